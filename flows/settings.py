@@ -1,0 +1,103 @@
+"""The one typed settings object: every path, URL, grid and solver parameter, with defaults.
+
+Values come from (lowest to highest priority) the defaults below, environment variables
+(`JITROUTE_DATA`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`, `JITROUTE_DASK_ADDRESS`,
+`JITROUTE_EARTHDATA_TOKEN`) and explicit overrides from the CLI. Lower layers never read this
+object; flows pass the values they need as plain arguments.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from storage.layout import DataLayout
+
+RISH_URL_DEFAULT = "https://database.rish.kyoto-u.ac.jp/arch/jmadata/data/gpv/original/"
+OSCAR_URL_DEFAULT = "https://podaac-opendap.jpl.nasa.gov/opendap/allData/oscar/"
+
+
+@dataclass(frozen=True)
+class GridSettings:
+    """Routing grid of the weather cube (degrees). Longitudes are 0..360 east."""
+
+    res_deg: float = 0.5
+    lat_min_deg: float = -80.0
+    lat_max_deg: float = 80.0
+
+
+@dataclass(frozen=True)
+class SourceSettings:
+    """Where forecasts come from. `https://`, `http://` and `file://` all work."""
+
+    rish_url: str = RISH_URL_DEFAULT
+    oscar_url: str = OSCAR_URL_DEFAULT
+    cycles_utc: tuple[int, ...] = (0, 6, 12, 18)
+    gsm_max_lead_h: int = 132
+    gsm_step_h: int = 6
+    allowed_redirect_hosts: tuple[str, ...] = ()
+    http_timeout_s: float = 60.0
+    http_retries: int = 3
+    http_backoff_s: float = 1.0
+    # Never logged or stored; read from the environment or a Prefect Secret.
+    earthdata_token: str | None = field(default=None, repr=False)
+
+
+@dataclass(frozen=True)
+class RoutingSettings:
+    """Defaults for the route solvers (see pipeline.routing for their meaning)."""
+
+    solver: str = "bfoa"
+    objective: str = "jit"
+    arrival_window_h: float = 6.0
+    seed: int = 1
+    n_lines: int | None = None  # None: chosen from the voyage length
+    n_points: int = 21
+    d_point_nm: float | None = None
+
+
+@dataclass(frozen=True)
+class Settings:
+    data_root: Path = Path("data")
+    grid: GridSettings = field(default_factory=GridSettings)
+    sources: SourceSettings = field(default_factory=SourceSettings)
+    routing: RoutingSettings = field(default_factory=RoutingSettings)
+    dask_address: str | None = None  # None: a local cluster
+    dask_workers: int = 2
+    timezone: str = "UTC"
+
+    @property
+    def layout(self) -> DataLayout:
+        return DataLayout(Path(self.data_root))
+
+    def with_overrides(self, **overrides) -> "Settings":
+        """Return a copy with top-level or `section.name` overrides; None values are ignored."""
+        s = self
+        for key, value in overrides.items():
+            if value is None:
+                continue
+            if "." in key:
+                section, name = key.split(".", 1)
+                s = replace(s, **{section: replace(getattr(s, section), **{name: value})})
+            else:
+                s = replace(s, **{key: value})
+        return s
+
+
+def load_settings(**overrides) -> Settings:
+    """Defaults, then environment, then `overrides` (e.g. `data_root=...`, `sources.rish_url=...`)."""
+    env = os.environ
+    s = Settings().with_overrides(
+        data_root=Path(env["JITROUTE_DATA"]) if env.get("JITROUTE_DATA") else None,
+        dask_address=env.get("JITROUTE_DASK_ADDRESS") or None,
+        **{
+            "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
+            "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,
+            "sources.earthdata_token": env.get("JITROUTE_EARTHDATA_TOKEN") or None,
+        },
+    )
+    return s.with_overrides(**overrides)
+
+
+__all__ = ["Settings", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings"]

@@ -1,0 +1,135 @@
+"""Regressors of the performance models: the one definition used by fitting and by routing.
+
+Inputs (all arrays or scalars):
+  rpm               engine revolutions per minute
+  draft_m, trim_m   mean draft and trim (m, trim > 0 by the stern)
+  wind_kn           true wind speed (kn)
+  wind_rel_deg      direction the wind comes FROM relative to the heading: 0 head, 180 following
+  hs_m              significant wave height (m)
+  wave_rel_deg      direction the waves come FROM relative to the heading: 0 head, 180 following
+  months_dd         months since dry dock (hull fouling)
+
+Each form maps these inputs to a row of regressors; a model is a coefficient vector per target
+(speed through water in kn, fuel rate in t/h) and the prediction is the dot product. The
+`*_nb` functions are numba-compiled and callable from routing kernels with plain scalars.
+
+Forms (ids are what numba kernels take):
+  FORM_THESIS = 0   V = a1·D + a2·T + a3·rpm + a4·WindDir + a5·WindSpd + a6·WaveDir + a7·WaveHt
+                    (no intercept, relative directions in degrees 0..180); fuel the same form.
+  FORM_PHYSICAL = 1 speed: 1, rpm, D, T, Vw²·cos θw, Hs²·cos²(θs/2), months
+                    fuel:  1, r³, r³·D, r³·months, Vw²·cos θw, Hs²·cos²(θs/2)   with r = rpm/100
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+FORM_THESIS = 0
+FORM_PHYSICAL = 1
+FORM_IDS = {"thesis": FORM_THESIS, "physical": FORM_PHYSICAL}
+
+SPEED_REGRESSORS = {
+    FORM_THESIS: ("draft_m", "trim_m", "rpm", "wind_dir_rel_deg", "wind_kn", "wave_dir_rel_deg", "wave_m"),
+    FORM_PHYSICAL: ("1", "rpm", "draft_m", "trim_m", "wind_kn2_cos", "wave_m2_cos2half", "months_dd"),
+}
+FUEL_REGRESSORS = {
+    FORM_THESIS: SPEED_REGRESSORS[FORM_THESIS],
+    FORM_PHYSICAL: ("1", "r3", "r3_draft", "r3_months", "wind_kn2_cos", "wave_m2_cos2half"),
+}
+N_SPEED = {k: len(v) for k, v in SPEED_REGRESSORS.items()}
+N_FUEL = {k: len(v) for k, v in FUEL_REGRESSORS.items()}
+
+
+@numba.njit(cache=True, inline="always")
+def fold_rel_deg(rel_deg: float) -> float:
+    """Relative direction folded to 0..180 (port and starboard alike)."""
+    a = abs(((rel_deg + 180.0) % 360.0) - 180.0)
+    return a
+
+
+@numba.njit(cache=True)
+def speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out):
+    """Fill `out` with the speed regressors of one observation."""
+    wr = fold_rel_deg(wind_rel_deg)
+    sr = fold_rel_deg(wave_rel_deg)
+    if form == FORM_THESIS:
+        out[0] = draft_m
+        out[1] = trim_m
+        out[2] = rpm
+        out[3] = wr
+        out[4] = wind_kn
+        out[5] = sr
+        out[6] = hs_m
+    else:
+        out[0] = 1.0
+        out[1] = rpm
+        out[2] = draft_m
+        out[3] = trim_m
+        out[4] = wind_kn * wind_kn * math.cos(math.radians(wr))
+        c = math.cos(math.radians(sr) / 2.0)
+        out[5] = hs_m * hs_m * c * c
+        out[6] = months_dd
+
+
+@numba.njit(cache=True)
+def fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out):
+    """Fill `out` with the fuel-rate regressors of one observation."""
+    if form == FORM_THESIS:
+        speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out)
+        return
+    wr = fold_rel_deg(wind_rel_deg)
+    sr = fold_rel_deg(wave_rel_deg)
+    r = rpm / 100.0
+    r3 = r * r * r
+    out[0] = 1.0
+    out[1] = r3
+    out[2] = r3 * draft_m
+    out[3] = r3 * months_dd
+    out[4] = wind_kn * wind_kn * math.cos(math.radians(wr))
+    c = math.cos(math.radians(sr) / 2.0)
+    out[5] = hs_m * hs_m * c * c
+
+
+@numba.njit(cache=True)
+def stw_kn_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
+    """Speed through water (kn) for one condition; never below 0."""
+    row = np.empty(coef.shape[0])
+    speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, row)
+    v = 0.0
+    for i in range(coef.shape[0]):
+        v += coef[i] * row[i]
+    return max(v, 0.0)
+
+
+@numba.njit(cache=True)
+def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
+    """Fuel rate (t/h) for one condition; never below 0."""
+    row = np.empty(coef.shape[0])
+    fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, row)
+    f = 0.0
+    for i in range(coef.shape[0]):
+        f += coef[i] * row[i]
+    return max(f, 0.0)
+
+
+def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
+    """Regressor matrix (n_obs × n_regressors) for `target` in {"speed", "fuel"}."""
+    cols = [np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)]
+    n = np.broadcast_shapes(*(c.shape for c in cols))
+    cols = [np.broadcast_to(c, n).ravel() for c in cols]
+    k = N_SPEED[form] if target == "speed" else N_FUEL[form]
+    X = np.empty((cols[0].size, k))
+    _fill_matrix(form, target == "speed", *cols, X)
+    return X
+
+
+@numba.njit(cache=True)
+def _fill_matrix(form, speed, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, X):
+    for i in range(X.shape[0]):
+        if speed:
+            speed_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], X[i])
+        else:
+            fuel_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], X[i])

@@ -1,0 +1,75 @@
+"""`PerformanceModel`: the one interface routing uses for a vessel's speed and fuel.
+
+A model is a form (see `features`) plus one coefficient vector per target. Routing kernels
+take `form_id`, `speed_coef`, `fuel_coef` and `months_dd` as plain values and call
+`features.stw_kn_nb` / `features.fuel_tph_nb`; Python code uses the vectorised methods.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.performance import features
+
+
+@dataclass(frozen=True)
+class PerformanceModel:
+    form: str  # "thesis" | "physical"
+    speed_coef: np.ndarray
+    fuel_coef: np.ndarray
+    months_dd: float = 0.0  # months since dry dock at the time of routing
+    imo: int | None = None
+    version: int | None = None
+    meta: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        fid = features.FORM_IDS.get(self.form)
+        if fid is None:
+            raise ValueError(f"unknown performance model form {self.form!r}; use one of {sorted(features.FORM_IDS)}")
+        object.__setattr__(self, "speed_coef", np.ascontiguousarray(self.speed_coef, dtype=np.float64))
+        object.__setattr__(self, "fuel_coef", np.ascontiguousarray(self.fuel_coef, dtype=np.float64))
+        if self.speed_coef.shape != (features.N_SPEED[fid],) or self.fuel_coef.shape != (features.N_FUEL[fid],):
+            raise ValueError(
+                f"{self.form} model of vessel {self.imo} needs {features.N_SPEED[fid]} speed and "
+                f"{features.N_FUEL[fid]} fuel coefficients, got {self.speed_coef.shape} and {self.fuel_coef.shape}"
+            )
+
+    @property
+    def form_id(self) -> int:
+        return features.FORM_IDS[self.form]
+
+    def stw_kn(self, rpm, draft_m, trim_m, wind_kn=0.0, wind_rel_deg=0.0, hs_m=0.0, wave_rel_deg=0.0):
+        """Speed through water (kn), vectorised over broadcastable inputs; floored at 0."""
+        args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg)))
+        X = features.design_matrix(self.form_id, "speed", *args, np.full(args[0].shape, self.months_dd))
+        return np.maximum(X @ self.speed_coef, 0.0).reshape(args[0].shape)
+
+    def fuel_tph(self, rpm, draft_m, trim_m, wind_kn=0.0, wind_rel_deg=0.0, hs_m=0.0, wave_rel_deg=0.0):
+        """Fuel rate (t/h), vectorised over broadcastable inputs; floored at 0."""
+        args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg)))
+        X = features.design_matrix(self.form_id, "fuel", *args, np.full(args[0].shape, self.months_dd))
+        return np.maximum(X @ self.fuel_coef, 0.0).reshape(args[0].shape)
+
+    def to_json(self) -> dict:
+        return {"form": self.form, "speed_coef": self.speed_coef.tolist(), "fuel_coef": self.fuel_coef.tolist(),
+                "months_dd": self.months_dd, "imo": self.imo, "version": self.version}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "PerformanceModel":
+        return cls(form=d["form"], speed_coef=np.asarray(d["speed_coef"]), fuel_coef=np.asarray(d["fuel_coef"]),
+                   months_dd=float(d.get("months_dd", 0.0)), imo=d.get("imo"), version=d.get("version"))
+
+
+def reference_model(design_speed_kn: float = 14.0, rpm_max: float = 100.0, design_fuel_tph: float = 1.5) -> PerformanceModel:
+    """A plausible physical-form model from design data, for vessels without a fit and for tests.
+
+    STW ≈ design speed at max rpm in calm water, proportional to rpm; fuel ∝ rpm³. Head wind
+    costs ~1 kn at 30 kn wind, head seas ~1.5 kn at 4 m.
+    """
+    a_rpm = design_speed_kn / rpm_max
+    speed = np.array([0.0, a_rpm, 0.0, 0.0, -1.0 / 900.0, -1.5 / 16.0, 0.0])
+    r3max = (rpm_max / 100.0) ** 3
+    fuel = np.array([0.0, design_fuel_tph / r3max, 0.0, 0.0, 0.0002, 0.01])
+    return PerformanceModel(form="physical", speed_coef=speed, fuel_coef=fuel)

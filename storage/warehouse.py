@@ -1,0 +1,110 @@
+"""The DuckDB warehouse: one file under the data root, one writer at a time, named migrations.
+
+DuckDB lets only one process hold a file open for writing, and a reader in another process
+blocks the writer. So the pipeline keeps connections short (open, write in a transaction,
+close) and retries while another process holds the file; analysts read the snapshot copy
+(`warehouse.snapshot.duckdb`, replaced atomically after every write) or the main file when
+the pipeline is idle.
+
+Schema lives in `storage/schema_*.py` modules as ordered lists of named migrations; each
+name is applied once and recorded in `schema_migrations`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import duckdb
+
+
+@dataclass(frozen=True)
+class Migration:
+    name: str  # unique, e.g. "ingest_001_log"
+    sql: str
+
+
+class WarehouseBusyError(RuntimeError):
+    pass
+
+
+def _all_migrations() -> list[Migration]:
+    # Imported here so each schema module can be edited on its own.
+    from storage import schema_fleet, schema_ingest, schema_routes
+
+    return [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS]
+
+
+def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnection:
+    deadline = time.monotonic() + wait_s
+    delay = 0.05
+    while True:
+        try:
+            return duckdb.connect(str(path), read_only=read_only)
+        except duckdb.IOException as exc:  # another process holds the file lock
+            if "lock" not in str(exc).lower() or time.monotonic() >= deadline:
+                raise WarehouseBusyError(
+                    f"warehouse {path} is held by another process ({exc}); "
+                    "close other connections (analysts: use warehouse.snapshot.duckdb) and retry"
+                ) from exc
+            time.sleep(delay)
+            delay = min(delay * 2, 1.0)
+
+
+def migrate(con: duckdb.DuckDBPyConnection) -> list[str]:
+    """Apply every migration not yet recorded; returns the names applied."""
+    con.execute(
+        "CREATE TABLE IF NOT EXISTS schema_migrations (name VARCHAR PRIMARY KEY, applied_at TIMESTAMP)"
+    )
+    done = {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()}
+    applied = []
+    for m in _all_migrations():
+        if m.name in done:
+            continue
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute(m.sql)
+            con.execute("INSERT INTO schema_migrations VALUES (?, now())", [m.name])
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+        applied.append(m.name)
+    return applied
+
+
+@contextlib.contextmanager
+def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator[duckdb.DuckDBPyConnection]:
+    """Short-lived connection. Writers get the schema migrated; the snapshot is refreshed on close."""
+    path = Path(path)
+    if write:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    elif not path.exists():
+        raise FileNotFoundError(f"warehouse {path} does not exist yet: run `jitroute demo` or an ingest first")
+    con = _open(path, read_only=not write, wait_s=wait_s)
+    try:
+        if write:
+            migrate(con)
+        yield con
+    finally:
+        con.close()
+    if write:
+        publish_snapshot(path)
+
+
+def publish_snapshot(path: Path) -> Path:
+    """Copy the (closed) warehouse to `<name>.snapshot.duckdb` atomically for analysts."""
+    path = Path(path)
+    snap = path.with_name(path.stem + ".snapshot.duckdb")
+    tmp = snap.with_name(snap.name + f".tmp{os.getpid()}")
+    try:
+        shutil.copyfile(path, tmp)
+        os.replace(tmp, snap)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return snap

@@ -1,0 +1,24 @@
+"""Shared fixtures. Tests never touch the network beyond 127.0.0.1 and never write outside tmp."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    if not SHARED.exists():
+        pytest.skip(f"shared documents not found at {SHARED}")
+    return SHARED
+
+
+@pytest.fixture
+def data_root(tmp_path, monkeypatch) -> Path:
+    root = tmp_path / "data"
+    monkeypatch.setenv("JITROUTE_DATA", str(root))
+    return root

@@ -1,0 +1,37 @@
+from pathlib import Path
+
+import numpy as np
+
+from flows.settings import load_settings
+from pipeline.performance.model import PerformanceModel, reference_model
+from storage import warehouse
+
+
+def test_settings_env_and_overrides(monkeypatch, tmp_path):
+    monkeypatch.setenv("JITROUTE_DATA", str(tmp_path / "d"))
+    monkeypatch.setenv("JITROUTE_RISH_URL", "file:///mirror/")
+    s = load_settings(**{"grid.res_deg": 0.25})
+    assert s.data_root == tmp_path / "d"
+    assert s.sources.rish_url == "file:///mirror/"
+    assert s.grid.res_deg == 0.25
+    assert s.layout.weather_cube == tmp_path / "d" / "cubes" / "weather.zarr"
+
+
+def test_reference_model_speed_and_fuel():
+    m = reference_model(design_speed_kn=14.0, rpm_max=100.0, design_fuel_tph=1.5)
+    assert np.isclose(m.stw_kn(100.0, 10.0, 0.0), 14.0)
+    assert np.isclose(m.fuel_tph(100.0, 10.0, 0.0), 1.5)
+    # head seas slow the ship, following seas do not
+    assert m.stw_kn(100.0, 10.0, 0.0, hs_m=4.0, wave_rel_deg=0.0) < 13.0
+    assert np.isclose(m.stw_kn(100.0, 10.0, 0.0, hs_m=4.0, wave_rel_deg=180.0), 14.0)
+    back = PerformanceModel.from_json(m.to_json())
+    assert np.allclose(back.speed_coef, m.speed_coef)
+
+
+def test_warehouse_migrates_and_snapshots(tmp_path: Path):
+    db = tmp_path / "w.duckdb"
+    with warehouse.connect(db) as con:
+        names = {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()}
+    assert (tmp_path / "w.snapshot.duckdb").exists()
+    with warehouse.connect(db, write=False) as con:
+        assert {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()} == names
