@@ -22,3 +22,13 @@ def data_root(tmp_path, monkeypatch) -> Path:
     root = tmp_path / "data"
     monkeypatch.setenv("JITROUTE_DATA", str(root))
     return root
+
+
+@pytest.fixture(scope="session")
+def prefect_harness(tmp_path_factory):
+    """One throw-away Prefect API (SQLite) for every flow test in the session."""
+    os.environ.setdefault("PREFECT_HOME", str(tmp_path_factory.mktemp("prefect_home")))
+    from prefect.testing.utilities import prefect_test_harness
+
+    with prefect_test_harness(server_startup_timeout=120):
+        yield
