@@ -1,0 +1,108 @@
+"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, `route_legs` and
+Parquet partitions `exports/routes/run_id=<id>/{routes,route_legs}.parquet`.
+
+One writer: the flow collects every voyage's rows and calls `write_run_results` once, inside
+one transaction, so a killed run leaves either all of a run's rows or none.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pandas as pd
+
+from storage import warehouse
+
+ROUTE_COLUMNS = [
+    "run_id", "voyage_id", "imo", "solver", "objective", "status", "reason", "depart_utc", "eta_utc",
+    "rta_utc", "hours", "fuel_t", "baseline_fuel_t", "baseline_hours", "savings_pct", "distance_nm",
+    "cost", "model_version", "cycle", "seed", "runtime_s", "n_legs", "beyond_forecast",
+]
+LEG_COLUMNS = [
+    "run_id", "voyage_id", "leg", "lat0", "lon0", "lat1", "lon1", "course_deg", "dist_nm", "rpm",
+    "stw_kn", "sog_kn", "hours", "fuel_t", "etd_utc", "eta_utc", "wind_kn", "wind_dir_deg", "hs_m",
+    "wave_dir_deg", "current_kn", "beyond_forecast",
+]
+
+
+def _utcnow() -> datetime:
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+def _frame(rows: list[dict], columns: list[str], run_id: str) -> pd.DataFrame:
+    df = pd.DataFrame.from_records(rows, columns=columns)
+    df["run_id"] = run_id
+    for c in columns:
+        if c.endswith("_utc") or c == "cycle":
+            df[c] = pd.to_datetime(df[c], utc=True).dt.tz_localize(None)
+    return df
+
+
+def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n_voyages: int) -> None:
+    with warehouse.connect(db_path) as con:
+        con.execute(
+            "INSERT INTO route_runs (run_id, started_at, cycle, n_voyages, status, solver, trigger) "
+            "VALUES (?, ?, ?, ?, 'running', ?, ?)",
+            [run_id, _utcnow(), pd.Timestamp(cycle).to_pydatetime() if cycle is not None else None,
+             n_voyages, solver, trigger],
+        )
+
+
+def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows: list[dict],
+                      leg_rows: list[dict]) -> tuple[int, int]:
+    """Write all rows of a run in one transaction, then the Parquet partition; returns (n_ok, n_failed)."""
+    routes = _frame(route_rows, ROUTE_COLUMNS, run_id)
+    legs = _frame(leg_rows, LEG_COLUMNS, run_id)
+    n_ok = int(routes["status"].isin(["ok", "late"]).sum()) if len(routes) else 0
+    n_failed = len(routes) - n_ok
+    status = "ok" if n_failed == 0 else ("failed" if n_ok == 0 else "partial")
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.register("routes_df", routes)
+            con.register("legs_df", legs)
+            con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
+            con.execute(f"INSERT INTO route_legs ({', '.join(LEG_COLUMNS)}) SELECT {', '.join(LEG_COLUMNS)} FROM legs_df")
+            con.execute(
+                "UPDATE route_runs SET finished_at = ?, n_ok = ?, n_failed = ?, status = ? WHERE run_id = ?",
+                [_utcnow(), n_ok, n_failed, status, run_id],
+            )
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    part = Path(exports_dir) / "routes" / f"run_id={run_id}"
+    part.mkdir(parents=True, exist_ok=True)
+    routes.drop(columns=["run_id"]).to_parquet(part / "routes.parquet", index=False)
+    legs.drop(columns=["run_id"]).to_parquet(part / "route_legs.parquet", index=False)
+    return n_ok, n_failed
+
+
+def fail_run(db_path: Path, run_id: str, reason: str) -> None:
+    """Mark a run failed (e.g. no cube); nothing else of it was written."""
+    with warehouse.connect(db_path) as con:
+        con.execute("UPDATE route_runs SET finished_at = ?, status = 'failed' WHERE run_id = ?", [_utcnow(), run_id])
+
+
+def run_summary(db_path: Path, run_id: str) -> dict:
+    with warehouse.connect(db_path, write=False) as con:
+        run = con.execute("SELECT * FROM route_runs WHERE run_id = ?", [run_id]).fetchdf()
+        totals = con.execute(
+            """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
+                      count(*) FILTER (WHERE status = 'late') AS n_late,
+                      count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
+                      sum(fuel_t) AS fuel_t, sum(baseline_fuel_t) AS baseline_fuel_t
+               FROM routes WHERE run_id = ?""",
+            [run_id],
+        ).fetchdf()
+        problems = con.execute(
+            "SELECT voyage_id, imo, status, reason FROM routes WHERE run_id = ? AND status <> 'ok' ORDER BY voyage_id",
+            [run_id],
+        ).fetchdf()
+    out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}
+    out.update(totals.iloc[0].to_dict())
+    base = out.get("baseline_fuel_t") or 0.0
+    out["savings_pct"] = 100.0 * (base - (out.get("fuel_t") or 0.0)) / base if base else None
+    out["problems"] = problems.to_dict("records")
+    return out
