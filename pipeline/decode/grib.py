@@ -1,0 +1,155 @@
+"""GRIB2 field discovery and selection through eccodes.
+
+JMA packs several fields into one GRIB message (multi-field messages); multi-field support is
+switched on so every field is seen, not only the first of each message. Fields are selected by
+(discipline, category, number, level type, level value), never by their position in the file.
+Nothing is written beside the input (no `.idx` files).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import eccodes
+import numpy as np
+
+from pipeline.decode.errors import DecodeError
+
+
+@dataclass(frozen=True)
+class FieldInfo:
+    index: int
+    discipline: int
+    category: int
+    number: int
+    level_type: int
+    level: float
+    step_h: int
+    cycle: np.datetime64
+    centre: int
+    short_name: str
+    ni: int
+    nj: int
+
+
+@dataclass(frozen=True)
+class GridInfo:
+    lat: np.ndarray  # as stored (scan order), float64
+    lon: np.ndarray  # 0..360 east
+
+
+def _get(h, key, default=None):
+    try:
+        return eccodes.codes_get(h, key)
+    except eccodes.KeyValueNotFoundError:
+        return default
+
+
+def _iter_handles(path: Path) -> Iterator[int]:
+    eccodes.codes_grib_multi_support_on()
+    try:
+        with open(path, "rb") as f:
+            while True:
+                try:
+                    h = eccodes.codes_grib_new_from_file(f)
+                except eccodes.GribInternalError as exc:
+                    raise DecodeError(path, f"corrupt GRIB2 message ({exc})") from exc
+                if h is None:
+                    return
+                try:
+                    yield h
+                finally:
+                    eccodes.codes_release(h)
+    except OSError as exc:
+        raise DecodeError(path, f"cannot read ({exc})") from exc
+
+
+def _info(index: int, h: int) -> FieldInfo:
+    date = int(_get(h, "dataDate", 19700101))
+    time = int(_get(h, "dataTime", 0))
+    cycle = np.datetime64(f"{date // 10000:04d}-{date // 100 % 100:02d}-{date % 100:02d}T{time // 100:02d}:{time % 100:02d}", "ns")
+    step_units = _get(h, "stepUnits", 1)
+    end = _get(h, "endStep", 0)
+    step_h = int(end) if step_units in (1, "h") else int(_get(h, "forecastTime", 0))
+    level_type = _get(h, "typeOfFirstFixedSurface", 255)
+    if isinstance(level_type, str):  # some tables map the code to a name
+        level_type = int(eccodes.codes_get_long(h, "typeOfFirstFixedSurface"))
+    return FieldInfo(
+        index=index,
+        discipline=int(_get(h, "discipline", -1)),
+        category=int(_get(h, "parameterCategory", -1)),
+        number=int(_get(h, "parameterNumber", -1)),
+        level_type=int(level_type),
+        level=float(_get(h, "level", 0) or 0),
+        step_h=step_h,
+        cycle=cycle,
+        centre=int(eccodes.codes_get_long(h, "centre")),
+        short_name=str(_get(h, "shortName", "unknown")),
+        ni=int(_get(h, "Ni", 0) or 0),
+        nj=int(_get(h, "Nj", 0) or 0),
+    )
+
+
+def list_fields(path: Path) -> list[FieldInfo]:
+    """Every field in a GRIB2 file (each field of a multi-field message counted once)."""
+    path = Path(path)
+    out = [_info(i, h) for i, h in enumerate(_iter_handles(path))]
+    if not out:
+        raise DecodeError(path, "no GRIB messages found (empty, truncated or not GRIB)")
+    return out
+
+
+def _grid(h: int, path: Path) -> GridInfo:
+    if _get(h, "gridType") != "regular_ll":
+        raise DecodeError(path, f"unsupported grid {_get(h, 'gridType')!r}; expected a regular lat/lon grid")
+    ni, nj = int(eccodes.codes_get(h, "Ni")), int(eccodes.codes_get(h, "Nj"))
+    la1 = eccodes.codes_get_double(h, "latitudeOfFirstGridPointInDegrees")
+    la2 = eccodes.codes_get_double(h, "latitudeOfLastGridPointInDegrees")
+    lo1 = eccodes.codes_get_double(h, "longitudeOfFirstGridPointInDegrees")
+    lo2 = eccodes.codes_get_double(h, "longitudeOfLastGridPointInDegrees")
+    if lo2 < lo1:
+        lo2 += 360.0
+    return GridInfo(lat=np.linspace(la1, la2, nj), lon=np.mod(np.linspace(lo1, lo2, ni), 360.0))
+
+
+def read_fields(path: Path, wanted: dict[str, tuple[int, int, int, int | None, float | None]],
+                fill_value: float | None = None) -> tuple[dict[str, dict[int, np.ndarray]], GridInfo | None, np.datetime64 | None]:
+    """Values of the wanted fields by name → {step_h: 2-D array (nj, ni) in scan order}.
+
+    `wanted` maps a name to (discipline, category, number, level_type or None, level or None).
+    Bitmap-missing points and, when given, points at or above `fill_value` become NaN.
+    The grid is None when none of the wanted fields is present.
+    """
+    path = Path(path)
+    out: dict[str, dict[int, np.ndarray]] = {k: {} for k in wanted}
+    grid = None
+    cycle = None
+    n = 0
+    for i, h in enumerate(_iter_handles(path)):
+        n += 1
+        info = _info(i, h)
+        for name, (d, c, num, lt, lv) in wanted.items():
+            if (info.discipline, info.category, info.number) != (d, c, num):
+                continue
+            if lt is not None and info.level_type != lt:
+                continue
+            if lv is not None and abs(info.level - lv) > 1e-6:
+                continue
+            g = _grid(h, path)
+            if grid is None:
+                grid = g
+            elif g.lat.size != grid.lat.size or g.lon.size != grid.lon.size:
+                raise DecodeError(path, f"field {name} at step {info.step_h} h has a different grid from the others")
+            cycle = info.cycle
+            vals = eccodes.codes_get_values(h).astype(np.float32)
+            if int(_get(h, "bitmapPresent", 0) or 0):
+                missing = eccodes.codes_get_double(h, "missingValue")
+                vals[vals == missing] = np.nan
+            if fill_value is not None:
+                vals[vals >= fill_value] = np.nan
+            out[name][info.step_h] = vals.reshape(g.lat.size, g.lon.size)
+    if n == 0:
+        raise DecodeError(path, "no GRIB messages found (empty, truncated or not GRIB)")
+    return out, grid, cycle

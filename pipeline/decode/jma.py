@@ -1,0 +1,93 @@
+"""JMA GSM (10 m wind) and GWM (waves) GRIB2 → canonical xarray Datasets.
+
+Canonical form: lat ascending, lon 0..360 east ascending, `cycle` (model init, UTC) and `step`
+(lead time, whole hours). Wind in m/s; waves: `swh` m, `mwd` degrees coming-from, `mwp` s.
+Land and ice (bitmap or fill value) are NaN.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from pipeline.decode.errors import DecodeError
+from pipeline.decode.grib import GridInfo, read_fields
+
+# name → (discipline, category, number, level type, level)
+GSM_WIND = {"u10": (0, 2, 2, 103, 10.0), "v10": (0, 2, 3, 103, 10.0)}
+GWM_WAVES = {
+    "swh": (10, 0, 3, None, None),
+    "mwd": (10, 0, 14, None, None),
+    "mwp": (10, 0, 15, None, None),
+}
+GWM_DIRECTION_ALTERNATIVES = ((10, 0, 4), (10, 0, 10))  # wind-wave direction, primary wave direction
+GWM_PERIOD_ALTERNATIVES = ((10, 0, 5), (10, 0, 11), (10, 0, 34))
+GWM_FILL_VALUE = 9999.0
+
+ATTRS = {
+    "u10": {"units": "m s-1", "standard_name": "eastward_wind", "long_name": "10 m eastward wind"},
+    "v10": {"units": "m s-1", "standard_name": "northward_wind", "long_name": "10 m northward wind"},
+    "swh": {"units": "m", "standard_name": "sea_surface_wave_significant_height", "long_name": "significant wave height"},
+    "mwd": {"units": "degree", "standard_name": "sea_surface_wave_from_direction", "long_name": "mean wave direction (coming from)"},
+    "mwp": {"units": "s", "standard_name": "sea_surface_wave_mean_period", "long_name": "mean wave period"},
+}
+
+
+def _canonical(values: dict[str, dict[int, np.ndarray]], grid: GridInfo, cycle: np.datetime64, steps: list[int]) -> xr.Dataset:
+    lat_order = np.argsort(grid.lat)
+    lon_order = np.argsort(grid.lon)
+    data = {}
+    for name, by_step in values.items():
+        cube = np.stack([by_step[s] for s in steps])[:, lat_order][:, :, lon_order]
+        data[name] = (("step", "lat", "lon"), cube, ATTRS.get(name, {}))
+    ds = xr.Dataset(
+        data,
+        coords={
+            "step": ("step", np.asarray(steps, dtype=np.int32), {"units": "hours", "long_name": "lead time"}),
+            "lat": ("lat", grid.lat[lat_order], {"units": "degrees_north"}),
+            "lon": ("lon", grid.lon[lon_order], {"units": "degrees_east"}),
+            "cycle": np.datetime64(cycle, "ns"),
+        },
+    )
+    return ds
+
+
+def decode_gsm(path: Path) -> xr.Dataset:
+    """One GSM file (one lead time) → u10, v10 (lat, lon) with scalar cycle, step, valid_time."""
+    values, grid, cycle = read_fields(path, GSM_WIND)
+    missing = [k for k, v in values.items() if not v]
+    if missing:
+        raise DecodeError(path, f"no {', '.join(missing)} (10 m wind) in this GSM file")
+    steps = sorted(set(values["u10"]) & set(values["v10"]))
+    if len(steps) != 1:
+        raise DecodeError(path, f"expected one lead time in a GSM file, found {steps}")
+    ds = _canonical(values, grid, cycle, steps).isel(step=0)
+    return ds.assign_coords(valid_time=ds.cycle + np.timedelta64(int(ds.step), "h"))
+
+
+def decode_gwm(path: Path) -> xr.Dataset:
+    """One GWM file (several lead times) → swh, mwd, mwp (step, lat, lon); land/ice → NaN."""
+    wanted = dict(GWM_WAVES)
+    for alt in GWM_DIRECTION_ALTERNATIVES:
+        wanted[f"mwd_{alt[2]}"] = (*alt, None, None)
+    for alt in GWM_PERIOD_ALTERNATIVES:
+        wanted[f"mwp_{alt[2]}"] = (*alt, None, None)
+    values, grid, cycle = read_fields(path, wanted, fill_value=GWM_FILL_VALUE)
+    for base in ("mwd", "mwp"):  # take the first direction/period product present
+        if not values[base]:
+            for key in [k for k in values if k.startswith(base + "_")]:
+                if values[key]:
+                    values[base] = values[key]
+                    break
+    values = {k: v for k, v in values.items() if k in GWM_WAVES}
+    if not values["swh"]:
+        raise DecodeError(path, "no significant wave height (GRIB2 10/0/3) in this GWM file")
+    for k in ("mwd", "mwp"):
+        if not values[k]:
+            raise DecodeError(path, f"no {ATTRS[k]['long_name']} in this GWM file")
+    steps = sorted(set(values["swh"]) & set(values["mwd"]) & set(values["mwp"]))
+    if not steps:
+        raise DecodeError(path, "wave fields do not share any lead time")
+    return _canonical(values, grid, cycle, steps)

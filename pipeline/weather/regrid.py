@@ -1,0 +1,68 @@
+"""NaN-aware bilinear regridding onto the routing grid, with longitude wrap-around.
+
+A target point takes the weighted mean of the valid (non-NaN) corners of its source cell, so
+coastal sea points keep a value while points whose four corners are land stay NaN. Directions
+(`mwd`, degrees) are interpolated through their unit-vector components, never as angles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+DIRECTION_VARS = ("mwd",)
+
+
+def _axis_weights(src: np.ndarray, dst: np.ndarray, periodic: bool):
+    """Indices i0, i1 and weight w1 of `dst` within ascending `src` (periodic: 360° wrap)."""
+    if periodic:
+        ext = np.concatenate([src, [src[0] + 360.0]])
+        x = np.mod(dst - src[0], 360.0) + src[0]
+        i0 = np.clip(np.searchsorted(ext, x, side="right") - 1, 0, ext.size - 2)
+        w1 = (x - ext[i0]) / (ext[i0 + 1] - ext[i0])
+        i1 = (i0 + 1) % src.size
+        return i0, i1, np.clip(w1, 0.0, 1.0), np.ones(dst.shape, bool)
+    inside = (dst >= src[0] - 1e-9) & (dst <= src[-1] + 1e-9)
+    i0 = np.clip(np.searchsorted(src, dst, side="right") - 1, 0, src.size - 2)
+    w1 = np.clip((dst - src[i0]) / (src[i0 + 1] - src[i0]), 0.0, 1.0)
+    return i0, i0 + 1, w1, inside
+
+
+def bilinear(values: np.ndarray, src_lat, src_lon, dst_lat, dst_lon) -> np.ndarray:
+    """Regrid `values` (..., nlat, nlon) from ascending src axes to dst axes; NaN-aware."""
+    j0, j1, wj, inside = _axis_weights(np.asarray(src_lat, float), np.asarray(dst_lat, float), periodic=False)
+    i0, i1, wi, _ = _axis_weights(np.asarray(src_lon, float), np.asarray(dst_lon, float), periodic=True)
+    v = np.asarray(values, dtype=np.float32)
+    out = np.zeros(v.shape[:-2] + (j0.size, i0.size), dtype=np.float32)
+    wsum = np.zeros_like(out)
+    for jj, wy in ((j0, 1.0 - wj), (j1, wj)):
+        rows = v[..., jj, :]
+        for ii, wx in ((i0, 1.0 - wi), (i1, wi)):
+            corner = rows[..., ii]
+            w = (wy[:, None] * wx[None, :]).astype(np.float32)
+            ok = ~np.isnan(corner)
+            out += np.where(ok, corner, 0.0) * w
+            wsum += ok * w
+    with np.errstate(invalid="ignore", divide="ignore"):
+        res = np.where(wsum > 1e-6, out / wsum, np.nan).astype(np.float32)
+    res[..., ~inside, :] = np.nan
+    return res
+
+
+def regrid(ds: xr.Dataset, lat: np.ndarray, lon: np.ndarray) -> xr.Dataset:
+    """Regrid every (…, lat, lon) variable of a canonical dataset onto (lat, lon)."""
+    out = {}
+    for name, da in ds.data_vars.items():
+        if da.dims[-2:] != ("lat", "lon"):
+            continue
+        if name in DIRECTION_VARS:
+            rad = np.radians(da.values)
+            s = bilinear(np.sin(rad), ds.lat.values, ds.lon.values, lat, lon)
+            c = bilinear(np.cos(rad), ds.lat.values, ds.lon.values, lat, lon)
+            vals = (np.degrees(np.arctan2(s, c)) + 360.0) % 360.0
+        else:
+            vals = bilinear(da.values, ds.lat.values, ds.lon.values, lat, lon)
+        out[name] = (da.dims, vals.astype(np.float32), da.attrs)
+    coords = {k: v for k, v in ds.coords.items() if "lat" not in v.dims and "lon" not in v.dims}
+    coords.update(lat=("lat", np.asarray(lat), {"units": "degrees_north"}), lon=("lon", np.asarray(lon), {"units": "degrees_east"}))
+    return xr.Dataset(out, coords=coords, attrs=ds.attrs)
