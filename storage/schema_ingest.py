@@ -1,5 +1,32 @@
-"""Warehouse schema for the ingest tables (named migrations, applied in order)."""
+"""Warehouse schema for weather ingest: the per-file log and per-cycle status."""
 
 from storage.warehouse import Migration
 
-MIGRATIONS: list[Migration] = []
+MIGRATIONS: list[Migration] = [
+    Migration(
+        "ingest_001_log",
+        """
+        CREATE TABLE ingest_log (
+            run_id VARCHAR,
+            source VARCHAR NOT NULL,          -- GSM | GWM | OSCAR
+            cycle TIMESTAMP,                  -- forecast cycle (UTC) the file was fetched for
+            file_name VARCHAR NOT NULL,
+            url VARCHAR,
+            bytes BIGINT,
+            sha256 VARCHAR,
+            status VARCHAR NOT NULL,          -- ok | missing | corrupt | skipped
+            error VARCHAR,
+            started_at TIMESTAMP,
+            finished_at TIMESTAMP
+        );
+        CREATE TABLE cycles (
+            cycle TIMESTAMP PRIMARY KEY,
+            complete BOOLEAN NOT NULL,
+            n_files_expected INTEGER,
+            n_files_ok INTEGER,
+            missing VARCHAR,                  -- what is missing, e.g. "GSM FD0512; GWM 90-132 h"
+            written_at TIMESTAMP
+        );
+        """,
+    ),
+]

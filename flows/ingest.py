@@ -1,0 +1,201 @@
+"""Prefect flows `ingest-weather` (one cycle) and `backfill` (a range of cycles).
+
+list → download → decode → write; each task calls one pipeline/storage function. A file that
+is missing or corrupt is logged and the cycle is written incomplete (never silently complete);
+a later run that finds the file completes it.
+"""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from prefect import flow, get_run_logger, task
+
+from flows.settings import Settings, load_settings
+from pipeline.decode.errors import DecodeError
+from pipeline.decode.jma import decode_gsm, decode_gwm
+from pipeline.decode.oscar import decode_oscar
+from pipeline.sources import oscar as oscar_src
+from pipeline.sources import rish
+from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text
+from pipeline.weather.assemble import assemble_cycle
+from pipeline.weather.grid import routing_grid
+from storage import cube, ingest_log, raw_store
+
+
+@dataclass
+class Download:
+    source: str
+    name: str
+    url: str
+    result: FetchResult | None = None
+    status: str = "missing"
+    error: str | None = None
+    started_at: object = None
+
+
+@dataclass
+class CycleReport:
+    cycle: str
+    complete: bool
+    n_expected: int
+    n_ok: int
+    missing: list[str] = field(default_factory=list)
+    corrupt: list[str] = field(default_factory=list)
+    skipped: bool = False
+
+
+def _opts(s: Settings) -> FetchOptions:
+    src = s.sources
+    return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
+                        allowed_redirect_hosts=src.allowed_redirect_hosts, token=src.earthdata_token)
+
+
+def parse_cycle(text: str) -> np.datetime64:
+    """'2020-12-01T00', '2020-12-01T12:00', '2020120112' → datetime64[ns] on a whole hour."""
+    t = text.strip()
+    if t.isdigit() and len(t) == 10:
+        t = f"{t[:4]}-{t[4:6]}-{t[6:8]}T{t[8:]}"
+    try:
+        c = np.datetime64(t, "h")
+    except ValueError as exc:
+        raise ValueError(f"cannot read cycle {text!r}; use e.g. 2020-12-01T00") from exc
+    return np.datetime64(c, "ns")
+
+
+@task(name="list-rish", retries=2, retry_delay_seconds=1)
+def list_rish(base_url: str, cycle: np.datetime64, opts: FetchOptions) -> tuple[list[rish.SourceFile], list[str], str]:
+    url = rish.day_folder_url(base_url, cycle)
+    try:
+        names, rejected = rish.parse_index(read_text(url, opts))
+    except FileNotFoundError:
+        return [], [], url
+    return rish.prefer_resolution(rish.files_for_cycle(names, cycle)), rejected, url
+
+
+@task(name="list-oscar", retries=2, retry_delay_seconds=1)
+def list_oscar(base_url: str, start: np.datetime64, end: np.datetime64, opts: FetchOptions) -> list[oscar_src.OscarFile]:
+    try:
+        names, _ = rish.parse_index(read_text(base_url.rstrip("/") + "/", opts))
+    except FileNotFoundError:
+        return []
+    return oscar_src.files_for_window(names, start, end)
+
+
+@task(name="download")
+def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opts: FetchOptions, known: dict[str, str]) -> list[Download]:
+    for it in items:
+        it.started_at = ingest_log.utcnow()
+        dest = raw_store.path_for(raw_dir, it.source, cycle, it.name)
+        it.result = fetch(it.url, dest, opts, expected_sha256=known.get(it.name))
+        it.status, it.error = it.result.status, it.result.error
+    return items
+
+
+@task(name="decode-and-assemble")
+def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
+    gsm, gwm, osc = [], [], []
+    for it in items:
+        if it.status not in ("ok", "skipped"):
+            continue
+        try:
+            if it.source == "GSM":
+                gsm.append(decode_gsm(it.result.path))
+            elif it.source == "GWM":
+                gwm.append(decode_gwm(it.result.path))
+            else:
+                osc.append(decode_oscar(it.result.path))
+        except DecodeError as exc:
+            it.status, it.error = "corrupt", f"{exc} (from {it.url})"
+            raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+    oscar = xr.concat(osc, dim="time").sortby("time") if osc else None
+    ds, missing_steps = assemble_cycle(cycle, steps, grid[0], grid[1], gsm, gwm, oscar)
+    return ds, missing_steps, oscar is not None
+
+
+@task(name="write-cycle")
+def write_cube(path: Path, ds, complete: bool, lock_dir: Path) -> None:
+    cube.write_cycle(path, ds, complete=complete, lock_dir=lock_dir)
+
+
+@task(name="log-files")
+def log_files(db: Path, run_id: str, cycle: np.datetime64, items: list[Download]) -> None:
+    now = ingest_log.utcnow()
+    ingest_log.record_files(db, [
+        {"run_id": run_id, "source": it.source, "cycle": cycle, "file_name": it.name, "url": it.url,
+         "bytes": it.result.bytes if it.result else None, "sha256": it.result.sha256 if it.result else None,
+         "status": it.status, "error": it.error, "started_at": it.started_at or now, "finished_at": now}
+        for it in items
+    ])
+
+
+@flow(name="ingest-weather", log_prints=False)
+def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | None = None, oscar_url: str | None = None,
+                   force: bool = False) -> dict:
+    """Fetch, decode, regrid and write one forecast cycle into the cube; returns a CycleReport dict."""
+    s = load_settings(data_root=Path(data_root) if data_root else None,
+                      **{"sources.rish_url": rish_url, "sources.oscar_url": oscar_url})
+    layout = s.layout.ensure()
+    logger = get_run_logger()
+    c = parse_cycle(cycle)
+    label = str(np.datetime_as_string(c, unit="h"))
+    if not force and c in cube.complete_cycles(layout.weather_cube):
+        logger.info("cycle %s is already complete; skipping", label)
+        return CycleReport(label, True, 0, 0, skipped=True).__dict__
+    opts = _opts(s)
+    steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
+    files, rejected, day_url = list_rish(s.sources.rish_url, c, opts)
+    for name in rejected:
+        logger.warning("ignored unsafe name %r listed at %s", name, day_url)
+    items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
+    gaps = rish.coverage(files, steps)
+    end = c + np.timedelta64(max(steps), "h")
+    oscar_files = list_oscar(s.sources.oscar_url, c, end, opts)
+    items += [Download("OSCAR", f.name, s.sources.oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
+    known = ingest_log.known_checksums(layout.warehouse, [it.name for it in items])
+    items = download_all(items, layout.raw, c, opts, known)
+    ds, missing_steps, have_currents = decode_and_assemble(items, c, steps, routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg), layout.quarantine)
+    problems = [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
+    problems += [f"GSM lead {h} h not listed" for h in gaps["GSM"]] + [f"GWM lead {h} h not listed" for h in gaps["GWM"]]
+    if not have_currents:
+        problems.append("no OSCAR analysis at or before the cycle")
+    complete = not missing_steps and have_currents and not problems
+    write_cube(layout.weather_cube, ds, complete, layout.locks)
+    run_id = uuid.uuid4().hex[:12]
+    log_files(layout.warehouse, run_id, c, items)
+    n_ok = sum(it.status in ("ok", "skipped") for it in items)
+    ingest_log.set_cycle_status(layout.warehouse, c, complete=complete, n_expected=len(steps) + 2 + len(oscar_files),
+                                n_ok=n_ok, missing="; ".join(problems)[:2000])
+    for p in problems:
+        logger.warning("cycle %s: %s", label, p)
+    return CycleReport(label, complete, len(items), n_ok, missing=problems,
+                       corrupt=[it.name for it in items if it.status == "corrupt"]).__dict__
+
+
+def cycles_between(start: str, end: str, hours: list[int]) -> list[np.datetime64]:
+    days = np.arange(np.datetime64(start[:10], "D"), np.datetime64(end[:10], "D") + 1)
+    return [np.datetime64(d, "ns") + np.timedelta64(int(h), "h") for d in days for h in hours]
+
+
+@flow(name="backfill")
+def backfill(start: str, end: str, cycles: str = "00,12", data_root: str | None = None, rish_url: str | None = None,
+             oscar_url: str | None = None, route: bool = False) -> list[dict]:
+    """Ingest every cycle from start to end (inclusive days), skipping complete ones; optionally re-route."""
+    hours = [int(h) for h in cycles.split(",") if h.strip()]
+    reports = []
+    todo = cycles_between(start, end, hours)
+    for c in todo:
+        label = np.datetime_as_string(c, unit="h")
+        reports.append(ingest_weather(label, data_root=data_root, rish_url=rish_url, oscar_url=oscar_url))
+        get_run_logger().info("backfill: %d/%d cycles done (%s)", len(reports), len(todo), label)
+    if route:
+        from flows.fleet import route_fleet
+
+        for r in reports:
+            if r["complete"]:
+                route_fleet(cycle=r["cycle"], data_root=data_root, trigger="backfill")
+    return reports

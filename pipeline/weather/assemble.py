@@ -1,0 +1,60 @@
+"""Assemble one forecast cycle on the routing grid from decoded GSM, GWM and OSCAR datasets.
+
+Every lead time of the cube's fixed step axis gets a slot; a step whose wind or waves are
+missing stays NaN and is listed in `missing_steps` so the cycle is marked incomplete.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import xarray as xr
+
+from pipeline.weather.currents import currents_at
+from pipeline.weather.regrid import regrid
+
+WIND_VARS = ("u10", "v10")
+WAVE_VARS = ("swh", "mwd", "mwp")
+
+
+def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray, lon: np.ndarray,
+                   gsm: Sequence[xr.Dataset], gwm: Sequence[xr.Dataset], oscar: xr.Dataset | None) -> tuple[xr.Dataset, list[int]]:
+    """(cycle dataset with dims (step, lat, lon), steps with missing wind or waves)."""
+    steps = np.asarray(steps_h, dtype=np.int32)
+    shape = (steps.size, lat.size, lon.size)
+    out = {v: np.full(shape, np.nan, np.float32) for v in (*WIND_VARS, *WAVE_VARS, "uo", "vo")}
+    have_wind = np.zeros(steps.size, bool)
+    have_waves = np.zeros(steps.size, bool)
+    pos = {int(s): i for i, s in enumerate(steps)}
+    for ds in gsm:
+        i = pos.get(int(ds["step"]))
+        if i is None:
+            continue
+        r = regrid(ds, lat, lon)
+        for v in WIND_VARS:
+            out[v][i] = r[v].values
+        have_wind[i] = True
+    for ds in gwm:
+        keep = [s for s in ds["step"].values if int(s) in pos]
+        if not keep:
+            continue
+        r = regrid(ds.sel(step=keep), lat, lon)
+        for k, s in enumerate(keep):
+            i = pos[int(s)]
+            for v in WAVE_VARS:
+                out[v][i] = r[v].values[k]
+            have_waves[i] = True
+    valid = np.datetime64(cycle, "ns") + steps.astype("timedelta64[h]").astype("timedelta64[ns]")
+    age = np.full(steps.size, np.nan, np.float32)
+    if oscar is not None:
+        cur = regrid(currents_at(oscar, valid).drop_vars("current_age_h"), lat, lon)
+        out["uo"][:] = cur["uo"].values
+        out["vo"][:] = cur["vo"].values
+        age = currents_at(oscar.isel(lat=slice(0, 1), lon=slice(0, 1)), valid)["current_age_h"].values
+    missing = [int(s) for s, w, a in zip(steps, have_wind, have_waves) if not (w and a)]
+    ds = xr.Dataset(
+        {k: (("step", "lat", "lon"), v) for k, v in out.items()} | {"current_age_h": (("step",), age.astype(np.float32))},
+        coords={"step": steps, "lat": lat, "lon": lon, "cycle": np.datetime64(cycle, "ns")},
+    )
+    return ds, missing

@@ -1,0 +1,194 @@
+"""The Zarr weather cube: dims (cycle, step, lat, lon), one cycle per region write.
+
+Store contents (CF attributes and units on every variable):
+  u10, v10  m/s   10 m wind (u east, v north)
+  swh       m     significant wave height
+  mwd       deg   mean wave direction, coming FROM
+  mwp       s     mean wave period
+  uo, vo    m/s   surface current, going TO (latest OSCAR analysis ≤ valid time)
+  current_age_h (cycle, step)  age of that analysis in hours
+  cycle_state   (cycle)        0 = being written (hidden), 1 = complete, 2 = incomplete (visible, flagged)
+
+How writes stay idempotent and crash-safe:
+1. Under an exclusive file lock (one writer per store), a new cycle is appended as an all-NaN
+   template with `cycle_state = 0`; an existing cycle is first set back to 0.
+2. Its data variables are written into that cycle's region.
+3. `cycle_state` is set last. Readers only see cycles whose state is not 0, so a writer killed
+   at any point leaves no partial cycle visible; the next write of the cycle repairs it.
+A half-finished append (arrays of unequal length along `cycle`) is trimmed back on the next
+write. The time encoding of `cycle` is fixed ("hours since 2000-01-01", int64) so appended
+cycles never shift.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+import zarr
+
+DATA_VARS = ("u10", "v10", "swh", "mwd", "mwp", "uo", "vo")
+STATE_HIDDEN, STATE_COMPLETE, STATE_INCOMPLETE = 0, 1, 2
+CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
+SPATIAL_CHUNK = (64, 128)
+
+VAR_ATTRS = {
+    "u10": {"units": "m s-1", "standard_name": "eastward_wind", "long_name": "10 m eastward wind"},
+    "v10": {"units": "m s-1", "standard_name": "northward_wind", "long_name": "10 m northward wind"},
+    "swh": {"units": "m", "standard_name": "sea_surface_wave_significant_height", "long_name": "significant wave height"},
+    "mwd": {"units": "degree", "standard_name": "sea_surface_wave_from_direction", "long_name": "mean wave direction (coming from)"},
+    "mwp": {"units": "s", "standard_name": "sea_surface_wave_mean_period", "long_name": "mean wave period"},
+    "uo": {"units": "m s-1", "standard_name": "eastward_sea_water_velocity", "long_name": "surface current east (going to)"},
+    "vo": {"units": "m s-1", "standard_name": "northward_sea_water_velocity", "long_name": "surface current north (going to)"},
+}
+
+
+class CubeError(RuntimeError):
+    pass
+
+
+@contextlib.contextmanager
+def writer_lock(lock_dir: Path, store: Path) -> Iterator[None]:
+    """Exclusive lock per store; a second writer waits until the first is done."""
+    lock_dir = Path(lock_dir)
+    lock_dir.mkdir(parents=True, exist_ok=True)
+    with open(lock_dir / (Path(store).name + ".lock"), "w") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
+    nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
+    data = {v: (("cycle", "step", "lat", "lon"), np.full((1, nstep, nlat, nlon), np.nan, np.float32), VAR_ATTRS[v]) for v in DATA_VARS}
+    data["current_age_h"] = (("cycle", "step"), np.full((1, nstep), np.nan, np.float32), {"units": "hours", "long_name": "age of the OSCAR analysis used"})
+    data["cycle_state"] = (("cycle",), np.array([STATE_HIDDEN], np.int8), {"flag_values": "0 1 2", "flag_meanings": "hidden complete incomplete"})
+    return xr.Dataset(
+        data,
+        coords={
+            "cycle": ("cycle", np.array([cycle], "datetime64[ns]"), {"long_name": "forecast cycle (model init time, UTC)"}),
+            "step": ("step", cycle_ds["step"].values.astype(np.int32), {"units": "hours", "long_name": "lead time"}),
+            "lat": ("lat", cycle_ds["lat"].values, {"units": "degrees_north", "standard_name": "latitude"}),
+            "lon": ("lon", cycle_ds["lon"].values, {"units": "degrees_east", "standard_name": "longitude"}),
+        },
+        attrs={"title": "jitroute weather cube", "Conventions": "CF-1.8",
+               "direction_conventions": "wind and waves coming-from; currents going-to"},
+    )
+
+
+def _encoding(ds: xr.Dataset) -> dict:
+    nstep = ds.sizes["step"]
+    enc = {v: {"chunks": (1, nstep, *SPATIAL_CHUNK)} for v in DATA_VARS}
+    enc["cycle"] = dict(CYCLE_ENCODING)
+    enc["current_age_h"] = {"chunks": (1, nstep)}
+    enc["cycle_state"] = {"chunks": (1,)}
+    return enc
+
+
+def _repair(path: Path) -> None:
+    """Trim arrays left longer than the others along `cycle` by an append that was killed."""
+    group = zarr.open_group(str(path), mode="r+")
+    lengths = {name: arr.shape[0] for name, arr in group.arrays() if "cycle" in (arr.metadata.dimension_names or ())[:1]}
+    if lengths and len(set(lengths.values())) > 1:
+        n = min(lengths.values())
+        for name, arr in group.arrays():
+            if name in lengths and arr.shape[0] > n:
+                arr.resize((n, *arr.shape[1:]))
+
+
+def _cycles_in_store(path: Path) -> np.ndarray:
+    with xr.open_zarr(path, consolidated=False) as ds:
+        return ds["cycle"].values.astype("datetime64[ns]")
+
+
+def _check_grid(path: Path, cycle_ds: xr.Dataset) -> None:
+    with xr.open_zarr(path, consolidated=False) as ds:
+        for c in ("step", "lat", "lon"):
+            if ds.sizes[c] != cycle_ds.sizes[c] or not np.allclose(ds[c].values, cycle_ds[c].values):
+                raise CubeError(f"{path}: the cycle's {c} axis differs from the cube's; regrid to the cube's grid first")
+
+
+def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path) -> None:
+    """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely."""
+    path = Path(path)
+    cycle = np.datetime64(cycle_ds["cycle"].values, "ns")
+    missing = [v for v in DATA_VARS if v not in cycle_ds]
+    if missing:
+        raise CubeError(f"cycle {cycle} lacks variables {missing}")
+    with writer_lock(lock_dir, path):
+        if not (path / "zarr.json").exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmpl = _template(cycle_ds, cycle)
+            tmpl.to_zarr(path, mode="w", encoding=_encoding(tmpl), consolidated=False, zarr_format=3)
+            index = 0
+        else:
+            _repair(path)
+            _check_grid(path, cycle_ds)
+            cycles = _cycles_in_store(path)
+            hits = np.flatnonzero(cycles == cycle)
+            if hits.size:
+                index = int(hits[0])
+                _set_state(path, index, STATE_HIDDEN)
+            else:
+                _template(cycle_ds, cycle).to_zarr(path, append_dim="cycle", consolidated=False)
+                index = cycles.size
+        region = {"cycle": slice(index, index + 1)}
+        body = xr.Dataset(
+            {v: (("cycle", "step", "lat", "lon"), cycle_ds[v].values[None].astype(np.float32)) for v in DATA_VARS}
+            | {"current_age_h": (("cycle", "step"), np.asarray(cycle_ds["current_age_h"].values, np.float32)[None])
+               if "current_age_h" in cycle_ds else (("cycle", "step"), np.full((1, cycle_ds.sizes["step"]), np.nan, np.float32))},
+        )
+        body.to_zarr(path, region=region, consolidated=False)
+        _set_state(path, index, STATE_COMPLETE if complete else STATE_INCOMPLETE)
+
+
+def _set_state(path: Path, index: int, state: int) -> None:
+    arr = zarr.open_array(str(path / "cycle_state"), mode="r+")
+    arr[index] = state
+
+
+def open_cube(path: Path, *, include_incomplete: bool = True) -> xr.Dataset:
+    """Lazy (dask) view of every visible cycle, sorted by cycle."""
+    path = Path(path)
+    if not (path / "zarr.json").exists():
+        raise FileNotFoundError(f"no weather cube at {path}: run `jitroute ingest` (or `jitroute demo`) first")
+    ds = xr.open_zarr(path, consolidated=False, chunks={})
+    state = ds["cycle_state"].values
+    keep = state == STATE_COMPLETE if not include_incomplete else state != STATE_HIDDEN
+    ds = ds.isel(cycle=np.flatnonzero(keep))
+    return ds.sortby("cycle")
+
+
+def cycle_states(path: Path) -> dict[np.datetime64, int]:
+    path = Path(path)
+    if not (path / "zarr.json").exists():
+        return {}
+    with xr.open_zarr(path, consolidated=False) as ds:
+        return dict(zip(ds["cycle"].values.astype("datetime64[ns]"), ds["cycle_state"].values.astype(int)))
+
+
+def complete_cycles(path: Path) -> list[np.datetime64]:
+    return sorted(c for c, s in cycle_states(path).items() if s == STATE_COMPLETE)
+
+
+def latest_complete_cycle(path: Path, at_or_before=None) -> np.datetime64 | None:
+    cycles = complete_cycles(path)
+    if at_or_before is not None:
+        limit = np.datetime64(at_or_before, "ns")
+        cycles = [c for c in cycles if c <= limit]
+    return cycles[-1] if cycles else None
+
+
+def load_cycle(path: Path, cycle) -> xr.Dataset:
+    """One visible cycle, eager, dims (step, lat, lon)."""
+    ds = open_cube(path)
+    c = np.datetime64(cycle, "ns")
+    if c not in ds["cycle"].values:
+        raise KeyError(f"cycle {c} is not in the cube at {path} (have {len(ds.cycle)} cycles)")
+    return ds.sel(cycle=c).load()
