@@ -118,8 +118,8 @@ def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list
 
 
 @task(name="write-cycle")
-def write_cube(path: Path, ds, complete: bool, lock_dir: Path) -> None:
-    cube.write_cycle(path, ds, complete=complete, lock_dir=lock_dir)
+def write_cube(path: Path, ds, complete: bool) -> None:
+    cube.write_cycle(path, ds, complete=complete)
 
 
 @task(name="log-files")
@@ -151,6 +151,9 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     files, rejected, day_url = list_rish(s.sources.rish_url, c, opts)
     for name in rejected:
         logger.warning("ignored unsafe name %r listed at %s", name, day_url)
+    if not files:
+        logger.warning("cycle %s: no GSM/GWM files listed at %s; nothing written", label, day_url)
+        return CycleReport(label, False, 0, 0, missing=[f"no GSM/GWM files listed at {day_url}"]).__dict__
     items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
     gaps = rish.coverage(files, steps)
     end = c + np.timedelta64(max(steps), "h")
@@ -160,11 +163,13 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     items = download_all(items, layout.raw, c, opts, known)
     ds, missing_steps, have_currents = decode_and_assemble(items, c, steps, routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg), layout.quarantine)
     problems = [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
-    problems += [f"GSM lead {h} h not listed" for h in gaps["GSM"]] + [f"GWM lead {h} h not listed" for h in gaps["GWM"]]
+    for model, leads in gaps.items():
+        if leads:
+            problems.append(f"{model} leads not listed: {', '.join(map(str, leads))} h")
     if not have_currents:
         problems.append("no OSCAR analysis at or before the cycle")
     complete = not missing_steps and have_currents and not problems
-    write_cube(layout.weather_cube, ds, complete, layout.locks)
+    write_cube(layout.weather_cube, ds, complete)
     run_id = uuid.uuid4().hex[:12]
     log_files(layout.warehouse, run_id, c, items)
     n_ok = sum(it.status in ("ok", "skipped") for it in items)

@@ -10,13 +10,13 @@ Store contents (CF attributes and units on every variable):
   cycle_state   (cycle)        0 = being written (hidden), 1 = complete, 2 = incomplete (visible, flagged)
 
 How writes stay idempotent and crash-safe:
-1. Under an exclusive file lock (one writer per store), a new cycle is appended as an all-NaN
+1. Under an exclusive file lock (one writer per store; `<store>.lock` beside it), a new cycle is appended as an all-NaN
    template with `cycle_state = 0`; an existing cycle is first set back to 0.
 2. Its data variables are written into that cycle's region.
 3. `cycle_state` is set last. Readers only see cycles whose state is not 0, so a writer killed
    at any point leaves no partial cycle visible; the next write of the cycle repairs it.
 A half-finished append (arrays of unequal length along `cycle`) is trimmed back on the next
-write. The time encoding of `cycle` is fixed ("hours since 2000-01-01", int64) so appended
+write, or by a reader that meets it (after waiting for the lock, so never under a live writer). The time encoding of `cycle` is fixed ("hours since 2000-01-01", int64) so appended
 cycles never shift.
 """
 
@@ -52,9 +52,9 @@ class CubeError(RuntimeError):
 
 
 @contextlib.contextmanager
-def writer_lock(lock_dir: Path, store: Path) -> Iterator[None]:
-    """Exclusive lock per store; a second writer waits until the first is done."""
-    lock_dir = Path(lock_dir)
+def writer_lock(lock_dir: Path | None, store: Path) -> Iterator[None]:
+    """Exclusive lock per store (file `<lock_dir or store's folder>/<store name>.lock`)."""
+    lock_dir = Path(lock_dir) if lock_dir is not None else Path(store).parent
     lock_dir.mkdir(parents=True, exist_ok=True)
     with open(lock_dir / (Path(store).name + ".lock"), "w") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
@@ -114,7 +114,7 @@ def _check_grid(path: Path, cycle_ds: xr.Dataset) -> None:
                 raise CubeError(f"{path}: the cycle's {c} axis differs from the cube's; regrid to the cube's grid first")
 
 
-def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path) -> None:
+def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None = None) -> None:
     """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely."""
     path = Path(path)
     cycle = np.datetime64(cycle_ds["cycle"].values, "ns")
@@ -153,23 +153,35 @@ def _set_state(path: Path, index: int, state: int) -> None:
     arr[index] = state
 
 
-def open_cube(path: Path, *, include_incomplete: bool = True) -> xr.Dataset:
+def _open_consistent(path: Path, lock_dir: Path | None) -> xr.Dataset:
+    try:
+        return xr.open_zarr(path, consolidated=False, chunks={})
+    except ValueError as exc:
+        if "conflicting sizes" not in str(exc):
+            raise
+    # A writer was killed mid-append (or is appending right now): wait for the lock, trim, reopen.
+    with writer_lock(lock_dir, path):
+        _repair(path)
+    return xr.open_zarr(path, consolidated=False, chunks={})
+
+
+def open_cube(path: Path, *, include_incomplete: bool = True, lock_dir: Path | None = None) -> xr.Dataset:
     """Lazy (dask) view of every visible cycle, sorted by cycle."""
     path = Path(path)
     if not (path / "zarr.json").exists():
         raise FileNotFoundError(f"no weather cube at {path}: run `jitroute ingest` (or `jitroute demo`) first")
-    ds = xr.open_zarr(path, consolidated=False, chunks={})
+    ds = _open_consistent(path, lock_dir)
     state = ds["cycle_state"].values
     keep = state == STATE_COMPLETE if not include_incomplete else state != STATE_HIDDEN
     ds = ds.isel(cycle=np.flatnonzero(keep))
     return ds.sortby("cycle")
 
 
-def cycle_states(path: Path) -> dict[np.datetime64, int]:
+def cycle_states(path: Path, lock_dir: Path | None = None) -> dict[np.datetime64, int]:
     path = Path(path)
     if not (path / "zarr.json").exists():
         return {}
-    with xr.open_zarr(path, consolidated=False) as ds:
+    with _open_consistent(path, lock_dir) as ds:
         return dict(zip(ds["cycle"].values.astype("datetime64[ns]"), ds["cycle_state"].values.astype(int)))
 
 

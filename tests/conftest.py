@@ -28,7 +28,19 @@ def data_root(tmp_path, monkeypatch) -> Path:
 def prefect_harness(tmp_path_factory):
     """One throw-away Prefect API (SQLite) for every flow test in the session."""
     os.environ.setdefault("PREFECT_HOME", str(tmp_path_factory.mktemp("prefect_home")))
+    os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
+    os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     from prefect.testing.utilities import prefect_test_harness
 
     with prefect_test_harness(server_startup_timeout=120):
         yield
+
+
+@pytest.fixture(scope="session")
+def demo_mirror(tmp_path_factory) -> Path:
+    """A generated RISH/OSCAR mirror with one full cycle (2020-12-01T00, 23 GSM leads + GWM + OSCAR)."""
+    from pipeline.synthetic.mirror import write_mirror
+
+    out = tmp_path_factory.mktemp("mirror")
+    write_mirror(out, "2020-12-01", "2020-12-01", cycles=(0,), seed=0)
+    return out
