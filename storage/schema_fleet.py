@@ -1,5 +1,70 @@
-"""Warehouse schema for the fleet tables (named migrations, applied in order)."""
+"""Warehouse schema for the fleet: vessels, noon reports (+ rejected), performance models, voyages.
+
+Units: knots, nautical miles, metres, hours, tonnes; times UTC. Relative directions
+(`*_dir_rel_deg`) are where wind/waves come FROM relative to the bow: 0 head, 180 following.
+"""
 
 from storage.warehouse import Migration
 
-MIGRATIONS: list[Migration] = []
+NOON_COLUMNS = """
+    imo BIGINT NOT NULL,
+    ts_utc TIMESTAMP NOT NULL,
+    lat DOUBLE, lon DOUBLE,
+    rpm DOUBLE, draft_m DOUBLE, trim_m DOUBLE,
+    stw_kn DOUBLE, sog_kn DOUBLE, dist_nm DOUBLE, hours DOUBLE,
+    fuel_t DOUBLE, fuel_hfo_t DOUBLE, fuel_mgo_t DOUBLE,
+    wind_kn DOUBLE, wind_dir_rel_deg DOUBLE, wave_m DOUBLE, wave_dir_rel_deg DOUBLE,
+    current_kn DOUBLE, current_dir_rel_deg DOUBLE,
+    months_since_drydock DOUBLE,
+    source_file VARCHAR
+"""
+
+MIGRATIONS: list[Migration] = [
+    Migration(
+        "fleet_001_tables",
+        f"""
+        CREATE TABLE vessels (
+            imo BIGINT PRIMARY KEY,
+            name VARCHAR NOT NULL,
+            type VARCHAR,
+            dwt DOUBLE,
+            design_speed_kn DOUBLE,
+            mcr_kw DOUBLE,
+            rpm_max DOUBLE,
+            design_fuel_tph DOUBLE
+        );
+        CREATE TABLE noon_reports ({NOON_COLUMNS}, PRIMARY KEY (imo, ts_utc));
+        CREATE TABLE noon_reports_rejected ({NOON_COLUMNS}, raw VARCHAR, reason VARCHAR NOT NULL, rejected_at TIMESTAMP);
+        CREATE TABLE perf_models (
+            imo BIGINT NOT NULL,
+            version INTEGER NOT NULL,
+            fitted_at TIMESTAMP NOT NULL,
+            form VARCHAR NOT NULL,            -- thesis | physical | fuzzy
+            target VARCHAR NOT NULL,          -- speed | fuel
+            coefficients VARCHAR,             -- JSON {{regressor: value}}
+            n_rows INTEGER,
+            r2 DOUBLE,
+            rmse DOUBLE,
+            cv_rmse DOUBLE,
+            status VARCHAR NOT NULL,          -- active | rejected | superseded
+            reason VARCHAR,
+            active BOOLEAN NOT NULL,
+            months_dd DOUBLE,
+            PRIMARY KEY (imo, version, target)
+        );
+        CREATE TABLE voyages (
+            voyage_id VARCHAR PRIMARY KEY,
+            imo BIGINT NOT NULL,
+            dep_name VARCHAR, dep_lat DOUBLE, dep_lon DOUBLE,
+            arr_name VARCHAR, arr_lat DOUBLE, arr_lon DOUBLE,
+            depart_utc TIMESTAMP NOT NULL,
+            rta_utc TIMESTAMP NOT NULL,
+            draft_m DOUBLE, trim_m DOUBLE,
+            rpm_options DOUBLE[],
+            max_hs_m DOUBLE,
+            max_wind_kn DOUBLE,
+            status VARCHAR DEFAULT 'planned'
+        );
+        """,
+    ),
+]

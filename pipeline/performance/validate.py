@@ -1,0 +1,109 @@
+"""Validation of noon reports: every row is either good or rejected with a reason.
+
+Nothing is silently dropped. Reasons (first failing check wins, in this order):
+  missing <col>                      required value empty / NaN
+  not a number in <col>              text where a number belongs
+  bad timestamp                      unparseable ts_utc
+  unknown vessel                     IMO not in the vessels table
+  hours <= 0                         reporting period not positive
+  negative <col>                     negative where impossible
+  out of range <col>                 outside a physical range (lat, rpm, draft, directions…)
+  speed beyond physics               STW or SOG above 35 kn
+  fuel looks like kg                 fuel rate above 20 t/h (a unit mistake)
+  speed looks like m/s               SOG disagrees with dist/hours by the m/s factor (1.944 ± 0.05)
+  sog inconsistent with distance     SOG disagrees with dist/hours by more than 25 %
+  duplicate timestamp in file        a second row with the same (imo, ts_utc)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+REQUIRED = ("imo", "ts_utc", "rpm", "draft_m", "stw_kn", "hours", "fuel_t")
+NUMERIC = ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
+           "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
+           "current_dir_rel_deg", "months_since_drydock")
+OPTIONAL_DEFAULTS = {"trim_m": 0.0, "wind_kn": 0.0, "wind_dir_rel_deg": 0.0, "wave_m": 0.0, "wave_dir_rel_deg": 0.0,
+                     "months_since_drydock": 0.0}
+NON_NEGATIVE = ("rpm", "draft_m", "stw_kn", "sog_kn", "dist_nm", "fuel_t", "fuel_hfo_t", "fuel_mgo_t", "wind_kn",
+                "wave_m", "current_kn", "months_since_drydock")
+RANGES = {
+    "lat": (-90, 90), "lon": (-180, 360), "rpm": (1, 250), "draft_m": (1, 25), "trim_m": (-6, 6), "hours": (0, 30),
+    "wind_dir_rel_deg": (0, 360), "wave_dir_rel_deg": (0, 360), "current_dir_rel_deg": (0, 360),
+    "wind_kn": (0, 120), "wave_m": (0, 25), "current_kn": (0, 8), "months_since_drydock": (0, 240),
+}
+MAX_SPEED_KN = 35.0
+MAX_FUEL_TPH = 20.0
+MS_TO_KN = 1.943844
+
+
+class NoonFileError(ValueError):
+    """The file as a whole cannot be read as noon reports (e.g. a required column is absent)."""
+
+
+def validate_noon(raw: pd.DataFrame, known_imos: set[int] | None = None, source: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(good rows with typed columns, rejected rows with `reason` and the original `raw` text)."""
+    absent = [c for c in REQUIRED if c not in raw.columns]
+    if absent:
+        raise NoonFileError(f"{source or 'noon report file'}: required columns missing: {', '.join(absent)}")
+    df = raw.copy()
+    df["raw"] = raw_text(raw)
+    reason = pd.Series(pd.NA, index=df.index, dtype="object")
+
+    def flag(mask, text):
+        nonlocal reason
+        mask = pd.Series(mask, index=df.index).fillna(False).astype(bool) & reason.isna()
+        reason = reason.mask(mask, text)
+
+    for c in REQUIRED:
+        flag(df[c].isna() | (df[c].astype(str).str.strip().isin(["", "nan", "NaN", "None"])), f"missing {c}")
+    for c in NUMERIC:
+        if c not in df.columns:
+            df[c] = OPTIONAL_DEFAULTS.get(c, np.nan)
+            continue
+        num = pd.to_numeric(df[c], errors="coerce")
+        flag(num.isna() & df[c].notna() & ~df[c].astype(str).str.strip().isin(["", "nan", "NaN", "None"]), f"not a number in {c}")
+        df[c] = num
+        if c in OPTIONAL_DEFAULTS:
+            df[c] = df[c].fillna(OPTIONAL_DEFAULTS[c])
+    imo = pd.to_numeric(df["imo"], errors="coerce")
+    flag(imo.isna() & reason.isna(), "not a number in imo")
+    df["imo"] = imo.fillna(0).astype("int64")
+    ts = pd.to_datetime(df["ts_utc"], errors="coerce", utc=True)
+    flag(ts.isna(), "bad timestamp")
+    df["ts_utc"] = ts.dt.tz_localize(None)
+    if known_imos is not None:
+        flag(~df["imo"].isin(list(known_imos)), "unknown vessel")
+    flag(df["hours"] <= 0, "hours <= 0")
+    for c in NON_NEGATIVE:
+        flag(df[c] < 0, f"negative {c}")
+    for c, (lo, hi) in RANGES.items():
+        flag((df[c] < lo) | (df[c] > hi), f"out of range {c}")
+    flag((df["stw_kn"] > MAX_SPEED_KN) | (df["sog_kn"] > MAX_SPEED_KN), "speed beyond physics")
+    flag(df["fuel_t"] / df["hours"] > MAX_FUEL_TPH, "fuel looks like kg")
+    implied = df["dist_nm"] / df["hours"]
+    ratio = implied / df["sog_kn"]
+    flag((df["sog_kn"] > 0.5) & (ratio.sub(MS_TO_KN).abs() < 0.05), "speed looks like m/s")
+    flag((df["sog_kn"] > 0.5) & ((ratio - 1.0).abs() > 0.25), "sog inconsistent with distance")
+    still_good = reason.isna()
+    dup = df[still_good].duplicated(subset=["imo", "ts_utc"], keep="first").reindex(df.index, fill_value=False)
+    flag(dup, "duplicate timestamp in file")
+    df["source_file"] = source
+    bad = df[reason.notna()].copy()
+    bad["reason"] = reason[reason.notna()]
+    good = df[reason.isna()].drop(columns=["raw"])
+    return good.reset_index(drop=True), bad.reset_index(drop=True)
+
+
+def raw_text(df: pd.DataFrame) -> pd.Series:
+    """Each row as 'v1|v2|…' text, as it came in (kept with rejected rows)."""
+    cols = [df[c].astype("string").fillna("") for c in df.columns]
+    out = cols[0]
+    for c in cols[1:]:
+        out = out + "|" + c
+    return out.astype(object)
+
+
+def reason_counts(rejected: pd.DataFrame) -> dict[str, int]:
+    return rejected["reason"].value_counts().to_dict() if len(rejected) else {}

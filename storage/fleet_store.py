@@ -1,0 +1,168 @@
+"""Reads and writes of the fleet tables: vessels, noon reports, performance models, voyages."""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.performance.model import PerformanceModel
+from pipeline.performance.validate import raw_text
+from storage import warehouse
+
+NOON_COLUMNS = ["imo", "ts_utc", "lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t",
+                "fuel_hfo_t", "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
+                "current_dir_rel_deg", "months_since_drydock", "source_file"]
+VESSEL_COLUMNS = ["imo", "name", "type", "dwt", "design_speed_kn", "mcr_kw", "rpm_max", "design_fuel_tph"]
+VOYAGE_COLUMNS = ["voyage_id", "imo", "dep_name", "dep_lat", "dep_lon", "arr_name", "arr_lat", "arr_lon", "depart_utc",
+                  "rta_utc", "draft_m", "trim_m", "rpm_options", "max_hs_m", "max_wind_kn", "status"]
+
+
+def _utcnow() -> datetime:
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+def _upsert(db_path: Path, table: str, df: pd.DataFrame, columns: list[str], key: str) -> int:
+    df = df.reindex(columns=columns)
+    with warehouse.connect(db_path) as con:
+        con.register("incoming", df)
+        con.execute("BEGIN TRANSACTION")
+        con.execute(f"DELETE FROM {table} WHERE {key} IN (SELECT {key} FROM incoming)")
+        con.execute(f"INSERT INTO {table} ({', '.join(columns)}) SELECT {', '.join(columns)} FROM incoming")
+        con.execute("COMMIT")
+    return len(df)
+
+
+def import_vessels(db_path: Path, df: pd.DataFrame) -> int:
+    return _upsert(db_path, "vessels", df, VESSEL_COLUMNS, "imo")
+
+
+def import_voyages(db_path: Path, df: pd.DataFrame) -> int:
+    df = df.copy()
+    for c in ("depart_utc", "rta_utc"):
+        df[c] = pd.to_datetime(df[c], utc=True).dt.tz_localize(None)
+    if "status" not in df:
+        df["status"] = "planned"
+    df["rpm_options"] = [list(map(float, r)) if not isinstance(r, str) else [float(x) for x in r.strip("[]").split(",") if x.strip()]
+                         for r in df["rpm_options"]]
+    return _upsert(db_path, "voyages", df, VOYAGE_COLUMNS, "voyage_id")
+
+
+def known_imos(db_path: Path) -> set[int]:
+    if not Path(db_path).exists():
+        return set()
+    with warehouse.connect(db_path) as con:
+        return {int(r[0]) for r in con.execute("SELECT imo FROM vessels").fetchall()}
+
+
+def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> dict[str, int]:
+    """Insert validated rows; rows identical to stored ones are no-ops, conflicting ones are rejected.
+
+    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts.
+    """
+    good = good.reindex(columns=NOON_COLUMNS)
+    value_cols = [c for c in NOON_COLUMNS if c not in ("imo", "ts_utc", "source_file")]
+    same = " AND ".join(f"(n.{c} IS NOT DISTINCT FROM g.{c})" for c in value_cols)
+    with warehouse.connect(db_path) as con:
+        con.register("g_df", good)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("CREATE TEMP TABLE g AS SELECT * FROM g_df")
+            present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchone()[0]
+            conflicts = con.execute(
+                f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
+            con.execute(f"INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc)")
+            inserted = len(good) - present - len(conflicts)
+            if len(conflicts):
+                conflicts["raw"] = raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
+                conflicts["reason"] = "conflicts with a stored report for the same vessel and time"
+                rejected = pd.concat([rejected, conflicts], ignore_index=True)
+            rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
+            for c in ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
+                      "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
+                      "current_dir_rel_deg", "months_since_drydock"):
+                rej[c] = pd.to_numeric(rej[c], errors="coerce")
+            rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
+            rej["ts_utc"] = pd.to_datetime(rej["ts_utc"], errors="coerce")
+            rej["rejected_at"] = _utcnow()
+            con.register("rej_df", rej)
+            # the same raw row rejected for the same reason is stored once: re-imports add nothing
+            con.execute(
+                "INSERT INTO noon_reports_rejected SELECT r.* FROM rej_df r "
+                "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason)"
+            )
+            con.execute("DROP TABLE g")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)), "conflicts": int(len(conflicts))}
+
+
+def load_reports(db_path: Path, imos: list[int] | None = None) -> pd.DataFrame:
+    """All stored noon reports (optionally of some vessels), ordered by vessel and time, in one query."""
+    with warehouse.connect(db_path, write=False) as con:
+        if imos:
+            return con.execute("SELECT * FROM noon_reports WHERE imo IN (SELECT unnest(?)) ORDER BY imo, ts_utc", [list(map(int, imos))]).fetchdf()
+        return con.execute("SELECT * FROM noon_reports ORDER BY imo, ts_utc").fetchdf()
+
+
+def active_models(db_path: Path) -> dict[int, dict]:
+    """imo → {"version", "form", "months_dd", "speed": {name: coef}, "fuel": {name: coef}} of active models."""
+    with warehouse.connect(db_path, write=False) as con:
+        rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd FROM perf_models WHERE active").fetchall()
+    out: dict[int, dict] = {}
+    for imo, version, form, target, coefs, months in rows:
+        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0})
+        d[target] = json.loads(coefs)
+    return out
+
+
+def next_versions(db_path: Path) -> dict[int, int]:
+    with warehouse.connect(db_path, write=False) as con:
+        return {int(i): int(v) + 1 for i, v in con.execute("SELECT imo, max(version) FROM perf_models GROUP BY imo").fetchall()}
+
+
+def save_fits(db_path: Path, rows: list[dict]) -> None:
+    """Store fit rows (one per vessel and target); activating one deactivates the vessel's older models."""
+    if not rows:
+        return
+    df = pd.DataFrame(rows)
+    df["fitted_at"] = _utcnow()
+    cols = ["imo", "version", "fitted_at", "form", "target", "coefficients", "n_rows", "r2", "rmse", "cv_rmse", "status",
+            "reason", "active", "months_dd"]
+    with warehouse.connect(db_path) as con:
+        con.register("fits", df.reindex(columns=cols))
+        con.execute("BEGIN TRANSACTION")
+        con.execute("UPDATE perf_models SET active = false, status = 'superseded' WHERE active AND imo IN (SELECT imo FROM fits WHERE active)")
+        con.execute(f"INSERT INTO perf_models ({', '.join(cols)}) SELECT {', '.join(cols)} FROM fits")
+        con.execute("COMMIT")
+
+
+def load_vessels(db_path: Path) -> pd.DataFrame:
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute("SELECT * FROM vessels ORDER BY imo").fetchdf()
+
+
+def load_voyages(db_path: Path, *, voyage_ids: list[str] | None = None, departing_after=None) -> pd.DataFrame:
+    q = "SELECT * FROM voyages WHERE true"
+    params: list = []
+    if voyage_ids:
+        q += " AND voyage_id IN (SELECT unnest(?))"
+        params.append(list(voyage_ids))
+    if departing_after is not None:
+        q += " AND depart_utc >= ?"
+        params.append(pd.Timestamp(departing_after).tz_localize(None) if pd.Timestamp(departing_after).tzinfo else pd.Timestamp(departing_after))
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute(q + " ORDER BY depart_utc, voyage_id", params).fetchdf()
+
+
+def load_active_model(db_path: Path, imo: int) -> PerformanceModel | None:
+    m = active_models(db_path).get(int(imo))
+    if not m or "speed" not in m or "fuel" not in m:
+        return None
+    return PerformanceModel(form=m["form"], speed_coef=np.array(list(m["speed"].values())), fuel_coef=np.array(list(m["fuel"].values())),
+                            months_dd=float(m["months_dd"]), imo=int(imo), version=m["version"])
