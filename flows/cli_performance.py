@@ -1,9 +1,97 @@
-"""`jitroute` commands for performance."""
+"""`jitroute noon import`, `jitroute refit`, `jitroute fleet generate|import`."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Optional
+
 import typer
+from rich.console import Console
+from rich.table import Table
+
+console = Console()
+DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
+
+
+def _fmt(x, nd=3):
+    return "-" if x is None or x != x else f"{x:.{nd}f}"
+
+
+def refit_table(summaries: list[dict]) -> Table:
+    t = Table(title="Performance models")
+    for col in ("IMO", "n", "STW R²", "STW RMSE kn", "STW cv", "fuel R²", "fuel RMSE t/h", "fuel cv", "changed"):
+        t.add_column(col, no_wrap=True, justify="right" if col != "changed" else "left")
+    t.add_column("why")
+    for s in summaries:
+        t.add_row(str(s["imo"]), str(s["n"]), _fmt(s.get("speed_r2")), _fmt(s.get("speed_rmse")), _fmt(s.get("speed_cv_rmse")),
+                  _fmt(s.get("fuel_r2")), _fmt(s.get("fuel_rmse")), _fmt(s.get("fuel_cv_rmse")),
+                  "[green]yes" if s["changed"] else "[yellow]no", s.get("why", s.get("reason", "")))
+    return t
 
 
 def register(app: typer.Typer) -> None:
-    """Add this area's commands to the CLI."""
+    noon = typer.Typer(help="Noon reports: import with validation.", no_args_is_help=True)
+    fleet = typer.Typer(help="Fleet data: vessels, voyages, demo generator.", no_args_is_help=True)
+    app.add_typer(noon, name="noon")
+    app.add_typer(fleet, name="fleet")
+
+    @noon.command("import")
+    def noon_import(file: Path = typer.Argument(..., help="CSV or Parquet of noon reports (one or many vessels)."),
+                    data: Optional[Path] = DataOpt):
+        """Validate and import noon reports; bad rows go to noon_reports_rejected with a reason."""
+        from flows.refit import import_noon_reports
+        from pipeline.performance.validate import NoonFileError
+
+        try:
+            c = import_noon_reports(str(file), data_root=str(data) if data else None)
+        except (NoonFileError, FileNotFoundError) as exc:
+            console.print(f"[red]error:[/] {exc}")
+            raise typer.Exit(2) from exc
+        console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
+                      f"{c['rejected']} rejected")
+        if c["reasons"] or c["conflicts"]:
+            t = Table(title="Rejected rows by reason")
+            t.add_column("reason")
+            t.add_column("rows", justify="right")
+            for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
+                t.add_row(reason, str(n))
+            if c["conflicts"]:
+                t.add_row("conflicts with a stored report", str(c["conflicts"]))
+            console.print(t)
+
+    @app.command()
+    def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),
+              form: str = typer.Option("physical", help="Model form: physical (default) or thesis."),
+              data: Optional[Path] = DataOpt):
+        """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
+        from flows.refit import refit_performance
+
+        summaries = refit_performance(imos=imo or None, data_root=str(data) if data else None, form=form)
+        console.print(refit_table(summaries))
+
+    @fleet.command("generate")
+    def fleet_generate(out: Path = typer.Option(..., "--out"), start: str = typer.Option("2020-12-01T00", help="Reports end and voyages start here (UTC)."),
+                       vessels: int = typer.Option(12, help="Number of vessels."), seed: int = typer.Option(7)):
+        """Write a deterministic demo fleet: vessels.csv, noon_reports.csv, voyages.csv."""
+        from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+        paths = write_fleet(generate_fleet(start, n_vessels=vessels, seed=seed), out)
+        for k, p in paths.items():
+            console.print(f"{k}: {p}")
+
+    @fleet.command("import")
+    def fleet_import(folder: Path = typer.Argument(..., help="Folder with vessels.csv, voyages.csv and optionally noon_reports.csv."),
+                     data: Optional[Path] = DataOpt):
+        """Import vessels and voyages (and noon reports, validated) from a folder of CSV files."""
+        import pandas as pd
+
+        from flows.refit import import_noon_reports
+        from flows.settings import load_settings
+        from storage import fleet_store
+
+        db = load_settings(data_root=data).layout.ensure().warehouse
+        n_v = fleet_store.import_vessels(db, pd.read_csv(folder / "vessels.csv"))
+        n_voy = fleet_store.import_voyages(db, pd.read_csv(folder / "voyages.csv"))
+        console.print(f"{n_v} vessels, {n_voy} voyages imported")
+        if (folder / "noon_reports.csv").exists():
+            noon_import(folder / "noon_reports.csv", data)

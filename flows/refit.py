@@ -1,0 +1,74 @@
+"""Prefect flows `refit-performance` and `import-noon-reports`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+from prefect import flow, get_run_logger, task
+
+from flows.settings import load_settings
+from pipeline.performance.refit import refit_vessel
+from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
+from storage import fleet_store
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """CSV or Parquet, every column as text (validation does the typing)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            return pd.read_parquet(path).astype("string").astype(object)
+        return pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+    except (ValueError, OSError, pd.errors.ParserError) as exc:
+        raise NoonFileError(f"{path}: cannot be read as CSV/Parquet ({exc})") from exc
+
+
+@flow(name="import-noon-reports")
+def import_noon_reports(path: str, data_root: str | None = None) -> dict:
+    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    raw = read_table(Path(path))
+    good, bad = validate_noon(raw, fleet_store.known_imos(db), source=Path(path).name)
+    counts = fleet_store.import_noon(db, good, bad)
+    counts["rows"] = len(raw)
+    counts["reasons"] = reason_counts(bad)
+    return counts
+
+
+@task(name="load-reports")
+def load_reports(db: Path, imos: list[int] | None) -> pd.DataFrame:
+    return fleet_store.load_reports(db, imos)
+
+
+@task(name="fit-vessels")
+def fit_vessels(reports: pd.DataFrame, active: dict, versions: dict, form: str, robust: bool) -> tuple[list[dict], list[dict]]:
+    rows, summaries = [], []
+    for imo, group in reports.groupby("imo", sort=True):
+        r, s = refit_vessel(int(imo), group, active.get(int(imo)), versions.get(int(imo), 1), form=form, robust=robust)
+        rows += r
+        summaries.append(s)
+    return rows, summaries
+
+
+@flow(name="refit-performance")
+def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "physical",
+                      robust: bool = True) -> list[dict]:
+    """Refit every (or the given) vessel's speed and fuel model; a model becomes active only if it is
+    well determined and not worse than the active one on the newest held-out reports."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    logger = get_run_logger()
+    known = fleet_store.known_imos(db)
+    reports = load_reports(db, imos)
+    summaries_missing = []
+    for imo in sorted(set(imos or known) - set(reports["imo"].astype(int))):
+        summaries_missing.append({"imo": imo, "n": 0, "changed": False,
+                                  "reason": "no valid noon reports (all rejected or none imported): model unchanged"})
+        logger.warning("vessel %s: no valid noon reports; model unchanged", imo)
+    rows, summaries = fit_vessels(reports, fleet_store.active_models(db), fleet_store.next_versions(db), form, robust)
+    fleet_store.save_fits(db, rows)
+    return sorted(summaries + summaries_missing, key=lambda d: d["imo"])
