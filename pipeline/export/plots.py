@@ -1,0 +1,291 @@
+"""PNG pictures of plans: a route over the weather, solver convergence, all voyages of a run.
+
+Maps use plain lon/lat axes with a 1/cos(latitude) aspect (locally true shape) and coastlines
+contoured from the `global-land-mask` grid sampled over the map extent. Everything is drawn in
+one longitude frame centred on the voyages (tick labels in °E/°W), so a route across the
+dateline is drawn as one piece. Legs are drawn as great circles (8 points per leg).
+
+Figures come from matplotlib's object API, not pyplot: rendering is Agg, headless and safe in
+worker threads. The `*_figure` functions return the Figure (for notebooks and tests), the
+`*_png` functions write it and return the Path.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+from pipeline.export.voyage import (finite_or_none, iso_utc, unwrap_lon_deg, vessel_label, voyage_id,
+                                    waypoint_names, waypoints_deg)
+from pipeline.routing.geodesy import KN_PER_MS, gc_interpolate
+from pipeline.routing.land import MASK_RES_DEG, is_sea
+
+STATUS_COLOURS = {"ok": "#2ca02c", "late": "#ff7f0e"}
+FAILED_COLOUR = "#d62728"  # infeasible, failed, error and anything unknown
+POINTS_PER_LEG = 8
+MAX_LAND_SAMPLES = 700  # per axis
+DPI = 110
+
+
+def status_colour(status) -> str:
+    return STATUS_COLOURS.get(str(status), FAILED_COLOUR)
+
+
+def _in_frame(lon_deg, centre_deg: float) -> np.ndarray:
+    """Each longitude moved by a multiple of 360° to within 180° of the centre."""
+    return centre_deg + (np.asarray(lon_deg, dtype=np.float64) - centre_deg + 180.0) % 360.0 - 180.0
+
+
+def _centre_deg(lon_deg) -> float:
+    """Circular mean of longitudes (so 179 and −179 centre on 180, not 0); 0 when there are none."""
+    lon = np.radians(np.asarray(lon_deg, dtype=np.float64))
+    if lon.size == 0:
+        return 0.0
+    return float(np.degrees(np.arctan2(np.sin(lon).mean(), np.cos(lon).mean())))
+
+
+def _track(legs: list[dict], centre_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Great-circle polyline through the legs, longitudes continuous and near the centre."""
+    if not legs:
+        return np.empty(0), np.empty(0)
+    fracs = np.linspace(0.0, 1.0, POINTS_PER_LEG + 1)
+    pts = [(legs[0]["lat0"], legs[0]["lon0"])]
+    for leg in legs:
+        pts += [gc_interpolate(leg["lat0"], leg["lon0"], leg["lat1"], leg["lon1"], f) for f in fracs[1:]]
+    lat, lon = np.array(pts, dtype=np.float64).T
+    return lat, unwrap_lon_deg(lon, centre_deg)
+
+
+def _waypoints(legs: list[dict], centre_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    lat, lon = waypoints_deg(legs)
+    return lat, unwrap_lon_deg(lon, centre_deg)
+
+
+def _extent(lat, lon) -> tuple[float, float, float, float]:
+    """(lon0, lon1, lat0, lat1) around the points with a margin; the world when there are none."""
+    lat, lon = np.asarray(lat, dtype=np.float64), np.asarray(lon, dtype=np.float64)
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    if not ok.any():
+        return -180.0, 180.0, -80.0, 80.0
+    lat, lon = lat[ok], lon[ok]
+    mx = max(2.0, 0.08 * np.ptp(lon))
+    my = max(2.0, 0.08 * np.ptp(lat))
+    x0, x1 = lon.min() - mx, lon.max() + mx
+    if x1 - x0 > 360.0:  # never show a longitude twice
+        x0, x1 = 0.5 * (x0 + x1) - 180.0, 0.5 * (x0 + x1) + 180.0
+    return float(x0), float(x1), float(max(-85.0, lat.min() - my)), float(min(85.0, lat.max() + my))
+
+
+def _lon_label(x, _pos=None) -> str:
+    w = (x + 180.0) % 360.0 - 180.0
+    if abs(w) < 1e-9 or abs(abs(w) - 180.0) < 1e-9:
+        return f"{abs(w):.0f}°"
+    return f"{abs(w):g}°{'E' if w > 0 else 'W'}"
+
+
+def _map_axes(title_lines: list[str], extent) -> tuple[Figure, object]:
+    x0, x1, y0, y1 = extent
+    aspect = 1.0 / max(0.1, np.cos(np.radians(0.5 * (y0 + y1))))
+    # height follows the map's shape (about 9 in of map width), so wide maps get no empty bands
+    height_in = float(np.clip(9.0 * (y1 - y0) * aspect / (x1 - x0) + 1.4, 3.5, 9.0))
+    fig = Figure(figsize=(11, height_in), layout="constrained")
+    ax = fig.add_subplot()
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect(aspect)
+    ax.xaxis.set_major_formatter(FuncFormatter(_lon_label))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda y, _p: f"{abs(y):g}°{'N' if y > 0 else 'S' if y < 0 else ''}"))
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.set_title("\n".join(title_lines), fontsize=10)
+    return fig, ax
+
+
+def _draw_land(ax, extent) -> None:
+    """Land filled and outlined, from the land mask sampled over the extent (≤ 700 points a side)."""
+    x0, x1, y0, y1 = extent
+    nx = int(min(MAX_LAND_SAMPLES, max(2, (x1 - x0) / MASK_RES_DEG)))
+    ny = int(min(MAX_LAND_SAMPLES, max(2, (y1 - y0) / MASK_RES_DEG)))
+    lon, lat = np.linspace(x0, x1, nx), np.linspace(y0, y1, ny)
+    land = (~is_sea(lat[:, None], lon[None, :])).astype(np.float32)
+    if land.any():
+        ax.contourf(lon, lat, land, levels=[0.5, 1.5], colors=["#ddd5c4"], zorder=1)
+        ax.contour(lon, lat, land, levels=[0.5], colors="0.3", linewidths=0.5, zorder=1)
+
+
+def _draw_field(fig, ax, field: dict, centre_deg: float, extent) -> None:
+    """Filled Hs contours with a colourbar and thinned wind barbs (knots), clipped to the extent."""
+    lat = np.asarray(field["lat"], dtype=np.float64)
+    lon = _in_frame(field["lon"], centre_deg)
+    lon, cols = np.unique(lon, return_index=True)  # sorted, and 0/360 duplicates dropped
+    x0, x1, y0, y1 = extent
+    pad = 2.0 * max(np.diff(lon).max(initial=0.0), np.abs(np.diff(lat)).max(initial=0.0))
+    keep_x = (lon >= x0 - pad) & (lon <= x1 + pad)
+    keep_y = (lat >= y0 - pad) & (lat <= y1 + pad)
+    if keep_x.sum() < 2 or keep_y.sum() < 2:
+        return
+    x, y = lon[keep_x], lat[keep_y]
+
+    def cut(name):
+        a = field.get(name)
+        if a is None:
+            return None
+        a = np.asarray(a, dtype=np.float64)
+        if a.shape != (lat.size, np.asarray(field["lon"]).size):
+            raise ValueError(f"weather field {name!r} has shape {a.shape}, expected (lat, lon) = "
+                             f"({lat.size}, {np.asarray(field['lon']).size})")
+        return a[:, cols][np.ix_(keep_y, keep_x)]
+
+    hs = cut("hs_m")
+    if hs is not None and np.isfinite(hs).any() and np.nanmax(hs) > 0:
+        levels = MaxNLocator(12).tick_values(0.0, float(np.nanmax(hs)))
+        cf = ax.contourf(x, y, hs, levels=levels, cmap="YlGnBu", zorder=0)
+        fig.colorbar(cf, ax=ax, shrink=0.8, label="significant wave height Hs [m]")
+    u, v = cut("u_ms"), cut("v_ms")
+    if u is not None and v is not None:
+        sy, sx = max(1, y.size // 16), max(1, x.size // 22)
+        ax.barbs(x[::sx], y[::sy], u[::sy, ::sx] * KN_PER_MS, v[::sy, ::sx] * KN_PER_MS,
+                 length=5, linewidth=0.5, color="0.25", zorder=2)
+
+
+def _fmt(x, unit: str, decimals: int = 1) -> str:
+    v = finite_or_none(x)
+    return "n/a" if v is None else f"{v:.{decimals}f}{unit}"
+
+
+def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | None = None,
+                     field: dict | None = None, title: str | None = None) -> Figure:
+    """The plan (solid) and the baseline (dashed) over Hs and wind; waypoints marked."""
+    baseline_legs = baseline_legs or []
+    all_lon = np.concatenate([waypoints_deg(legs)[1], waypoints_deg(baseline_legs)[1]])
+    if all_lon.size:
+        centre = _centre_deg(all_lon)
+    elif field is not None:
+        centre = _centre_deg(field["lon"])
+    else:
+        centre = 0.0
+    lat, lon = _track(legs, centre)
+    blat, blon = _track(baseline_legs, centre)
+    if lat.size or blat.size:
+        extent = _extent(np.concatenate([lat, blat]), np.concatenate([lon, blon]))
+    elif field is not None:
+        extent = _extent(*np.meshgrid(np.asarray(field["lat"]), _in_frame(field["lon"], centre), indexing="ij"))
+    else:
+        extent = _extent([], [])
+    head = title or f"{voyage_id(route)} · {vessel_label(route)} · {route.get('solver') or '?'} · " \
+                    f"{route.get('status') or '?'}"
+    numbers = (f"fuel {_fmt(route.get('fuel_t'), ' t')} vs baseline {_fmt(route.get('baseline_fuel_t'), ' t')} "
+               f"(saving {_fmt(route.get('savings_pct'), ' %')}) · ETA {iso_utc(route.get('eta_utc')) or 'n/a'}"
+               f" · RTA {iso_utc(route.get('rta_utc')) or 'n/a'}")
+    lines = [head, numbers] + ([f"no route: {route.get('reason') or route.get('status')}"] if not legs else [])
+    fig, ax = _map_axes(lines, extent)
+    if field is not None:
+        _draw_field(fig, ax, field, centre, extent)
+    _draw_land(ax, extent)
+    if blat.size:
+        ax.plot(blon, blat, "--", color="0.15", lw=1.3, zorder=3, label="baseline")
+    if lat.size:
+        ax.plot(lon, lat, "-", color="#c2185b", lw=2.0, zorder=4, label="plan")
+        wlat, wlon = _waypoints(legs, centre)
+        ax.plot(wlon, wlat, "o", ms=3.5, mfc="white", mec="#c2185b", zorder=5, label="waypoints")
+        names = waypoint_names(route, wlat.size)
+        for k in (0, wlat.size - 1):
+            ax.annotate(names[k], (wlon[k], wlat[k]), xytext=(4, 4), textcoords="offset points", fontsize=8,
+                        zorder=6)
+    if lat.size or blat.size:
+        ax.legend(loc="best", fontsize=8)
+    return fig
+
+
+def route_map_png(path, route: dict, legs: list[dict], baseline_legs: list[dict] | None = None,
+                  field: dict | None = None, title: str | None = None) -> Path:
+    """Write `route_map_figure(...)` as a PNG. `field`: dict(lat=1-D, lon=1-D, hs_m=2-D or None,
+    u_ms=2-D, v_ms=2-D or None), arrays indexed (lat, lon); lon may be −180..180 or 0..360."""
+    return _save(route_map_figure(route, legs, baseline_legs, field, title), path)
+
+
+def convergence_figure(history, title: str | None = None) -> Figure:
+    """Best cost per BFOA cycle (and the running best when it differs), with the DP optimum if given.
+
+    `history`: 1-D costs, or {"bfoa": costs, "dp_cost": float | None}.
+    """
+    dp = None
+    if isinstance(history, dict):
+        dp = finite_or_none(history.get("dp_cost"))
+        history = history.get("bfoa", [])
+    cost = np.asarray(history if history is not None else [], dtype=np.float64).ravel()
+    fig = Figure(figsize=(8, 5), layout="constrained")
+    ax = fig.add_subplot()
+    cycle = np.arange(1, cost.size + 1)
+    sub = "no BFOA history"
+    if cost.size:
+        ax.plot(cycle, cost, "o-", ms=3, lw=1.2, label="best in cycle")
+        best = np.fmin.accumulate(cost)
+        if not np.allclose(best, cost, equal_nan=True):
+            ax.step(cycle, best, where="post", lw=1.5, label="best so far")
+        final = np.nanmin(cost) if np.isfinite(cost).any() else np.nan
+        sub = f"{cost.size} cycles, best {_fmt(final, '', 4)}"
+        if dp is not None and np.isfinite(final) and dp != 0:
+            sub += f" ({100.0 * (final - dp) / abs(dp):+.2f} % vs DP)"
+    if dp is not None:
+        ax.axhline(dp, ls="--", color="k", lw=1.0, label=f"DP optimum {dp:.4g}")
+    ax.set_xlabel("BFOA cycle")
+    ax.set_ylabel("objective cost")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    if cost.size or dp is not None:
+        ax.legend(fontsize=8)
+    ax.set_title(f"{title or 'BFOA convergence'}\n{sub}", fontsize=10)
+    return fig
+
+
+def convergence_png(path, history, title: str | None = None) -> Path:
+    return _save(convergence_figure(history, title), path)
+
+
+def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Figure:
+    """Every voyage of a run on one map, coloured by status and labelled with its voyage id;
+    voyages without legs are listed in a box."""
+    all_lon = np.concatenate([waypoints_deg(legs)[1] for _r, legs in routes_with_legs] or [np.empty(0)])
+    centre = _centre_deg(all_lon)
+    tracks = [(route, *_track(legs, centre)) for route, legs in routes_with_legs]
+    lat_all = np.concatenate([t[1] for t in tracks] or [np.empty(0)])
+    lon_all = np.concatenate([t[2] for t in tracks] or [np.empty(0)])
+    statuses = [str(r.get("status")) for r, _legs in routes_with_legs]
+    counts = {s: statuses.count(s) for s in dict.fromkeys(statuses)}
+    head = title or f"{len(routes_with_legs)} voyages"
+    extent = _extent(lat_all, lon_all)
+    fig, ax = _map_axes([head, ", ".join(f"{n} {s}" for s, n in counts.items()) or "no voyages"], extent)
+    _draw_land(ax, extent)
+    missing = []
+    for route, lat, lon in tracks:
+        colour = status_colour(route.get("status"))
+        if not lat.size:
+            missing.append(f"{voyage_id(route)} ({route.get('status')})")
+            continue
+        ax.plot(lon, lat, "-", color=colour, lw=1.6, zorder=3)
+        ax.plot(lon[[0, -1]], lat[[0, -1]], "o", ms=3, color=colour, zorder=4)
+        mid = lat.size // 2
+        ax.annotate(voyage_id(route), (lon[mid], lat[mid]), xytext=(3, 3), textcoords="offset points",
+                    fontsize=7, color=colour, zorder=5)
+    handles = [Line2D([], [], color=status_colour(s), lw=2, label=s) for s in counts]
+    if handles:
+        ax.legend(handles=handles, loc="best", fontsize=8, title="status", title_fontsize=8)
+    if missing:
+        ax.text(0.01, 0.01, "no route: " + ", ".join(missing), transform=ax.transAxes, fontsize=7,
+                va="bottom", ha="left", color=FAILED_COLOUR, zorder=6,
+                bbox=dict(boxstyle="round", fc="white", ec=FAILED_COLOUR, alpha=0.85))
+    return fig
+
+
+def fleet_map_png(path, routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Path:
+    return _save(fleet_map_figure(routes_with_legs, title), path)
+
+
+def _save(fig: Figure, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, format="png", dpi=DPI)
+    return path

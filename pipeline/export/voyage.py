@@ -1,0 +1,102 @@
+"""What every export reads from a routed voyage: waypoints, names, UTC times, finite numbers.
+
+A voyage is `route: dict` (one row of `routes`) and `legs: list[dict]` (its `route_legs` rows in
+order). Waypoint 0 is leg 0's start and waypoint i (i ≥ 1) is leg i−1's end, so n legs give
+n + 1 waypoints. Times are naive UTC (datetime, pandas Timestamp or numpy datetime64).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+
+def voyage_id(route: dict) -> str:
+    return str(route.get("voyage_id") or "?")
+
+
+def vessel_label(route: dict) -> str:
+    """The vessel's name, or its IMO number when the name is missing."""
+    name = route.get("vessel_name")
+    if isinstance(name, str) and name.strip():
+        return name.strip()
+    imo = route.get("imo")
+    return f"IMO {imo}" if imo is not None else "unknown vessel"
+
+
+def require_legs(route: dict, legs: list[dict], what: str) -> None:
+    """Raise ValueError naming the voyage when there is no route to export (no legs, bad positions)."""
+    if not legs:
+        reason = route.get("reason") or "no reason given"
+        raise ValueError(
+            f"voyage {voyage_id(route)}: cannot write {what}, the plan has no legs "
+            f"(status {route.get('status')!r}: {reason}); only voyages with a route can be exported"
+        )
+    lat, lon = waypoints_deg(legs)
+    bad = ~(np.isfinite(lat) & np.isfinite(lon) & (np.abs(lat) <= 90.0))
+    if bad.any():
+        raise ValueError(f"voyage {voyage_id(route)}: cannot write {what}, waypoint(s) "
+                         f"{', '.join(map(str, np.flatnonzero(bad)))} have no valid position")
+
+
+def waypoints_deg(legs: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """(lat, lon) of the n + 1 waypoints in degrees, longitudes as given (−180..180)."""
+    if not legs:
+        return np.empty(0), np.empty(0)
+    lat = [legs[0]["lat0"]] + [leg["lat1"] for leg in legs]
+    lon = [legs[0]["lon0"]] + [leg["lon1"] for leg in legs]
+    return np.asarray(lat, dtype=np.float64), np.asarray(lon, dtype=np.float64)
+
+
+def waypoint_names(route: dict, n_waypoints: int) -> list[str]:
+    """Departure port, WP001 … WPnnn, arrival port (generic names when the ports are missing)."""
+    names = [f"WP{i:03d}" for i in range(n_waypoints)]
+    if n_waypoints:
+        names[0] = route.get("dep_name") or "Departure"
+        names[-1] = route.get("arr_name") or "Arrival"
+    return names
+
+
+def unwrap_lon_deg(lon_deg, centre_deg: float | None = None) -> np.ndarray:
+    """Longitudes along a track made continuous (no step > 180°), e.g. 179.5, −179.6 → 179.5, 180.4.
+
+    With `centre_deg` the whole track is shifted by a multiple of 360° so its middle lies within
+    180° of the centre (several tracks drawn in one frame).
+    """
+    lon = np.unwrap(np.asarray(lon_deg, dtype=np.float64), period=360.0)
+    if centre_deg is not None and lon.size:
+        mid = 0.5 * (lon.min() + lon.max())
+        lon = lon - 360.0 * np.round((mid - centre_deg) / 360.0)
+    return lon
+
+
+def utc_timestamp(t) -> pd.Timestamp | None:
+    """A naive UTC Timestamp, or None for None/NaT. Aware times are converted to UTC."""
+    if t is None:
+        return None
+    ts = pd.Timestamp(t)
+    if pd.isna(ts):
+        return None
+    if ts.tzinfo is not None:
+        ts = ts.tz_convert("UTC").tz_localize(None)
+    return ts
+
+
+def iso_utc(t) -> str | None:
+    """ISO 8601 UTC with a Z, rounded to the second (what ECDIS and JSON readers expect)."""
+    ts = utc_timestamp(t)
+    return None if ts is None else ts.round("s").strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def finite_or_none(x: Any) -> float | None:
+    """A plain float, or None for None/NaN/inf/non-numbers."""
+    if x is None or isinstance(x, (bool, np.bool_)):
+        return None
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None

@@ -1,0 +1,244 @@
+"""Route exports: RTZ against the IEC 61174 schemas, GeoJSON, and PNG maps/plots."""
+
+import json
+from datetime import datetime, timedelta
+
+import numpy as np
+import pandas as pd
+import pytest
+from lxml import etree
+
+from pipeline.export import plots
+from pipeline.export.geojson import route_to_geojson
+from pipeline.export.rtz import JITROUTE_NS, route_to_rtz, rtz_file_name, validate_rtz
+from pipeline.routing.geodesy import gc_bearing_deg, gc_distance_nm
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+RTZ_NS = {"1.0": "http://www.cirm.org/RTZ/1/0", "1.1": "http://www.cirm.org/RTZ/1/1",
+          "1.2": "http://www.cirm.org/RTZ/1/2"}
+# North Pacific, eastbound across the dateline between waypoints 2 and 3
+POINTS = [(40.0, 176.0), (40.6, 178.3), (41.0, 179.5), (41.3, -179.6), (41.8, -177.2)]
+DEPART = datetime(2021, 1, 10, 6, 0, 0)
+
+
+def make_legs(points=POINTS, depart=DEPART, sog_kn=(12.4, 12.9, 11.7, 13.2), rpm=(71.26, 74.8, 68.49, 77.51)):
+    legs, t = [], depart
+    for i, ((la0, lo0), (la1, lo1)) in enumerate(zip(points[:-1], points[1:])):
+        dist = gc_distance_nm(la0, lo0, la1, lo1)
+        hours = dist / sog_kn[i]
+        eta = t + timedelta(hours=hours)  # not whole seconds on purpose
+        legs.append(dict(leg=i, lat0=la0, lon0=lo0, lat1=la1, lon1=lo1, course_deg=gc_bearing_deg(la0, lo0, la1, lo1),
+                         dist_nm=dist, rpm=rpm[i], stw_kn=sog_kn[i] - 0.3, sog_kn=sog_kn[i], hours=hours,
+                         fuel_t=0.9 * hours, etd_utc=t, eta_utc=pd.Timestamp(eta), wind_kn=18.0 + i,
+                         wind_dir_deg=350.0 + 5 * i, hs_m=2.5 + 0.1 * i, wave_dir_deg=300.0,
+                         current_kn=np.nan if i == 1 else 0.4, beyond_forecast=i == 3))
+        t = eta
+    return legs
+
+
+@pytest.fixture
+def voyage():
+    legs = make_legs()
+    route = dict(voyage_id="V0007", imo=9074729, vessel_name="Pacific Trader", solver="bfoa", status="ok",
+                 reason=None, depart_utc=DEPART, eta_utc=legs[-1]["eta_utc"],
+                 rta_utc=pd.Timestamp("2021-01-11T12:00:00"), hours=sum(x["hours"] for x in legs),
+                 fuel_t=sum(x["fuel_t"] for x in legs), baseline_fuel_t=np.float64(30.0), savings_pct=np.nan,
+                 distance_nm=sum(x["dist_nm"] for x in legs), dep_name="Yokohama", arr_name="Dutch Harbor")
+    return route, legs
+
+
+def _parse(xml: bytes, version="1.1"):
+    ns = {"r": RTZ_NS[version], "jr": JITROUTE_NS}
+    return etree.fromstring(xml), ns
+
+
+# --- RTZ --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("version", ["1.0", "1.1", "1.2"])
+def test_rtz_validates_against_its_schema(voyage, version):
+    xml = route_to_rtz(*voyage, version=version)
+    validate_rtz(xml, version=version)
+    doc, ns = _parse(xml, version)
+    assert doc.get("version") == version
+    info = doc.find("r:routeInfo", ns)
+    assert info.get("routeName") == "V0007_Yokohama-Dutch_Harbor"
+    assert rtz_file_name(voyage[0]) == info.get("routeName") + ".rtz"
+    assert info.get("vesselIMO") == "9074729" and info.get("vesselName") == "Pacific Trader"
+
+
+def test_rtz_waypoints_are_the_leg_endpoints(voyage):
+    route, legs = voyage
+    doc, ns = _parse(route_to_rtz(route, legs))
+    wps = doc.findall("r:waypoints/r:waypoint", ns)
+    assert len(wps) == len(legs) + 1
+    got = [(float(w.find("r:position", ns).get("lat")), float(w.find("r:position", ns).get("lon"))) for w in wps]
+    np.testing.assert_allclose(got, POINTS, atol=5e-7)
+    assert all(len(w.find("r:position", ns).get("lon").split(".")[1]) >= 6 for w in wps)
+    assert [w.get("name") for w in wps][::len(wps) - 1] == ["Yokohama", "Dutch Harbor"]
+    # a leg's data sits on the waypoint it leads to; the first waypoint has none
+    assert wps[0].find("r:leg", ns) is None
+    assert {w.find("r:leg", ns).get("geometryType") for w in wps[1:]} == {"Orthodrome"}
+
+
+def test_rtz_schedule_has_the_legs_times_speeds_and_rpm(voyage):
+    route, legs = voyage
+    doc, ns = _parse(route_to_rtz(route, legs))
+    ids = [w.get("id") for w in doc.findall("r:waypoints/r:waypoint", ns)]
+    els = doc.findall("r:schedules/r:schedule/r:calculated/r:scheduleElement", ns)
+    assert [e.get("waypointId") for e in els] == ids
+    assert els[0].get("eta") is None and els[0].get("etd") == "2021-01-10T06:00:00Z"
+    for k, el in enumerate(els[1:], start=1):
+        leg = legs[k - 1]
+        eta = pd.Timestamp(el.get("eta").rstrip("Z"))
+        assert el.get("eta").endswith("Z")
+        assert abs((eta - leg["eta_utc"]).total_seconds()) <= 0.5
+        if k < len(legs):
+            assert el.get("etd") == el.get("eta")  # no stay at intermediate waypoints
+        assert float(el.get("speed")) == pytest.approx(leg["sog_kn"], abs=0.005)
+        assert int(el.get("rpm")) == round(leg["rpm"])
+        ext = el.find("r:extensions/r:extension/jr:leg", ns)
+        assert float(ext.get("rpm")) == pytest.approx(leg["rpm"], abs=0.005)
+        assert ext.get("beyondForecast") == ("true" if leg["beyond_forecast"] else "false")
+    assert els[2].get("currentSpeed") is None  # NaN met is left out, not written as "nan"
+    assert els[3].get("windDirection") == "0.0"  # 360° folds to 0
+
+
+def test_rtz_1_0_wind_is_in_metres_per_second(voyage):
+    doc, ns = _parse(route_to_rtz(*voyage, version="1.0"), "1.0")
+    el = doc.findall("r:schedules/r:schedule/r:calculated/r:sheduleElement", ns)[1]
+    assert float(el.get("windSpeed")) == pytest.approx(18.0 / 1.943844, abs=0.05)
+
+
+def test_broken_rtz_fails_validation_naming_the_problem(voyage):
+    doc, ns = _parse(route_to_rtz(*voyage))
+    doc.remove(doc.find("r:waypoints", ns))
+    with pytest.raises(ValueError, match=r"V0007_Yokohama.*line \d+: .*waypoints"):
+        validate_rtz(etree.tostring(doc))
+
+    doc, ns = _parse(route_to_rtz(*voyage))
+    doc.find("r:waypoints/r:waypoint/r:position", ns).set("lon", "180.000000")
+    with pytest.raises(ValueError, match=r"attribute 'lon': \[facet 'maxExclusive'\]"):
+        validate_rtz(etree.tostring(doc))
+
+    doc, ns = _parse(route_to_rtz(*voyage))
+    doc.findall("r:waypoints/r:waypoint", ns)[2].set("id", "1")
+    with pytest.raises(ValueError, match="unique, repeated: 1"):
+        validate_rtz(etree.tostring(doc))
+
+    with pytest.raises(ValueError, match="not well-formed"):
+        validate_rtz(b"<route version='1.1'>")
+
+
+def test_rtz_schema_folder_comes_from_the_environment(voyage, tmp_path, monkeypatch):
+    monkeypatch.setenv("JITROUTE_RTZ_SCHEMAS", str(tmp_path))
+    with pytest.raises(FileNotFoundError, match="JITROUTE_RTZ_SCHEMAS"):
+        validate_rtz(route_to_rtz(*voyage))
+
+
+def test_a_point_at_the_antimeridian_is_written_as_minus_180(voyage):
+    route, legs = voyage
+    legs[-1]["lon1"] = 179.99999996
+    xml = route_to_rtz(route, legs)
+    validate_rtz(xml)
+    doc, ns = _parse(xml)
+    assert doc.findall("r:waypoints/r:waypoint/r:position", ns)[-1].get("lon") == "-180.000000"
+
+
+def test_voyage_without_legs_is_refused_naming_it(voyage):
+    route = dict(voyage[0], status="infeasible", reason="arrival on land")
+    for export in (route_to_rtz, route_to_geojson):
+        with pytest.raises(ValueError, match="V0007.*no legs.*arrival on land"):
+            export(route, [])
+
+
+# --- GeoJSON ----------------------------------------------------------------------------------
+
+def test_geojson_is_json_safe_and_continuous_across_the_dateline(voyage):
+    route, legs = voyage
+    gj = route_to_geojson(route, legs)
+    back = json.loads(json.dumps(gj, allow_nan=False))
+    assert back == gj
+    line, *points = back["features"]
+    coords = np.array(line["geometry"]["coordinates"])
+    assert line["geometry"]["type"] == "LineString" and len(coords) == len(legs) + 1
+    assert np.abs(np.diff(coords[:, 0])).max() < 180.0
+    assert coords[3, 0] == pytest.approx(180.4)  # −179.6 unwrapped
+    np.testing.assert_allclose((coords[:, 0] + 180.0) % 360.0 - 180.0, [p[1] for p in POINTS], atol=1e-9)
+    np.testing.assert_allclose(coords[:, 1], [p[0] for p in POINTS])
+    props = line["properties"]
+    assert props["savings_pct"] is None and props["reason"] is None
+    assert props["depart_utc"] == "2021-01-10T06:00:00Z" and props["baseline_fuel_t"] == 30.0
+
+    assert [p["properties"]["index"] for p in points] == list(range(len(legs) + 1))
+    assert [p["geometry"]["coordinates"][0] for p in points] == list(coords[:, 0])
+    p0, p1, _p2, p3, last = (p["properties"] for p in points)
+    assert p0["eta_utc"] is None and p0["etd_utc"] == "2021-01-10T06:00:00Z" and p0["rpm"] == 71.26
+    assert p1["eta_utc"] == pd.Timestamp(legs[0]["eta_utc"]).round("s").strftime("%Y-%m-%dT%H:%M:%SZ")
+    assert p1["current_kn"] is None and p1["sog_kn"] == 12.9  # leg 1 starts at waypoint 1
+    assert p3["lon_deg"] == -179.6 and p3["beyond_forecast"] is True
+    assert last["rpm"] is None and last["name"] == "Dutch Harbor"
+
+
+# --- PNG --------------------------------------------------------------------------------------
+
+def _field():
+    lat = np.arange(50.0, 30.0 - 0.1, -0.5)  # north to south, as JMA writes it
+    lon = np.arange(0.0, 360.0, 0.5)  # 0..360 east, as the cube holds it
+    la, lo = np.meshgrid(lat, lon, indexing="ij")
+    hs = 1.0 + 3.0 * np.exp(-((la - 42.0) ** 2 + (((lo - 180.0 + 180) % 360 - 180) / 2) ** 2) / 20.0)
+    return dict(lat=lat, lon=lon, hs_m=hs, u_ms=np.full_like(hs, 8.0), v_ms=np.full_like(hs, -3.0))
+
+
+def _is_png(path):
+    data = path.read_bytes()
+    return data[:8] == PNG_MAGIC and len(data) > 10_000
+
+
+def test_route_map_draws_the_dateline_route_in_one_piece(voyage, tmp_path):
+    route, legs = voyage
+    baseline = make_legs(points=[POINTS[0], POINTS[-1]], sog_kn=(12.5,), rpm=(72.0,))
+    fig = plots.route_map_figure(route, legs, baseline, field=_field())
+    ax = fig.axes[0]
+    x0, x1 = ax.get_xlim()
+    assert x0 < 180.0 < x1 and x1 - x0 < 20.0  # not stretched across the world
+    (plan,) = [ln for ln in ax.get_lines() if ln.get_label() == "plan"]
+    assert np.abs(np.diff(plan.get_xdata())).max() < 1.0
+    assert "V0007" in ax.get_title() and "saving n/a" in ax.get_title()
+    assert [a.get_ylabel() for a in fig.axes[1:]] == ["significant wave height Hs [m]"]
+    assert {type(c).__name__ for c in ax.collections} == {"QuadContourSet", "Barbs"}  # Hs, wind; no land here
+
+    out = plots.route_map_png(tmp_path / "maps" / "V0007.png", route, legs, baseline, field=_field())
+    assert out == tmp_path / "maps" / "V0007.png" and _is_png(out)
+
+
+def test_route_map_of_a_voyage_without_legs_still_draws(voyage, tmp_path):
+    route = dict(voyage[0], status="infeasible", reason="no way through the ice limit")
+    out = plots.route_map_png(tmp_path / "none.png", route, [], field=_field())
+    assert _is_png(out)
+
+
+def test_convergence_plot_shows_history_and_dp_optimum(tmp_path):
+    hist = [105.0, 101.0, 102.5, 99.0, 99.0, 98.2]
+    fig = plots.convergence_figure({"bfoa": np.array(hist), "dp_cost": 97.5})
+    ax = fig.axes[0]
+    labels = [ln.get_label() for ln in ax.get_lines()]
+    assert labels == ["best in cycle", "best so far", "DP optimum 97.5"]
+    np.testing.assert_allclose(ax.get_lines()[1].get_ydata(), [105.0, 101.0, 101.0, 99.0, 99.0, 98.2])
+    assert "+0.72 % vs DP" in ax.get_title()
+    assert _is_png(plots.convergence_png(tmp_path / "conv.png", hist, title="V0007 bfoa"))
+    assert plots.convergence_png(tmp_path / "empty.png", []).read_bytes()[:8] == PNG_MAGIC
+
+
+def test_fleet_map_colours_voyages_by_status(voyage, tmp_path):
+    route, legs = voyage
+    west = make_legs(points=[(35.0, 141.0), (38.0, 150.0), (42.0, 160.0)], sog_kn=(12.0, 12.0), rpm=(70.0, 70.0))
+    fleet = [(route, legs), (dict(route, voyage_id="V0008", status="late"), west),
+             (dict(route, voyage_id="V0009", status="infeasible"), [])]
+    fig = plots.fleet_map_figure(fleet)
+    ax = fig.axes[0]
+    colours = {ln.get_color() for ln in ax.get_lines() if len(ln.get_xdata()) > 2}
+    assert colours == {plots.STATUS_COLOURS["ok"], plots.STATUS_COLOURS["late"]}
+    assert {t.get_text() for t in ax.texts} >= {"V0007", "V0008", "no route: V0009 (infeasible)"}
+    x0, x1 = ax.get_xlim()
+    assert x0 < 141.0 and x1 > 183.0  # both voyages in one frame, the dateline one not wrapped to −180
+    assert _is_png(plots.fleet_map_png(tmp_path / "fleet.png", fleet, title="run 2021-01-10"))
