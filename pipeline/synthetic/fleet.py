@@ -15,8 +15,8 @@ import pandas as pd
 from pipeline.performance.model import PerformanceModel
 
 PORTS = {  # approach points at sea (lat, lon east)
-    "Tokyo Bay": (34.95, 139.85), "Busan": (34.95, 129.15), "Shanghai": (30.9, 122.75), "Kaohsiung": (22.5, 120.15),
-    "Hong Kong": (22.1, 114.35), "Manila": (14.45, 120.55), "Guam": (13.45, 144.55), "Naha": (26.2, 127.55),
+    "Tokyo Bay": (34.85, 139.85), "Busan": (34.95, 129.15), "Shanghai": (30.9, 122.75), "Kaohsiung": (22.5, 120.15),
+    "Hong Kong": (22.1, 114.35), "Manila": (14.4, 120.3), "Guam": (13.45, 144.55), "Naha": (26.2, 127.55),
     "Keelung": (25.25, 121.85), "Qingdao": (35.9, 120.65), "Nagoya": (34.5, 137.0), "Yokohama": (35.3, 139.8),
 }
 ROUTES = [("Tokyo Bay", "Guam"), ("Busan", "Shanghai"), ("Shanghai", "Kaohsiung"), ("Kaohsiung", "Hong Kong"),

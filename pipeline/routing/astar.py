@@ -1,0 +1,73 @@
+"""A* over (line, node) with the time-constraint weight sweep of the A* paper.
+
+For a weight α the edge cost is α·F/F_ref + (1 − α)·T/T_ref (fuel and hours of the leg, sailed
+time-dependently from the label's arrival time); every (line, node) is settled once (first-in,
+first-out assumption). The heuristic is the remaining great-circle distance priced at a lower
+bound of fuel per mile and an upper bound of speed, so it never overestimates under the stated
+bounds (weather lowers the fuel rate by at most 30 % and adds at most 3 kn + 10 %). Sweeping α from
+time-only to fuel-only gives a family of routes; the one with the best objective value wins
+(least fuel on time, else least late).
+"""
+
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+
+from pipeline.routing import geodesy as geo
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+
+ALPHAS = (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
+
+
+def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float, speed_ub_kn: float, f_ref: float,
+                t_ref_h: float):
+    lat, lon, edge_ok = inst.space.lat, inst.space.lon, inst.space.edge_ok
+    L2, P = lat.shape
+    c = P // 2
+    ms = inst.space.max_shift
+    alat, alon = lat[-1, c], lon[-1, c]
+    rem = np.array([[geo.gc_distance_nm(lat[i, a], lon[i, a], alat, alon) for a in range(P)] for i in range(L2)])
+    h = alpha * rem * fuel_per_nm_lb / f_ref + (1 - alpha) * rem / speed_ub_kn / t_ref_h
+    out = np.empty(N_LEG_OUT)
+    start = (0, c)
+    best_g = {start: 0.0}
+    label = {start: (inst.t_dep_h, 0.0, None, -1)}  # time, fuel, parent, rpm index
+    heap = [(h[0, c], 0.0, 0, c)]
+    done = set()
+    W = inst.numba_weather()
+    while heap:
+        _, g, i, a = heapq.heappop(heap)
+        if (i, a) in done:
+            continue
+        done.add((i, a))
+        if i == L2 - 1:
+            break
+        t0, f0, _, _ = label[(i, a)]
+        for a2 in range(max(0, a - ms), min(P, a + ms + 1)):
+            if not edge_ok[i, a, a2] or (i + 1, a2) in done:
+                continue
+            for r in rpm_order:
+                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, inst.rpm_options[r], inst.vp,
+                            inst.speed_coef, inst.fuel_coef, *W, out)
+                if out[CODE] != OK or t0 + out[H] - inst.t_dep_h > inst.max_hours:
+                    continue
+                g2 = g + alpha * out[FUEL] / f_ref + (1 - alpha) * out[H] / t_ref_h
+                key = (i + 1, a2)
+                if g2 < best_g.get(key, np.inf):
+                    best_g[key] = g2
+                    label[key] = (t0 + out[H], f0 + out[FUEL], (i, a), int(r))
+                    heapq.heappush(heap, (g2 + h[i + 1, a2], g2, i + 1, a2))
+    end = (L2 - 1, c)
+    if end not in done:
+        return None
+    nodes = np.full(L2, c, np.int64)
+    rpm_idx = np.zeros(L2 - 1, np.int64)
+    key = end
+    while label[key][2] is not None:
+        i, a = key
+        nodes[i] = a
+        rpm_idx[i - 1] = label[key][3]
+        key = label[key][2]
+    return nodes, rpm_idx

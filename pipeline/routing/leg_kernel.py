@@ -1,0 +1,150 @@
+"""Time-dependent sailing of one leg, and of a whole route, compiled with numba.
+
+A leg is the great-circle chord between two nodes. The ship steps along it, each step at most
+`max_step_h` hours (the last step shorter): at the step's start it samples the weather, takes
+the relative wind and wave angles from its course there, gets speed through water and fuel rate
+from its performance model at the leg's rpm, adds the current along course (SOG = STW + current
+along course), and advances. Hours and fuel (rate × time) accumulate; weather limits (Hs, wind)
+make the leg infeasible with a code.
+
+Vessel parameters come as one float array `vp`:
+  [form_id, draft_m, trim_m, months_dd, max_hs_m, max_wind_kn, max_step_h]
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from pipeline.performance.features import fuel_tph_nb, stw_kn_nb
+from pipeline.routing import geodesy as geo
+from pipeline.routing.weather_field import N_VARS, SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, sample_nb
+
+OK, WAVE_LIMIT, WIND_LIMIT, NO_HEADWAY, NO_EDGE, TOO_LONG = 0, 1, 2, 3, 4, 5
+REASONS = {
+    OK: "ok",
+    WAVE_LIMIT: "significant wave height above the vessel's limit",
+    WIND_LIMIT: "wind above the vessel's limit",
+    NO_HEADWAY: "cannot make headway (speed over ground below 0.5 kn)",
+    NO_EDGE: "leg crosses land, a limit line or the latitude limits",
+    TOO_LONG: "voyage takes longer than the planning horizon",
+}
+N_LEG_OUT = 14
+# leg_out fields
+H, FUEL, CODE, BEYOND, WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, SOG_KN, CUR_KN = range(N_LEG_OUT)
+MIN_SOG_KN = 0.5
+
+
+def vessel_params(form_id: int, draft_m: float, trim_m: float, months_dd: float, max_hs_m: float | None,
+                  max_wind_kn: float | None, max_step_h: float = 1.0) -> np.ndarray:
+    return np.array([form_id, draft_m, trim_m, months_dd, np.inf if max_hs_m is None or np.isnan(max_hs_m) else max_hs_m,
+                     np.inf if max_wind_kn is None or np.isnan(max_wind_kn) else max_wind_kn, max_step_h], dtype=np.float64)
+
+
+@numba.njit(cache=True)
+def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, wx, times_h, grid, out):
+    """Sail one leg starting at t0_h (hours after the weather's t_ref); results in out[0:N_LEG_OUT]."""
+    for k in range(N_LEG_OUT):
+        out[k] = 0.0
+    form = int(vp[0])
+    dist = geo.gc_distance_nm(lat0, lon0, lat1, lon1)
+    if dist < 1e-6:
+        return
+    w = np.empty(N_VARS)
+    done, t, fuel = 0.0, t0_h, 0.0
+    while done < dist - 1e-9:
+        lat, lon = geo.gc_interpolate(lat0, lon0, lat1, lon1, done / dist)
+        hdg = geo.gc_bearing_deg(lat, lon, lat1, lon1)
+        if sample_nb(wx, times_h, grid, t, lat, lon, w):
+            out[BEYOND] = 1.0
+        u = 0.0 if math.isnan(w[U10]) else w[U10]
+        v = 0.0 if math.isnan(w[V10]) else w[V10]
+        hs = 0.0 if math.isnan(w[SWH]) else w[SWH]
+        wave_x = 0.0 if math.isnan(w[WAVE_X]) else w[WAVE_X]
+        wave_y = 1.0 if math.isnan(w[WAVE_Y]) else w[WAVE_Y]
+        uo = 0.0 if math.isnan(w[UO]) else w[UO]
+        vo = 0.0 if math.isnan(w[VO]) else w[VO]
+        wind_kn = math.sqrt(u * u + v * v) * geo.KN_PER_MS
+        if hs > vp[4]:
+            out[CODE] = WAVE_LIMIT
+            return
+        if wind_kn > vp[5]:
+            out[CODE] = WIND_LIMIT
+            return
+        wind_from = math.degrees(math.atan2(-u, -v))
+        wave_from = math.degrees(math.atan2(wave_x, wave_y))
+        wind_rel = wind_from - hdg
+        wave_rel = wave_from - hdg
+        stw = stw_kn_nb(form, speed_coef, rpm, vp[1], vp[2], wind_kn, wind_rel, hs, wave_rel, vp[3])
+        cur = geo.along_course(uo, vo, hdg) * geo.KN_PER_MS
+        sog = stw + cur
+        if sog < MIN_SOG_KN:
+            out[CODE] = NO_HEADWAY
+            return
+        ds = min(dist - done, sog * vp[6])
+        dt = ds / sog
+        fuel += fuel_tph_nb(form, fuel_coef, rpm, vp[1], vp[2], wind_kn, wind_rel, hs, wave_rel, vp[3]) * dt
+        out[WIND_KN] += wind_kn * dt
+        out[WIND_FX] += math.sin(math.radians(wind_from)) * dt
+        out[WIND_FY] += math.cos(math.radians(wind_from)) * dt
+        out[HS] += hs * dt
+        out[WAVE_FX] += wave_x * dt
+        out[WAVE_FY] += wave_y * dt
+        out[CUR_ALONG_KN] += cur * dt
+        out[STW_KN] += stw * dt
+        out[CUR_KN] += math.sqrt(uo * uo + vo * vo) * geo.KN_PER_MS * dt
+        t += dt
+        done += ds
+    hours = t - t0_h
+    if hours <= 0.0:
+        return
+    out[H] = hours
+    out[FUEL] = fuel
+    for k in (WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, CUR_KN):
+        out[k] /= hours
+    out[SOG_KN] = dist / hours
+
+
+@numba.njit(cache=True)
+def sail_route_nb(nodes, rpm_idx, start_line, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, speed_coef,
+                  fuel_coef, wx, times_h, grid, cum_t, cum_f):
+    """Sail a route (node per line, rpm index per leg) from line `start_line`, reusing cum_t/cum_f before it.
+
+    cum_t[i], cum_f[i]: hours after t_ref and fuel so far on reaching line i (cum_t[0] = t_dep_h).
+    Returns (code, failing leg); code 0 when the whole route was sailed.
+    """
+    out = np.empty(N_LEG_OUT)
+    if start_line == 0:
+        cum_t[0] = t_dep_h
+        cum_f[0] = 0.0
+    for i in range(start_line, nodes.shape[0] - 1):
+        a, b = nodes[i], nodes[i + 1]
+        if not edge_ok[i, a, b]:
+            return NO_EDGE, i
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], cum_t[i], rpm_options[rpm_idx[i]], vp,
+                    speed_coef, fuel_coef, wx, times_h, grid, out)
+        if out[CODE] != OK:
+            return int(out[CODE]), i
+        cum_t[i + 1] = cum_t[i] + out[H]
+        cum_f[i + 1] = cum_f[i] + out[FUEL]
+        if cum_t[i + 1] - t_dep_h > max_hours:
+            return TOO_LONG, i
+    return OK, -1
+
+
+def sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, field) -> np.ndarray:
+    """Python entry: one leg in a `WeatherField`; returns the N_LEG_OUT array."""
+    out = np.empty(N_LEG_OUT)
+    sail_leg_nb(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), vp, speed_coef, fuel_coef,
+                field.values, field.times_h, field.grid, out)
+    return out
+
+
+def sail_leg_python(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, field) -> np.ndarray:
+    """The same leg through the interpreted (non-compiled) code path, for verification."""
+    out = np.empty(N_LEG_OUT)
+    sail_leg_nb.py_func(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), vp, speed_coef,
+                        fuel_coef, field.values, field.times_h, field.grid, out)
+    return out

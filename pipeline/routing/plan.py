@@ -1,0 +1,142 @@
+"""The voyage plan a solve returns: waypoints, rpm per leg, ETAs, the weather met, totals, status."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from pipeline.routing import geodesy as geo
+from pipeline.routing import leg_kernel as lk
+
+STATUSES = ("ok", "late", "infeasible", "failed")
+
+
+def _utc(t) -> pd.Timestamp | None:
+    return None if t is None else pd.Timestamp(np.datetime64(t, "s"))
+
+
+@dataclass
+class Plan:
+    voyage_id: str
+    imo: int | None
+    solver: str
+    objective: str
+    status: str
+    reason: str | None
+    depart_utc: np.datetime64
+    rta_utc: np.datetime64
+    legs: list[dict] = field(default_factory=list)
+    cost: float = math.inf
+    seed: int | None = None
+    runtime_s: float = 0.0
+    baseline: "Plan | None" = None
+    history: np.ndarray | None = None
+    n_evals: int = 0
+    model_version: int | None = None
+    cycle: np.datetime64 | None = None
+
+    @property
+    def hours(self) -> float:
+        return float(sum(leg["hours"] for leg in self.legs)) if self.legs else math.nan
+
+    @property
+    def fuel_t(self) -> float:
+        return float(sum(leg["fuel_t"] for leg in self.legs)) if self.legs else math.nan
+
+    @property
+    def distance_nm(self) -> float:
+        return float(sum(leg["dist_nm"] for leg in self.legs)) if self.legs else math.nan
+
+    @property
+    def eta_utc(self) -> pd.Timestamp | None:
+        return self.legs[-1]["eta_utc"] if self.legs else None
+
+    @property
+    def n_beyond_forecast(self) -> int:
+        return int(sum(bool(leg["beyond_forecast"]) for leg in self.legs))
+
+    @property
+    def savings_pct(self) -> float:
+        b = self.baseline
+        if b is None or not b.legs or not self.legs or not (b.fuel_t > 0):
+            return math.nan
+        return 100.0 * (b.fuel_t - self.fuel_t) / b.fuel_t
+
+    @property
+    def waypoints(self) -> list[tuple[float, float]]:
+        if not self.legs:
+            return []
+        return [(self.legs[0]["lat0"], self.legs[0]["lon0"])] + [(leg["lat1"], leg["lon1"]) for leg in self.legs]
+
+    def route_row(self, run_id: str | None = None) -> dict:
+        b = self.baseline
+        return {
+            "run_id": run_id, "voyage_id": self.voyage_id, "imo": self.imo, "solver": self.solver,
+            "objective": self.objective, "status": self.status, "reason": self.reason,
+            "depart_utc": _utc(self.depart_utc), "eta_utc": self.eta_utc, "rta_utc": _utc(self.rta_utc),
+            "hours": self.hours, "fuel_t": self.fuel_t,
+            "baseline_fuel_t": b.fuel_t if b is not None else math.nan,
+            "baseline_hours": b.hours if b is not None else math.nan,
+            "savings_pct": self.savings_pct, "distance_nm": self.distance_nm,
+            "cost": self.cost if math.isfinite(self.cost) else None, "model_version": self.model_version,
+            "cycle": _utc(self.cycle), "seed": self.seed, "runtime_s": self.runtime_s, "n_legs": len(self.legs),
+            "beyond_forecast": self.n_beyond_forecast,
+        }
+
+    def leg_rows(self, run_id: str | None = None) -> list[dict]:
+        return [{"run_id": run_id, "voyage_id": self.voyage_id, **leg} for leg in self.legs]
+
+    def to_json(self) -> dict:
+        """JSON-safe summary for scripts (`jitroute route --json`)."""
+        def clean(v):
+            if isinstance(v, pd.Timestamp):
+                return v.strftime("%Y-%m-%dT%H:%M:%SZ")
+            if isinstance(v, (np.floating, float)):
+                return None if not math.isfinite(float(v)) else round(float(v), 6)
+            if isinstance(v, np.integer):
+                return int(v)
+            if isinstance(v, np.bool_):
+                return bool(v)
+            return v
+        row = self.route_row()
+        keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
+                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "beyond_forecast")
+        out = {k: clean(row[k]) for k in keys}
+        out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
+        return out
+
+
+def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[dict], int, int]:
+    """Sail the route leg by leg and describe each leg; returns (legs, failure code, failing leg)."""
+    lat, lon = inst.space.lat, inst.space.lon
+    t = inst.t_dep_h
+    legs = []
+    for i in range(len(nodes) - 1):
+        a, b = int(nodes[i]), int(nodes[i + 1])
+        if not inst.space.edge_ok[i, a, b]:
+            return legs, lk.NO_EDGE, i
+        rpm = float(inst.rpm_options[rpm_idx[i]])
+        o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vp, inst.speed_coef,
+                        inst.fuel_coef, inst.weather)
+        if o[lk.CODE] != lk.OK:
+            return legs, int(o[lk.CODE]), i
+        etd = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
+        t += o[lk.H]
+        eta = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
+        legs.append({
+            "leg": i, "lat0": float(lat[i, a]), "lon0": float(lon[i, a]), "lat1": float(lat[i + 1, b]),
+            "lon1": float(lon[i + 1, b]),
+            "course_deg": float(geo.gc_bearing_deg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
+            "dist_nm": float(geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
+            "rpm": rpm, "stw_kn": float(o[lk.STW_KN]), "sog_kn": float(o[lk.SOG_KN]), "hours": float(o[lk.H]),
+            "fuel_t": float(o[lk.FUEL]), "etd_utc": pd.Timestamp(etd), "eta_utc": pd.Timestamp(eta),
+            "wind_kn": float(o[lk.WIND_KN]),
+            "wind_dir_deg": float(np.degrees(np.arctan2(o[lk.WIND_FX], o[lk.WIND_FY])) % 360.0),
+            "hs_m": float(o[lk.HS]),
+            "wave_dir_deg": float(np.degrees(np.arctan2(o[lk.WAVE_FX], o[lk.WAVE_FY])) % 360.0),
+            "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
+        })
+    return legs, lk.OK, -1

@@ -1,0 +1,201 @@
+"""The node graph all solvers share: N_line lines across the base route, N_point nodes per line.
+
+Line 0 is the departure and line L+1 the arrival (only their centre node is used); lines
+1..L are spread evenly along the base route (great circle by default, or rhumb), each
+perpendicular to it, with nodes D_point NM apart (the centre node on the base route). A route
+is one node per line. An edge (line i, node a) → (line i+1, node b) exists when |a − b| ≤
+`max_shift` and the straight (great-circle) leg stays at sea (land mask sampled every
+`land_step_nm`), inside the lat/lon limits, and crosses no limit line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from pipeline.routing import geodesy as geo
+from pipeline.routing.land import is_sea, is_sea_nb, sea_mask
+
+
+class VoyageGeometryError(ValueError):
+    """The voyage cannot be laid out (a port on land, no way through)."""
+
+
+@dataclass(frozen=True)
+class SearchSpace:
+    lat: np.ndarray  # (L+2, P) degrees
+    lon: np.ndarray  # (L+2, P) degrees -180..180
+    node_ok: np.ndarray  # (L+2, P) bool
+    edge_ok: np.ndarray  # (L+1, P, P) bool
+    d_point_nm: float
+    base: str
+    max_shift: int
+    base_distance_nm: float
+
+    @property
+    def n_lines(self) -> int:
+        return self.lat.shape[0] - 2
+
+    @property
+    def n_points(self) -> int:
+        return self.lat.shape[1]
+
+    @property
+    def centre(self) -> int:
+        return self.n_points // 2
+
+    def base_route(self) -> np.ndarray:
+        return np.full(self.lat.shape[0], self.centre, dtype=np.int64)
+
+
+def default_n_lines(distance_nm: float) -> int:
+    """About one line every 40 NM, at least 8 and at most 80."""
+    return int(min(80, max(8, round(distance_nm / 40.0))))
+
+
+def default_d_point_nm(distance_nm: float, n_points: int) -> float:
+    """Spread the nodes over ±20 % of the voyage length (at least ±60 NM)."""
+    half_width = max(60.0, 0.2 * distance_nm)
+    return half_width / max(1, n_points // 2)
+
+
+def _base_point(base, lat0, lon0, lat1, lon1, f):
+    if base == "rhumb":
+        return geo.rhumb_interpolate(lat0, lon0, lat1, lon1, f)
+    return geo.gc_interpolate(lat0, lon0, lat1, lon1, f)
+
+
+def _segments_cross(ax, ay, bx, by, cx, cy, dx, dy) -> bool:
+    def orient(px, py, qx, qy, rx, ry):
+        return (qx - px) * (ry - py) - (qy - py) * (rx - px)
+
+    o1, o2 = orient(ax, ay, bx, by, cx, cy), orient(ax, ay, bx, by, dx, dy)
+    o3, o4 = orient(cx, cy, dx, dy, ax, ay), orient(cx, cy, dx, dy, bx, by)
+    return (o1 * o2 < 0) and (o3 * o4 < 0)
+
+
+@numba.njit(cache=True)
+def _edges_at_sea(mask, lat, lon, node_ok, max_shift, step_nm, lat_lo, lat_hi, out):
+    L2, P = lat.shape
+    for i in range(L2 - 1):
+        for a in range(P):
+            if not node_ok[i, a]:
+                continue
+            for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                if not node_ok[i + 1, b]:
+                    continue
+                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])
+                n = int(d / step_nm) + 1
+                ok = True
+                for k in range(1, n):
+                    plat, plon = geo.gc_interpolate(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], k / n)
+                    if plat < lat_lo or plat > lat_hi or not is_sea_nb(mask, plat, plon):
+                        ok = False
+                        break
+                out[i, a, b] = ok
+
+
+def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_lines: int | None = None,
+                       n_points: int = 21, d_point_nm: float | None = None, base: str = "gc", max_shift: int | None = None,
+                       lat_limits: tuple[float, float] = (-75.0, 75.0), limit_lines: list[list[tuple[float, float]]] | None = None,
+                       land_step_nm: float = 1.0, check_land: bool = True, dep_name: str = "departure",
+                       arr_name: str = "destination") -> SearchSpace:
+    """Lay out the node lines for a voyage from `dep` to `arr` ((lat, lon) degrees)."""
+    if base not in ("gc", "rhumb"):
+        raise ValueError(f"base route must be 'gc' or 'rhumb', not {base!r}")
+    for name, (la, lo) in ((dep_name, dep), (arr_name, arr)):
+        if not (-90 <= la <= 90) or not (-180 <= lo <= 360):
+            raise VoyageGeometryError(f"{name} {la:.4f},{lo:.4f} is not a valid position")
+        if check_land and not bool(is_sea(la, lo)):
+            raise VoyageGeometryError(f"{name} {la:.4f},{lo:.4f} is on land (global land mask); give a position at sea, e.g. the pilot station")
+        if not (lat_limits[0] <= la <= lat_limits[1]):
+            raise VoyageGeometryError(f"{name} latitude {la:.2f} is outside the latitude limits {lat_limits}")
+    lat0, lon0 = dep
+    lat1, lon1 = arr
+    dist = geo.rhumb_distance_nm(lat0, lon0, lat1, lon1) if base == "rhumb" else geo.gc_distance_nm(lat0, lon0, lat1, lon1)
+    if dist < 1.0:
+        raise VoyageGeometryError(f"{dep_name} and {arr_name} are the same place ({dist:.2f} NM apart)")
+    L = n_lines if n_lines is not None else default_n_lines(dist)
+    P = int(n_points) | 1  # odd, so there is a centre node
+    dp = d_point_nm if d_point_nm is not None else default_d_point_nm(dist, P)
+    ms = max_shift if max_shift is not None else max(2, P // 4)
+    c = P // 2
+    lat = np.empty((L + 2, P))
+    lon = np.empty((L + 2, P))
+    node_ok = np.zeros((L + 2, P), dtype=bool)
+    for i in range(L + 2):
+        f = i / (L + 1)
+        blat, blon = _base_point(base, lat0, lon0, lat1, lon1, f)
+        if i in (0, L + 1):
+            lat[i, :], lon[i, :] = blat, geo.wrap180(blon)
+            node_ok[i, c] = True
+            continue
+        nlat, nlon = _base_point(base, lat0, lon0, lat1, lon1, min(1.0, f + 1e-4))
+        course = geo.gc_bearing_deg(blat, blon, nlat, nlon)
+        for j in range(P):
+            off = (j - c) * dp
+            if off == 0:
+                lat[i, j], lon[i, j] = blat, geo.wrap180(blon)
+            else:
+                side = course + (90.0 if off > 0 else -90.0)
+                lat[i, j], lon[i, j] = geo.destination(blat, blon, side, abs(off))
+        node_ok[i] = (lat[i] >= lat_limits[0]) & (lat[i] <= lat_limits[1])
+        if check_land:
+            node_ok[i] &= is_sea(lat[i], lon[i])
+    edge_ok = np.zeros((L + 1, P, P), dtype=bool)
+    if check_land:
+        _edges_at_sea(sea_mask(), lat, lon, node_ok, ms, land_step_nm, lat_limits[0], lat_limits[1], edge_ok)
+    else:
+        for i in range(L + 1):
+            for a in range(P):
+                for b in range(max(0, a - ms), min(P, a + ms + 1)):
+                    edge_ok[i, a, b] = node_ok[i, a] and node_ok[i + 1, b]
+    for line in limit_lines or []:
+        _forbid_crossing(lat, lon, edge_ok, line)
+    return SearchSpace(lat=lat, lon=lon, node_ok=node_ok, edge_ok=edge_ok, d_point_nm=float(dp), base=base,
+                       max_shift=int(ms), base_distance_nm=float(dist))
+
+
+def _forbid_crossing(lat, lon, edge_ok, polyline):
+    """Remove edges that cross a limit polyline [(lat, lon), ...] (planar test in a local unwrapped frame)."""
+    ref = lon[0, lat.shape[1] // 2]
+    pts = [(la, ref + geo.wrap180(lo - ref)) for la, lo in polyline]
+    for i, a, b in zip(*np.nonzero(edge_ok)):
+        ax, ay = ref + geo.wrap180(lon[i, a] - ref), lat[i, a]
+        bx, by = ref + geo.wrap180(lon[i + 1, b] - ref), lat[i + 1, b]
+        for (p_lat, p_lon), (q_lat, q_lon) in zip(pts[:-1], pts[1:]):
+            if _segments_cross(ax, ay, bx, by, p_lon, p_lat, q_lon, q_lat):
+                edge_ok[i, a, b] = False
+                break
+
+
+def reachable(space: SearchSpace) -> bool:
+    """True when some route connects departure to arrival through feasible edges."""
+    L2, P = space.lat.shape
+    can = np.zeros(P, dtype=bool)
+    can[space.centre] = True
+    for i in range(L2 - 1):
+        can = (can[:, None] & space.edge_ok[i]).any(axis=0)
+    return bool(can[space.centre])
+
+
+def limit_lines_from_geojson(obj: dict) -> list[list[tuple[float, float]]]:
+    """LineString / MultiLineString / Polygon features of a GeoJSON object → [(lat, lon), ...] polylines."""
+    feats = obj.get("features", [obj]) if obj.get("type") == "FeatureCollection" else [obj]
+    lines = []
+    for f in feats:
+        g = f.get("geometry", f)
+        t, coords = g.get("type"), g.get("coordinates")
+        parts = {"LineString": [coords], "MultiLineString": coords, "Polygon": coords,
+                 "MultiPolygon": [r for p in (coords or []) for r in p]}.get(t)
+        if parts is None:
+            raise ValueError(f"limit line geometry {t!r} is not a LineString, MultiLineString or Polygon")
+        lines += [[(float(p[1]), float(p[0])) for p in part] for part in parts]
+    return lines
+
+
+__all__ = ["SearchSpace", "VoyageGeometryError", "build_search_space", "reachable", "default_n_lines",
+           "default_d_point_nm", "limit_lines_from_geojson"]

@@ -1,0 +1,158 @@
+"""Weather for routing as plain numpy arrays, and its numba sampler.
+
+A `WeatherField` holds the variables a ship meets, on a regular lat/lon grid, at a few valid
+times counted in hours from `t_ref` (UTC):
+
+  0 u10, 1 v10   wind (m/s, u east / v north: the wind blows TOWARDS that vector)
+  2 swh          significant wave height (m)
+  3 wave_x, 4 wave_y   sin/cos of the direction the waves come FROM (unit components)
+  5 uo, 6 vo     current (m/s, going to)
+
+Sampling is bilinear in space (NaN-aware: NaN corners such as land are ignored and the others
+re-weighted) and linear in time between the two bracketing valid times, with the weight taken
+over that interval. Directions are never averaged as angles: wave direction is interpolated
+through its components and turned back into an angle by the caller. Past the last valid time the
+last step is persisted and the sample is flagged `beyond`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+N_VARS = 7
+U10, V10, SWH, WAVE_X, WAVE_Y, UO, VO = range(N_VARS)
+
+
+@dataclass(frozen=True)
+class WeatherField:
+    values: np.ndarray  # (7, nt, nlat, nlon) float32
+    times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
+    grid: np.ndarray  # float64 [lat0, dlat, nlat, lon0, dlon, nlon, wraps]
+    t_ref: np.datetime64  # UTC
+    cycle: np.datetime64 | None = None
+
+    @property
+    def horizon_utc(self) -> np.datetime64:
+        return self.t_ref + np.timedelta64(int(round(self.times_h[-1] * 3600)), "s")
+
+    def hours_after_ref(self, when) -> float:
+        return float((np.datetime64(when, "s") - np.datetime64(self.t_ref, "s")) / np.timedelta64(1, "h"))
+
+    @property
+    def lat_range_deg(self) -> tuple[float, float]:
+        lat0, dlat, nlat = self.grid[0], self.grid[1], self.grid[2]
+        return float(lat0), float(lat0 + dlat * (nlat - 1))
+
+
+def _grid(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    lat = np.asarray(lat, dtype=np.float64)
+    lon = np.asarray(lon, dtype=np.float64)
+    if lat.size < 2 or lon.size < 2:
+        raise ValueError("a weather field needs at least 2 latitudes and 2 longitudes")
+    dlat, dlon = lat[1] - lat[0], lon[1] - lon[0]
+    if not (np.allclose(np.diff(lat), dlat) and np.allclose(np.diff(lon), dlon)) or dlat <= 0 or dlon <= 0:
+        raise ValueError("weather grid must be regular with increasing latitude and longitude")
+    wraps = 1.0 if abs(lon.size * dlon - 360.0) < 1e-6 else 0.0
+    return np.array([lat[0], dlat, lat.size, lon[0] % 360.0 if wraps else lon[0], dlon, lon.size, wraps])
+
+
+def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=None) -> WeatherField:
+    """Build a field from (nt, nlat, nlon) arrays (mwd in degrees, coming from)."""
+    times = np.asarray(times_utc, dtype="datetime64[s]")
+    t_ref = times[0]
+    times_h = ((times - t_ref) / np.timedelta64(1, "s")).astype(np.float64) / 3600.0
+    if np.any(np.diff(times_h) <= 0):
+        raise ValueError("weather valid times must increase")
+    mwd = np.radians(np.asarray(mwd_deg, dtype=np.float64))
+    vals = np.stack([np.asarray(u10), np.asarray(v10), np.asarray(swh), np.sin(mwd), np.cos(mwd), np.asarray(uo),
+                     np.asarray(vo)]).astype(np.float32)
+    lat = np.asarray(lat, dtype=np.float64)
+    if lat[0] > lat[-1]:
+        lat = lat[::-1]
+        vals = vals[:, :, ::-1, :]
+    return WeatherField(values=np.ascontiguousarray(vals), times_h=times_h, grid=_grid(lat, lon), t_ref=t_ref,
+                        cycle=None if cycle is None else np.datetime64(cycle, "s"))
+
+
+def from_cycle(ds, cycle=None) -> WeatherField:
+    """From one cube cycle (xarray dims step, lat, lon; variables u10 v10 swh mwd uo vo)."""
+    cyc = np.datetime64(cycle if cycle is not None else ds["cycle"].values, "s")
+    times = cyc + (np.asarray(ds["step"].values, dtype=np.int64) * 3600).astype("timedelta64[s]")
+    return from_arrays(ds["lat"].values, ds["lon"].values, times, u10=ds["u10"].values, v10=ds["v10"].values,
+                       swh=ds["swh"].values, mwd_deg=ds["mwd"].values, uo=ds["uo"].values, vo=ds["vo"].values, cycle=cyc)
+
+
+def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0, wave_from_deg=0.0,
+            current_ms=(0.0, 0.0), lat=(-80.0, 80.0), lon=(0.0, 359.5)) -> WeatherField:
+    """The same weather everywhere and always (calm by default): for tests and for routing without a cube."""
+    la = np.array([lat[0], lat[1]])
+    lo = np.arange(0.0, 360.0, 0.5) if lon == (0.0, 359.5) else np.array(lon)
+    t0 = np.datetime64(t_start_utc, "s")
+    times = np.array([t0, t0 + np.timedelta64(int(hours * 3600), "s")])
+    shape = (2, la.size, lo.size)
+    return from_arrays(la, lo, times, u10=np.full(shape, wind_ms[0]), v10=np.full(shape, wind_ms[1]),
+                       swh=np.full(shape, swh_m), mwd_deg=np.full(shape, wave_from_deg),
+                       uo=np.full(shape, current_ms[0]), vo=np.full(shape, current_ms[1]))
+
+
+@numba.njit(cache=True)
+def _bilinear(a, it, iy, ix0, ix1, wy, wx):
+    v00, v01 = a[it, iy, ix0], a[it, iy, ix1]
+    v10, v11 = a[it, iy + 1, ix0], a[it, iy + 1, ix1]
+    s, w = 0.0, 0.0
+    for val, wt in ((v00, (1 - wy) * (1 - wx)), (v01, (1 - wy) * wx), (v10, wy * (1 - wx)), (v11, wy * wx)):
+        if not math.isnan(val) and wt > 0.0:
+            s += val * wt
+            w += wt
+    if w <= 1e-12:
+        return np.nan
+    return s / w
+
+
+@numba.njit(cache=True)
+def sample_nb(values, times_h, grid, t_h, lat, lon, out):
+    """Fill out[0:7] with the weather at (t_h, lat, lon); return True when t_h is past the last valid time."""
+    nt = times_h.shape[0]
+    beyond = t_h > times_h[nt - 1] + 1e-9
+    if nt == 1 or t_h <= times_h[0]:
+        i0, i1, wt = 0, 0, 0.0
+    elif t_h >= times_h[nt - 1]:
+        i0, i1, wt = nt - 1, nt - 1, 0.0
+    else:
+        i0 = 0
+        while times_h[i0 + 1] <= t_h:
+            i0 += 1
+        i1 = i0 + 1
+        wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
+    lat0, dlat, nlat, lon0, dlon, nlon, wraps = grid[0], grid[1], int(grid[2]), grid[3], grid[4], int(grid[5]), grid[6]
+    fy = (lat - lat0) / dlat
+    fy = min(max(fy, 0.0), nlat - 1.0)
+    iy = min(int(fy), nlat - 2)
+    wy = fy - iy
+    if wraps > 0.5:
+        fx = ((lon - lon0) % 360.0) / dlon
+        ix0 = int(fx) % nlon
+        ix1 = (ix0 + 1) % nlon
+        wx = fx - int(fx)
+    else:
+        x = lon0 + ((lon - lon0) % 360.0)
+        if x > lon0 + dlon * (nlon - 1) + 0.5 * (360.0 - dlon * (nlon - 1)):
+            x -= 360.0  # nearer the western edge
+        fx = min(max((x - lon0) / dlon, 0.0), nlon - 1.0)
+        ix0 = min(int(fx), nlon - 2)
+        ix1 = ix0 + 1
+        wx = fx - ix0
+    for v in range(values.shape[0]):
+        a = _bilinear(values[v], i0, iy, ix0, ix1, wy, wx)
+        if i1 != i0:
+            b = _bilinear(values[v], i1, iy, ix0, ix1, wy, wx)
+            if math.isnan(a):
+                a = b
+            elif not math.isnan(b):
+                a = a + wt * (b - a)
+        out[v] = a
+    return beyond
