@@ -1,9 +1,166 @@
-"""`jitroute` commands for routing."""
+"""`jitroute route`: plan one voyage (ad hoc or from the warehouse) and compare it with the baseline."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+from typing import Optional
+
 import typer
+from rich.console import Console
+from rich.table import Table
+
+console = Console()
+
+
+def _latlon(text: str, what: str) -> tuple[float, float]:
+    try:
+        lat, lon = (float(x) for x in text.split(","))
+    except ValueError as exc:
+        raise typer.BadParameter(f"{what} must be LAT,LON in degrees (e.g. 35.4,139.7), not {text!r}") from exc
+    return lat, lon
+
+
+def plan_table(plan) -> Table:
+    t = Table(title=f"Voyage {plan.voyage_id}: {plan.solver} plan, status {plan.status}")
+    for col in ("leg", "from", "to", "course°", "NM", "rpm", "STW kn", "SOG kn", "h", "fuel t", "ETA (UTC)", "wind kn", "Hs m", "beyond"):
+        t.add_column(col, justify="right", no_wrap=True)
+    for g in plan.legs:
+        t.add_row(str(g["leg"]), f"{g['lat0']:.2f},{g['lon0']:.2f}", f"{g['lat1']:.2f},{g['lon1']:.2f}", f"{g['course_deg']:.0f}",
+                  f"{g['dist_nm']:.1f}", f"{g['rpm']:g}", f"{g['stw_kn']:.2f}", f"{g['sog_kn']:.2f}", f"{g['hours']:.2f}",
+                  f"{g['fuel_t']:.2f}", g["eta_utc"].strftime("%m-%d %H:%M"), f"{g['wind_kn']:.0f}", f"{g['hs_m']:.1f}",
+                  "yes" if g["beyond_forecast"] else "")
+    return t
+
+
+def comparison_table(plan) -> Table:
+    t = Table(title="Plan vs baseline (great circle, constant rpm)")
+    for col in ("", "fuel t", "hours", "NM", "ETA (UTC)", "status"):
+        t.add_column(col, justify="right")
+    for name, p in ((plan.solver, plan), ("baseline", plan.baseline)):
+        if p is None:
+            continue
+        eta = p.eta_utc.strftime("%Y-%m-%d %H:%M") if p.eta_utc is not None else "-"
+        t.add_row(name, f"{p.fuel_t:.2f}", f"{p.hours:.1f}", f"{p.distance_nm:.0f}", eta, p.status)
+    return t
 
 
 def register(app: typer.Typer) -> None:
-    """Add this area's commands to the CLI."""
+    @app.command()
+    def route(
+        from_: Optional[str] = typer.Option(None, "--from", help="Departure LAT,LON (at sea)."),
+        to: Optional[str] = typer.Option(None, "--to", help="Destination LAT,LON (at sea)."),
+        depart: Optional[str] = typer.Option(None, help="Departure time UTC, e.g. 2020-12-01T00."),
+        rta: Optional[str] = typer.Option(None, help="Required time of arrival UTC."),
+        imo: Optional[int] = typer.Option(None, help="Vessel (its active performance model is used)."),
+        voyage: Optional[str] = typer.Option(None, "--voyage", help="Take the voyage from the warehouse instead."),
+        solver: str = typer.Option("bfoa", help="bfoa | dp | astar | gc | rhumb."),
+        seed: int = typer.Option(1, help="Random seed of the BFOA (same seed, same plan)."),
+        objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
+        cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
+        calm: bool = typer.Option(False, "--calm", help="Ignore the cube: calm water, no current."),
+        rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel)."),
+        png: Optional[Path] = typer.Option(None, help="Write a map of the route, baseline and weather."),
+        convergence: Optional[Path] = typer.Option(None, help="Write the BFOA convergence plot."),
+        rtz: Optional[Path] = typer.Option(None, help="Write the plan as RTZ 1.1 (validated against the schema)."),
+        as_json: bool = typer.Option(False, "--json", help="Print the plan as JSON for scripts."),
+        data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA)."),
+    ):
+        """Plan one voyage: waypoints, rpm per leg and ETAs, compared with the great-circle baseline."""
+        import numpy as np
+
+        from flows.fleet import _write_bytes, plan_voyage
+        from flows.settings import load_settings
+        from pipeline.routing.problem import RoutingInputError
+        from pipeline.routing.search_space import VoyageGeometryError
+        from storage import cube, fleet_store
+
+        s = load_settings(data_root=data)
+        lay = s.layout
+        if not lay.warehouse.exists():
+            _fail(f"no warehouse at {lay.warehouse}: run `jitroute demo`, or `jitroute fleet import` and `jitroute refit` first")
+        if voyage:
+            rows = fleet_store.load_voyages(lay.warehouse, voyage_ids=[voyage])
+            if rows.empty:
+                _fail(f"voyage {voyage} is not in {lay.warehouse}")
+            v = rows.iloc[0].to_dict()
+        else:
+            missing = [n for n, x in (("--from", from_), ("--to", to), ("--depart", depart), ("--rta", rta), ("--imo", imo)) if x is None]
+            if missing:
+                _fail(f"give {', '.join(missing)} (or --voyage ID)")
+            (la0, lo0), (la1, lo1) = _latlon(from_, "--from"), _latlon(to, "--to")
+            v = {"voyage_id": "adhoc", "imo": imo, "dep_lat": la0, "dep_lon": lo0, "arr_lat": la1, "arr_lon": lo1,
+                 "depart_utc": np.datetime64(depart, "s"), "rta_utc": np.datetime64(rta, "s"), "rpm_options": None}
+        if rpm:
+            v["rpm_options"] = [float(x) for x in rpm.split(",")]
+        vessels = fleet_store.load_vessels(lay.warehouse)
+        vessel = vessels[vessels.imo == int(v["imo"])]
+        if vessel.empty:
+            _fail(f"vessel {v['imo']} is not in the warehouse: import it with `jitroute fleet import`")
+        vessel = vessel.iloc[0].to_dict()
+        model = fleet_store.load_active_model(lay.warehouse, int(v["imo"]))
+        if model is None:
+            _fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
+        cube_path, c = None, None
+        if not calm:
+            c = np.datetime64(cycle, "s") if cycle else cube.latest_complete_cycle(lay.weather_cube)
+            if c is None:
+                _fail(f"no complete forecast cycle in {lay.weather_cube}: run `jitroute ingest --cycle …` (or use --calm)")
+            cube_path, c = str(lay.weather_cube), str(np.datetime_as_string(np.datetime64(c, "s")))
+        routing = {"solver": solver, "objective": objective, "arrival_window_h": s.routing.arrival_window_h, "seed": seed,
+                   "n_lines": s.routing.n_lines, "n_points": s.routing.n_points, "d_point_nm": s.routing.d_point_nm}
+        try:
+            with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
+                plan, weather = plan_voyage(v, vessel, model.to_json(), cube_path, c, routing)
+        except (RoutingInputError, VoyageGeometryError, KeyError) as exc:
+            _fail(str(exc).strip("'\""))
+        if as_json:
+            print(json.dumps(plan.to_json(), indent=1))
+        else:
+            console.print(plan_table(plan))
+            console.print(comparison_table(plan))
+            sav = plan.savings_pct
+            console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
+                          f"savings vs baseline {'n/a' if sav != sav else f'{sav:.1f} %'}; runtime {plan.runtime_s:.2f} s; "
+                          f"weather {'calm water' if calm else 'cycle ' + c}")
+        if plan.legs:
+            from pipeline.export import plots
+            from pipeline.export import rtz as rtz_mod
+
+            named = dict(plan.route_row(), vessel_name=vessel.get("name"), dep_name=v.get("dep_name"), arr_name=v.get("arr_name"))
+            if png:
+                from pipeline.routing import weather_field as wf
+
+                lats, lons = zip(*plan.waypoints)
+                field = wf.snapshot(weather, plan.legs[len(plan.legs) // 2]["etd_utc"], (min(lats), max(lats)), (min(lons), max(lons)))
+                plots.route_map_png(png, named, plan.legs, plan.baseline.legs if plan.baseline else None,
+                                    field if field["hs_m"] is not None else None)
+                _say(as_json, f"map: {png}")
+            if convergence and plan.history is not None:
+                plots.convergence_png(convergence, plan.history, title=f"{plan.voyage_id}: BFOA best cost per cycle")
+                _say(as_json, f"convergence: {convergence}")
+            if rtz:
+                doc = rtz_mod.route_to_rtz(named, plan.legs)
+                rtz_mod.validate_rtz(doc)
+                _write_bytes(Path(rtz), doc)
+                _say(as_json, f"RTZ: {rtz}")
+        if plan.status in ("infeasible", "failed"):
+            raise typer.Exit(3)
+
+
+def _say(quiet: bool, text: str) -> None:
+    if not quiet:
+        console.print(text)
+
+
+class _null:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *a):
+        return False
+
+
+def _fail(msg: str):
+    console.print(f"[red]error:[/] {msg}")
+    raise typer.Exit(2)

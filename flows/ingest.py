@@ -11,6 +11,8 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from datetime import datetime, timezone
+
 import numpy as np
 import xarray as xr
 from prefect import flow, get_run_logger, task
@@ -49,15 +51,27 @@ class CycleReport:
     skipped: bool = False
 
 
-def _opts(s: Settings) -> FetchOptions:
+def _opts(s: Settings, source: str) -> FetchOptions:
+    """Fetch options for RISH or OSCAR; only OSCAR requests carry the Earthdata token."""
     src = s.sources
     return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
-                        allowed_redirect_hosts=src.allowed_redirect_hosts, token=src.earthdata_token)
+                        allowed_redirect_hosts=src.allowed_redirect_hosts,
+                        token=src.earthdata_token if source == "OSCAR" else None)
+
+
+LATEST_DELAY_H = 6
 
 
 def parse_cycle(text: str) -> np.datetime64:
-    """'2020-12-01T00', '2020-12-01T12:00', '2020120112' → datetime64[ns] on a whole hour."""
+    """'2020-12-01T00', '2020-12-01T12:00', '2020120112' → datetime64[ns] on a whole hour.
+
+    'latest' is the newest 6-hourly cycle at least LATEST_DELAY_H old (when RISH has it).
+    """
     t = text.strip()
+    if t.lower() == "latest":
+        now = np.datetime64(datetime.now(timezone.utc).replace(tzinfo=None), "h") - np.timedelta64(LATEST_DELAY_H, "h")
+        hours = (now - np.datetime64(now, "D")).astype(int)
+        return np.datetime64(np.datetime64(now, "D") + np.timedelta64(hours - hours % 6, "h"), "ns")
     if t.isdigit() and len(t) == 10:
         t = f"{t[:4]}-{t[4:6]}-{t[6:8]}T{t[8:]}"
     try:
@@ -87,11 +101,12 @@ def list_oscar(base_url: str, start: np.datetime64, end: np.datetime64, opts: Fe
 
 
 @task(name="download")
-def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opts: FetchOptions, known: dict[str, str]) -> list[Download]:
+def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
+                 known: dict[str, str]) -> list[Download]:
     for it in items:
         it.started_at = ingest_log.utcnow()
         dest = raw_store.path_for(raw_dir, it.source, cycle, it.name)
-        it.result = fetch(it.url, dest, opts, expected_sha256=known.get(it.name))
+        it.result = fetch(it.url, dest, opts[it.source], expected_sha256=known.get(it.name))
         it.status, it.error = it.result.status, it.result.error
     return items
 
@@ -146,9 +161,9 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     if not force and c in cube.complete_cycles(layout.weather_cube):
         logger.info("cycle %s is already complete; skipping", label)
         return CycleReport(label, True, 0, 0, skipped=True).__dict__
-    opts = _opts(s)
+    opts = {source: _opts(s, source) for source in ("GSM", "GWM", "OSCAR")}
     steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
-    files, rejected, day_url = list_rish(s.sources.rish_url, c, opts)
+    files, rejected, day_url = list_rish(s.sources.rish_url, c, opts["GSM"])
     for name in rejected:
         logger.warning("ignored unsafe name %r listed at %s", name, day_url)
     if not files:
@@ -157,7 +172,7 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
     gaps = rish.coverage(files, steps)
     end = c + np.timedelta64(max(steps), "h")
-    oscar_files = list_oscar(s.sources.oscar_url, c, end, opts)
+    oscar_files = list_oscar(s.sources.oscar_url, c, end, opts["OSCAR"])
     items += [Download("OSCAR", f.name, s.sources.oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
     known = ingest_log.known_checksums(layout.warehouse, [it.name for it in items])
     items = download_all(items, layout.raw, c, opts, known)

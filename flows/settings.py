@@ -2,7 +2,7 @@
 
 Values come from (lowest to highest priority) the defaults below, environment variables
 (`JITROUTE_DATA`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`, `JITROUTE_DASK_ADDRESS`,
-`JITROUTE_EARTHDATA_TOKEN`) and explicit overrides from the CLI. Lower layers never read this
+`JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`) and explicit overrides from the CLI. Lower layers never read this
 object; flows pass the values they need as plain arguments.
 """
 
@@ -55,6 +55,7 @@ class RoutingSettings:
     n_lines: int | None = None  # None: chosen from the voyage length
     n_points: int = 21
     d_point_nm: float | None = None
+    lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
 
 
 @dataclass(frozen=True)
@@ -91,6 +92,7 @@ def load_settings(**overrides) -> Settings:
     s = Settings().with_overrides(
         data_root=Path(env["JITROUTE_DATA"]) if env.get("JITROUTE_DATA") else None,
         dask_address=env.get("JITROUTE_DASK_ADDRESS") or None,
+        dask_workers=int(env["JITROUTE_DASK_WORKERS"]) if env.get("JITROUTE_DASK_WORKERS") else None,
         **{
             "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
             "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,

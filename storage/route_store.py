@@ -92,7 +92,9 @@ def run_summary(db_path: Path, run_id: str) -> dict:
             """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
                       count(*) FILTER (WHERE status = 'late') AS n_late,
                       count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
-                      sum(fuel_t) AS fuel_t, sum(baseline_fuel_t) AS baseline_fuel_t
+                      sum(fuel_t) AS fuel_t,
+                      sum(fuel_t) FILTER (WHERE baseline_fuel_t IS NOT NULL) AS compared_fuel_t,
+                      sum(baseline_fuel_t) FILTER (WHERE fuel_t IS NOT NULL) AS baseline_fuel_t
                FROM routes WHERE run_id = ?""",
             [run_id],
         ).fetchdf()
@@ -101,8 +103,8 @@ def run_summary(db_path: Path, run_id: str) -> dict:
             [run_id],
         ).fetchdf()
     out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}
-    out.update(totals.iloc[0].to_dict())
+    out.update({k: (int(v) if k.startswith("n") and v == v else v) for k, v in totals.iloc[0].to_dict().items()})
     base = out.get("baseline_fuel_t") or 0.0
-    out["savings_pct"] = 100.0 * (base - (out.get("fuel_t") or 0.0)) / base if base else None
+    out["savings_pct"] = 100.0 * (base - (out.get("compared_fuel_t") or 0.0)) / base if base else None
     out["problems"] = problems.to_dict("records")
     return out

@@ -28,7 +28,7 @@ MIGRATIONS: list[Migration] = [
             imo BIGINT,
             solver VARCHAR,
             objective VARCHAR,
-            status VARCHAR NOT NULL,           -- ok | late | infeasible | error
+            status VARCHAR NOT NULL,           -- ok | late | infeasible | failed
             reason VARCHAR,
             depart_utc TIMESTAMP,
             eta_utc TIMESTAMP,
@@ -45,7 +45,7 @@ MIGRATIONS: list[Migration] = [
             seed INTEGER,
             runtime_s DOUBLE,
             n_legs INTEGER,
-            beyond_forecast BOOLEAN,
+            beyond_forecast INTEGER,           -- legs sailed past the forecast horizon (last step persisted)
             PRIMARY KEY (run_id, voyage_id)
         );
         CREATE TABLE route_legs (
@@ -70,6 +70,50 @@ MIGRATIONS: list[Migration] = [
             beyond_forecast BOOLEAN,
             PRIMARY KEY (run_id, voyage_id, leg)
         );
+        """,
+    ),
+    Migration(
+        "routes_002_analyst_views",
+        """
+        -- the newest routing of every voyage
+        CREATE VIEW latest_routes AS
+        SELECT r.*, v.dep_name, v.arr_name, s.name AS vessel_name
+        FROM routes r
+        JOIN route_runs u USING (run_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels s ON s.imo = r.imo
+        QUALIFY row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC) = 1;
+
+        -- fuel and savings per run (only voyages routed with a baseline count towards savings)
+        CREATE VIEW fleet_savings AS
+        SELECT u.run_id, u.started_at, u.cycle, u.trigger, count(*) AS n_voyages,
+               count(*) FILTER (WHERE r.status = 'ok') AS n_on_time,
+               count(*) FILTER (WHERE r.status = 'late') AS n_late,
+               count(*) FILTER (WHERE r.status IN ('infeasible', 'failed')) AS n_not_routed,
+               sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL) AS fuel_t,
+               sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL) AS baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL)
+                        / nullif(sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL), 0)) AS savings_pct
+        FROM route_runs u JOIN routes r USING (run_id)
+        GROUP BY ALL;
+
+        -- active model fit quality per vessel and target
+        CREATE VIEW model_quality AS
+        SELECT m.imo, s.name AS vessel_name, m.target, m.form, m.version, m.fitted_at, m.n_rows, m.r2, m.rmse,
+               m.cv_rmse, (SELECT count(*) FROM noon_reports n WHERE n.imo = m.imo) AS n_reports,
+               (SELECT count(*) FROM noon_reports_rejected x WHERE x.imo = m.imo) AS n_rejected
+        FROM perf_models m LEFT JOIN vessels s ON s.imo = m.imo
+        WHERE m.active;
+
+        -- per cycle: completeness and what the files did
+        CREATE VIEW ingest_health AS
+        SELECT c.cycle, c.complete, c.n_files_expected, c.n_files_ok, c.missing, c.written_at,
+               count(l.file_name) FILTER (WHERE l.status = 'ok') AS files_downloaded,
+               count(l.file_name) FILTER (WHERE l.status = 'skipped') AS files_skipped,
+               count(l.file_name) FILTER (WHERE l.status = 'missing') AS files_missing,
+               count(l.file_name) FILTER (WHERE l.status = 'corrupt') AS files_corrupt
+        FROM cycles c LEFT JOIN ingest_log l ON l.cycle = c.cycle
+        GROUP BY ALL;
         """,
     ),
 ]

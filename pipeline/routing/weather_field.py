@@ -156,3 +156,22 @@ def sample_nb(values, times_h, grid, t_h, lat, lon, out):
                 a = a + wt * (b - a)
         out[v] = a
     return beyond
+
+
+def snapshot(field: WeatherField, when, lat_range: tuple[float, float], lon_range: tuple[float, float]) -> dict:
+    """Hs and wind on the field's own grid inside a box at the valid time nearest `when` (for maps)."""
+    lat0, dlat, nlat, lon0, dlon, nlon = field.grid[:6]
+    lat = lat0 + dlat * np.arange(int(nlat))
+    lon = lon0 + dlon * np.arange(int(nlon))
+    it = int(np.argmin(np.abs(field.times_h - field.hours_after_ref(when))))
+    iy = np.flatnonzero((lat >= lat_range[0] - 2) & (lat <= lat_range[1] + 2))
+    lon_e = ((lon + 180.0) % 360.0) - 180.0
+    lo, hi = lon_range
+    if hi - lo > 180 or lo > hi:  # box across the dateline, given in -180..180
+        ix = np.flatnonzero((lon_e >= max(lo, hi) - 2) | (lon_e <= min(lo, hi) + 2))
+    else:
+        ix = np.flatnonzero((lon_e >= lo - 2) & (lon_e <= hi + 2))
+    if iy.size < 2 or ix.size < 2:
+        return {"lat": lat[:0], "lon": lon[:0], "hs_m": None, "u_ms": None, "v_ms": None}
+    sub = field.values[:, it][:, iy][:, :, ix]
+    return {"lat": lat[iy], "lon": lon[ix], "hs_m": sub[SWH], "u_ms": sub[U10], "v_ms": sub[V10]}

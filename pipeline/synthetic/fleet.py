@@ -128,7 +128,7 @@ def generate_fleet(start, *, n_vessels: int = 12, days: int = 365, seed: int = 7
         noon.append(_spoil(reports, rng) if i % 3 == 0 else reports)
         dep, arr = ROUTES[i % len(ROUTES)]
         dist = _gc_nm(PORTS[dep], PORTS[arr])
-        depart = start + np.timedelta64(int(6 + 2 * i), "h")
+        depart = start + np.timedelta64(int(13 + 2 * i), "h")  # after the 12 UTC cycle of the start day
         speed = vt[2] * (0.80 if i != n_vessels - 1 else 1.9)  # the last voyage's RTA is impossibly tight
         hours = dist * 1.08 / speed
         rpm_opts = [round(vt[3] * f, 1) for f in (0.6, 0.7, 0.8, 0.9, 1.0)]

@@ -1,0 +1,44 @@
+"""From a warehouse voyage row (+ its vessel's model) to a `RoutingProblem`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.performance.model import PerformanceModel
+from pipeline.routing.problem import RoutingInputError, RoutingProblem
+
+
+def _num(v, default=None):
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return default
+    return default if math.isnan(f) else f
+
+
+def rpm_options_of(voyage: dict, rpm_max: float | None) -> tuple[float, ...]:
+    opts = voyage.get("rpm_options")
+    if opts is None or (isinstance(opts, float) and math.isnan(opts)) or len(opts) == 0:
+        if not rpm_max:
+            raise RoutingInputError(f"voyage {voyage.get('voyage_id')}: no allowed rpm settings and no rpm_max for the vessel")
+        return tuple(round(rpm_max * f, 1) for f in (0.6, 0.7, 0.8, 0.9, 1.0))
+    return tuple(float(r) for r in opts)
+
+
+def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float | None = None, objective: str = "jit",
+                        window_h: float = 6.0, n_lines: int | None = None, n_points: int = 21,
+                        d_point_nm: float | None = None) -> RoutingProblem:
+    vid = str(voyage.get("voyage_id"))
+    for k in ("dep_lat", "dep_lon", "arr_lat", "arr_lon"):
+        if _num(voyage.get(k)) is None:
+            raise RoutingInputError(f"voyage {vid}: {k} is missing")
+    return RoutingProblem(
+        dep=(float(voyage["dep_lat"]), float(voyage["dep_lon"])), arr=(float(voyage["arr_lat"]), float(voyage["arr_lon"])),
+        depart_utc=np.datetime64(voyage["depart_utc"], "s"), rta_utc=np.datetime64(voyage["rta_utc"], "s"), model=model,
+        rpm_options=rpm_options_of(voyage, rpm_max), draft_m=_num(voyage.get("draft_m"), 10.0),
+        trim_m=_num(voyage.get("trim_m"), 0.0), max_hs_m=_num(voyage.get("max_hs_m")),
+        max_wind_kn=_num(voyage.get("max_wind_kn")), objective=objective, window_h=window_h, voyage_id=vid,
+        imo=int(voyage["imo"]) if voyage.get("imo") is not None else None, dep_name=str(voyage.get("dep_name") or "departure"),
+        arr_name=str(voyage.get("arr_name") or "destination"), n_lines=n_lines, n_points=n_points, d_point_nm=d_point_nm)
