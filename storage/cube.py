@@ -197,10 +197,14 @@ def latest_complete_cycle(path: Path, at_or_before=None) -> np.datetime64 | None
     return cycles[-1] if cycles else None
 
 
-def load_cycle(path: Path, cycle) -> xr.Dataset:
-    """One visible cycle, eager, dims (step, lat, lon)."""
+def load_cycle(path: Path, cycle, lat_range_deg: tuple[float, float] | None = None) -> xr.Dataset:
+    """One visible cycle, eager, dims (step, lat, lon); only the latitude band `lat_range_deg` if given."""
     ds = open_cube(path)
     c = np.datetime64(cycle, "ns")
     if c not in ds["cycle"].values:
         raise KeyError(f"cycle {c} is not in the cube at {path} (have {len(ds.cycle)} cycles)")
-    return ds.sel(cycle=c).load()
+    one = ds.sel(cycle=c)
+    if lat_range_deg is not None:
+        lo, hi = sorted(lat_range_deg)
+        one = one.sel(lat=slice(lo, hi)) if one.lat.values[0] < one.lat.values[-1] else one.sel(lat=slice(hi, lo))
+    return one.load()
