@@ -1,0 +1,130 @@
+"""End to end: nightly (ingest → refit → route-fleet on a local dask cluster), exports, CLI, deployments."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import duckdb
+import pandas as pd
+import pytest
+
+from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+
+@pytest.fixture(scope="module")
+def fleet_root(tmp_path_factory, demo_mirror, prefect_harness):
+    """A data root with a 4-vessel fleet (+ one voyage departing from land) after one nightly run."""
+    from flows.cli_fleet import _import_fleet
+    from flows.fleet import nightly
+    from storage import fleet_store
+
+    root = tmp_path_factory.mktemp("fleet") / "data"
+    root.mkdir()
+    fl = generate_fleet("2020-12-01T00", n_vessels=4, days=200, seed=3)
+    folder = root.parent / "fleet_csv"
+    write_fleet(fl, folder)
+    _import_fleet(folder, root)
+    bad = fl.voyages.iloc[[0]].copy()
+    bad["voyage_id"], bad["dep_name"], bad["dep_lat"], bad["dep_lon"] = "VLAND", "Tokyo city", 35.68, 139.76
+    fleet_store.import_voyages(root / "warehouse.duckdb", bad)
+    urls = {"rish_url": (demo_mirror / "rish").as_uri() + "/", "oscar_url": (demo_mirror / "oscar").as_uri() + "/"}
+    first = nightly(date="2020-12-01", data_root=str(root), cycles="00", **urls)
+    return root, fl, first, urls
+
+
+def _q(root: Path, sql: str):
+    with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+        return con.execute(sql).fetchdf()
+
+
+def test_nightly_fills_the_tables_and_records_the_unroutable_voyage(fleet_root):
+    root, fl, first, _ = fleet_root
+    r = first["routing"]
+    routes = _q(root, f"SELECT * FROM routes WHERE run_id = '{r['run_id']}'").set_index("voyage_id")
+    assert set(routes.index) == set(fl.voyages.voyage_id) | {"VLAND"}
+    assert routes.loc["VLAND", "status"] == "failed" and "on land" in routes.loc["VLAND", "reason"]
+    late_id = fl.voyages.voyage_id.iloc[-1]  # the generator gives the last voyage an impossible RTA
+    assert routes.loc[late_id, "status"] == "late" and "late" in routes.loc[late_id, "reason"]
+    ok = routes[routes.status == "ok"]
+    assert len(ok) >= 2
+    assert (ok.fuel_t <= ok.baseline_fuel_t + 1e-9).all()  # never worse than the baseline it starts from
+    assert (pd.to_datetime(ok.eta_utc) <= pd.to_datetime(ok.rta_utc)).all()
+    legs = _q(root, f"SELECT voyage_id, count(*) n, sum(fuel_t) f FROM route_legs WHERE run_id = '{r['run_id']}' GROUP BY 1").set_index("voyage_id")
+    for vid in ok.index:
+        assert legs.loc[vid, "n"] == routes.loc[vid, "n_legs"]
+        assert legs.loc[vid, "f"] == pytest.approx(routes.loc[vid, "fuel_t"], rel=1e-9)
+    assert (root / "exports" / "routes" / f"run_id={r['run_id']}").exists()
+    assert Path(r["fleet_map"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    views = {v: len(_q(root, f"SELECT * FROM {v}")) for v in ("latest_routes", "fleet_savings", "model_quality", "ingest_health")}
+    assert views["latest_routes"] == len(routes) and views["fleet_savings"] == 1 and views["model_quality"] == 8
+    assert views["ingest_health"] == 1
+
+
+def test_rtz_exports_validate_against_the_published_schema(fleet_root):
+    from pipeline.export.rtz import validate_rtz
+
+    root, fl, first, _ = fleet_root
+    out = Path(first["routing"]["exports_dir"])
+    files = sorted(out.glob("*.rtz"))
+    assert len(files) == len(fl.voyages)  # every routed voyage, none for the failed one
+    for f in files:
+        validate_rtz(f.read_bytes())
+    gj = json.loads((out / f"{fl.voyages.voyage_id.iloc[0]}.geojson").read_text())
+    assert gj["type"] == "FeatureCollection"
+
+
+def test_second_nightly_adds_a_run_but_no_ingest_or_fits(fleet_root):
+    from flows.fleet import nightly
+
+    root, fl, first, urls = fleet_root
+    before = {t: len(_q(root, f"SELECT * FROM {t}")) for t in ("ingest_log", "perf_models", "noon_reports", "cycles")}
+    second = nightly(date="2020-12-01", data_root=str(root), cycles="00", **urls)
+    after = {t: len(_q(root, f"SELECT * FROM {t}")) for t in before}
+    assert after == before
+    assert second["ingest"][0]["skipped"] and second["models_changed"] == 0
+    runs = _q(root, "SELECT run_id FROM route_runs")
+    assert len(runs) == 2 and second["routing"]["run_id"] != first["routing"]["run_id"]
+
+
+def test_route_cli_json_png_and_rtz(fleet_root, tmp_path):
+    from typer.testing import CliRunner
+
+    from flows.cli import app
+    from pipeline.export.rtz import validate_rtz
+
+    root, fl, _, _ = fleet_root
+    vid = fl.voyages.voyage_id.iloc[1]
+    res = CliRunner().invoke(app, ["route", "--voyage", vid, "--data", str(root), "--json", "--png", str(tmp_path / "r.png"),
+                                   "--rtz", str(tmp_path / "r.rtz"), "--solver", "bfoa", "--seed", "3"])
+    assert res.exit_code == 0, res.output
+    plan = json.loads(res.stdout[res.stdout.index("{"):])
+    assert plan["status"] in ("ok", "late") and plan["solver"] == "bfoa" and plan["voyage_id"] == vid
+    assert plan["fuel_t"] == pytest.approx(sum(g["fuel_t"] for g in plan["legs"]), rel=1e-6)
+    assert plan["baseline_fuel_t"] >= plan["fuel_t"] - 1e-6
+    assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
+    validate_rtz((tmp_path / "r.rtz").read_bytes())
+
+
+def test_route_cli_says_what_is_missing(tmp_path):
+    from typer.testing import CliRunner
+
+    from flows.cli import app
+
+    res = CliRunner().invoke(app, ["route", "--voyage", "V1", "--data", str(tmp_path / "empty")])
+    assert res.exit_code == 2 and "jitroute demo" in res.output
+
+
+def test_deployments_have_their_schedules_and_parameters():
+    from deploy.serve import build_deployments
+
+    deps = {d.name: d for d in build_deployments(timezone="Europe/Oslo", nightly_cron="15 3 * * *", data_root="/srv/jit")}
+    assert set(deps) == {"nightly", "ingest-6h", "backfill"}
+    cron = deps["nightly"].schedules[0].schedule
+    assert cron.cron == "15 3 * * *" and cron.timezone == "Europe/Oslo"
+    assert deps["ingest-6h"].schedules[0].schedule.interval.total_seconds() == 6 * 3600
+    assert deps["ingest-6h"].parameters["cycle"] == "latest"
+    assert deps["backfill"].schedules == [] and deps["backfill"].parameters["route"] is False
+    assert all(d.parameters["data_root"] == "/srv/jit" for d in deps.values())
+    with pytest.raises(Exception):
+        build_deployments(timezone="Mars/Olympus")
