@@ -100,6 +100,7 @@ class Instance:
             raise RoutingInputError(
                 f"voyage {problem.voyage_id}: the performance model of vessel {problem.imo} gives {slow:.2f} kn at "
                 f"{problem.rpm_options[0]:g} rpm in calm water; refit the model or check the allowed rpm settings")
+        _check_coverage(problem, space, weather)
         max_hours = max(1.6 * problem.t_req_h, 1.6 * space.base_distance_nm / slow)
         return cls(problem=problem, space=space, weather=weather, rpm_options=np.array(problem.rpm_options),
                    vp=vp, speed_coef=m.speed_coef, fuel_coef=m.fuel_coef,
@@ -115,3 +116,22 @@ class Instance:
         return (self.space.lat, self.space.lon, self.space.edge_ok, self.rpm_options, self.t_dep_h, self.max_hours,
                 self.vp, self.speed_coef, self.fuel_coef, *self.numba_weather(), self.obj, p.t_req_h, p.window_h,
                 self.f_target, p.early_t_per_h, p.late_t_per_h)
+
+
+def _check_coverage(problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> None:
+    """The weather must cover every usable node (a regional field must not be silently extrapolated)."""
+    lat = space.lat[space.node_ok]
+    lon = space.lon[space.node_ok]
+    lo, hi = weather.lat_range_deg
+    tol = weather.grid[1]
+    if lat.min() < lo - tol or lat.max() > hi + tol:
+        raise RoutingInputError(
+            f"voyage {problem.voyage_id}: its search area spans latitudes {lat.min():.1f}..{lat.max():.1f} but the "
+            f"weather covers only {lo:.1f}..{hi:.1f}")
+    if weather.grid[6] < 0.5:
+        lon0, dlon, nlon = weather.grid[3], weather.grid[4], int(weather.grid[5])
+        rel = (lon - lon0) % 360.0
+        if np.any(rel > dlon * (nlon - 1) + dlon):
+            raise RoutingInputError(
+                f"voyage {problem.voyage_id}: its search area leaves the weather's longitudes "
+                f"{lon0:.1f}..{lon0 + dlon * (nlon - 1):.1f}")
