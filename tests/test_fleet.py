@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
+import threading
+import time
 from pathlib import Path
 
 import duckdb
@@ -128,3 +132,45 @@ def test_deployments_have_their_schedules_and_parameters():
     assert all(d.parameters["data_root"] == "/srv/jit" for d in deps.values())
     with pytest.raises(Exception):
         build_deployments(timezone="Mars/Olympus")
+
+
+# Last in the module: it adds a route run to the shared data root.
+def test_killed_worker_loses_no_voyage(fleet_root, monkeypatch):
+    from distributed import Client, LocalCluster
+
+    from flows.fleet import route_fleet
+
+    root, fl, _, _ = fleet_root
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    client = Client(cluster)
+    monkeypatch.setenv("JITROUTE_DASK_ADDRESS", cluster.scheduler_address)
+    killed: list[int] = []
+    stop = threading.Event()
+
+    def kill_a_busy_worker():
+        deadline = time.monotonic() + 240
+        while not stop.is_set() and time.monotonic() < deadline:
+            busy = [w for w, keys in client.processing().items() if keys]
+            if busy:
+                pid = client.run(os.getpid, workers=[busy[0]])[busy[0]]
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+                return
+            stop.wait(0.02)
+
+    killer = threading.Thread(target=kill_a_busy_worker, daemon=True)
+    killer.start()
+    try:
+        summary = route_fleet(cycle="2020-12-01T00", data_root=str(root), solver="dp", exports=False)
+    finally:
+        stop.set()
+        killer.join(10)
+        client.close()
+        cluster.close()
+    assert killed, "no worker was busy long enough to be killed"
+    with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+        rows = con.execute("SELECT voyage_id, status, reason FROM routes WHERE run_id = ?", [summary["run_id"]]).fetchall()
+    ids = {r[0] for r in rows}
+    assert ids == set(fl.voyages.voyage_id) | {"VLAND"}
+    for vid, status, reason in rows:
+        assert status in ("ok", "late") or vid == "VLAND" or "routing task lost" in (reason or ""), (vid, status, reason)
