@@ -1,7 +1,9 @@
 """Fleet flows: `route-fleet` (every upcoming voyage, one dask task each) and `nightly`.
 
-Workers read the Zarr cube themselves (only their voyage's latitude band of one cycle); the
-scheduler ships small job dicts out and plain result rows back. One writer (this flow) puts a
+Workers read the Zarr cube themselves (one cycle, once per worker process, then reused); the
+scheduler ships small job dicts out and plain result rows back. Voyages go out in small batches
+(about three Prefect tasks per worker, `routing.voyages_per_task` to override): a Prefect task
+costs about a second of orchestration, several times the routing of a coastal voyage. One writer (this flow) puts a
 run's rows into DuckDB in one transaction and into Parquet partitions. A voyage that fails —
 bad input, no model, no way through, even a lost worker — is recorded with status and reason
 and never fails the others.
@@ -9,6 +11,7 @@ and never fails the others.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import traceback
@@ -74,10 +77,17 @@ def plan_voyage(voyage: dict, vessel: dict, model_json: dict | None, cube_path: 
     if cube_path is None:
         weather = wf.uniform(problem.depart_utc - np.timedelta64(1, "h"), 2.0 * problem.t_req_h + 240.0)
     else:
-        ds = cube.load_cycle(Path(cube_path), cycle, lat_range_deg=problem.lat_band_deg(space))
-        weather = wf.from_cycle(ds, cycle)
+        weather = cycle_field(cube_path, cycle)
     plan = solve(problem, weather, solver=routing["solver"], seed=routing["seed"], space=space)
     return plan, weather
+
+
+@functools.lru_cache(maxsize=2)
+def cycle_field(cube_path: str, cycle: str):
+    """One cube cycle as a WeatherField, read once per worker process and reused for its voyages."""
+    from pipeline.routing import weather_field as wf
+
+    return wf.from_cycle(cube.load_cycle(Path(cube_path), cycle), cycle)
 
 
 def route_one(job: dict) -> dict:
@@ -147,28 +157,42 @@ def _write_bytes(path: Path, data: bytes) -> str:
     return str(path)
 
 
-@task(name="route-voyage", retries=1, retry_delay_seconds=0, cache_policy=NO_CACHE)
-def route_voyage(job: dict) -> dict:
-    return route_one(job)
+@task(name="route-voyages-batch", retries=1, retry_delay_seconds=0, cache_policy=NO_CACHE)
+def route_batch(jobs: list[dict]) -> list[dict]:
+    """Route a few voyages one after the other; each is isolated (its own try/except and row)."""
+    return [route_one(job) for job in jobs]
+
+
+def batches(jobs: list[dict], per_task: int) -> list[list[dict]]:
+    return [jobs[k:k + per_task] for k in range(0, len(jobs), per_task)]
+
+
+def voyages_per_task(n_jobs: int, n_workers: int, setting: int | None) -> int:
+    """Explicit setting, else about three tasks per worker (a Prefect task costs ~1 s of orchestration)."""
+    if setting:
+        return max(1, int(setting))
+    return max(1, math.ceil(n_jobs / (3 * max(1, n_workers))))
 
 
 @flow(name="route-voyages")
-def route_voyages(jobs: list[dict]) -> list[dict]:
-    """Fan the jobs out over the flow's task runner; a lost task becomes a failed row, never a lost voyage."""
+def route_voyages(jobs: list[dict], per_task: int = 1) -> list[dict]:
+    """Fan the jobs out over the flow's task runner; a lost task becomes failed rows, never lost voyages."""
     logger = get_run_logger()
-    futures = {route_voyage.submit(job): job for job in jobs}
+    futures = {route_batch.submit(chunk): chunk for chunk in batches(jobs, per_task)}
     results = []
-    for k, fut in enumerate(as_completed(list(futures)), start=1):
-        job = futures[fut]
+    for fut in as_completed(list(futures)):
+        chunk = futures[fut]
         try:
-            res = fut.result()
+            done = fut.result()
         except Exception as exc:
-            res = {"route": failed_row(job["run_id"], job["voyage"], job["cycle"], f"routing task lost: {type(exc).__name__}: {exc}"),
-                   "legs": [], "files": []}
-        results.append(res)
-        r = res["route"]
-        logger.info("routed %d/%d: %s %s%s", k, len(jobs), r["voyage_id"], r["status"],
-                    f" ({r['reason']})" if r.get("reason") else "")
+            done = [{"route": failed_row(job["run_id"], job["voyage"], job["cycle"],
+                                         f"routing task lost: {type(exc).__name__}: {exc}"), "legs": [], "files": []}
+                    for job in chunk]
+        results.extend(done)
+        for res in done:
+            r = res["route"]
+            logger.info("routed %d/%d: %s %s%s", len(results), len(jobs), r["voyage_id"], r["status"],
+                        f" ({r['reason']})" if r.get("reason") else "")
     return results
 
 
@@ -225,7 +249,8 @@ def route_fleet(cycle: str | None = None, voyages: list[str] | None = None, data
     logger.info("run %s: routing %d voyages on cycle %s (%s)", run_id, len(jobs), np.datetime_as_string(c, unit="h"),
                 f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
-        results = route_voyages.with_options(task_runner=task_runner(s))(jobs) if jobs else []
+        per_task = voyages_per_task(len(jobs), s.dask_workers, s.routing.voyages_per_task)
+        results = route_voyages.with_options(task_runner=task_runner(s))(jobs, per_task) if jobs else []
         rows = [r["route"] for r in results]
         legs = [leg for r in results for leg in r["legs"]]
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, rows, legs)

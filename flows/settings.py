@@ -56,6 +56,7 @@ class RoutingSettings:
     n_points: int = 21
     d_point_nm: float | None = None
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
+    voyages_per_task: int | None = None  # None: about three Prefect tasks per dask worker
 
 
 @dataclass(frozen=True)

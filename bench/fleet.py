@@ -1,0 +1,106 @@
+"""Fleet routing throughput: 200 voyages with 1 and with 2 local dask workers (target scaling ≥ 1.7×).
+
+Builds (once, under bench/out/fleet) a data root with one ingested demo cycle, a 12-vessel fleet
+with fitted models and 200 voyages on the demo's port pairs with staggered departures, then runs
+the `route-fleet` flow (exports off) against a local dask cluster of 1 and of 2 single-threaded
+worker processes (passed as an existing scheduler address, as in production) and prints voyages
+per minute and the ratio. Each cluster is warmed up first (imports, land mask, numba caches, the
+cube cycle) so both timings measure routing, not start-up.
+
+    .venv/bin/python bench/fleet.py [--voyages 200]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+OUT = REPO / "bench" / "out" / "fleet"
+
+
+def prepare(n_voyages: int) -> Path:
+    import pandas as pd
+
+    from flows.cli_fleet import _import_fleet
+    from flows.ingest import ingest_weather
+    from flows.refit import refit_performance
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+    from pipeline.synthetic.mirror import write_mirror
+    from storage import fleet_store
+
+    root = OUT / "data"
+    marker = root / f".ready-{n_voyages}"
+    if marker.exists():
+        return root
+    root.mkdir(parents=True, exist_ok=True)
+    mirror = OUT / "mirror"
+    if not (mirror / ".complete").exists():
+        write_mirror(mirror, "2020-12-01", "2020-12-01", cycles=(0,), seed=0)
+        (mirror / ".complete").write_text("ok\n")
+    ingest_weather("2020-12-01T00", data_root=str(root), rish_url=(mirror / "rish").as_uri() + "/",
+                   oscar_url=(mirror / "oscar").as_uri() + "/")
+    fl = generate_fleet("2020-12-01T00", n_vessels=12, days=365, seed=7)
+    write_fleet(fl, OUT / "fleet_csv")
+    _import_fleet(OUT / "fleet_csv", root)
+    refit_performance(data_root=str(root))
+    base = fl.voyages
+    rows = []
+    for k in range(n_voyages):
+        v = base.iloc[k % len(base)].copy()
+        v["voyage_id"] = f"B{k:04d}"
+        shift = pd.Timedelta(hours=(k // len(base)) * 3)
+        v["depart_utc"] += shift
+        v["rta_utc"] += shift
+        rows.append(v)
+    fleet_store.import_voyages(root / "warehouse.duckdb", pd.DataFrame(rows))
+    marker.write_text("ok\n")
+    return root
+
+
+def run(root: Path, address: str, voyages: list[str]) -> float:
+    from flows.fleet import route_fleet
+
+    os.environ["JITROUTE_DASK_ADDRESS"] = address
+    t0 = time.perf_counter()
+    s = route_fleet(cycle="2020-12-01T00", voyages=voyages, data_root=str(root), exports=False, trigger="bench")
+    dt = time.perf_counter() - t0
+    assert s["n"] == len(voyages), s
+    return dt
+
+
+def main() -> None:
+    import logging
+
+    from distributed import LocalCluster
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--voyages", type=int, default=200)
+    args = ap.parse_args()
+    os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
+    os.environ.setdefault("PREFECT_HOME", str(OUT / "prefect"))
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    root = prepare(args.voyages)
+    ids = [f"B{k:04d}" for k in range(args.voyages)]
+    times = {}
+    for workers in (1, 2):
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                          silence_logs=logging.WARNING) as cluster:
+            os.environ["JITROUTE_DASK_WORKERS"] = str(workers)
+            run(root, cluster.scheduler_address, ids[: 2 * workers])  # warm-up: imports, land mask, numba caches, cube
+            times[workers] = run(root, cluster.scheduler_address, ids)
+    t1, t2 = times[1], times[2]
+    v1, v2 = args.voyages / t1 * 60, args.voyages / t2 * 60
+    ratio = t1 / t2
+    print(f"{'workers':>8} {'seconds':>9} {'voyages/min':>12}")
+    print(f"{1:>8} {t1:>9.1f} {v1:>12.1f}")
+    print(f"{2:>8} {t2:>9.1f} {v2:>12.1f}")
+    print(f"scaling 1 → 2 workers: {ratio:.2f}× (target ≥ 1.7×: {'met' if ratio >= 1.7 else 'NOT met'})")
+
+
+if __name__ == "__main__":
+    main()
