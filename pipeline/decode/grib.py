@@ -66,7 +66,13 @@ def _iter_handles(path: Path) -> Iterator[int]:
         raise DecodeError(path, f"cannot read ({exc})") from exc
 
 
-def _info(index: int, h: int) -> FieldInfo:
+def _code(h: int) -> tuple[int, int, int]:
+    """(discipline, category, number): read first, so fields nobody asked for cost three look-ups."""
+    return int(_get(h, "discipline", -1)), int(_get(h, "parameterCategory", -1)), int(_get(h, "parameterNumber", -1))
+
+
+def _level_and_time(h: int) -> tuple[int, float, int, np.datetime64]:
+    """(level type, level, step in hours, cycle)."""
     date = int(_get(h, "dataDate", 19700101))
     time = int(_get(h, "dataTime", 0))
     cycle = np.datetime64(f"{date // 10000:04d}-{date // 100 % 100:02d}-{date % 100:02d}T{time // 100:02d}:{time % 100:02d}", "ns")
@@ -76,13 +82,19 @@ def _info(index: int, h: int) -> FieldInfo:
     level_type = _get(h, "typeOfFirstFixedSurface", 255)
     if isinstance(level_type, str):  # some tables map the code to a name
         level_type = int(eccodes.codes_get_long(h, "typeOfFirstFixedSurface"))
+    return int(level_type), float(_get(h, "level", 0) or 0), step_h, cycle
+
+
+def _info(index: int, h: int) -> FieldInfo:
+    discipline, category, number = _code(h)
+    level_type, level, step_h, cycle = _level_and_time(h)
     return FieldInfo(
         index=index,
-        discipline=int(_get(h, "discipline", -1)),
-        category=int(_get(h, "parameterCategory", -1)),
-        number=int(_get(h, "parameterNumber", -1)),
-        level_type=int(level_type),
-        level=float(_get(h, "level", 0) or 0),
+        discipline=discipline,
+        category=category,
+        number=number,
+        level_type=level_type,
+        level=level,
         step_h=step_h,
         cycle=cycle,
         centre=int(eccodes.codes_get_long(h, "centre")),
@@ -127,29 +139,33 @@ def read_fields(path: Path, wanted: dict[str, tuple[int, int, int, int | None, f
     grid = None
     cycle = None
     n = 0
-    for i, h in enumerate(_iter_handles(path)):
+    codes = {(d, c, num) for d, c, num, _, _ in wanted.values()}
+    for h in _iter_handles(path):
         n += 1
-        info = _info(i, h)
+        code = _code(h)
+        if code not in codes:
+            continue
+        level_type, level, step_h, field_cycle = _level_and_time(h)
         for name, (d, c, num, lt, lv) in wanted.items():
-            if (info.discipline, info.category, info.number) != (d, c, num):
+            if code != (d, c, num):
                 continue
-            if lt is not None and info.level_type != lt:
+            if lt is not None and level_type != lt:
                 continue
-            if lv is not None and abs(info.level - lv) > 1e-6:
+            if lv is not None and abs(level - lv) > 1e-6:
                 continue
             g = _grid(h, path)
             if grid is None:
                 grid = g
             elif g.lat.size != grid.lat.size or g.lon.size != grid.lon.size:
-                raise DecodeError(path, f"field {name} at step {info.step_h} h has a different grid from the others")
-            cycle = info.cycle
+                raise DecodeError(path, f"field {name} at step {step_h} h has a different grid from the others")
+            cycle = field_cycle
             vals = eccodes.codes_get_values(h).astype(np.float32)
             if int(_get(h, "bitmapPresent", 0) or 0):
                 missing = eccodes.codes_get_double(h, "missingValue")
                 vals[vals == missing] = np.nan
             if fill_value is not None:
                 vals[vals >= fill_value] = np.nan
-            out[name][info.step_h] = vals.reshape(g.lat.size, g.lon.size)
+            out[name][step_h] = vals.reshape(g.lat.size, g.lon.size)
     if n == 0:
         raise DecodeError(path, "no GRIB messages found (empty, truncated or not GRIB)")
     return out, grid, cycle

@@ -35,9 +35,19 @@ ATTRS = {
 }
 
 
+def _order(axis: np.ndarray) -> np.ndarray | slice:
+    """Index that sorts `axis` ascending; a slice (a view, no copy) when it is already sorted or reversed."""
+    order = np.argsort(axis)
+    if np.array_equal(order, np.arange(axis.size)):
+        return slice(None)
+    if np.array_equal(order, np.arange(axis.size)[::-1]):
+        return slice(None, None, -1)
+    return order
+
+
 def _canonical(values: dict[str, dict[int, np.ndarray]], grid: GridInfo, cycle: np.datetime64, steps: list[int]) -> xr.Dataset:
-    lat_order = np.argsort(grid.lat)
-    lon_order = np.argsort(grid.lon)
+    lat_order = _order(grid.lat)
+    lon_order = _order(grid.lon)
     data = {}
     for name, by_step in values.items():
         cube = np.stack([by_step[s] for s in steps])[:, lat_order][:, :, lon_order]
@@ -54,12 +64,23 @@ def _canonical(values: dict[str, dict[int, np.ndarray]], grid: GridInfo, cycle: 
     return ds
 
 
+def _require_global(grid: GridInfo, path: Path) -> None:
+    """GSM and GWM are global products (`Rgl`): a grid that does not go round the globe in longitude
+    (a regional or mislabelled file) would leave most of the routing grid empty, so it is refused."""
+    lon = np.sort(grid.lon)
+    step = float(np.median(np.diff(lon))) if lon.size > 1 else 0.0
+    if step <= 0 or abs(lon.size * step - 360.0) > step / 2:
+        raise DecodeError(path, f"wrong grid: longitudes {lon[0]:g}..{lon[-1]:g}E in {lon.size} points do not cover the globe; "
+                                "expected a global GSM/GWM grid")
+
+
 def decode_gsm(path: Path) -> xr.Dataset:
     """One GSM file (one lead time) → u10, v10 (lat, lon) with scalar cycle, step, valid_time."""
     values, grid, cycle = read_fields(path, GSM_WIND)
     missing = [k for k, v in values.items() if not v]
     if missing:
         raise DecodeError(path, f"no {', '.join(missing)} (10 m wind) in this GSM file")
+    _require_global(grid, path)
     steps = sorted(set(values["u10"]) & set(values["v10"]))
     if len(steps) != 1:
         raise DecodeError(path, f"expected one lead time in a GSM file, found {steps}")
@@ -87,6 +108,7 @@ def decode_gwm(path: Path) -> xr.Dataset:
     for k in ("mwd", "mwp"):
         if not values[k]:
             raise DecodeError(path, f"no {ATTRS[k]['long_name']} in this GWM file")
+    _require_global(grid, path)
     steps = sorted(set(values["swh"]) & set(values["mwd"]) & set(values["mwp"]))
     if not steps:
         raise DecodeError(path, "wave fields do not share any lead time")
