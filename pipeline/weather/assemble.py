@@ -48,10 +48,11 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
     valid = np.datetime64(cycle, "ns") + steps.astype("timedelta64[h]").astype("timedelta64[ns]")
     age = np.full(steps.size, np.nan, np.float32)
     if oscar is not None:
-        cur = regrid(currents_at(oscar, valid).drop_vars("current_age_h"), lat, lon)
+        # regrid each analysis once, then persist it to the valid times (same values, far fewer fields)
+        cur = currents_at(regrid(oscar, lat, lon), valid)
         out["uo"][:] = cur["uo"].values
         out["vo"][:] = cur["vo"].values
-        age = currents_at(oscar.isel(lat=slice(0, 1), lon=slice(0, 1)), valid)["current_age_h"].values
+        age = cur["current_age_h"].values
     missing = [int(s) for s, w, a in zip(steps, have_wind, have_waves) if not (w and a)]
     ds = xr.Dataset(
         {k: (("step", "lat", "lon"), v) for k, v in out.items()} | {"current_age_h": (("step",), age.astype(np.float32))},

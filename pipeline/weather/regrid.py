@@ -7,6 +7,7 @@ coastal sea points keep a value while points whose four corners are land stay Na
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import xarray as xr
 
@@ -29,24 +30,45 @@ def _axis_weights(src: np.ndarray, dst: np.ndarray, periodic: bool):
 
 
 def bilinear(values: np.ndarray, src_lat, src_lon, dst_lat, dst_lon) -> np.ndarray:
-    """Regrid `values` (..., nlat, nlon) from ascending src axes to dst axes; NaN-aware."""
+    """Regrid `values` (..., nlat, nlon) from ascending src axes to dst axes; NaN-aware (float32)."""
     j0, j1, wj, inside = _axis_weights(np.asarray(src_lat, float), np.asarray(dst_lat, float), periodic=False)
     i0, i1, wi, _ = _axis_weights(np.asarray(src_lon, float), np.asarray(dst_lon, float), periodic=True)
     v = np.asarray(values, dtype=np.float32)
-    out = np.zeros(v.shape[:-2] + (j0.size, i0.size), dtype=np.float32)
-    wsum = np.zeros_like(out)
-    for jj, wy in ((j0, 1.0 - wj), (j1, wj)):
-        rows = v[..., jj, :]
-        for ii, wx in ((i0, 1.0 - wi), (i1, wi)):
-            corner = rows[..., ii]
-            w = (wy[:, None] * wx[None, :]).astype(np.float32)
-            ok = ~np.isnan(corner)
-            out += np.where(ok, corner, 0.0) * w
-            wsum += ok * w
-    with np.errstate(invalid="ignore", divide="ignore"):
-        res = np.where(wsum > 1e-6, out / wsum, np.nan).astype(np.float32)
-    res[..., ~inside, :] = np.nan
-    return res
+    lead = v.shape[:-2]
+    out = np.empty((int(np.prod(lead, dtype=np.int64)), j0.size, i0.size), dtype=np.float32)
+    _bilinear_nb(v.reshape(-1, *v.shape[-2:]), np.stack([j0, j1]), np.stack([i0, i1]), np.stack([1.0 - wj, wj]),
+                 np.stack([1.0 - wi, wi]), out)
+    out = out.reshape(lead + out.shape[-2:])
+    out[..., ~inside, :] = np.nan
+    return out
+
+
+@numba.njit(cache=True)
+def _bilinear_nb(v, jj, ii, wy, wx, out):
+    """out[t, a, b] = Σ w·v over the valid corners / Σ w over them (NaN if that is ≤ 1e-6).
+
+    Corner weight w = wy·wx (float64, rounded to float32); corners are summed in the order
+    (j0,i0), (j0,i1), (j1,i0), (j1,i1) in float32.
+    """
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    tiny = np.float32(1e-6)
+    nan = np.float32(np.nan)
+    for t in range(v.shape[0]):
+        for a in range(out.shape[1]):
+            for b in range(out.shape[2]):
+                acc = zero
+                wsum = zero
+                for cy in range(2):
+                    for cx in range(2):
+                        val = v[t, jj[cy, a], ii[cx, b]]
+                        wc = np.float32(wy[cy, a] * wx[cx, b])
+                        if np.isnan(val):
+                            acc = acc + zero * wc
+                        else:
+                            acc = acc + val * wc
+                            wsum = wsum + one * wc
+                out[t, a, b] = acc / wsum if wsum > tiny else nan
 
 
 def regrid(ds: xr.Dataset, lat: np.ndarray, lon: np.ndarray) -> xr.Dataset:
