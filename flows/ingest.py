@@ -2,7 +2,8 @@
 
 list → download → decode → write; each task calls one pipeline/storage function. A file that
 is missing or corrupt is logged and the cycle is written incomplete (never silently complete);
-a later run that finds the file completes it.
+a later run that finds the file completes it. A cycle is skipped only when both the cube and the
+warehouse's cycle status (written last) say it is complete.
 """
 
 from __future__ import annotations
@@ -51,15 +52,36 @@ class CycleReport:
     skipped: bool = False
 
 
-def _opts(s: Settings, source: str) -> FetchOptions:
-    """Fetch options for RISH or OSCAR; only OSCAR requests carry the Earthdata token."""
+def _opts(s: Settings, source: str, token: str | None = None) -> FetchOptions:
+    """Fetch options for RISH or OSCAR; only OSCAR requests carry the Earthdata token (`token`, else the settings')."""
     src = s.sources
     return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
                         allowed_redirect_hosts=src.allowed_redirect_hosts,
-                        token=src.earthdata_token if source == "OSCAR" else None)
+                        token=(token or src.earthdata_token) if source == "OSCAR" else None)
+
+
+def earthdata_token(s: Settings) -> str | None:
+    """The Earthdata token: from the environment (settings), else the Prefect Secret block
+    `s.sources.earthdata_secret_block` (`prefect block create secret`, or `Secret(value=…).save(name)`);
+    None when neither exists. The value is never logged."""
+    if s.sources.earthdata_token or not s.sources.earthdata_secret_block:
+        return s.sources.earthdata_token
+    from prefect.blocks.system import Secret
+
+    try:
+        return Secret.load(s.sources.earthdata_secret_block).get()
+    except ValueError:  # no such block: OSCAR is fetched without a token
+        return None
 
 
 LATEST_DELAY_H = 6
+
+
+def _recorded_complete(db: Path, c: np.datetime64) -> bool:
+    """The warehouse says the cycle is complete: its status is written last, so a run killed after the
+    cube write but before the log and status is not mistaken for a finished one."""
+    status = ingest_log.cycle_status(db)
+    return bool(status["complete"][status["cycle"] == c].any())
 
 
 def parse_cycle(text: str) -> np.datetime64:
@@ -158,10 +180,11 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     logger = get_run_logger()
     c = parse_cycle(cycle)
     label = str(np.datetime_as_string(c, unit="h"))
-    if not force and c in cube.complete_cycles(layout.weather_cube):
+    if not force and c in cube.complete_cycles(layout.weather_cube) and _recorded_complete(layout.warehouse, c):
         logger.info("cycle %s is already complete; skipping", label)
         return CycleReport(label, True, 0, 0, skipped=True).__dict__
-    opts = {source: _opts(s, source) for source in ("GSM", "GWM", "OSCAR")}
+    token = earthdata_token(s)
+    opts = {source: _opts(s, source, token) for source in ("GSM", "GWM", "OSCAR")}
     steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
     files, rejected, day_url = list_rish(s.sources.rish_url, c, opts["GSM"])
     for name in rejected:

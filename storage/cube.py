@@ -15,6 +15,8 @@ How writes stay idempotent and crash-safe:
 2. Its data variables are written into that cycle's region.
 3. `cycle_state` is set last. Readers only see cycles whose state is not 0, so a writer killed
    at any point leaves no partial cycle visible; the next write of the cycle repairs it.
+The store itself is created as `<store>.creating` and renamed into place, so a writer killed while
+creating it leaves no half store behind. Write failures (a full disk) raise CubeError; the cycle stays hidden.
 A half-finished append (arrays of unequal length along `cycle`) is trimmed back on the next
 write, or by a reader that meets it (after waiting for the lock, so never under a live writer). The time encoding of `cycle` is fixed ("hours since 2000-01-01", int64) so appended
 cycles never shift.
@@ -24,9 +26,12 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import os
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
+import dask.array
 import numpy as np
 import xarray as xr
 import zarr
@@ -65,8 +70,11 @@ def writer_lock(lock_dir: Path | None, store: Path) -> Iterator[None]:
 
 
 def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
+    """One hidden all-NaN cycle. The data variables are lazy and written with `compute=False`: only their
+    metadata goes to the store, and chunks never written read as the NaN fill value."""
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
-    data = {v: (("cycle", "step", "lat", "lon"), np.full((1, nstep, nlat, nlon), np.nan, np.float32), VAR_ATTRS[v]) for v in DATA_VARS}
+    nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32, chunks=(1, nstep, *SPATIAL_CHUNK))
+    data = {v: (("cycle", "step", "lat", "lon"), nan, VAR_ATTRS[v]) for v in DATA_VARS}
     data["current_age_h"] = (("cycle", "step"), np.full((1, nstep), np.nan, np.float32), {"units": "hours", "long_name": "age of the OSCAR analysis used"})
     data["cycle_state"] = (("cycle",), np.array([STATE_HIDDEN], np.int8), {"flag_values": "0 1 2", "flag_meanings": "hidden complete incomplete"})
     return xr.Dataset(
@@ -115,8 +123,28 @@ def _check_grid(path: Path, cycle_ds: xr.Dataset) -> None:
 
 
 def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None = None) -> None:
-    """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely."""
-    path = Path(path)
+    """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely.
+
+    A failed write (e.g. a full disk) raises CubeError naming the store; the cycle stays hidden.
+    """
+    try:
+        _write_cycle(Path(path), cycle_ds, complete=complete, lock_dir=lock_dir)
+    except OSError as exc:
+        label = np.datetime_as_string(np.datetime64(cycle_ds["cycle"].values, "h"), unit="h")
+        raise CubeError(f"{path}: writing cycle {label} failed ({exc}); no part of it is visible. "
+                        "Fix the cause (e.g. free space on the data root) and re-run the ingest") from exc
+
+
+def _create_store(path: Path, tmpl: xr.Dataset) -> None:
+    """Write the first template beside the store and rename it into place: the store exists whole or not
+    at all. A creation killed half-way leaves only `<store>.creating`, removed by the next writer."""
+    tmp = path.with_name(path.name + ".creating")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmpl.to_zarr(tmp, mode="w", encoding=_encoding(tmpl), consolidated=False, zarr_format=3, compute=False)
+    os.replace(tmp, path)
+
+
+def _write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None) -> None:
     cycle = np.datetime64(cycle_ds["cycle"].values, "ns")
     missing = [v for v in DATA_VARS if v not in cycle_ds]
     if missing:
@@ -124,8 +152,7 @@ def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: P
     with writer_lock(lock_dir, path):
         if not (path / "zarr.json").exists():
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmpl = _template(cycle_ds, cycle)
-            tmpl.to_zarr(path, mode="w", encoding=_encoding(tmpl), consolidated=False, zarr_format=3)
+            _create_store(path, _template(cycle_ds, cycle))
             index = 0
         else:
             _repair(path)
@@ -136,11 +163,11 @@ def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: P
                 index = int(hits[0])
                 _set_state(path, index, STATE_HIDDEN)
             else:
-                _template(cycle_ds, cycle).to_zarr(path, append_dim="cycle", consolidated=False)
+                _template(cycle_ds, cycle).to_zarr(path, append_dim="cycle", consolidated=False, compute=False)
                 index = cycles.size
         region = {"cycle": slice(index, index + 1)}
         body = xr.Dataset(
-            {v: (("cycle", "step", "lat", "lon"), cycle_ds[v].values[None].astype(np.float32)) for v in DATA_VARS}
+            {v: (("cycle", "step", "lat", "lon"), np.asarray(cycle_ds[v].values, dtype=np.float32)[None]) for v in DATA_VARS}
             | {"current_age_h": (("cycle", "step"), np.asarray(cycle_ds["current_age_h"].values, np.float32)[None])
                if "current_age_h" in cycle_ds else (("cycle", "step"), np.full((1, cycle_ds.sizes["step"]), np.nan, np.float32))},
         )

@@ -15,12 +15,13 @@ import numpy as np
 
 
 def path_for(raw_dir: Path, source: str, cycle, file_name: str) -> Path:
-    if not file_name or "/" in file_name or "\\" in file_name or ".." in file_name:
+    if not file_name or file_name == "." or "/" in file_name or "\\" in file_name or ".." in file_name or "\x00" in file_name:
         raise ValueError(f"refusing to store {file_name!r}: not a plain file name")
     day = np.datetime_as_string(np.datetime64(cycle, "D")).replace("-", "")
-    p = (Path(raw_dir) / source.lower() / day / file_name).resolve()
-    if Path(raw_dir).resolve() not in p.parents:
-        raise ValueError(f"refusing to store {file_name!r} outside {raw_dir}")
+    folder = (Path(raw_dir) / source.lower() / day).resolve()
+    p = (folder / file_name).resolve()
+    if p.parent != folder:
+        raise ValueError(f"refusing to store {file_name!r} outside {folder}")
     return p
 
 

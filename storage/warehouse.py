@@ -3,8 +3,9 @@
 DuckDB lets only one process hold a file open for writing, and a reader in another process
 blocks the writer. So the pipeline keeps connections short (open, write in a transaction,
 close) and retries while another process holds the file; analysts read the snapshot copy
-(`warehouse.snapshot.duckdb`, replaced atomically after every write) or the main file when
-the pipeline is idle.
+(`warehouse.snapshot.duckdb`, replaced atomically after every write, copied while the writer still
+holds the file so it is never torn or older than the last write) or the main file when the
+pipeline is idle.
 
 Schema lives in `storage/schema_*.py` modules as ordered lists of named migrations; each
 name is applied once and recorded in `schema_migrations`.
@@ -91,14 +92,19 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
         if write:
             migrate(con)
         yield con
+        if write:  # while we still hold the file, so no other writer changes it during the copy
+            con.execute("CHECKPOINT")
+            publish_snapshot(path)
     finally:
         con.close()
-    if write:
-        publish_snapshot(path)
 
 
 def publish_snapshot(path: Path) -> Path:
-    """Copy the (closed) warehouse to `<name>.snapshot.duckdb` atomically for analysts."""
+    """Copy the warehouse to `<name>.snapshot.duckdb` atomically for analysts.
+
+    Call it with the file closed or held by a checkpointed write connection (as `connect` does), so
+    the copy is never torn by another writer and never replaces a newer snapshot with an older one.
+    """
     path = Path(path)
     snap = path.with_name(path.stem + ".snapshot.duckdb")
     tmp = snap.with_name(snap.name + f".tmp{os.getpid()}")

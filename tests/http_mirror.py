@@ -1,44 +1,82 @@
-"""A loopback HTTP server (127.0.0.1, ephemeral port) serving a folder, with fault injection."""
+"""A loopback HTTP server (127.0.0.1, ephemeral port) serving a folder, with fault injection.
+
+Faults are keyed by file name (or path suffix):
+  "404", "500"          that status on every request
+  "500xN"               500 for the first N requests, then the file
+  "truncate"            announce the full length, send half, drop the connection
+  "stall" / "stallxN"   accept the request and never answer (the client's timeout fires); xN: first N only
+  "reset" / "resetxN"   close the connection with a TCP reset before any response; xN: first N only
+  "redirect:<url>"      302 to <url>
+  "barrier2"            send headers and half the body, wait until a second request for the same
+                        file has got that far too, then send the rest (forces two downloads to overlap)
+Every request's path and headers are recorded in `handler.requests`; `handler.hits` counts them.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import os
+import socket
+import struct
 import threading
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+
+STALL_LIMIT_S = 30.0  # a stalled request is released at the latest when the server stops
 
 
 class FaultyHandler(SimpleHTTPRequestHandler):
     faults: dict[str, str] = {}
     hits: dict[str, int] = {}
+    requests: list[tuple[str, dict[str, str]]] = []
+    stop: threading.Event = threading.Event()
+    barrier: threading.Barrier = threading.Barrier(2)
 
     def log_message(self, *args):  # keep test output clean
         pass
 
+    def _first_n(self, fault: str, kind: str) -> bool:
+        """True when `fault` is `kind` (always) or `kindxN` and this is one of the first N requests."""
+        if fault == kind:
+            return True
+        return fault.startswith(kind + "x") and self.hits[self.path] <= int(fault[len(kind) + 1:])
+
     def do_GET(self):
         name = self.path.rsplit("/", 1)[-1]
         self.hits[self.path] = self.hits.get(self.path, 0) + 1
-        fault = next((f for key, f in self.faults.items() if name == key or self.path.endswith(key)), None)
+        self.requests.append((self.path, dict(self.headers.items())))
+        fault = next((f for key, f in self.faults.items() if name == key or self.path.endswith(key)), None) or ""
         if fault == "404":
             self.send_error(404)
-        elif fault == "500":
+        elif fault == "500" or self._first_n(fault, "500"):
             self.send_error(500)
-        elif fault and fault.startswith("500x"):  # fail the first N requests, then serve
-            if self.hits[self.path] <= int(fault[4:]):
-                self.send_error(500)
-            else:
-                super().do_GET()
+        elif self._first_n(fault, "stall"):
+            self.stop.wait(STALL_LIMIT_S)
+            self.close_connection = True
+        elif self._first_n(fault, "reset"):
+            self.connection.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            os.close(self.connection.detach())  # linger 0: the peer gets a TCP RST, no response
+            self.close_connection = True
         elif fault == "truncate":  # announce the full length, send half, drop the connection
-            path = Path(self.translate_path(self.path))
-            data = path.read_bytes()
+            data = Path(self.translate_path(self.path)).read_bytes()
             self.send_response(200)
             self.send_header("Content-Length", str(len(data)))
             self.end_headers()
             self.wfile.write(data[: len(data) // 2])
             self.wfile.flush()
             self.close_connection = True
-        elif fault and fault.startswith("redirect:"):
+        elif fault == "barrier2":
+            data = Path(self.translate_path(self.path)).read_bytes()
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(data)))
+            self.end_headers()
+            self.wfile.write(data[: len(data) // 2])
+            self.wfile.flush()
+            self.barrier.wait(STALL_LIMIT_S)
+            self.wfile.write(data[len(data) // 2:])
+            self.wfile.flush()
+        elif fault.startswith("redirect:"):
             self.send_response(302)
             self.send_header("Location", fault[len("redirect:"):])
             self.end_headers()
@@ -48,13 +86,16 @@ class FaultyHandler(SimpleHTTPRequestHandler):
 
 @contextlib.contextmanager
 def serve(folder: Path, faults: dict[str, str] | None = None):
-    """Serve `folder`; yields the base URL 'http://127.0.0.1:PORT/'."""
-    handler = type("Handler", (FaultyHandler,), {"faults": dict(faults or {}), "hits": {}})
+    """Serve `folder`; yields (the base URL 'http://127.0.0.1:PORT/', the handler class with hits/requests)."""
+    handler = type("Handler", (FaultyHandler,), {"faults": dict(faults or {}), "hits": {}, "requests": [],
+                                                 "stop": threading.Event(), "barrier": threading.Barrier(2)})
     server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(handler, directory=str(folder)))
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     try:
         yield f"http://127.0.0.1:{server.server_address[1]}/", handler
     finally:
+        handler.stop.set()
+        handler.barrier.abort()
         server.shutdown()
         server.server_close()

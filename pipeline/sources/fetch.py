@@ -2,20 +2,26 @@
 
 - retries with exponential backoff on 5xx, timeouts and connection errors; 404 is `missing`
   at once (no retries);
-- the body is written to `<name>.part` and renamed only when complete and, when the server
-  sent Content-Length, of that size;
+- the body is written to `<name>.<pid>.<thread>.part` (one per writer, so two ingests of the
+  same cycle never write into one file) and renamed only when complete and, when the server
+  sent Content-Length, of that size; parts left by killed processes are removed;
 - sha256 is computed while writing; a file already present with the expected checksum is
   not downloaded again (`skipped`);
 - a redirect to another host is refused unless that host is allowed;
-- a bearer token (Earthdata) is sent as a header and never appears in a message.
+- a bearer token (Earthdata) is sent as a header to the URL's own origin only (never after a
+  redirect to another host) and never appears in a message or a repr;
+- a full or read-only data root (ENOSPC, EDQUOT, EFBIG, EROFS) is not retried: `LocalWriteError`
+  is raised at once, naming the file, since every later download would fail the same way.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote, urljoin, urlparse
 
@@ -40,7 +46,14 @@ class FetchOptions:
     retries: int = 3
     backoff_s: float = 1.0
     allowed_redirect_hosts: tuple[str, ...] = ()
-    token: str | None = None
+    token: str | None = field(default=None, repr=False)  # never in a repr, a log line or a message
+
+
+LOCAL_WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS)
+
+
+class LocalWriteError(OSError):
+    """The data root cannot take the download (full, over quota, file too large, read-only)."""
 
 
 def sha256_of(path: Path) -> str:
@@ -89,11 +102,19 @@ def _client(opts: FetchOptions) -> httpx.Client:
     return httpx.Client(timeout=opts.timeout_s, follow_redirects=False, headers=headers)
 
 
+def _origin(url: str) -> tuple[str, str | None, int | None]:
+    u = urlparse(url)
+    return u.scheme, u.hostname, u.port or {"http": 80, "https": 443}.get(u.scheme)
+
+
 def _get_following(client: httpx.Client, url: str, opts: FetchOptions, stream: bool):
     host = urlparse(url).hostname
+    origin = _origin(url)
     for _ in range(5):
         try:
             req = client.build_request("GET", url)
+            if _origin(url) != origin:  # the token belongs to the first origin only
+                req.headers.pop("Authorization", None)
             resp = client.send(req, stream=stream)
         except (httpx.TimeoutException, httpx.TransportError) as exc:
             raise _Retryable(f"{type(exc).__name__}: {exc}") from exc
@@ -102,7 +123,7 @@ def _get_following(client: httpx.Client, url: str, opts: FetchOptions, stream: b
             resp.close()
             new_host = urlparse(target).hostname
             if new_host != host and new_host not in opts.allowed_redirect_hosts:
-                raise PermissionError(f"{url}: redirect to another host {new_host!r} refused (allow it in settings)")
+                raise PermissionError(f"{url}: redirect to another host {new_host!r} refused (allow it with JITROUTE_ALLOWED_REDIRECT_HOSTS)")
             url = target
             continue
         if resp.status_code == 404:
@@ -124,7 +145,8 @@ def fetch(url: str, dest: Path, opts: FetchOptions = FetchOptions(), expected_sh
     if expected_sha256 and dest.exists() and sha256_of(dest) == expected_sha256:
         return FetchResult(url, dest, "skipped", dest.stat().st_size, expected_sha256)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    part = dest.with_name(dest.name + ".part")
+    _remove_dead_parts(dest)
+    part = dest.with_name(f"{dest.name}.{os.getpid()}.{threading.get_ident()}.part")
     last_error = "unknown error"
     for attempt in range(opts.retries + 1):
         try:
@@ -142,10 +164,27 @@ def fetch(url: str, dest: Path, opts: FetchOptions = FetchOptions(), expected_sh
             return FetchResult(url, None, "error", error=str(exc))
         except (_Retryable, OSError) as exc:
             part.unlink(missing_ok=True)
+            if isinstance(exc, OSError) and exc.errno in LOCAL_WRITE_ERRNOS:
+                raise LocalWriteError(exc.errno, f"cannot write {dest} ({os.strerror(exc.errno)}): "
+                                                 "free space on the data root (or make it writable) and re-run") from exc
             last_error = f"{url}: {exc}"
             if attempt < opts.retries:
                 time.sleep(opts.backoff_s * (2**attempt))
     return FetchResult(url, None, "missing", error=f"{last_error} (after {opts.retries + 1} attempts)")
+
+
+def _remove_dead_parts(dest: Path) -> None:
+    """Delete `<dest>.<pid>.<thread>.part` files whose writing process no longer exists (it was killed)."""
+    for p in dest.parent.glob(dest.name + ".*.part"):
+        pid = p.name[len(dest.name) + 1:].split(".", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            p.unlink(missing_ok=True)
+        except PermissionError:  # alive, owned by someone else
+            pass
 
 
 def _download(url: str, part: Path, opts: FetchOptions) -> tuple[int, str]:
