@@ -8,7 +8,7 @@ import pandas as pd
 from prefect import flow, get_run_logger, task
 
 from flows.settings import load_settings
-from pipeline.performance.refit import refit_vessel
+from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -21,9 +21,12 @@ def read_table(path: Path) -> pd.DataFrame:
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             return pd.read_parquet(path).astype("string").astype(object)
-        return pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
     except (ValueError, OSError, pd.errors.ParserError) as exc:
         raise NoonFileError(f"{path}: cannot be read as CSV/Parquet ({exc})") from exc
+    if not isinstance(df.index, pd.RangeIndex):  # pandas took surplus leading fields as an index: columns shifted
+        raise NoonFileError(f"{path}: line 2 has more fields than the header's {len(df.columns)} columns; fix the file and re-import")
+    return df
 
 
 @flow(name="import-noon-reports")
@@ -41,17 +44,12 @@ def import_noon_reports(path: str, data_root: str | None = None) -> dict:
 
 @task(name="load-reports")
 def load_reports(db: Path, imos: list[int] | None) -> pd.DataFrame:
-    return fleet_store.load_reports(db, imos)
+    return fleet_store.load_reports(db, imos, columns=REPORT_COLUMNS)
 
 
 @task(name="fit-vessels")
 def fit_vessels(reports: pd.DataFrame, active: dict, versions: dict, form: str, robust: bool) -> tuple[list[dict], list[dict]]:
-    rows, summaries = [], []
-    for imo, group in reports.groupby("imo", sort=True):
-        r, s = refit_vessel(int(imo), group, active.get(int(imo)), versions.get(int(imo), 1), form=form, robust=robust)
-        rows += r
-        summaries.append(s)
-    return rows, summaries
+    return refit_fleet(reports, active, versions, form=form, robust=robust)
 
 
 @flow(name="refit-performance")

@@ -67,4 +67,12 @@ MIGRATIONS: list[Migration] = [
         );
         """,
     ),
+    Migration(
+        "fleet_002_rejected_keys_nullable",
+        # a row rejected for a bad timestamp or IMO has none to store; it is kept with its raw text
+        """
+        ALTER TABLE noon_reports_rejected ALTER COLUMN imo DROP NOT NULL;
+        ALTER TABLE noon_reports_rejected ALTER COLUMN ts_utc DROP NOT NULL;
+        """,
+    ),
 ]
