@@ -84,6 +84,7 @@ def main() -> None:
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     os.environ.setdefault("PREFECT_HOME", str(OUT / "prefect"))
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     root = prepare(args.voyages)
     ids = [f"B{k:04d}" for k in range(args.voyages)]
     times = {}

@@ -164,7 +164,19 @@ def route_batch(jobs: list[dict]) -> list[dict]:
 
 
 def batches(jobs: list[dict], per_task: int) -> list[list[dict]]:
-    return [jobs[k:k + per_task] for k in range(0, len(jobs), per_task)]
+    """Deal the voyages, longest first, round-robin into batches of about `per_task` so batches take similar time."""
+    from pipeline.routing.geodesy import gc_distance_nm
+
+    def length_nm(job):
+        v = job["voyage"]
+        try:
+            return -gc_distance_nm(float(v["dep_lat"]), float(v["dep_lon"]), float(v["arr_lat"]), float(v["arr_lon"]))
+        except (TypeError, ValueError, KeyError):
+            return 0.0
+
+    ordered = sorted(jobs, key=length_nm)
+    n = max(1, math.ceil(len(jobs) / per_task))
+    return [ordered[k::n] for k in range(n) if ordered[k::n]]
 
 
 def voyages_per_task(n_jobs: int, n_workers: int, setting: int | None) -> int:
