@@ -1,8 +1,8 @@
 """The one typed settings object: every path, URL, grid and solver parameter, with defaults.
 
 Values come from (lowest to highest priority) the defaults below, environment variables
-(`JITROUTE_DATA`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`, `JITROUTE_DASK_ADDRESS`,
-`JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`) and explicit overrides from the CLI. Lower layers never read this
+(`JITROUTE_DATA`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`, `JITROUTE_ALLOWED_REDIRECT_HOSTS`,
+`JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`) and explicit overrides from the CLI. Lower layers never read this
 object; flows pass the values they need as plain arguments.
 """
 
@@ -40,8 +40,9 @@ class SourceSettings:
     http_timeout_s: float = 60.0
     http_retries: int = 3
     http_backoff_s: float = 1.0
-    # Never logged or stored; read from the environment or a Prefect Secret.
+    # Never logged or stored; read from the environment, else from the Prefect Secret block named below.
     earthdata_token: str | None = field(default=None, repr=False)
+    earthdata_secret_block: str = "jitroute-earthdata-token"
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,8 @@ def load_settings(**overrides) -> Settings:
             "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
             "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,
             "sources.earthdata_token": env.get("JITROUTE_EARTHDATA_TOKEN") or None,
+            "sources.allowed_redirect_hosts": tuple(h.strip() for h in env.get("JITROUTE_ALLOWED_REDIRECT_HOSTS", "").split(",")
+                                                    if h.strip()) or None,
         },
     )
     return s.with_overrides(**overrides)
