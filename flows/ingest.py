@@ -3,7 +3,8 @@
 list → download → decode → write; each task calls one pipeline/storage function. A file that
 is missing or corrupt is logged and the cycle is written incomplete (never silently complete);
 a later run that finds the file completes it. A cycle is skipped only when both the cube and the
-warehouse's cycle status (written last) say it is complete.
+warehouse's cycle status (written last) say it is complete. Tasks do not hash their inputs for
+Prefect's cache (they pass whole decoded cycles): re-runs are made idempotent by the cube and the log.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from datetime import datetime, timezone
 import numpy as np
 import xarray as xr
 from prefect import flow, get_run_logger, task
+from prefect.cache_policies import NO_CACHE
 
 from flows.settings import Settings, load_settings
 from pipeline.decode.errors import DecodeError
@@ -103,7 +105,7 @@ def parse_cycle(text: str) -> np.datetime64:
     return np.datetime64(c, "ns")
 
 
-@task(name="list-rish", retries=2, retry_delay_seconds=1)
+@task(name="list-rish", retries=2, retry_delay_seconds=1, cache_policy=NO_CACHE)
 def list_rish(base_url: str, cycle: np.datetime64, opts: FetchOptions) -> tuple[list[rish.SourceFile], list[str], str]:
     url = rish.day_folder_url(base_url, cycle)
     try:
@@ -113,7 +115,7 @@ def list_rish(base_url: str, cycle: np.datetime64, opts: FetchOptions) -> tuple[
     return rish.prefer_resolution(rish.files_for_cycle(names, cycle)), rejected, url
 
 
-@task(name="list-oscar", retries=2, retry_delay_seconds=1)
+@task(name="list-oscar", retries=2, retry_delay_seconds=1, cache_policy=NO_CACHE)
 def list_oscar(base_url: str, start: np.datetime64, end: np.datetime64, opts: FetchOptions) -> list[oscar_src.OscarFile]:
     try:
         names, _ = rish.parse_index(read_text(base_url.rstrip("/") + "/", opts))
@@ -122,7 +124,7 @@ def list_oscar(base_url: str, start: np.datetime64, end: np.datetime64, opts: Fe
     return oscar_src.files_for_window(names, start, end)
 
 
-@task(name="download")
+@task(name="download", cache_policy=NO_CACHE)
 def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
                  known: dict[str, str]) -> list[Download]:
     for it in items:
@@ -133,7 +135,7 @@ def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opt
     return items
 
 
-@task(name="decode-and-assemble")
+@task(name="decode-and-assemble", cache_policy=NO_CACHE)
 def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
     gsm, gwm, osc = [], [], []
     for it in items:
@@ -154,12 +156,12 @@ def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list
     return ds, missing_steps, oscar is not None
 
 
-@task(name="write-cycle")
+@task(name="write-cycle", cache_policy=NO_CACHE)
 def write_cube(path: Path, ds, complete: bool) -> None:
     cube.write_cycle(path, ds, complete=complete)
 
 
-@task(name="log-files")
+@task(name="log-files", cache_policy=NO_CACHE)
 def log_files(db: Path, run_id: str, cycle: np.datetime64, items: list[Download]) -> None:
     now = ingest_log.utcnow()
     ingest_log.record_files(db, [

@@ -35,11 +35,15 @@ import dask.array
 import numpy as np
 import xarray as xr
 import zarr
+from zarr.codecs import BloscCodec
 
 DATA_VARS = ("u10", "v10", "swh", "mwd", "mwp", "uo", "vo")
 STATE_HIDDEN, STATE_COMPLETE, STATE_INCOMPLETE = 0, 1, 2
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
 SPATIAL_CHUNK = (64, 128)
+# LZ4 after byte shuffle: about as small as zstd on smooth float32 fields, faster to write and ~3× faster to
+# read (routing workers read the cube). Fixed when the store is created; appended cycles inherit it.
+DATA_CODEC = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
 
 VAR_ATTRS = {
     "u10": {"units": "m s-1", "standard_name": "eastward_wind", "long_name": "10 m eastward wind"},
@@ -92,7 +96,7 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
 
 def _encoding(ds: xr.Dataset) -> dict:
     nstep = ds.sizes["step"]
-    enc = {v: {"chunks": (1, nstep, *SPATIAL_CHUNK)} for v in DATA_VARS}
+    enc = {v: {"chunks": (1, nstep, *SPATIAL_CHUNK), "compressors": (DATA_CODEC,)} for v in DATA_VARS}
     enc["cycle"] = dict(CYCLE_ENCODING)
     enc["current_age_h"] = {"chunks": (1, nstep)}
     enc["cycle_state"] = {"chunks": (1,)}

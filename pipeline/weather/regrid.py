@@ -29,6 +29,27 @@ def _axis_weights(src: np.ndarray, dst: np.ndarray, periodic: bool):
     return i0, i0 + 1, w1, inside
 
 
+def _aligned(src: np.ndarray, dst: np.ndarray, periodic: bool) -> np.ndarray | None:
+    """Indices of `dst` in `src` when every destination point is a source point (else None)."""
+    x = np.mod(dst - src[0], 360.0) + src[0] if periodic else dst
+    i = np.clip(np.searchsorted(src, x - 1e-9), 0, src.size - 1)
+    return i if np.all(np.abs(src[i] - x) <= 1e-9) else None
+
+
+def subset_if_aligned(values: np.ndarray, src_lat, src_lon, dst_lat, dst_lon) -> np.ndarray | None:
+    """`values` (..., nlat, nlon) at the destination points when they all lie on source points — what
+    `bilinear` gives there, without interpolating — else None. Latitudes outside the source are NaN."""
+    src_lat, dst_lat = np.asarray(src_lat, float), np.asarray(dst_lat, float)
+    inside = (dst_lat >= src_lat[0] - 1e-9) & (dst_lat <= src_lat[-1] + 1e-9)
+    j = _aligned(src_lat, np.where(inside, dst_lat, src_lat[0]), periodic=False)
+    i = _aligned(np.asarray(src_lon, float), np.asarray(dst_lon, float), periodic=True)
+    if j is None or i is None:
+        return None
+    out = np.asarray(values, dtype=np.float32)[..., j[:, None], i[None, :]]
+    out[..., ~inside, :] = np.nan
+    return out
+
+
 def bilinear(values: np.ndarray, src_lat, src_lon, dst_lat, dst_lon) -> np.ndarray:
     """Regrid `values` (..., nlat, nlon) from ascending src axes to dst axes; NaN-aware (float32)."""
     j0, j1, wj, inside = _axis_weights(np.asarray(src_lat, float), np.asarray(dst_lat, float), periodic=False)
@@ -77,14 +98,17 @@ def regrid(ds: xr.Dataset, lat: np.ndarray, lon: np.ndarray) -> xr.Dataset:
     for name, da in ds.data_vars.items():
         if da.dims[-2:] != ("lat", "lon"):
             continue
-        if name in DIRECTION_VARS:
+        same = subset_if_aligned(da.values, ds.lat.values, ds.lon.values, lat, lon)
+        if same is not None:  # e.g. 0.5° GSM onto the 0.5° routing grid: no interpolation, directions kept exactly
+            vals = same
+        elif name in DIRECTION_VARS:
             rad = np.radians(da.values)
             s = bilinear(np.sin(rad), ds.lat.values, ds.lon.values, lat, lon)
             c = bilinear(np.cos(rad), ds.lat.values, ds.lon.values, lat, lon)
             vals = (np.degrees(np.arctan2(s, c)) + 360.0) % 360.0
         else:
             vals = bilinear(da.values, ds.lat.values, ds.lon.values, lat, lon)
-        out[name] = (da.dims, vals.astype(np.float32), da.attrs)
+        out[name] = (da.dims, vals.astype(np.float32, copy=False), da.attrs)
     coords = {k: v for k, v in ds.coords.items() if "lat" not in v.dims and "lon" not in v.dims}
     coords.update(lat=("lat", np.asarray(lat), {"units": "degrees_north"}), lon=("lon", np.asarray(lon), {"units": "degrees_east"}))
     return xr.Dataset(out, coords=coords, attrs=ds.attrs)
