@@ -26,7 +26,8 @@ from pipeline.performance import features
 K_FOLDS = 5
 MIN_ROWS_PER_COEF = 5
 NOT_WORSE_TOLERANCE = 1.02  # a new model may be at most 2 % worse on held-out rows
-ROBUST_ITERATIONS = 8  # iteratively re-weighted least squares with Huber weights
+ROBUST_ITERATIONS = 8  # at most this many iteratively re-weighted least-squares solves with Huber weights
+ROBUST_RTOL = 1e-5  # ... stopping once no coefficient moves by more than this (relative to the largest)
 HUBER_K = 1.345
 PAD_WASTE = 1.25  # groups padded together differ in row count by at most this factor
 STACK_ROWS = 1 << 19  # padded rows per batched stack (bounds memory for very large fleets)
@@ -92,7 +93,8 @@ def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: 
     """Least squares of y on X (regressor names from `features`); constant/all-zero regressors are dropped.
 
     A constant column is kept only where it is the model's intercept ("1"). With `robust`, Huber
-    weights (scale 1.4826·MAD) are re-estimated over ROBUST_ITERATIONS solves.
+    weights (scale 1.4826·MAD) are re-estimated until the coefficients settle (ROBUST_RTOL), at most
+    ROBUST_ITERATIONS solves.
     """
     return fit_targets(form, target, X, y, np.array([0, len(y)]), robust=robust, k_folds=k_folds)[0]
 
@@ -169,10 +171,13 @@ def _fit_stack(form, target, names, X, y, starts, n, robust, k_folds) -> list[Fi
     beta = np.zeros((G, k))
     gram = np.empty((G, F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per group and fold
     resid = np.full((G, rows), np.inf)
-    for _ in range(ROBUST_ITERATIONS if robust else 1):
+    for it in range(ROBUST_ITERATIONS if robust else 1):
         _gram_nb(ZY, w, lo, hi, gram)
         total = gram.sum(axis=1)
+        prev = beta.copy()
         beta[live] = _solve((total[..., :k] + ident)[live], total[live, :, k])
+        if it and (np.abs(beta - prev).max(axis=1) <= ROBUST_RTOL * np.maximum(np.abs(beta).max(axis=1), 1e-12)).all():
+            break  # converged: `w` is still the weights `beta` was solved with (the CV below reuses them)
         if robust:
             _resid_nb(ZY, np.repeat(beta[:, None], F, axis=1), lo, hi, resid)
             w = _huber_weights(resid, n)
