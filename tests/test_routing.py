@@ -1,0 +1,522 @@
+"""Routing engine: geodesy, the leg kernel, objectives and the solvers on analytic weather and real coasts.
+
+Every expected value is computed here by hand (or by an independent formula in this file), not taken
+from the code under test. Fault handling (land ports, past RTA, fenced destinations, blocking weather,
+NaN holes, weather outside the area) lives in tests/reliability/test_routing_faults.py.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from global_land_mask import globe
+
+from pipeline.performance.model import reference_model
+from pipeline.routing import geodesy as geo
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing import weather_field as wf
+from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, OBJ_THESIS, route_cost_nb
+from pipeline.routing.problem import Instance
+from pipeline.routing.search_space import build_search_space
+from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solve
+
+MODEL = reference_model(14.0, 100.0, 1.5)  # STW = 0.14·rpm kn, fuel = 1.5·(rpm/100)³ t/h in calm water
+FAST = BfoaParams(n_bacteria=8, n_chemo=6, n_cycles=8)
+MEDIUM = BfoaParams(n_bacteria=12, n_chemo=8, n_cycles=15)
+R_NM = 3440.065
+KN_PER_MS = 1.943844
+T0 = "2020-12-01T06"
+
+
+def haversine_nm(lat1, lon1, lat2, lon2):
+    """Independent great-circle distance (numpy, radius 3440.065 NM)."""
+    p1, p2, dl = np.radians(lat1), np.radians(lat2), np.radians(lon2 - lon1)
+    a = np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(dl / 2) ** 2
+    return 2 * R_NM * np.arcsin(np.sqrt(a))
+
+
+def unit(lat, lon):
+    p, l = np.radians(lat), np.radians(lon)
+    return np.array([np.cos(p) * np.cos(l), np.cos(p) * np.sin(l), np.sin(p)])
+
+
+def problem(dep, arr, hours, **kw):
+    base = dict(dep=dep, arr=arr, depart_utc=T0, rta_utc=np.datetime64(T0) + np.timedelta64(int(hours * 60), "m"),
+                model=MODEL, rpm_options=(70, 85, 100), n_lines=10, n_points=11, voyage_id="VTEST")
+    base.update(kw)
+    return RoutingProblem(**base)
+
+
+def field(fn, lat=(10.0, 50.0), lon=(180.0, 250.0), step=0.5, hours=400):
+    """A static field on a regular grid from fn(LAT, LON) → {var: 2-D array}; unset variables are zero."""
+    la = np.arange(lat[0], lat[1] + 1e-9, step)
+    lo = np.arange(lon[0], lon[1] + 1e-9, step)
+    LA, LO = np.meshgrid(la, lo, indexing="ij")
+    t0 = np.datetime64("2020-12-01T00")
+    times = np.array([t0, t0 + np.timedelta64(hours, "h")])
+    shape = (2,) + LA.shape
+    kw = {k: np.zeros(shape) for k in ("u10", "v10", "swh", "mwd_deg", "uo", "vo")}
+    for k, v in fn(LA, LO).items():
+        kw[k] = np.broadcast_to(v, shape).copy()
+    return wf.from_arrays(la, lo, times, **kw)
+
+
+def wavy(seed):
+    """Smooth, non-uniform wind, waves and currents (different for every seed)."""
+    rng = np.random.default_rng(seed)
+    k = rng.uniform(0.1, 0.4, 4)
+    ph = rng.uniform(0.0, 2 * np.pi, 4)
+
+    def fn(LA, LO):
+        u = 8 * np.sin(k[2] * LO + ph[2])
+        v = 6 * np.cos(k[3] * LA + ph[3])
+        return dict(swh=2.5 + 2.0 * np.sin(k[0] * LA + ph[0]) * np.cos(k[1] * LO + ph[1]), u10=u, v10=v,
+                    uo=0.6 * np.sin(2 * k[1] * LA + ph[0]), vo=0.4 * np.cos(2 * k[0] * LO + ph[2]),
+                    mwd_deg=(np.degrees(np.arctan2(-u, -v)) + 20.0) % 360.0)
+    return fn
+
+
+def node_offsets(plan, space):
+    """Node index of each plan waypoint on its line, minus the centre index."""
+    offs = [0]  # the ports: every node of their lines is the port itself
+    for i, (la, lo) in enumerate(plan.waypoints[1:-1], start=1):
+        d = haversine_nm(la, lo, space.lat[i], space.lon[i])
+        j = int(np.argmin(d))
+        assert d[j] < 1e-6, f"waypoint {i} is not a node of line {i}"
+        offs.append(j - space.centre)
+    return np.array(offs + [0])
+
+
+def vp(max_hs=None, max_wind=None, step_h=1.0):
+    return lk.vessel_params(MODEL.form_id, 10.0, 0.0, MODEL.months_dd, max_hs, max_wind, step_h)
+
+
+# ---------------------------------------------------------------------------------------------- geodesy
+
+
+def test_great_circle_distances_bearings_and_points_by_hand():
+    one_deg = R_NM * math.radians(1.0)  # 60.04 NM on this sphere, 60 NM by the nautical-mile definition
+    assert geo.gc_distance_nm(10.0, 20.0, 11.0, 20.0) == pytest.approx(one_deg, rel=1e-12)
+    assert geo.gc_distance_nm(10.0, 20.0, 11.0, 20.0) == pytest.approx(60.0, rel=1e-3)
+    assert geo.gc_distance_nm(0.0, 0.0, 0.0, 90.0) == pytest.approx(5400.0, rel=1e-3)
+    assert geo.gc_distance_nm(0.0, 0.0, 90.0, 0.0) == pytest.approx(R_NM * math.pi / 2, rel=1e-12)
+    assert geo.gc_distance_nm(0.0, 179.5, 0.0, -179.5) == pytest.approx(one_deg, rel=1e-9)  # across the dateline
+    assert geo.gc_distance_nm(0.0, 10.0, 0.0, 370.0) == pytest.approx(0.0, abs=1e-6)  # 0..360 input
+    # bearings: east, north, west, south, and 45° from (0,0) towards (45N, 90E) (y = x = √½ by hand)
+    assert geo.gc_bearing_deg(0.0, 0.0, 0.0, 10.0) == pytest.approx(90.0)
+    assert geo.gc_bearing_deg(0.0, 0.0, 10.0, 0.0) == pytest.approx(0.0)
+    assert geo.gc_bearing_deg(0.0, 10.0, 0.0, 0.0) == pytest.approx(270.0)
+    assert geo.gc_bearing_deg(10.0, 0.0, 0.0, 0.0) == pytest.approx(180.0)
+    assert geo.gc_bearing_deg(0.0, 0.0, 45.0, 90.0) == pytest.approx(45.0)
+    assert geo.gc_bearing_deg(0.0, 170.0, 0.0, -170.0) == pytest.approx(90.0)  # east across the dateline
+    # intermediate points: equator midpoint, midpoint over the pole, and a dateline midpoint
+    assert geo.gc_interpolate(0.0, 0.0, 0.0, 90.0, 0.5) == pytest.approx((0.0, 45.0), abs=1e-9)
+    la, lo = geo.gc_interpolate(60.0, 0.0, 60.0, 180.0, 0.5)
+    assert la == pytest.approx(90.0, abs=1e-6)
+    la, lo = geo.gc_interpolate(0.0, 170.0, 0.0, -170.0, 0.5)
+    assert la == pytest.approx(0.0, abs=1e-9) and abs(abs(lo) - 180.0) < 1e-9
+    # an oblique case against slerp of unit vectors, and destination() as the inverse of distance + bearing
+    p, q = (35.4, 139.7), (33.7, -118.3)
+    d = geo.gc_distance_nm(*p, *q) / R_NM
+    for f in (0.1, 0.37, 0.8):
+        want = (np.sin((1 - f) * d) * unit(*p) + np.sin(f * d) * unit(*q)) / np.sin(d)
+        assert unit(*geo.gc_interpolate(*p, *q, f)) == pytest.approx(want, abs=1e-9)
+        la, lo = geo.gc_interpolate(*p, *q, f)
+        assert geo.gc_distance_nm(*p, la, lo) == pytest.approx(f * d * R_NM, rel=1e-9)
+    la, lo = geo.destination(*p, geo.gc_bearing_deg(*p, *q), geo.gc_distance_nm(*p, *q))
+    assert geo.gc_distance_nm(la, lo, *q) < 1e-6
+    assert geo.destination(0.0, 0.0, 90.0, R_NM * math.pi / 2) == pytest.approx((0.0, 90.0), abs=1e-9)  # a quarter east
+
+
+def test_yokohama_to_long_beach_stays_in_the_north_pacific():
+    p, q = (35.4, 139.7), (33.7, -118.3)
+    dist = geo.gc_distance_nm(*p, *q)
+    assert dist == pytest.approx(haversine_nm(*p, *q), rel=1e-9)
+    assert 4700.0 < dist < 4900.0  # ≈ 4,780 NM on this sphere
+    pts = [geo.gc_interpolate(*p, *q, f) for f in np.linspace(0.0, 1.0, 201)]
+    lats = np.array([a for a, _ in pts])
+    lons = np.array([b for _, b in pts])
+    assert np.all((lons >= 139.0) | (lons <= -118.0)), "the base route must cross the dateline, never 0°"
+    # the arc's highest latitude is its vertex, by Clairaut: cos(lat_v) = cos(lat_0)·sin(course_0)
+    vertex = math.degrees(math.acos(math.cos(math.radians(p[0])) * math.sin(math.radians(geo.gc_bearing_deg(*p, *q)))))
+    assert lats.max() == pytest.approx(vertex, abs=0.01) and 47.0 < vertex < 48.0 and lats.min() >= 33.7 - 1e-9
+    # consecutive points are ~24 NM apart (no jump round the world)
+    steps = haversine_nm(lats[:-1], lons[:-1], lats[1:], lons[1:])
+    assert steps == pytest.approx(dist / 200, rel=1e-6)
+    space = build_search_space(p, q, n_lines=20, n_points=5, check_land=False)
+    c = space.centre
+    assert np.all((space.lon[:, c] >= 139.7 - 1e-9) | (space.lon[:, c] <= -118.3 + 1e-9))  # the base route itself
+    assert np.all(np.abs(space.lon) > 100.0)  # lines ±956 NM wide, all still about the Pacific, none near 0°
+    gaps = haversine_nm(space.lat[:-1, c], space.lon[:-1, c], space.lat[1:, c], space.lon[1:, c])
+    assert gaps == pytest.approx(dist / 21, rel=1e-6)
+    assert space.base_distance_nm == pytest.approx(dist)
+
+
+def test_rhumb_line_is_never_shorter_than_the_great_circle():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        la1, la2 = rng.uniform(-70, 70, 2)
+        lo1, lo2 = rng.uniform(-180, 180, 2)
+        assert geo.rhumb_distance_nm(la1, lo1, la2, lo2) >= geo.gc_distance_nm(la1, lo1, la2, lo2) - 1e-6
+    # equal on the equator and on a meridian; known values by hand elsewhere
+    assert geo.rhumb_distance_nm(0.0, 10.0, 0.0, 40.0) == pytest.approx(30 * R_NM * math.radians(1), rel=1e-9)
+    assert geo.rhumb_distance_nm(10.0, 20.0, 40.0, 20.0) == pytest.approx(30 * R_NM * math.radians(1), rel=1e-9)
+    along_parallel = 20 * R_NM * math.radians(1) * math.cos(math.radians(35.0))  # 20° of longitude at 35° N
+    assert geo.rhumb_distance_nm(35.0, 170.0, 35.0, -170.0) == pytest.approx(along_parallel, rel=1e-9)
+    assert geo.rhumb_distance_nm(35.4, 139.7, 33.7, -118.3) > geo.gc_distance_nm(35.4, 139.7, 33.7, -118.3) + 200.0
+    # a rhumb line holds its course: the bearing from any point on it to the end is the initial bearing
+    b0 = geo.rhumb_bearing_deg(10.0, -30.0, 50.0, 20.0)
+    for f in (0.25, 0.5, 0.75):
+        la, lo = geo.rhumb_interpolate(10.0, -30.0, 50.0, 20.0, f)
+        assert geo.rhumb_bearing_deg(la, lo, 50.0, 20.0) == pytest.approx(b0, abs=1e-6)
+        assert geo.rhumb_distance_nm(10.0, -30.0, la, lo) == pytest.approx(f * geo.rhumb_distance_nm(10.0, -30.0, 50.0, 20.0), rel=1e-6)
+    assert geo.rhumb_interpolate(0.0, 170.0, 0.0, -170.0, 0.25) == pytest.approx((0.0, 175.0), abs=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------- leg kernel
+
+
+def test_calm_leg_takes_distance_over_stw_and_burns_rate_times_hours():
+    calm = wf.uniform("2020-12-01T00", 200)
+    for rpm in (70.0, 85.0, 100.0):
+        stw = 14.0 * rpm / 100.0  # by hand from the reference model
+        rate = 1.5 * (rpm / 100.0) ** 3
+        assert float(MODEL.stw_kn(rpm, 10.0, 0.0)) == pytest.approx(stw)
+        assert float(MODEL.fuel_tph(rpm, 10.0, 0.0)) == pytest.approx(rate)
+        for (a, b) in (((0.0, 150.0), (0.0, 152.5)), ((30.0, -160.0), (33.0, -150.0)), ((40.0, 178.0), (41.0, -177.0))):
+            dist = haversine_nm(*a, *b)
+            out = lk.sail_leg(*a, *b, 6.0, rpm, vp(), MODEL.speed_coef, MODEL.fuel_coef, calm)
+            assert out[lk.CODE] == lk.OK and out[lk.BEYOND] == 0
+            assert out[lk.H] == pytest.approx(dist / stw, rel=1e-9)
+            assert out[lk.FUEL] == pytest.approx(rate * dist / stw, rel=1e-9)
+            assert out[lk.STW_KN] == pytest.approx(stw) and out[lk.SOG_KN] == pytest.approx(stw)
+
+
+def test_currents_wind_and_waves_act_along_the_course():
+    leg = (0.0, 150.0, 0.0, 152.0)  # due east along the equator
+    dist = haversine_nm(*leg)
+    stw, rate = 11.9, 1.5 * 0.85**3  # 85 rpm
+    for c in (0.5, 1.0, 2.0):
+        for sign in (1.0, -1.0):  # +: following (setting east), −: head current
+            f = wf.uniform("2020-12-01T00", 200, current_ms=(sign * c, 0.0))
+            out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+            sog = stw + sign * c * KN_PER_MS
+            assert out[lk.SOG_KN] == pytest.approx(sog, rel=1e-9)
+            assert out[lk.STW_KN] == pytest.approx(stw, rel=1e-9)
+            assert out[lk.H] == pytest.approx(dist / sog, rel=1e-9)
+            assert out[lk.FUEL] == pytest.approx(rate * dist / sog, rel=1e-9)
+            assert out[lk.CUR_ALONG_KN] == pytest.approx(sign * c * KN_PER_MS, rel=1e-9)
+    # a cross current (setting north) adds nothing along an eastward course
+    f = wf.uniform("2020-12-01T00", 200, current_ms=(0.0, 1.5))
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.SOG_KN] == pytest.approx(stw)
+    # 30 kn head wind (blowing towards the west, so coming FROM ahead) costs 1 kn and 0.0002·900 t/h
+    f = wf.uniform("2020-12-01T00", 200, wind_ms=(-30.0 / KN_PER_MS, 0.0))
+    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    assert out[lk.STW_KN] == pytest.approx(stw - 1.0, rel=1e-6)  # the field stores float32
+    assert out[lk.FUEL] == pytest.approx((rate + 0.18) * dist / (stw - 1.0), rel=1e-6)
+    assert out[lk.WIND_KN] == pytest.approx(30.0, rel=1e-6)
+    # 4 m head seas (coming from 090°) cost 1.5 kn and 0.01·16 t/h; following seas cost nothing
+    f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=90.0)
+    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    assert out[lk.STW_KN] == pytest.approx(stw - 1.5, rel=1e-6)
+    assert out[lk.FUEL] == pytest.approx((rate + 0.16) * dist / (stw - 1.5), rel=1e-6)
+    f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=270.0)
+    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    assert out[lk.STW_KN] == pytest.approx(stw, rel=1e-6) and out[lk.FUEL] == pytest.approx(rate * dist / stw, rel=1e-6)
+    # limits: Hs 4 m against a 3.5 m limit, 30 kn wind against 25 kn, a head current the ship cannot stem
+    f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=90.0)
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_hs=3.5), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.WAVE_LIMIT
+    f = wf.uniform("2020-12-01T00", 200, wind_ms=(-30.0 / KN_PER_MS, 0.0))
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_wind=25.0), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.WIND_LIMIT
+    f = wf.uniform("2020-12-01T00", 200, current_ms=(-6.0, 0.0))  # 11.66 kn against 11.9 kn: SOG 0.24 < 0.5
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.NO_HEADWAY
+
+
+def test_weather_sampling_interpolates_time_space_and_direction():
+    # unequal valid-time intervals (0, 10, 30 h) with a current growing 0.1 m/s per hour; u10 = latitude;
+    # waves from 350° then from 010° (the mean direction is north, not south)
+    lat, lon = np.array([10.0, 20.0]), np.array([150.0, 160.0])
+    t0 = np.datetime64("2020-12-01T00")
+    times = t0 + np.array([0, 10, 30]).astype("timedelta64[h]")
+    ramp = np.array([0.0, 1.0, 3.0])[:, None, None] * np.ones((3, 2, 2))
+    u10 = np.broadcast_to(lat[None, :, None], (3, 2, 2))
+    mwd = np.broadcast_to(np.array([350.0, 10.0, 10.0])[:, None, None], (3, 2, 2))
+    f = wf.from_arrays(lat, lon, times, u10=u10, v10=np.zeros((3, 2, 2)), swh=ramp, mwd_deg=mwd, uo=ramp, vo=ramp)
+    out = np.empty(wf.N_VARS)
+    for t_h, want in ((0.0, 0.0), (5.0, 0.5), (10.0, 1.0), (20.0, 2.0), (27.0, 2.7)):
+        assert not wf.sample_nb(f.values, f.times_h, f.grid, t_h, 12.5, 155.0, out)
+        assert out[wf.UO] == pytest.approx(want, abs=1e-6) and out[wf.SWH] == pytest.approx(want, abs=1e-6)
+        assert out[wf.U10] == pytest.approx(12.5, abs=1e-5)
+    wf.sample_nb(f.values, f.times_h, f.grid, 5.0, 15.0, 151.0, out)
+    assert math.degrees(math.atan2(out[wf.WAVE_X], out[wf.WAVE_Y])) == pytest.approx(0.0, abs=1e-4)
+    assert wf.sample_nb(f.values, f.times_h, f.grid, 40.0, 15.0, 151.0, out)  # past the horizon: flagged, persisted
+    assert out[wf.UO] == pytest.approx(3.0)
+
+
+def test_compiled_leg_equals_the_pure_python_twin():
+    fld = field(wavy(3))
+    rng = np.random.default_rng(11)
+    for _ in range(6):
+        lat0, lon0 = rng.uniform(15, 45), rng.uniform(-175, -115)
+        lat1, lon1 = geo.destination(lat0, lon0, rng.uniform(0, 360), rng.uniform(20, 200))
+        rpm, t0 = rng.uniform(60, 100), rng.uniform(0, 300)
+        v = vp(step_h=rng.choice([0.25, 1.0]))
+        fast = lk.sail_leg(lat0, lon0, lat1, lon1, t0, rpm, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+        slow = lk.sail_leg_python(lat0, lon0, lat1, lon1, t0, rpm, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+        assert fast[lk.CODE] == lk.OK and fast[lk.H] > 0
+        np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-12)
+
+
+def test_splitting_a_leg_does_not_change_its_hours():
+    # constant course (equator) in a static uniform field with wind, waves and current: exact
+    f = wf.uniform("2020-12-01T00", 200, wind_ms=(4.0, -3.0), swh_m=3.0, wave_from_deg=60.0, current_ms=(-0.7, 0.3))
+    whole = lk.sail_leg(0.0, 150.0, 0.0, 153.0, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    a = lk.sail_leg(0.0, 150.0, 0.0, 151.1, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    b = lk.sail_leg(0.0, 151.1, 0.0, 153.0, a[lk.H], 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    assert a[lk.H] + b[lk.H] == pytest.approx(whole[lk.H], rel=1e-12)
+    assert a[lk.FUEL] + b[lk.FUEL] == pytest.approx(whole[lk.FUEL], rel=1e-12)
+    # an oblique leg in a static non-uniform field, with fine steps: equal up to the step discretisation
+    fld = field(wavy(5))
+    p, q = (25.0, -170.0), (31.0, -160.0)
+    m = geo.gc_interpolate(*p, *q, 0.4)
+    v = vp(step_h=0.05)
+    whole = lk.sail_leg(*p, *q, 0.0, 85.0, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+    a = lk.sail_leg(*p, *m, 0.0, 85.0, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+    b = lk.sail_leg(*m, *q, a[lk.H], 85.0, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+    assert a[lk.H] + b[lk.H] == pytest.approx(whole[lk.H], rel=1e-5)
+    assert a[lk.FUEL] + b[lk.FUEL] == pytest.approx(whole[lk.FUEL], rel=1e-5)
+
+
+# ---------------------------------------------------------------------------------------------- solvers
+
+
+def test_calm_sea_route_is_the_great_circle():
+    dep, arr = (30.0, -160.0), (35.0, -130.0)
+    pr = problem(dep, arr, 144)
+    space = pr.search_space()
+    calm = wf.uniform("2020-12-01T00", 400)
+    for solver in ("dp", "bfoa"):
+        plan = solve(pr, calm, solver=solver, seed=3, params=FAST, space=space)
+        assert plan.status == "ok", plan.reason
+        assert np.all(node_offsets(plan, space) == 0), solver
+        assert plan.distance_nm == pytest.approx(haversine_nm(*dep, *arr), rel=1e-9)
+        assert plan.hours <= pr.t_req_h + 1e-9
+        for g in plan.legs:  # every leg in calm water: dist/stw hours at its rpm, rate × hours fuel
+            stw, rate = 0.14 * g["rpm"], 1.5 * (g["rpm"] / 100) ** 3
+            assert g["hours"] == pytest.approx(g["dist_nm"] / stw, rel=1e-9)
+            assert g["fuel_t"] == pytest.approx(rate * g["hours"], rel=1e-9)
+        # slower than the constant-rpm baseline where it can be: it saves fuel by using the slack to the RTA
+        assert plan.fuel_t < plan.baseline.fuel_t and plan.savings_pct > 5.0
+
+
+STORM_DEP, STORM_ARR = (30.0, -160.0), (35.0, -130.0)
+
+
+def storm_field(hs_storm):
+    mlat, mlon = geo.gc_interpolate(*STORM_DEP, *STORM_ARR, 0.5)
+
+    def fn(LA, LO):
+        inside = haversine_nm(LA, LO, mlat, mlon) < 200.0
+        return dict(swh=np.where(inside, hs_storm, 1.0), mwd_deg=np.full(LA.shape, 90.0))
+    return field(fn)
+
+
+def test_storm_on_the_great_circle_is_avoided():
+    storm = storm_field(8.0)
+    pr = problem(STORM_DEP, STORM_ARR, 144)
+    space = pr.search_space()
+    base = solve(pr, storm, solver="gc", space=space)
+    assert base.status == "ok" and max(g["hs_m"] for g in base.legs) > 7.0  # the baseline ploughs through it
+    for solver, params in (("dp", None), ("bfoa", FAST)):
+        plan = solve(pr, storm, solver=solver, seed=1, params=params, space=space)
+        assert plan.status == "ok", plan.reason
+        offs = node_offsets(plan, space)
+        mid = space.n_lines // 2
+        assert np.all(np.abs(offs[mid - 1:mid + 3]) >= 3), (solver, offs)  # ≥ 185 NM off the great circle mid-route
+        assert max(g["hs_m"] for g in plan.legs) < 1.5
+        assert plan.baseline.fuel_t == pytest.approx(base.fuel_t)
+        assert plan.savings_pct > 20.0, (solver, plan.savings_pct)
+        assert plan.fuel_t < base.fuel_t and plan.hours <= pr.t_req_h + 1e-9
+    # with a 6 m wave limit the great circle is impossible and the solvers still find a way round
+    pr6 = problem(STORM_DEP, STORM_ARR, 144, max_hs_m=6.0)
+    gc = solve(pr6, storm, solver="gc", space=space)
+    assert gc.status == "infeasible" and "wave height" in gc.reason
+    for solver in ("dp", "bfoa"):
+        plan = solve(pr6, storm, solver=solver, seed=1, params=FAST, space=space)
+        assert plan.status == "ok" and max(g["hs_m"] for g in plan.legs) < 6.0
+
+
+def test_opposing_current_band_is_avoided():
+    dep, arr = (0.0, -145.0), (0.0, -115.0)  # due east along the equator
+    band = field(lambda LA, LO: dict(uo=np.where(np.abs(LA) < 1.5, -1.5, 0.0)), lat=(-12.0, 12.0), lon=(200.0, 250.0))
+    pr = problem(dep, arr, 192)
+    space = pr.search_space()
+    for solver, params in (("dp", None), ("bfoa", FAST)):
+        plan = solve(pr, band, solver=solver, seed=2, params=params, space=space)
+        assert plan.status == "ok", plan.reason
+        lats = np.array([la for la, _ in plan.waypoints])
+        assert np.all(np.abs(lats[2:-2]) > 1.5), (solver, lats)  # out of the band for the middle of the voyage
+        head = [g["current_kn"] for g in plan.legs[2:-2]]
+        assert max(head) < 0.5
+        assert plan.baseline.status == "ok" and plan.baseline.legs[5]["current_kn"] == pytest.approx(1.5 * KN_PER_MS, rel=1e-3)
+        assert plan.fuel_t < plan.baseline.fuel_t and plan.savings_pct > 5.0, (solver, plan.savings_pct)
+
+
+def test_impossible_rta_gives_the_least_late_plan():
+    dep, arr = (30.0, -160.0), (35.0, -130.0)
+    dist = haversine_nm(*dep, *arr)
+    fastest_h = dist / 14.0
+    pr = problem(dep, arr, 0.8 * fastest_h)
+    calm = wf.uniform("2020-12-01T00", 400)
+    for solver in ("dp", "bfoa", "astar", "gc"):
+        plan = solve(pr, calm, solver=solver, seed=1, params=FAST)
+        assert plan.status == "late", solver
+        assert "RTA" in plan.reason and "late" in plan.reason
+        assert all(g["rpm"] == 100.0 for g in plan.legs), solver
+        assert plan.hours >= pr.t_req_h
+        assert plan.hours == pytest.approx(fastest_h, rel=1e-9), solver  # the great circle at full speed
+        assert f"{plan.hours - pr.t_req_h:.1f} h late" in plan.reason
+
+
+@pytest.mark.parametrize("name, dep, arr, kw", [
+    # Nojima-zaki → Kii Channel: the great circle crosses the Izu islands and the Kii peninsula
+    ("japan", (34.85, 139.85), (33.9, 135.0), dict(n_lines=12, n_points=15, d_point_nm=12.0)),
+    # Singapore Strait, east entrance → west of Sentosa, among the southern islands
+    ("singapore", (1.25, 104.5), (1.15, 103.55), dict(n_lines=12, n_points=15, d_point_nm=1.0)),
+])
+def test_routes_stay_at_sea_along_real_coasts(name, dep, arr, kw):
+    def at_sea_everywhere(lat0, lon0, lat1, lon1, step_nm):
+        n = max(2, int(math.ceil(haversine_nm(lat0, lon0, lat1, lon1) / step_nm)))
+        pts = np.array([geo.gc_interpolate(lat0, lon0, lat1, lon1, k / n) for k in range(n + 1)])
+        return bool(np.all(globe.is_ocean(pts[:, 0], pts[:, 1])))
+
+    assert not at_sea_everywhere(*dep, *arr, 0.5), "the straight line must cross land for this test to mean anything"
+    pr = problem(dep, arr, 30, **kw)
+    space = pr.search_space()
+    calm = wf.uniform("2020-12-01T00", 400)
+    for solver in ("dp", "bfoa", "gc"):
+        plan = solve(pr, calm, solver=solver, seed=1, params=FAST, space=space)
+        assert plan.status == "ok", (name, solver, plan.reason)
+        step = 0.1 if name == "singapore" else 1.0
+        for g in plan.legs:
+            assert at_sea_everywhere(g["lat0"], g["lon0"], g["lat1"], g["lon1"], step), (name, solver, g["leg"])
+        assert plan.distance_nm > haversine_nm(*dep, *arr)  # it went round
+
+
+def test_dateline_crossing_routes_like_the_great_circle():
+    dep, arr = (35.0, 160.0), (35.0, -160.0)
+    gc_nm = haversine_nm(*dep, *arr)
+    assert gc_nm == pytest.approx(1953.7, abs=1.0)
+    pr = problem(dep, arr, 168)
+    calm = wf.uniform("2020-12-01T00", 400)
+    for solver in ("dp", "bfoa"):
+        plan = solve(pr, calm, solver=solver, seed=1, params=FAST)
+        assert plan.status == "ok", plan.reason
+        assert plan.distance_nm == pytest.approx(gc_nm, rel=0.005)
+        assert max(g["dist_nm"] for g in plan.legs) < 300.0
+        lons = np.array([lo for _, lo in plan.waypoints])
+        assert np.all(np.abs(lons) >= 155.0)  # never round by 0°
+        assert (lons > 0).any() and (lons < 0).any()
+        assert plan.hours <= pr.t_req_h
+
+
+def test_bfoa_is_reproducible_by_seed():
+    fld = field(wavy(2))
+    pr = problem((30.0, -160.0), (33.0, -145.0), 90, n_lines=8, n_points=9)
+    space = pr.search_space()
+    runs = {s: [solve(pr, fld, solver="bfoa", seed=s, params=FAST, space=space) for _ in range(2)] for s in (1, 2, 3, 4)}
+    for s, (a, b) in runs.items():
+        assert a.waypoints == b.waypoints and [g["rpm"] for g in a.legs] == [g["rpm"] for g in b.legs]
+        assert a.cost == b.cost and a.n_evals == b.n_evals
+        np.testing.assert_array_equal(a.history, b.history)
+    # the seed is actually used: the searches differ between seeds (results may coincide)
+    assert len({(r[0].n_evals, tuple(r[0].history)) for r in runs.values()}) > 1
+
+
+DP_CASES = [  # (dep, arr, hours to the RTA, rpm options, weather seed, objective)
+    ((30.0, -160.0), (33.0, -145.0), 90, (70, 85, 100), 0, "jit"),
+    ((25.0, -150.0), (20.0, -138.0), 80, (75, 100), 1, "jit"),
+    ((40.0, -170.0), (38.0, -155.0), 96, (70, 85, 100), 2, "jit"),
+    ((35.0, -140.0), (28.0, -132.0), 64, (80, 100), 3, "thesis"),
+]
+
+
+def test_dp_is_never_beaten_and_bfoa_comes_close():
+    for dep, arr, hours, rpms, wseed, obj in DP_CASES:
+        fld = field(wavy(wseed))
+        pr = problem(dep, arr, hours, rpm_options=rpms, objective=obj, n_lines=6, n_points=9)
+        space = pr.search_space()
+        dp = solve(pr, fld, solver="dp", space=space)
+        assert dp.status == "ok", dp.reason
+        gaps = []
+        for seed in (1, 2, 3):
+            b = solve(pr, fld, solver="bfoa", seed=seed, params=MEDIUM, space=space)
+            assert b.status == "ok"
+            assert dp.cost <= b.cost * (1 + 1e-3), (dep, seed, dp.cost, b.cost)  # only DP's time bucket may lose a little
+            gaps.append(b.cost / dp.cost - 1.0)
+        assert np.median(gaps) <= 0.02, (dep, gaps)
+        assert dp.cost <= solve(pr, fld, solver="gc", space=space).cost * (1 + 1e-3)
+
+
+def test_dp_equals_exhaustive_search_on_a_tiny_graph():
+    for wseed, obj, rpms in ((7, "jit", (70, 85, 100)), (8, "thesis", (75, 100))):
+        fld = field(wavy(wseed))
+        pr = problem((32.0, -150.0), (29.0, -142.0), 40, rpm_options=rpms, objective=obj, n_lines=3, n_points=5,
+                     max_shift=2)
+        space = pr.search_space()
+        dp = solve(pr, fld, solver="dp", space=space)
+        inst = Instance.build(pr, space, fld)
+        inst.f_target = dp.baseline.fuel_t  # as solve() sets it
+        best = math.inf
+        for mid in itertools.product(range(5), repeat=3):
+            nodes = np.array((2, *mid, 2))
+            for rr in itertools.product(range(len(rpms)), repeat=4):
+                best = min(best, _evaluate(inst, nodes, np.array(rr))[0])
+        assert math.isfinite(best)
+        assert dp.cost == pytest.approx(best, rel=1e-3), obj
+        assert dp.cost >= best - 1e-9
+
+
+# ---------------------------------------------------------------------------------------------- objectives
+
+
+def test_thesis_quality_function_as_published():
+    T_req, F_t = 100.0, 50.0
+
+    def q(hours, fuel):
+        return route_cost_nb(OBJ_THESIS, hours, fuel, T_req, 6.0, F_t, 0.2, 1.0e4)
+
+    assert q(100.0, 40.0) == pytest.approx(1.0 + 9999.9)  # T = T_req counts as late
+    assert q(120.0, 10.0) == pytest.approx(1.2 + 9999.9)  # late: fuel ignored
+    assert q(150.0, 0.0) > q(120.0, 80.0)
+    assert q(85.0, 50.0) == pytest.approx(0.85 + 3.0)  # T = 0.85·T_req: the lower branch
+    assert q(60.0, 25.0) == pytest.approx(0.85 + 1.5)  # fast: time ignored
+    assert q(10.0, 25.0) == q(60.0, 25.0)
+    assert q(90.0, 50.0) == pytest.approx(0.90 + 3.0)
+    assert q(99.9, 20.0) == pytest.approx(0.999 + 1.2)
+
+
+def test_jit_objective_ranks_on_time_before_late_and_penalises_early_mildly():
+    T_req, W, early, late = 100.0, 6.0, 0.2, 1.0e4
+
+    def q(hours, fuel):
+        return route_cost_nb(OBJ_JIT, hours, fuel, T_req, W, 1.0, early, late)
+
+    # inside the window [RTA − 6 h, RTA]: just the fuel
+    for h in (94.0, 97.0, 100.0):
+        assert q(h, 42.0) == pytest.approx(42.0)
+    # late: fuel + 1000 t + 1e4 t per hour late
+    assert q(100.5, 42.0) == pytest.approx(42.0 + LATE_STEP_T + 5000.0)
+    assert q(100.01, 0.0) > q(100.0, LATE_STEP_T - 1.0)  # an on-time plan beats a late one burning up to 1000 t less
+    for late_h in (1e-3, 0.1, 5.0):
+        for f_late in (0.0, 100.0):
+            assert q(T_req + late_h, f_late) > q(T_req, f_late + 500.0)
+    assert q(101.0, 100.0) < q(102.0, 0.0)  # among late plans the least late wins
+    # early: 0.2 t per hour before the window, far less than the lateness penalty
+    assert q(90.0, 42.0) == pytest.approx(42.0 + 0.2 * 4.0)
+    assert q(50.0, 42.0) == pytest.approx(42.0 + 0.2 * 44.0)
+    assert q(90.0, 40.0) < q(94.0, 42.0)  # arriving early still pays when it saves more fuel than the penalty
+    assert q(90.0, 41.5) > q(94.0, 41.0)
