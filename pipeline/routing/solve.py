@@ -40,7 +40,7 @@ def shortest_route(space: SearchSpace) -> np.ndarray | None:
         for a in np.flatnonzero(np.isfinite(dist)):
             for b in np.flatnonzero(space.edge_ok[i, a]):
                 d = dist[a] + gc_distance_nm(space.lat[i, a], space.lon[i, a], space.lat[i + 1, b], space.lon[i + 1, b])
-                if d < nxt[b] - 1e-9 or (abs(d - nxt[b]) <= 1e-9 and abs(b - c) < abs(parent[i + 1, b] - c)):
+                if d < nxt[b] - 1e-9 or (abs(d - nxt[b]) <= 1e-9 and abs(a - c) < abs(parent[i + 1, b] - c)):
                     nxt[b] = d
                     parent[i + 1, b] = a
         dist = nxt
