@@ -29,6 +29,7 @@ FAILED_COLOUR = "#d62728"  # infeasible, failed, error and anything unknown
 POINTS_PER_LEG = 8
 MAX_LAND_SAMPLES = 700  # per axis
 DPI = 110
+MAX_MAP_SHAPE = 0.85  # map height / width at most (the figure is 11 in wide, at most 9 in high)
 
 
 def status_colour(status) -> str:
@@ -75,9 +76,20 @@ def _extent(lat, lon) -> tuple[float, float, float, float]:
     mx = max(2.0, 0.08 * np.ptp(lon))
     my = max(2.0, 0.08 * np.ptp(lat))
     x0, x1 = lon.min() - mx, lon.max() + mx
+    y0, y1 = max(-85.0, lat.min() - my), min(85.0, lat.max() + my)
+    # a north-south voyage would be a thin strip in a wide frame: show more ocean either side instead
+    min_width = (y1 - y0) * _lon_stretch(y0, y1) / MAX_MAP_SHAPE
+    if x1 - x0 < min_width:
+        x0, x1 = 0.5 * (x0 + x1) - 0.5 * min_width, 0.5 * (x0 + x1) + 0.5 * min_width
     if x1 - x0 > 360.0:  # never show a longitude twice
         x0, x1 = 0.5 * (x0 + x1) - 180.0, 0.5 * (x0 + x1) + 180.0
-    return float(x0), float(x1), float(max(-85.0, lat.min() - my)), float(min(85.0, lat.max() + my))
+    return float(x0), float(x1), float(y0), float(y1)
+
+
+
+def _lon_stretch(y0: float, y1: float) -> float:
+    """Plot units of latitude per degree of longitude that keep the map conformal at mid-latitude."""
+    return 1.0 / max(0.1, np.cos(np.radians(0.5 * (y0 + y1))))
 
 
 def _lon_label(x, _pos=None) -> str:
@@ -89,7 +101,7 @@ def _lon_label(x, _pos=None) -> str:
 
 def _map_axes(title_lines: list[str], extent) -> tuple[Figure, object]:
     x0, x1, y0, y1 = extent
-    aspect = 1.0 / max(0.1, np.cos(np.radians(0.5 * (y0 + y1))))
+    aspect = _lon_stretch(y0, y1)
     # height follows the map's shape (about 9 in of map width), so wide maps get no empty bands
     height_in = float(np.clip(9.0 * (y1 - y0) * aspect / (x1 - x0) + 1.4, 3.5, 9.0))
     fig = Figure(figsize=(11, height_in), layout="constrained")
@@ -177,10 +189,10 @@ def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | 
         extent = _extent([], [])
     head = title or f"{voyage_id(route)} · {vessel_label(route)} · {route.get('solver') or '?'} · " \
                     f"{route.get('status') or '?'}"
-    numbers = (f"fuel {_fmt(route.get('fuel_t'), ' t')} vs baseline {_fmt(route.get('baseline_fuel_t'), ' t')} "
-               f"(saving {_fmt(route.get('savings_pct'), ' %')}) · ETA {iso_utc(route.get('eta_utc')) or 'n/a'}"
-               f" · RTA {iso_utc(route.get('rta_utc')) or 'n/a'}")
-    lines = [head, numbers] + ([f"no route: {route.get('reason') or route.get('status')}"] if not legs else [])
+    fuel = (f"fuel {_fmt(route.get('fuel_t'), ' t')} vs baseline {_fmt(route.get('baseline_fuel_t'), ' t')} "
+            f"(saving {_fmt(route.get('savings_pct'), ' %')})")
+    times = f"ETA {iso_utc(route.get('eta_utc')) or 'n/a'} · RTA {iso_utc(route.get('rta_utc')) or 'n/a'}"
+    lines = [head, fuel, times] + ([f"no route: {route.get('reason') or route.get('status')}"] if not legs else [])
     fig, ax = _map_axes(lines, extent)
     if field is not None:
         _draw_field(fig, ax, field, centre, extent)
