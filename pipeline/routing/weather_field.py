@@ -123,9 +123,8 @@ def sample_nb(values, times_h, grid, t_h, lat, lon, out):
     elif t_h >= times_h[nt - 1]:
         i0, i1, wt = nt - 1, nt - 1, 0.0
     else:
-        i0 = 0
-        while times_h[i0 + 1] <= t_h:
-            i0 += 1
+        # the last valid time ≤ t_h, by bisection: hourly fields over a voyage have hundreds of steps
+        i0 = np.searchsorted(times_h, t_h, side="right") - 1
         i1 = i0 + 1
         wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
     lat0, dlat, nlat, lon0, dlon, nlon, wraps = grid[0], grid[1], int(grid[2]), grid[3], grid[4], int(grid[5]), grid[6]
