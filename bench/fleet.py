@@ -82,6 +82,7 @@ def main() -> None:
     ap.add_argument("--voyages", type=int, default=200)
     args = ap.parse_args()
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
+    OUT.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("PREFECT_HOME", str(OUT / "prefect"))
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
