@@ -28,7 +28,6 @@ test: install
 bench: install
 	$(BIN)/python bench/ingest.py
 	$(BIN)/python bench/refit.py
-	$(BIN)/python bench/routing.py
 	$(BIN)/python bench/fleet.py
 
 clean:
