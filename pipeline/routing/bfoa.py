@@ -315,12 +315,16 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                 k = np.random.randint(0, ns)
                 if k == best_i:
                     continue
-                if _random_init(pos[k], rpm[k], edge_ok, n_rpm, max_shift, r_max, k_max, backup):
+                # walk in scratch space: a failed walk must not leave bacterium k half-overwritten with stale sums
+                if _random_init(cand, cand_r, edge_ok, n_rpm, max_shift, r_max, k_max, backup):
+                    pos[k, :] = cand
+                    rpm[k, :] = cand_r
                     cost[k] = _cost_from(pos[k], rpm[k], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
                                          fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t[k],
                                          cum_f[k])
                     n_evals += 1
                     moves[k] = 0
                     level[k] = 0
+                    fails[k] = 0
         history[cyc] = best_cost
     return best_pos, best_rpm, best_cost, history, n_evals
