@@ -29,6 +29,7 @@ bench: install
 	$(BIN)/python bench/ingest.py
 	$(BIN)/python bench/refit.py
 	$(BIN)/python bench/fleet.py
+	$(BIN)/python bench/routing.py
 
 clean:
 	rm -rf data .prefect
