@@ -132,6 +132,71 @@ def test_worse_or_underdetermined_models_are_not_activated(fleet):
     assert not s3["changed"] and s3["reason"] == "same as the active model"
 
 
+
+def _reference_fit(X, y, robust, k_folds=fit.K_FOLDS):
+    """The documented fit, written plainly: drop constant regressors (but the intercept), scale to unit
+    RMS, Huber IRLS by weighted lstsq until the step is ≤ ROBUST_RTOL of the largest coefficient (at most
+    ROBUST_ITERATIONS solves), k-fold CV (row p in fold p mod k) refitted from the rows with the last weights."""
+    ok = np.isfinite(X).all(axis=1) & np.isfinite(y)
+    X, y = X[ok], y[ok]
+    keep = (X.max(axis=0) - X.min(axis=0) > 1e-12) | ((X == 1.0).all(axis=0))
+    scale = np.sqrt((X[:, keep] ** 2).mean(axis=0))
+    Z = X[:, keep] / scale
+    w, beta = np.ones(len(y)), np.zeros(keep.sum())
+    for it in range(fit.ROBUST_ITERATIONS if robust else 1):
+        prev = beta
+        sw = np.sqrt(w)
+        beta = np.linalg.lstsq(Z * sw[:, None], y * sw, rcond=None)[0]
+        if it and np.abs(beta - prev).max() <= fit.ROBUST_RTOL * max(np.abs(beta).max(), 1e-12):
+            break
+        if robust:
+            r = y - Z @ beta
+            s = 1.4826 * np.median(np.abs(r - np.median(r))) or 1e-9
+            w = np.minimum(1.0, fit.HUBER_K * s / np.abs(r))
+    r = y - Z @ beta
+    fold = np.arange(len(y)) % k_folds
+    cv_sq = 0.0
+    for f in range(k_folds):
+        tr, te = fold != f, fold == f
+        sw = np.sqrt(w[tr])
+        b = np.linalg.lstsq(Z[tr] * sw[:, None], y[tr] * sw, rcond=None)[0]
+        cv_sq += ((y[te] - Z[te] @ b) ** 2).sum()
+    coef = np.zeros(X.shape[1])
+    coef[keep] = beta / scale
+    return coef, np.sqrt((r ** 2).mean()), np.sqrt(cv_sq / len(y))
+
+
+def test_batched_robust_fit_equals_each_vessel_fitted_alone(fleet):
+    """A fleet fit gives every vessel what a fit of that vessel alone gives, and that is the plain
+    IRLS + CV written out above: each vessel stops re-weighting when its own coefficients settle,
+    whatever the other vessels in the batch do."""
+    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    good = good.sort_values(["imo", "ts_utc"])
+    parts = [g for _, g in good.groupby("imo")]
+    parts[1] = parts[1].head(150).copy()
+    parts[1]["trim_m"] = 0.5  # a constant regressor: dropped for this vessel only
+    parts[2] = parts[2].copy()
+    parts[2].loc[parts[2].index[::9], "stw_kn"] *= 0.5  # outliers: Huber weights differ from 1
+    parts[2].loc[parts[2].index[5], "rpm"] = np.nan  # a row the fit must leave out
+    reports = pd.concat(parts)
+    inp = fit.inputs_from_reports(reports)
+    sizes = [len(p) for p in parts]
+    bounds = np.r_[0, np.cumsum(sizes)]
+    for target, y in (("speed", inp["stw_kn"]), ("fuel", inp["fuel_tph"])):
+        X = fit.design("physical", target, inp)
+        batched = fit.fit_targets("physical", target, X, y, bounds, robust=True)
+        for g, res in enumerate(batched):
+            s = slice(bounds[g], bounds[g + 1])
+            alone = fit.fit_target("physical", target, X[s], y[s], robust=True)
+            np.testing.assert_allclose(res.coef, alone.coef, rtol=1e-12, atol=1e-15)
+            assert (res.rmse, res.cv_rmse, res.dropped) == (alone.rmse, alone.cv_rmse, alone.dropped)
+            coef, rmse, cv = _reference_fit(X[s], y[s], robust=True)
+            np.testing.assert_allclose(res.coef, coef, rtol=1e-8, atol=1e-12 * np.abs(coef).max())
+            assert res.rmse == pytest.approx(rmse, rel=1e-9) and res.cv_rmse == pytest.approx(cv, rel=1e-8)
+    assert fit.fit_targets("physical", "speed", fit.design("physical", "speed", inp), inp["stw_kn"], bounds,
+                           robust=True)[1].dropped == ["trim_m"]
+    assert batched[2].n == sizes[2] - 1
+
 @pytest.mark.parametrize("inputs,expected", [((8, 4, 1), 1.75), ((8, 5, 3), 1.75), ((10, 2, 3), 1.75), ((6, 3, 4), 1.43),
                                              ((10, 5, 7), 2.57), ((5, 2, 2), 0.934)])
 def test_fuzzy_model_reproduces_published_outputs(inputs, expected):

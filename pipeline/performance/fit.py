@@ -5,12 +5,12 @@ are scaled to unit RMS before solving the normal equations, so rpm³ and wind² 
 ruin the conditioning; k-fold cross-validation reuses per-fold XᵀX blocks instead of refitting
 from the rows, which keeps a refit of a whole fleet close to one pass over the data.
 
-A fleet is fitted in one go (`fit_targets`): vessels of similar report counts are padded into
-one (vessel × regressor × row) stack and every step — normal equations, Huber re-weighting,
-cross-validation folds — is one compiled loop or batched solve for all of them. Padding rows
-carry zero weight, and a regressor dropped for one vessel becomes an identity row/column in
-its normal equations, so each vessel gets the coefficients it would get alone (up to
-rounding). `fit_target` is the same code with one group.
+A fleet is fitted in one go (`fit_targets`): one compiled loop takes the vessels one after
+another, copies a vessel's rows (scaled, fold by fold) into a small scratch block that stays in
+cache, and runs its Huber re-weighting, statistics and cross-validation folds there. Each
+vessel stops re-weighting when its own coefficients settle, and a regressor dropped for it
+becomes an identity row/column in its normal equations, so each vessel gets the coefficients it
+would get alone (up to rounding). `fit_target` is the same code with one group.
 """
 
 from __future__ import annotations
@@ -29,8 +29,6 @@ NOT_WORSE_TOLERANCE = 1.02  # a new model may be at most 2 % worse on held-out r
 ROBUST_ITERATIONS = 8  # at most this many iteratively re-weighted least-squares solves with Huber weights
 ROBUST_RTOL = 1e-5  # ... stopping once no coefficient moves by more than this (relative to the largest)
 HUBER_K = 1.345
-PAD_WASTE = 1.25  # groups padded together differ in row count by at most this factor
-STACK_ROWS = 1 << 19  # padded rows per batched stack (bounds memory for very large fleets)
 
 
 @dataclass
@@ -73,22 +71,6 @@ def design(form: str, target: str, inp: dict[str, np.ndarray]) -> np.ndarray:
                                   inp["wind_rel_deg"], inp["hs_m"], inp["wave_rel_deg"], inp["months_dd"])
 
 
-def _solve(XtX: np.ndarray, Xty: np.ndarray) -> np.ndarray:
-    """Solve a stack of normal equations; a singular one falls back to least squares (the others are unaffected)."""
-    try:
-        return np.linalg.solve(XtX, Xty[..., None])[..., 0]
-    except np.linalg.LinAlgError:
-        A = XtX.reshape(-1, *XtX.shape[-2:])
-        b = Xty.reshape(-1, Xty.shape[-1])
-        out = np.empty_like(b)
-        for i in range(len(A)):
-            try:
-                out[i] = np.linalg.solve(A[i], b[i])
-            except np.linalg.LinAlgError:
-                out[i] = np.linalg.lstsq(A[i], b[i], rcond=None)[0]
-        return out.reshape(Xty.shape)
-
-
 def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: bool = False, k_folds: int = K_FOLDS) -> FitResult:
     """Least squares of y on X (regressor names from `features`); constant/all-zero regressors are dropped.
 
@@ -103,195 +85,304 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
                 k_folds: int = K_FOLDS) -> list[FitResult]:
     """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y.
 
-    Rows with a non-finite regressor or target are left out (per group, order kept).
+    Rows with a non-finite regressor or target are left out (per group, order kept). Each group
+    stops re-weighting when its own coefficients settle, so it gets what `fit_target` gives it alone.
     """
     fid = features.FORM_IDS[form]
     names = (features.SPEED_REGRESSORS if target == "speed" else features.FUEL_REGRESSORS)[fid]
     X = np.ascontiguousarray(X, dtype=np.float64)
     y = np.ascontiguousarray(y, dtype=np.float64)
-    bounds = np.asarray(bounds, dtype=np.int64)
-    ok = np.isfinite(X).all(axis=1) & np.isfinite(y)
-    if not ok.all():
-        kept_before = np.concatenate([[0], np.cumsum(ok)])
-        X, y, bounds = X[ok], y[ok], kept_before[bounds]
-    n = np.diff(bounds)
-    out: list[FitResult | None] = [None] * n.size
-    for groups in _stacks(n):
-        for g, res in zip(groups, _fit_stack(form, target, names, X, y, bounds[groups], n[groups], robust, k_folds)):
-            out[g] = res
-    return out
-
-
-def _stacks(n: np.ndarray) -> list[np.ndarray]:
-    """Group indices in batches of similar row count (padding ≤ PAD_WASTE) and bounded size."""
-    order = np.argsort(n, kind="stable")
-    size_class = np.floor(np.log(np.maximum(n[order], 1)) / np.log(PAD_WASTE)).astype(np.int64)
-    batches = []
-    for part in np.split(order, np.flatnonzero(np.diff(size_class)) + 1):
-        per = max(1, STACK_ROWS // max(int(n[part].max()), 1))
-        batches += [part[i:i + per] for i in range(0, part.size, per)]
-    return batches
-
-
-def _fit_stack(form, target, names, X, y, starts, n, robust, k_folds) -> list[FitResult]:
-    """Fit groups of similar size together.
-
-    Arrays are (group, regressor, slot). A group's rows are laid out fold by fold (row p goes to
-    CV fold p mod F), so every fold is one contiguous slot range; slots beyond a group's rows
-    are padding with weight 0 and residual +inf (sorted last by the medians).
-    """
-    G, k = n.size, X.shape[1]
-    rows = max(int(n.max()), 1)
-    F = max(int(k_folds), 1)
-    row_of_slot = np.concatenate([np.arange(f, rows, F) for f in range(F)])
-    slot_of_row = np.empty(rows, np.int64)
-    slot_of_row[row_of_slot] = np.arange(rows)
-    fold_start = np.cumsum([0] + [(rows - f + F - 1) // F for f in range(F)])[:-1]
-    lo = np.repeat(fold_start[None, :], G, axis=0)
-    hi = lo + np.maximum((n[:, None] - np.arange(F) + F - 1) // F, 0)
-    valid = row_of_slot[None, :] < n[:, None]
-    nf = np.maximum(n, 1).astype(np.float64)
-
-    ZY = np.zeros((G, k + 1, rows))  # scaled regressors, then the target
-    top, bottom, sumsq = np.zeros((G, k)), np.zeros((G, k)), np.zeros((G, k))
-    nonzero = np.zeros((G, k), dtype=np.bool_)
-    _pack_nb(X, y, starts, n, slot_of_row, ZY, top, bottom, nonzero, sumsq)
-    intercept = np.array([nm == "1" for nm in names])
-    keep = (intercept & nonzero) | (top - bottom > 1e-12)
-    n_keep = keep.sum(axis=1)
-    live = (n > 0) & (n_keep > 0)
-    scale = np.sqrt(sumsq / nf[:, None])
-    scale[(scale == 0) | ~keep] = 1.0
-    ZY[:, :k] /= scale[..., None]
-    ZY[:, :k][~keep] = 0.0
-    ident = np.zeros((G, k, k))
-    ident[:, np.arange(k), np.arange(k)] = ~keep  # dropped regressor: β = 0 without touching the others
-
-    w = valid.astype(np.float64)
-    beta = np.zeros((G, k))
-    gram = np.empty((G, F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per group and fold
-    resid = np.full((G, rows), np.inf)
-    for it in range(ROBUST_ITERATIONS if robust else 1):
-        _gram_nb(ZY, w, lo, hi, gram)
-        total = gram.sum(axis=1)
-        prev = beta.copy()
-        beta[live] = _solve((total[..., :k] + ident)[live], total[live, :, k])
-        if it and (np.abs(beta - prev).max(axis=1) <= ROBUST_RTOL * np.maximum(np.abs(beta).max(axis=1), 1e-12)).all():
-            break  # converged: `w` is still the weights `beta` was solved with (the CV below reuses them)
-        if robust:
-            _resid_nb(ZY, np.repeat(beta[:, None], F, axis=1), lo, hi, resid)
-            w = _huber_weights(resid, n)
-    _resid_nb(ZY, np.repeat(beta[:, None], F, axis=1), lo, hi, resid)
-    r = np.where(valid, resid, 0.0)
-    ssr = (r * r).sum(axis=1)
-    rmse = np.sqrt(ssr / nf)
-    Y = ZY[:, k]
-    dev = np.where(valid, Y - (Y.sum(axis=1) / nf)[:, None], 0.0)
-    sst = (dev * dev).sum(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r2 = np.where(sst > 0, 1.0 - ssr / sst, np.nan)
-
-    # k-fold CV: every fold's fit is the total normal equations minus that fold's block
-    cv = np.full(G, np.nan)
-    ok = live & (n >= 2 * n_keep) & (k_folds >= 2)
-    if ok.any():
-        if robust:
-            _gram_nb(ZY, w, lo, hi, gram)
-        rest = (gram.sum(axis=1, keepdims=True) - gram)[ok]
-        betas = np.zeros((G, F, k))
-        betas[ok] = _solve(rest[..., :k] + ident[ok][:, None], rest[..., k])
-        _resid_nb(ZY, betas, lo, hi, resid)
-        r = np.where(valid, resid, 0.0)[ok]
-        cv[ok] = np.sqrt((r * r).sum(axis=1) / n[ok])
-    coef = np.where(keep, beta / scale, 0.0)
-
+    bounds = np.ascontiguousarray(bounds, dtype=np.int64)
+    G, k = bounds.size - 1, X.shape[1]
+    intercept = np.array([nm == "1" for nm in names], dtype=np.bool_)
+    coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
+    n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
+    _fit_groups_nb(X, y, bounds, intercept, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,
+                   max(int(k_folds), 1), int(k_folds) >= 2, coef, keep, n, stats)
     out = []
     for g in range(G):
         dropped = [names[j] for j in range(k) if not keep[g, j]]
-        if live[g]:
-            out.append(FitResult(form, target, names, coef[g], int(n[g]), float(r2[g]), float(rmse[g]), float(cv[g]),
-                                 dropped, robust))
-        else:
-            out.append(FitResult(form, target, names, np.zeros(k), int(n[g]), float("nan"), float("nan"), float("nan"),
-                                 dropped, robust))
+        out.append(FitResult(form, target, names, coef[g], int(n[g]), float(stats[g, 0]), float(stats[g, 1]),
+                             float(stats[g, 2]), dropped, robust))
     return out
 
 
-def _huber_weights(resid: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Huber weights per group (row g of `resid`: its n[g] residuals, +inf in padding → weight 0).
+@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
+    """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
+    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined).
 
-    Scale = 1.4826 · MAD of the group's residuals (1e-9 when the MAD is 0).
+    A group's finite rows are copied, scaled to unit RMS per regressor, into scratch laid out
+    regressor by row, fold by fold (row p goes to CV fold p mod F), so every fold is one
+    contiguous range and the whole group stays in cache through all its solves.
     """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        med = _row_medians(resid, n)
-        s = 1.4826 * _row_medians(np.abs(resid - med[:, None]), n)
-        s[s == 0] = 1e-9
-        u = np.abs(resid) / (HUBER_K * s)[:, None]
-        return np.minimum(1.0, 1.0 / u)  # 1 where u ≤ 1, else 1/u
-
-
-def _row_medians(a: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """np.median of the n[g] finite values of row g (the rest of the row is +inf); NaN where n[g] = 0."""
-    out = np.full(n.size, np.nan)
-    for m in np.unique(n[n > 0]):
-        rows = np.flatnonzero(n == m)
-        half = int(m) // 2
-        part = np.partition(a if rows.size == n.size else a[rows], half, axis=1)
-        out[rows] = part[:, half] if m % 2 else (part[:, :half].max(axis=1) + part[:, half]) / 2
-    return out
-
-
-@numba.njit(cache=True)
-def _pack_nb(X, y, starts, n, slot_of_row, ZY, top, bottom, nonzero, sumsq):
-    """Copy each group's rows into its slots; per regressor: max, min, any non-zero, sum of squares."""
     k = X.shape[1]
-    for g in range(n.size):
-        for p in range(n[g]):
-            row = starts[g] + p
-            s = slot_of_row[p]
+    G = bounds.size - 1
+    nmax = 0
+    for g in range(G):
+        nmax = max(nmax, bounds[g + 1] - bounds[g])
+    Z = np.empty((k + 1, nmax))  # scaled regressors, then the target
+    w = np.empty(nmax)
+    r = np.empty(nmax)
+    buf = np.empty(nmax)
+    ok = np.empty(nmax, dtype=np.bool_)
+    gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
+    A = np.empty((k, k + 1))
+    beta, prev = np.empty(k), np.empty(k)
+    betas = np.empty((F, k))
+    top, bottom, sumsq, scale = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    nonzero = np.empty(k, dtype=np.bool_)
+    lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
+    for g in range(G):
+        a, b = bounds[g], bounds[g + 1]
+        # which rows are usable; per regressor: max, min, any non-zero, sum of squares
+        m = 0
+        for i in range(k):
+            sumsq[i] = 0.0
+            nonzero[i] = False
+        for row in range(a, b):
+            good = np.isfinite(y[row])
+            for i in range(k):
+                good = good and np.isfinite(X[row, i])
+            ok[row - a] = good
+            if not good:
+                continue
             for i in range(k):
                 v = X[row, i]
-                ZY[g, i, s] = v
-                if p == 0 or v > top[g, i]:
-                    top[g, i] = v
-                if p == 0 or v < bottom[g, i]:
-                    bottom[g, i] = v
+                if m == 0 or v > top[i]:
+                    top[i] = v
+                if m == 0 or v < bottom[i]:
+                    bottom[i] = v
                 if v != 0.0:
-                    nonzero[g, i] = True
-                sumsq[g, i] += v * v
-            ZY[g, k, s] = y[row]
+                    nonzero[i] = True
+                sumsq[i] += v * v
+            m += 1
+        n_out[g] = m
+        nf = float(max(m, 1))
+        n_keep = 0
+        for i in range(k):
+            keep[g, i] = (intercept[i] and nonzero[i]) or (m > 0 and top[i] - bottom[i] > 1e-12)
+            n_keep += keep[g, i]
+            scale[i] = np.sqrt(sumsq[i] / nf)
+            if scale[i] == 0.0 or not keep[g, i]:
+                scale[i] = 1.0
+        if m == 0 or n_keep == 0:
+            continue  # nothing to fit: coefficients 0, statistics NaN
+        # fold f is slots lo[f]:hi[f]
+        s0 = 0
+        for f in range(F):
+            lo[f] = s0
+            s0 += max((m - f + F - 1) // F, 0)
+            hi[f] = s0
+        p = 0
+        for row in range(a, b):
+            if not ok[row - a]:
+                continue
+            s = lo[p % F] + p // F
+            for i in range(k):
+                Z[i, s] = X[row, i] / scale[i] if keep[g, i] else 0.0
+            Z[k, s] = y[row]
+            p += 1
+        for s in range(m):
+            w[s] = 1.0
+        for i in range(k):
+            beta[i] = 0.0
+        fresh = False  # gram holds the blocks of the current weights
+        for it in range(max_solves):
+            _fold_grams(Z, w, lo, hi, gram)
+            fresh = True
+            _sum_folds(gram, A)
+            for i in range(k):
+                prev[i] = beta[i]
+            _solve_dropped(A, keep[g], beta)
+            if it > 0:
+                step, big = 0.0, 0.0
+                for i in range(k):
+                    step = max(step, abs(beta[i] - prev[i]))
+                    big = max(big, abs(beta[i]))
+                if step <= rtol * max(big, 1e-12):
+                    break  # converged: `w` is still the weights `beta` was solved with
+            if robust:
+                _residuals(Z, beta, 0, m, r)
+                _huber_weights(r, m, huber_k, buf, w)
+                fresh = False
+        # fit statistics on all rows
+        _residuals(Z, beta, 0, m, r)
+        ssr, ysum = 0.0, 0.0
+        for s in range(m):
+            ssr += r[s] * r[s]
+            ysum += Z[k, s]
+        ybar = ysum / nf
+        sst = 0.0
+        for s in range(m):
+            d = Z[k, s] - ybar
+            sst += d * d
+        stats[g, 1] = np.sqrt(ssr / nf)
+        if sst > 0:
+            stats[g, 0] = 1.0 - ssr / sst
+        for i in range(k):
+            coef[g, i] = beta[i] / scale[i] if keep[g, i] else 0.0
+        # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block
+        if do_cv and m >= 2 * n_keep:
+            if not fresh:
+                _fold_grams(Z, w, lo, hi, gram)
+            _sum_folds(gram, A)
+            cv = 0.0
+            for f in range(F):
+                for i in range(k):
+                    for j in range(k + 1):
+                        gram[f, i, j] = A[i, j] - gram[f, i, j]
+                _solve_dropped(gram[f], keep[g], betas[f])
+                _residuals(Z, betas[f], lo[f], hi[f], r)
+                for s in range(lo[f], hi[f]):
+                    cv += r[s] * r[s]
+            stats[g, 2] = np.sqrt(cv / m)
 
 
 @numba.njit(cache=True, fastmath={"reassoc", "contract"})  # reassociation lets the row sums vectorise
-def _gram_nb(ZY, w, lo, hi, out):
-    """out[g, f] = [ZᵀWZ | ZᵀWy] over slots lo[g, f]:hi[g, f] of group g."""
-    k = ZY.shape[1] - 1
-    for g in range(ZY.shape[0]):
-        for f in range(lo.shape[1]):
-            a, b = lo[g, f], hi[g, f]
-            for i in range(k):
-                for j in range(i, k + 1):
-                    s = 0.0
-                    for r in range(a, b):
-                        s += w[g, r] * ZY[g, i, r] * ZY[g, j, r]
-                    out[g, f, i, j] = s
-                    if j < k:
-                        out[g, f, j, i] = s
+def _fold_grams(Z, w, lo, hi, out):
+    """out[f] = [ZᵀWZ | ZᵀWy] over slots lo[f]:hi[f]."""
+    k = Z.shape[0] - 1
+    for f in range(lo.size):
+        a, b = lo[f], hi[f]
+        wf = w[a:b]  # slices indexed from 0 up: no negative-index checks, so the loops vectorise
+        for i in range(k):
+            zi = Z[i, a:b]
+            for j in range(i, k + 1):
+                zj = Z[j, a:b]
+                s = 0.0
+                for q in range(b - a):
+                    s += wf[q] * zi[q] * zj[q]
+                out[f, i, j] = s
+                if j < k:
+                    out[f, j, i] = s
 
 
 @numba.njit(cache=True)
-def _resid_nb(ZY, beta, lo, hi, out):
-    """out[g, r] = y − z·β[g, f] over slots lo[g, f]:hi[g, f]; other slots are left as they are."""
-    k = ZY.shape[1] - 1
-    for g in range(ZY.shape[0]):
-        for f in range(lo.shape[1]):
-            a, b = lo[g, f], hi[g, f]
-            for r in range(a, b):
-                out[g, r] = ZY[g, k, r]
-            for i in range(k):
-                c = beta[g, f, i]
-                for r in range(a, b):
-                    out[g, r] -= c * ZY[g, i, r]
+def _sum_folds(gram, out):
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            s = 0.0
+            for f in range(gram.shape[0]):
+                s += gram[f, i, j]
+            out[i, j] = s
+
+
+@numba.njit(cache=True)
+def _residuals(Z, beta, a, b, out):
+    """out[q] = y − z·β over slots a:b."""
+    k = Z.shape[0] - 1
+    o = out[a:b]
+    o[:] = Z[k, a:b]
+    for i in range(k):
+        c = beta[i]
+        zi = Z[i, a:b]
+        for q in range(b - a):
+            o[q] -= c * zi[q]
+
+
+@numba.njit(cache=True)
+def _solve_dropped(A, keep, x):
+    """x solving A[:, :k]·x = A[:, k] with a dropped regressor's row and column replaced by the identity
+    (β = 0 for it without touching the others). Gaussian elimination with partial pivoting; an exactly
+    singular system falls back to least squares (minimum norm), as LAPACK's solver would refuse it."""
+    k = A.shape[0]
+    M = np.empty((k, k))
+    v = np.empty(k)
+    for i in range(k):
+        for j in range(k):
+            M[i, j] = A[i, j]
+        M[i, i] += 0.0 if keep[i] else 1.0
+        v[i] = A[i, k]
+    L = M.copy()
+    c = v.copy()
+    for col in range(k):
+        p = col
+        for i in range(col + 1, k):
+            if abs(L[i, col]) > abs(L[p, col]):
+                p = i
+        if L[p, col] == 0.0:
+            x[:] = np.linalg.lstsq(M, v, rcond=2.220446049250313e-16 * k)[0]
+            return
+        if p != col:
+            for j in range(k):
+                L[col, j], L[p, j] = L[p, j], L[col, j]
+            c[col], c[p] = c[p], c[col]
+        inv = 1.0 / L[col, col]
+        for i in range(col + 1, k):
+            l = L[i, col] * inv
+            if l != 0.0:
+                for j in range(col + 1, k):
+                    L[i, j] -= l * L[col, j]
+                c[i] -= l * c[col]
+    for i in range(k - 1, -1, -1):
+        s = c[i]
+        for j in range(i + 1, k):
+            s -= L[i, j] * x[j]
+        x[i] = s / L[i, i]
+
+
+@numba.njit(cache=True)
+def _huber_weights(r, m, huber_k, buf, w):
+    """Huber weights of residuals r[:m] into w[:m]: scale = 1.4826 · MAD (1e-9 when the MAD is 0)."""
+    for q in range(m):
+        buf[q] = r[q]
+    med = _median_inplace(buf, m)
+    for q in range(m):
+        buf[q] = abs(r[q] - med)
+    s = 1.4826 * _median_inplace(buf, m)
+    if s == 0.0:
+        s = 1e-9
+    c = huber_k * s
+    for q in range(m):
+        u = abs(r[q]) / c
+        inv = 1.0 / u
+        w[q] = inv if inv < 1.0 else 1.0  # 1 where u ≤ 1, else 1/u
+
+
+@numba.njit(cache=True)
+def _median_inplace(a, m):
+    """np.median of a[:m] (reorders a[:m])."""
+    half = m // 2
+    hi = _select(a, 0, m - 1, half)
+    if m % 2:
+        return hi
+    lo = a[0]  # the largest of a[:half], which `_select` left below a[half]
+    for q in range(1, half):
+        if a[q] > lo:
+            lo = a[q]
+    return (lo + hi) / 2
+
+
+@numba.njit(cache=True)
+def _select(a, left, right, kth):
+    """Quickselect: reorder a[left:right+1] so a[kth] is in sorted position, smaller-or-equal before it."""
+    while right > left:
+        mid = (left + right) // 2  # median of three as pivot
+        if a[mid] < a[left]:
+            a[mid], a[left] = a[left], a[mid]
+        if a[right] < a[left]:
+            a[right], a[left] = a[left], a[right]
+        if a[right] < a[mid]:
+            a[right], a[mid] = a[mid], a[right]
+        pivot = a[mid]
+        i, j = left, right
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if kth <= j:
+            right = j
+        elif kth >= i:
+            left = i
+        else:
+            break
+    return a[kth]
 
 
 @dataclass(frozen=True)
