@@ -51,12 +51,11 @@ def build_warehouse(out: Path, n_vessels: int, days: int) -> tuple[Path, dict]:
 def refit_path(db: Path) -> tuple[float, float, list[dict], list[dict], int]:
     """(load seconds, fit seconds, perf_models rows, summaries, reports) of one refit of every vessel."""
     t0 = time.perf_counter()
-    reports = load_reports.fn(db, None)
-    active, versions = fleet_store.active_models(db), fleet_store.next_versions(db)
+    reports, active, versions = load_reports.fn(db, None)  # reports, active models, next versions
     t1 = time.perf_counter()
     rows, summaries = fit_vessels.fn(reports, active, versions, FORM, True)
     t2 = time.perf_counter()
-    return t1 - t0, t2 - t1, rows, summaries, len(reports)
+    return t1 - t0, t2 - t1, rows, summaries, len(reports["imo"])
 
 
 def reference_inputs(db: Path) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from prefect import flow, get_run_logger, task
 
@@ -43,12 +44,14 @@ def import_noon_reports(path: str, data_root: str | None = None) -> dict:
 
 
 @task(name="load-reports")
-def load_reports(db: Path, imos: list[int] | None) -> pd.DataFrame:
-    return fleet_store.load_reports(db, imos, columns=REPORT_COLUMNS)
+def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray], dict, dict]:
+    """(noon-report columns a refit needs, active models, next versions), read in one connection."""
+    return fleet_store.load_for_refit(db, imos, REPORT_COLUMNS)
 
 
 @task(name="fit-vessels")
-def fit_vessels(reports: pd.DataFrame, active: dict, versions: dict, form: str, robust: bool) -> tuple[list[dict], list[dict]]:
+def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, form: str,
+                robust: bool) -> tuple[list[dict], list[dict]]:
     return refit_fleet(reports, active, versions, form=form, robust=robust)
 
 
@@ -61,12 +64,12 @@ def refit_performance(imos: list[int] | None = None, data_root: str | None = Non
     db = s.layout.ensure().warehouse
     logger = get_run_logger()
     known = fleet_store.known_imos(db)
-    reports = load_reports(db, imos)
+    reports, active, versions = load_reports(db, imos)
     summaries_missing = []
-    for imo in sorted(set(imos or known) - set(reports["imo"].astype(int))):
+    for imo in sorted(set(imos or known) - set(np.unique(reports["imo"]).tolist())):
         summaries_missing.append({"imo": imo, "n": 0, "changed": False,
                                   "reason": "no valid noon reports (all rejected or none imported): model unchanged"})
         logger.warning("vessel %s: no valid noon reports; model unchanged", imo)
-    rows, summaries = fit_vessels(reports, fleet_store.active_models(db), fleet_store.next_versions(db), form, robust)
+    rows, summaries = fit_vessels(reports, active, versions, form, robust)
     fleet_store.save_fits(db, rows)
     return sorted(summaries + summaries_missing, key=lambda d: d["imo"])

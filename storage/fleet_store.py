@@ -119,10 +119,52 @@ def load_reports(db_path: Path, imos: list[int] | None = None, columns: Sequence
         return con.execute(f"SELECT {select} FROM noon_reports ORDER BY imo, ts_utc").fetchdf()
 
 
+def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]) -> tuple[dict[str, np.ndarray], dict[int, dict], dict[int, int]]:
+    """What a refit reads, in one read-only connection: (noon-report `columns` as float64 arrays — "imo"
+    as int64 — ordered by vessel and time; `active_models`; `next_versions`).
+
+    The rows come unordered through Arrow (no pandas) and are put in order here: cheaper than an
+    ORDER BY in the query. NULLs read as NaN.
+    """
+    unknown = sorted(set(columns) - set(NOON_COLUMNS))
+    if unknown:
+        raise ValueError(f"noon_reports has no column(s) {', '.join(unknown)}; known: {', '.join(NOON_COLUMNS)}")
+    cols = [c for c in dict.fromkeys(["imo", *columns]) if c != "ts_utc"]
+    query = f"SELECT {', '.join(cols)}, epoch_us(ts_utc) AS ts_us FROM noon_reports"
+    with warehouse.connect(db_path, write=False) as con:
+        if imos:
+            table = con.sql(query + " WHERE imo IN (SELECT unnest(?))", params=[list(map(int, imos))]).to_arrow_table()
+        else:
+            table = con.sql(query).to_arrow_table()
+        active, versions = _active_models(con), _next_versions(con)
+    arrays = {c: table.column(c).to_numpy() for c in table.column_names}
+    imo, ts_us = arrays.pop("imo").astype(np.int64), arrays.pop("ts_us")
+    order = None if _ordered(imo, ts_us) else np.lexsort((ts_us, imo))
+    out = {"imo": imo if order is None else imo[order]}
+    for c in columns:
+        if c == "ts_utc":
+            v = ts_us.astype("datetime64[us]")
+        elif c == "imo":
+            continue
+        else:
+            v = arrays[c].astype(np.float64, copy=False)
+        out[c] = v if order is None else v[order]
+    return out, active, versions
+
+
+def _ordered(imo: np.ndarray, ts: np.ndarray) -> bool:
+    d_imo = np.diff(imo)
+    return bool((d_imo >= 0).all() and ((d_imo > 0) | (np.diff(ts) > 0)).all())
+
+
 def active_models(db_path: Path) -> dict[int, dict]:
     """imo → {"version", "form", "months_dd", "speed": {name: coef}, "fuel": {name: coef}} of active models."""
     with warehouse.connect(db_path, write=False) as con:
-        rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd FROM perf_models WHERE active").fetchall()
+        return _active_models(con)
+
+
+def _active_models(con) -> dict[int, dict]:
+    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd FROM perf_models WHERE active").fetchall()
     out: dict[int, dict] = {}
     for imo, version, form, target, coefs, months in rows:
         d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0})
@@ -132,7 +174,11 @@ def active_models(db_path: Path) -> dict[int, dict]:
 
 def next_versions(db_path: Path) -> dict[int, int]:
     with warehouse.connect(db_path, write=False) as con:
-        return {int(i): int(v) + 1 for i, v in con.execute("SELECT imo, max(version) FROM perf_models GROUP BY imo").fetchall()}
+        return _next_versions(con)
+
+
+def _next_versions(con) -> dict[int, int]:
+    return {int(i): int(v) + 1 for i, v in con.execute("SELECT imo, max(version) FROM perf_models GROUP BY imo").fetchall()}
 
 
 def save_fits(db_path: Path, rows: list[dict]) -> None:

@@ -55,14 +55,16 @@ INPUT_COLUMNS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_dir_rel_deg", "wav
                  "months_since_drydock", "stw_kn", "fuel_t", "hours")  # noon-report columns a fit reads
 
 
-def inputs_from_reports(df: pd.DataFrame) -> dict[str, np.ndarray]:
-    """Model inputs (features order) and targets from validated noon reports."""
+def inputs_from_reports(reports) -> dict[str, np.ndarray]:
+    """Model inputs (features order) and targets from validated noon reports (a DataFrame or a mapping
+    of column → array)."""
+    col = {c: np.asarray(reports[c], dtype=np.float64) for c in INPUT_COLUMNS}
     return {
-        "rpm": df["rpm"].to_numpy(float), "draft_m": df["draft_m"].to_numpy(float), "trim_m": df["trim_m"].to_numpy(float),
-        "wind_kn": df["wind_kn"].to_numpy(float), "wind_rel_deg": df["wind_dir_rel_deg"].to_numpy(float),
-        "hs_m": df["wave_m"].to_numpy(float), "wave_rel_deg": df["wave_dir_rel_deg"].to_numpy(float),
-        "months_dd": df["months_since_drydock"].to_numpy(float),
-        "stw_kn": df["stw_kn"].to_numpy(float), "fuel_tph": (df["fuel_t"] / df["hours"]).to_numpy(float),
+        "rpm": col["rpm"], "draft_m": col["draft_m"], "trim_m": col["trim_m"],
+        "wind_kn": col["wind_kn"], "wind_rel_deg": col["wind_dir_rel_deg"],
+        "hs_m": col["wave_m"], "wave_rel_deg": col["wave_dir_rel_deg"],
+        "months_dd": col["months_since_drydock"],
+        "stw_kn": col["stw_kn"], "fuel_tph": col["fuel_t"] / col["hours"],
     }
 
 

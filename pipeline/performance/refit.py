@@ -31,21 +31,24 @@ def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: 
     return rows, summaries[0]
 
 
-def refit_fleet(reports: pd.DataFrame, active: dict[int, dict], versions: dict[int, int], *, form: str = "physical",
+def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = "physical",
                 robust: bool = True) -> tuple[list[dict], list[dict]]:
     """`refit_vessel` for every vessel in `reports` (time-ordered within each vessel), fitted together.
 
-    `active`: imo → active model (as `fleet_store.active_models` returns); `versions`: imo → version
-    of the new rows (1 if absent). Returns (perf_models rows, one summary per vessel in IMO order).
+    `reports`: a DataFrame or a mapping of column → array (as `fleet_store.load_for_refit` gives)
+    with at least `REPORT_COLUMNS`. `active`: imo → active model (as `fleet_store.active_models`
+    returns); `versions`: imo → version of the new rows (1 if absent). Returns (perf_models rows,
+    one summary per vessel in IMO order).
     """
-    if reports.empty:
+    imo = np.asarray(reports["imo"], dtype=np.int64)
+    if imo.size == 0:
         return [], []
-    imo = reports["imo"].to_numpy(np.int64)
+    inp = fit.inputs_from_reports(reports)
     if (np.diff(imo) < 0).any():
         order = np.argsort(imo, kind="stable")  # keeps each vessel's time order
-        reports, imo = reports.iloc[order], imo[order]
+        imo, inp = imo[order], {c: v[order] for c, v in inp.items()}
     first = np.flatnonzero(np.r_[True, imo[1:] != imo[:-1]])
-    return _refit(imo[first], np.r_[first, imo.size], fit.inputs_from_reports(reports), active, versions, form, robust)
+    return _refit(imo[first], np.r_[first, imo.size], inp, active, versions, form, robust)
 
 
 def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], active: dict, versions: dict, form: str,
