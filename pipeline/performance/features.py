@@ -50,28 +50,52 @@ def fold_rel_deg(rel_deg: float) -> float:
     return a
 
 
+@numba.njit(cache=True, inline="always")
+def weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg):
+    """The physical form's weather regressors (speed and fuel alike): (Vw²·cos θw, Hs²·cos²(θs/2))."""
+    wr = fold_rel_deg(wind_rel_deg)
+    sr = fold_rel_deg(wave_rel_deg)
+    c = math.cos(math.radians(sr) / 2.0)
+    return wind_kn * wind_kn * math.cos(math.radians(wr)), hs_m * hs_m * c * c
+
+
+@numba.njit(cache=True, inline="always")
+def _speed_physical(rpm, draft_m, trim_m, wind_term, wave_term, months_dd, out):
+    out[0] = 1.0
+    out[1] = rpm
+    out[2] = draft_m
+    out[3] = trim_m
+    out[4] = wind_term
+    out[5] = wave_term
+    out[6] = months_dd
+
+
+@numba.njit(cache=True, inline="always")
+def _fuel_physical(rpm, draft_m, months_dd, wind_term, wave_term, out):
+    r = rpm / 100.0
+    r3 = r * r * r
+    out[0] = 1.0
+    out[1] = r3
+    out[2] = r3 * draft_m
+    out[3] = r3 * months_dd
+    out[4] = wind_term
+    out[5] = wave_term
+
+
 @numba.njit(cache=True)
 def speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out):
     """Fill `out` with the speed regressors of one observation."""
-    wr = fold_rel_deg(wind_rel_deg)
-    sr = fold_rel_deg(wave_rel_deg)
     if form == FORM_THESIS:
         out[0] = draft_m
         out[1] = trim_m
         out[2] = rpm
-        out[3] = wr
+        out[3] = fold_rel_deg(wind_rel_deg)
         out[4] = wind_kn
-        out[5] = sr
+        out[5] = fold_rel_deg(wave_rel_deg)
         out[6] = hs_m
     else:
-        out[0] = 1.0
-        out[1] = rpm
-        out[2] = draft_m
-        out[3] = trim_m
-        out[4] = wind_kn * wind_kn * math.cos(math.radians(wr))
-        c = math.cos(math.radians(sr) / 2.0)
-        out[5] = hs_m * hs_m * c * c
-        out[6] = months_dd
+        wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+        _speed_physical(rpm, draft_m, trim_m, wind_term, wave_term, months_dd, out)
 
 
 @numba.njit(cache=True)
@@ -80,17 +104,8 @@ def fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_re
     if form == FORM_THESIS:
         speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out)
         return
-    wr = fold_rel_deg(wind_rel_deg)
-    sr = fold_rel_deg(wave_rel_deg)
-    r = rpm / 100.0
-    r3 = r * r * r
-    out[0] = 1.0
-    out[1] = r3
-    out[2] = r3 * draft_m
-    out[3] = r3 * months_dd
-    out[4] = wind_kn * wind_kn * math.cos(math.radians(wr))
-    c = math.cos(math.radians(sr) / 2.0)
-    out[5] = hs_m * hs_m * c * c
+    wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+    _fuel_physical(rpm, draft_m, months_dd, wind_term, wave_term, out)
 
 
 @numba.njit(cache=True)
@@ -117,13 +132,25 @@ def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, w
 
 def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """Regressor matrix (n_obs × n_regressors) for `target` in {"speed", "fuel"}."""
-    cols = [np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)]
-    n = np.broadcast_shapes(*(c.shape for c in cols))
-    cols = [np.broadcast_to(c, n).ravel() for c in cols]
+    cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     k = N_SPEED[form] if target == "speed" else N_FUEL[form]
     X = np.empty((cols[0].size, k))
     _fill_matrix(form, target == "speed", *cols, X)
     return X
+
+
+def design_matrices(form: int, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> tuple[np.ndarray, np.ndarray]:
+    """(speed, fuel) regressor matrices, as `design_matrix` gives them, in one pass (weather terms computed once)."""
+    cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
+    Xs, Xf = np.empty((cols[0].size, N_SPEED[form])), np.empty((cols[0].size, N_FUEL[form]))
+    _fill_both(form, *cols, Xs, Xf)
+    return Xs, Xf
+
+
+def _columns(*arrays) -> list[np.ndarray]:
+    cols = [np.asarray(a, dtype=np.float64) for a in arrays]
+    n = np.broadcast_shapes(*(c.shape for c in cols))
+    return [np.broadcast_to(c, n).ravel() for c in cols]
 
 
 @numba.njit(cache=True)
@@ -133,3 +160,15 @@ def _fill_matrix(form, speed, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m,
             speed_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], X[i])
         else:
             fuel_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], X[i])
+
+
+@numba.njit(cache=True)
+def _fill_both(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, Xs, Xf):
+    for i in range(Xs.shape[0]):
+        if form == FORM_THESIS:
+            speed_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], Xs[i])
+            fuel_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], Xf[i])
+        else:
+            wind_term, wave_term = weather_terms_nb(wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i])
+            _speed_physical(rpm[i], draft_m[i], trim_m[i], wind_term, wave_term, months_dd[i], Xs[i])
+            _fuel_physical(rpm[i], draft_m[i], months_dd[i], wind_term, wave_term, Xf[i])

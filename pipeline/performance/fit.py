@@ -73,6 +73,13 @@ def design(form: str, target: str, inp: dict[str, np.ndarray]) -> np.ndarray:
                                   inp["wind_rel_deg"], inp["hs_m"], inp["wave_rel_deg"], inp["months_dd"])
 
 
+def designs(form: str, inp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """{"speed": X, "fuel": X}: both design matrices in one pass over the inputs."""
+    Xs, Xf = features.design_matrices(features.FORM_IDS[form], inp["rpm"], inp["draft_m"], inp["trim_m"], inp["wind_kn"],
+                                      inp["wind_rel_deg"], inp["hs_m"], inp["wave_rel_deg"], inp["months_dd"])
+    return {"speed": Xs, "fuel": Xf}
+
+
 def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: bool = False, k_folds: int = K_FOLDS) -> FitResult:
     """Least squares of y on X (regressor names from `features`); constant/all-zero regressors are dropped.
 
@@ -109,7 +116,7 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     return out
 
 
-@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+@numba.njit(cache=True)
 def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
     """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
     stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined).
@@ -124,79 +131,32 @@ def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F
     for g in range(G):
         nmax = max(nmax, bounds[g + 1] - bounds[g])
     Z = np.empty((k + 1, nmax))  # scaled regressors, then the target
-    w = np.empty(nmax)
-    r = np.empty(nmax)
-    buf = np.empty(nmax)
-    ok = np.empty(nmax, dtype=np.bool_)
+    T = np.empty((k, nmax))  # weighted regressors
+    w, r, buf = np.empty(nmax), np.empty(nmax), np.empty(nmax)
+    rows = np.empty(nmax, dtype=np.int64)
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
     A = np.empty((k, k + 1))
     beta, prev = np.empty(k), np.empty(k)
     betas = np.empty((F, k))
-    top, bottom, sumsq, scale = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
-    nonzero = np.empty(k, dtype=np.bool_)
+    scale = np.empty(k)
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
+    full = np.zeros(1, dtype=np.int64)
+    end = np.empty(1, dtype=np.int64)
     for g in range(G):
-        a, b = bounds[g], bounds[g + 1]
-        # which rows are usable; per regressor: max, min, any non-zero, sum of squares
-        m = 0
-        for i in range(k):
-            sumsq[i] = 0.0
-            nonzero[i] = False
-        for row in range(a, b):
-            good = np.isfinite(y[row])
-            for i in range(k):
-                good = good and np.isfinite(X[row, i])
-            ok[row - a] = good
-            if not good:
-                continue
-            for i in range(k):
-                v = X[row, i]
-                if m == 0 or v > top[i]:
-                    top[i] = v
-                if m == 0 or v < bottom[i]:
-                    bottom[i] = v
-                if v != 0.0:
-                    nonzero[i] = True
-                sumsq[i] += v * v
-            m += 1
+        m = _pack(X, y, bounds[g], bounds[g + 1], F, rows, lo, hi, Z)
         n_out[g] = m
-        nf = float(max(m, 1))
-        n_keep = 0
-        for i in range(k):
-            keep[g, i] = (intercept[i] and nonzero[i]) or (m > 0 and top[i] - bottom[i] > 1e-12)
-            n_keep += keep[g, i]
-            scale[i] = np.sqrt(sumsq[i] / nf)
-            if scale[i] == 0.0 or not keep[g, i]:
-                scale[i] = 1.0
+        n_keep = _scale(Z, m, intercept, keep[g], scale)
         if m == 0 or n_keep == 0:
             continue  # nothing to fit: coefficients 0, statistics NaN
-        # fold f is slots lo[f]:hi[f]
-        s0 = 0
-        for f in range(F):
-            lo[f] = s0
-            s0 += max((m - f + F - 1) // F, 0)
-            hi[f] = s0
-        p = 0
-        for row in range(a, b):
-            if not ok[row - a]:
-                continue
-            s = lo[p % F] + p // F
-            for i in range(k):
-                Z[i, s] = X[row, i] / scale[i] if keep[g, i] else 0.0
-            Z[k, s] = y[row]
-            p += 1
-        for s in range(m):
-            w[s] = 1.0
-        for i in range(k):
-            beta[i] = 0.0
-        fresh = False  # gram holds the blocks of the current weights
+        nf = float(m)
+        end[0] = m
+        w[:m] = 1.0
+        beta[:] = 0.0
+        med, s = np.nan, np.nan  # the last Huber location and scale: where the next ones probably lie
         for it in range(max_solves):
-            _fold_grams(Z, w, lo, hi, gram)
-            fresh = True
-            _sum_folds(gram, A)
-            for i in range(k):
-                prev[i] = beta[i]
-            _solve_dropped(A, keep[g], beta)
+            _grams(Z, w, full, end, T, gram)
+            prev[:] = beta
+            _solve_dropped(gram[0], keep[g], beta)
             if it > 0:
                 step, big = 0.0, 0.0
                 for i in range(k):
@@ -206,19 +166,10 @@ def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F
                     break  # converged: `w` is still the weights `beta` was solved with
             if robust:
                 _residuals(Z, beta, 0, m, r)
-                _huber_weights(r, m, huber_k, buf, w)
-                fresh = False
+                med, s = _huber_weights(r, m, huber_k, med, s, buf, w)
         # fit statistics on all rows
         _residuals(Z, beta, 0, m, r)
-        ssr, ysum = 0.0, 0.0
-        for s in range(m):
-            ssr += r[s] * r[s]
-            ysum += Z[k, s]
-        ybar = ysum / nf
-        sst = 0.0
-        for s in range(m):
-            d = Z[k, s] - ybar
-            sst += d * d
+        ssr, sst, ybar = _sums(r, Z[k], m)
         stats[g, 1] = np.sqrt(ssr / nf)
         if sst > 0:
             stats[g, 0] = 1.0 - ssr / sst
@@ -226,9 +177,10 @@ def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F
             coef[g, i] = beta[i] / scale[i] if keep[g, i] else 0.0
         # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block
         if do_cv and m >= 2 * n_keep:
-            if not fresh:
-                _fold_grams(Z, w, lo, hi, gram)
-            _sum_folds(gram, A)
+            _grams(Z, w, lo, hi, T, gram)
+            A[:] = 0.0
+            for f in range(F):
+                A += gram[f]
             cv = 0.0
             for f in range(F):
                 for i in range(k):
@@ -236,38 +188,123 @@ def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F
                         gram[f, i, j] = A[i, j] - gram[f, i, j]
                 _solve_dropped(gram[f], keep[g], betas[f])
                 _residuals(Z, betas[f], lo[f], hi[f], r)
-                for s in range(lo[f], hi[f]):
-                    cv += r[s] * r[s]
-            stats[g, 2] = np.sqrt(cv / m)
-
-
-@numba.njit(cache=True, fastmath={"reassoc", "contract"})  # reassociation lets the row sums vectorise
-def _fold_grams(Z, w, lo, hi, out):
-    """out[f] = [ZᵀWZ | ZᵀWy] over slots lo[f]:hi[f]."""
-    k = Z.shape[0] - 1
-    for f in range(lo.size):
-        a, b = lo[f], hi[f]
-        wf = w[a:b]  # slices indexed from 0 up: no negative-index checks, so the loops vectorise
-        for i in range(k):
-            zi = Z[i, a:b]
-            for j in range(i, k + 1):
-                zj = Z[j, a:b]
-                s = 0.0
-                for q in range(b - a):
-                    s += wf[q] * zi[q] * zj[q]
-                out[f, i, j] = s
-                if j < k:
-                    out[f, j, i] = s
+                for q in range(lo[f], hi[f]):
+                    cv += r[q] * r[q]
+            stats[g, 2] = np.sqrt(cv / nf)
 
 
 @numba.njit(cache=True)
-def _sum_folds(gram, out):
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            s = 0.0
-            for f in range(gram.shape[0]):
-                s += gram[f, i, j]
-            out[i, j] = s
+def _pack(X, y, a, b, F, rows, lo, hi, Z):
+    """Copy the finite rows among a:b of X and y into Z[:, :m] (regressors, then the target) fold by fold:
+    the p-th of them goes to fold p mod F, and fold f is slots lo[f]:hi[f]. Returns m."""
+    k = X.shape[1]
+    m = 0
+    for row in range(a, b):
+        good = np.isfinite(y[row])
+        for i in range(k):
+            good &= np.isfinite(X[row, i])
+        rows[m] = row
+        m += good
+    s = 0
+    for f in range(F):
+        lo[f] = s
+        for p in range(f, m, F):
+            row = rows[p]
+            for i in range(k):
+                Z[i, s] = X[row, i]
+            Z[k, s] = y[row]
+            s += 1
+        hi[f] = s
+    return m
+
+
+@numba.njit(cache=True, fastmath=True)  # finite values only (`_pack` left the others out)
+def _column_stats(z):
+    """(max, min, any non-zero, sum of squares) of a finite, non-empty array."""
+    top, bottom, sq, nonzero = z[0], z[0], 0.0, False
+    for v in z:
+        top = max(top, v)
+        bottom = min(bottom, v)
+        nonzero |= v != 0.0
+        sq += v * v
+    return top, bottom, nonzero, sq
+
+
+@numba.njit(cache=True)
+def _scale(Z, m, intercept, keep, scale):
+    """Decide which regressors to keep (not constant, or the intercept) and scale the kept ones in Z[:, :m]
+    to unit RMS; a dropped one becomes 0. Returns how many are kept."""
+    k = Z.shape[0] - 1
+    n_keep = 0
+    for i in range(k):
+        zi = Z[i, :m]
+        keep[i] = False
+        scale[i] = 1.0
+        if m == 0:
+            continue
+        top, bottom, nonzero, sq = _column_stats(zi)
+        keep[i] = (intercept[i] and nonzero) or top - bottom > 1e-12
+        if keep[i]:
+            n_keep += 1
+            rms = np.sqrt(sq / m)
+            if rms != 0.0:
+                scale[i] = rms
+            zi /= scale[i]
+        else:
+            zi[:] = 0.0
+    return n_keep
+
+
+@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+def _sums(r, yv, m):
+    """(Σ r², Σ (y − ȳ)², ȳ) over the first m slots."""
+    ssr, ysum = 0.0, 0.0
+    for q in range(m):
+        ssr += r[q] * r[q]
+        ysum += yv[q]
+    ybar = ysum / m
+    sst = 0.0
+    for q in range(m):
+        d = yv[q] - ybar
+        sst += d * d
+    return ssr, sst, ybar
+
+
+@numba.njit(cache=True, fastmath={"reassoc", "contract"})  # reassociation lets the row sums vectorise
+def _grams(Z, w, lo, hi, T, out):
+    """out[f] = [ZᵀWZ | ZᵀWy] over slots lo[f]:hi[f] (T: scratch for the weighted regressors)."""
+    k = Z.shape[0] - 1
+    for f in range(lo.size):
+        a, b = lo[f], hi[f]
+        n = b - a
+        wf = w[a:b]  # slices indexed from 0 up: no negative-index checks, so the loops vectorise
+        for i in range(k):
+            zi, ti = Z[i, a:b], T[i, :n]
+            for q in range(n):
+                ti[q] = wf[q] * zi[q]
+        for i in range(k):
+            ti = T[i, :n]
+            j = i
+            while j + 3 <= k:  # four columns per sweep over the rows
+                z0, z1, z2, z3 = Z[j, a:b], Z[j + 1, a:b], Z[j + 2, a:b], Z[j + 3, a:b]
+                s0 = s1 = s2 = s3 = 0.0
+                for q in range(n):
+                    t = ti[q]
+                    s0 += t * z0[q]
+                    s1 += t * z1[q]
+                    s2 += t * z2[q]
+                    s3 += t * z3[q]
+                out[f, i, j], out[f, i, j + 1], out[f, i, j + 2], out[f, i, j + 3] = s0, s1, s2, s3
+                j += 4
+            while j <= k:
+                zj = Z[j, a:b]
+                s0 = 0.0
+                for q in range(n):
+                    s0 += ti[q] * zj[q]
+                out[f, i, j] = s0
+                j += 1
+            for j in range(i + 1, k):
+                out[f, j, i] = out[f, i, j]
 
 
 @numba.njit(cache=True)
@@ -325,14 +362,23 @@ def _solve_dropped(A, keep, x):
 
 
 @numba.njit(cache=True)
-def _huber_weights(r, m, huber_k, buf, w):
-    """Huber weights of residuals r[:m] into w[:m]: scale = 1.4826 · MAD (1e-9 when the MAD is 0)."""
+def _huber_weights(r, m, huber_k, med_guess, s_guess, buf, w):
+    """Huber weights of residuals r[:m] into w[:m]: scale s = 1.4826 · MAD (1e-9 when the MAD is 0).
+
+    Returns (median, s); the previous ones, if known (else NaN), are guesses that make the medians cheap.
+    """
+    if not (np.isfinite(med_guess) and np.isfinite(s_guess)):  # guess from the mean and standard deviation
+        mean, sq = 0.0, 0.0
+        for q in range(m):
+            mean += r[q]
+        mean /= m
+        for q in range(m):
+            sq += (r[q] - mean) * (r[q] - mean)
+        med_guess, s_guess = mean, np.sqrt(sq / m)
+    med = _median(r, m, med_guess, 0.1 * s_guess, buf)
     for q in range(m):
-        buf[q] = r[q]
-    med = _median_inplace(buf, m)
-    for q in range(m):
-        buf[q] = abs(r[q] - med)
-    s = 1.4826 * _median_inplace(buf, m)
+        w[q] = abs(r[q] - med)  # w is scratch until the weights go in
+    s = 1.4826 * _median(w, m, s_guess / 1.4826, 0.1 * s_guess, buf)
     if s == 0.0:
         s = 1e-9
     c = huber_k * s
@@ -340,6 +386,35 @@ def _huber_weights(r, m, huber_k, buf, w):
         u = abs(r[q]) / c
         inv = 1.0 / u
         w[q] = inv if inv < 1.0 else 1.0  # 1 where u ≤ 1, else 1/u
+    return med, s
+
+
+@numba.njit(cache=True)
+def _median(a, m, guess, width, buf):
+    """np.median of a[:m] (a is left as it is; buf is scratch).
+
+    If guess ± width brackets the middle order statistics, only the values inside the bracket are
+    selected among (few, when the guess is good); otherwise all of them.
+    """
+    half = m // 2
+    low, high = guess - width, guess + width
+    below, inside = 0, 0
+    for q in range(m):
+        v = a[q]
+        below += v < low
+        buf[inside] = v
+        inside += (v >= low) & (v <= high)
+    if below <= half - 1 + m % 2 and half < below + inside:
+        upper = _select(buf, 0, inside - 1, half - below)
+        if m % 2:
+            return upper
+        lower = buf[0]  # the largest of the values below the upper middle one
+        for q in range(1, half - below):
+            lower = max(lower, buf[q])
+        return (lower + upper) / 2
+    for q in range(m):
+        buf[q] = a[q]
+    return _median_inplace(buf, m)
 
 
 @numba.njit(cache=True)

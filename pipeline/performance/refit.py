@@ -56,7 +56,7 @@ def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], act
     """Vessel g is rows bounds[g]:bounds[g+1] of the model inputs `inp`."""
     n = np.diff(bounds)
     y = {"speed": inp["stw_kn"], "fuel": inp["fuel_tph"]}
-    X = {t: fit.design(form, t, inp) for t in TARGETS}
+    X = fit.designs(form, inp)
     results = {t: fit.fit_targets(form, t, X[t], y[t], bounds, robust=robust) for t in TARGETS}
     hold_from = bounds[:-1] + fit.holdout_start(n)
     compared = {t: _compare_with_active(t, imos, bounds, hold_from, X[t], y[t], results[t], active, form) for t in TARGETS}
