@@ -33,7 +33,7 @@ STOPS = {
     "download-2nd-file": "download:2:pause",
     "decode-4th-file": "decode:4:pause",
     "zarr-creating-the-store": "zarr:8:pause",
-    "zarr-mid-region": "zarr:120:kill",
+    "zarr-mid-region": "zarr:75:kill",  # creating the store takes ~45 writes, the region 64 more
     "before-ingest-log": "log:1:kill",
     "before-cycle-status": "status:1:kill",
     "rewrite-mid-region": "zarr:40:kill",  # a forced re-ingest of a complete cycle
