@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 
-from pipeline.weather.currents import currents_at
+from pipeline.weather.currents import analysis_for, persist_into
 from pipeline.weather.regrid import regrid
 
 WIND_VARS = ("u10", "v10")
@@ -23,7 +23,8 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
     """(cycle dataset with dims (step, lat, lon), steps with missing wind or waves)."""
     steps = np.asarray(steps_h, dtype=np.int32)
     shape = (steps.size, lat.size, lon.size)
-    out = {v: np.full(shape, np.nan, np.float32) for v in (*WIND_VARS, *WAVE_VARS, "uo", "vo")}
+    # uninitialised: every slot is written once below, by a field or by NaN (no full-size NaN prefill to overwrite)
+    out = {v: np.empty(shape, np.float32) for v in (*WIND_VARS, *WAVE_VARS, "uo", "vo")}
     have_wind = np.zeros(steps.size, bool)
     have_waves = np.zeros(steps.size, bool)
     pos = {int(s): i for i, s in enumerate(steps)}
@@ -45,14 +46,21 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
             for v in WAVE_VARS:
                 out[v][i] = r[v].values[k]
             have_waves[i] = True
+    for v in WIND_VARS:
+        out[v][~have_wind] = np.nan
+    for v in WAVE_VARS:
+        out[v][~have_waves] = np.nan
     valid = np.datetime64(cycle, "ns") + steps.astype("timedelta64[h]").astype("timedelta64[ns]")
-    age = np.full(steps.size, np.nan, np.float32)
     if oscar is not None:
         # regrid each analysis once, then persist it to the valid times (same values, far fewer fields)
-        cur = currents_at(regrid(oscar, lat, lon), valid)
-        out["uo"][:] = cur["uo"].values
-        out["vo"][:] = cur["vo"].values
-        age = cur["current_age_h"].values
+        cur = regrid(oscar, lat, lon)
+        idx, age = analysis_for(cur["time"].values, valid)
+        for v in ("uo", "vo"):
+            persist_into(cur[v].values, idx, out[v])
+    else:
+        age = np.full(steps.size, np.nan, np.float32)
+        out["uo"].fill(np.nan)
+        out["vo"].fill(np.nan)
     missing = [int(s) for s, w, a in zip(steps, have_wind, have_waves) if not (w and a)]
     ds = xr.Dataset(
         {k: (("step", "lat", "lon"), v) for k, v in out.items()} | {"current_age_h": (("step",), age.astype(np.float32))},
