@@ -1,6 +1,7 @@
 """Prefect flows `ingest-weather` (one cycle) and `backfill` (a range of cycles).
 
-list → download → decode → write; each task calls one pipeline/storage function. A file that
+Four tasks: list → download → decode → write. Downloads run a few at a time and GRIB2 files are
+decoded in two threads; the write task writes the cube, then the file log, then the cycle status. A file that
 is missing or corrupt is logged and the cycle is written incomplete (never silently complete);
 a later run that finds the file completes it. A cycle is skipped only when both the cube and the
 warehouse's cycle status (written last) say it is complete. Tasks do not hash their inputs for
@@ -10,6 +11,7 @@ Prefect's cache (they pass whole decoded cycles): re-runs are made idempotent by
 from __future__ import annotations
 
 import uuid
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -105,71 +107,114 @@ def parse_cycle(text: str) -> np.datetime64:
     return np.datetime64(c, "ns")
 
 
-@task(name="list-rish", retries=2, retry_delay_seconds=1, cache_policy=NO_CACHE)
-def list_rish(base_url: str, cycle: np.datetime64, opts: FetchOptions) -> tuple[list[rish.SourceFile], list[str], str]:
-    url = rish.day_folder_url(base_url, cycle)
-    try:
-        names, rejected = rish.parse_index(read_text(url, opts))
-    except FileNotFoundError:
-        return [], [], url
-    return rish.prefer_resolution(rish.files_for_cycle(names, cycle)), rejected, url
+DOWNLOAD_WORKERS = 4  # concurrent HTTP downloads (I/O-bound; hashing and file writes release the GIL)
+DECODE_WORKERS = 2  # GRIB2 files decoded at once (eccodes is built thread-safe and releases the GIL)
 
 
-@task(name="list-oscar", retries=2, retry_delay_seconds=1, cache_policy=NO_CACHE)
-def list_oscar(base_url: str, start: np.datetime64, end: np.datetime64, opts: FetchOptions) -> list[oscar_src.OscarFile]:
+@dataclass
+class Listing:
+    items: list[Download]
+    rejected: list[str]
+    day_url: str
+    gaps: dict[str, list[int]]
+    n_oscar: int
+
+
+@task(name="list-sources", retries=2, retry_delay_seconds=1, cache_policy=NO_CACHE)
+def list_sources(rish_url: str, oscar_url: str, cycle: np.datetime64, steps: list[int],
+                 opts: dict[str, FetchOptions]) -> Listing:
+    """The cycle's GSM/GWM files from the RISH day folder and the OSCAR files covering its leads (OSCAR is
+    not listed when RISH has nothing for the cycle)."""
+    day_url = rish.day_folder_url(rish_url, cycle)
     try:
-        names, _ = rish.parse_index(read_text(base_url.rstrip("/") + "/", opts))
+        names, rejected = rish.parse_index(read_text(day_url, opts["GSM"]))
     except FileNotFoundError:
-        return []
-    return oscar_src.files_for_window(names, start, end)
+        names, rejected = [], []
+    files = rish.prefer_resolution(rish.files_for_cycle(names, cycle))
+    if not files:
+        return Listing([], rejected, day_url, {}, 0)
+    items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
+    try:
+        oscar_names, _ = rish.parse_index(read_text(oscar_url.rstrip("/") + "/", opts["OSCAR"]))
+    except FileNotFoundError:
+        oscar_names = []
+    oscar_files = oscar_src.files_for_window(oscar_names, cycle, cycle + np.timedelta64(max(steps), "h"))
+    items += [Download("OSCAR", f.name, oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
+    return Listing(items, rejected, day_url, rish.coverage(files, steps), len(oscar_files))
+
+
+def _fetch_one(it: Download, raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
+               known: dict[str, str]) -> Download:
+    it.started_at = ingest_log.utcnow()
+    dest = raw_store.path_for(raw_dir, it.source, cycle, it.name)
+    it.result = fetch(it.url, dest, opts[it.source], expected_sha256=known.get(it.name))
+    it.status, it.error = it.result.status, it.result.error
+    return it
 
 
 @task(name="download", cache_policy=NO_CACHE)
 def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
                  known: dict[str, str]) -> list[Download]:
-    for it in items:
-        it.started_at = ingest_log.utcnow()
-        dest = raw_store.path_for(raw_dir, it.source, cycle, it.name)
-        it.result = fetch(it.url, dest, opts[it.source], expected_sha256=known.get(it.name))
-        it.status, it.error = it.result.status, it.result.error
+    """Every file, DOWNLOAD_WORKERS at a time. A local write failure (full disk) stops the ingest at once:
+    downloads not yet started are cancelled and the error is raised (files already fetched stay, whole)."""
+    pool = ThreadPoolExecutor(DOWNLOAD_WORKERS, thread_name_prefix="download")
+    try:
+        futures = [pool.submit(_fetch_one, it, raw_dir, cycle, opts, known) for it in items]
+        for done in as_completed(futures):
+            done.result()  # raises LocalWriteError
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
     return items
+
+
+def _decode_one(it: Download, quarantine_dir: Path):
+    """The decoded dataset, or None after marking the file corrupt and moving it to quarantine."""
+    try:
+        return (decode_gsm if it.source == "GSM" else decode_gwm)(it.result.path)
+    except DecodeError as exc:
+        it.status, it.error = "corrupt", f"{exc} (from {it.url})"
+        raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+        return None
 
 
 @task(name="decode-and-assemble", cache_policy=NO_CACHE)
 def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
-    gsm, gwm, osc = [], [], []
-    for it in items:
-        if it.status not in ("ok", "skipped"):
-            continue
-        try:
-            if it.source == "GSM":
-                gsm.append(decode_gsm(it.result.path))
-            elif it.source == "GWM":
-                gwm.append(decode_gwm(it.result.path))
-            else:
+    """GRIB2 files DECODE_WORKERS at a time; OSCAR NetCDF in this thread meanwhile (HDF5 is not thread-safe)."""
+    usable = [it for it in items if it.status in ("ok", "skipped")]
+    grib = [it for it in usable if it.source in ("GSM", "GWM")]
+    with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
+        decoded = pool.map(lambda it: _decode_one(it, quarantine_dir), grib)
+        osc = []
+        for it in (it for it in usable if it.source == "OSCAR"):
+            try:
                 osc.append(decode_oscar(it.result.path))
-        except DecodeError as exc:
-            it.status, it.error = "corrupt", f"{exc} (from {it.url})"
-            raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+            except DecodeError as exc:
+                it.status, it.error = "corrupt", f"{exc} (from {it.url})"
+                raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+        decoded = list(decoded)
+    gsm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GSM"]
+    gwm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GWM"]
     oscar = xr.concat(osc, dim="time").sortby("time") if osc else None
     ds, missing_steps = assemble_cycle(cycle, steps, grid[0], grid[1], gsm, gwm, oscar)
     return ds, missing_steps, oscar is not None
 
 
 @task(name="write-cycle", cache_policy=NO_CACHE)
-def write_cube(path: Path, ds, complete: bool) -> None:
-    cube.write_cycle(path, ds, complete=complete)
-
-
-@task(name="log-files", cache_policy=NO_CACHE)
-def log_files(db: Path, run_id: str, cycle: np.datetime64, items: list[Download]) -> None:
+def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complete: bool, n_expected: int,
+                problems: list[str]) -> None:
+    """Cube first, then the file log, then the cycle status: the status is written last, so a run killed
+    before it is never taken for a complete one."""
+    cube.write_cycle(layout.weather_cube, ds, complete=complete)
     now = ingest_log.utcnow()
-    ingest_log.record_files(db, [
+    run_id = uuid.uuid4().hex[:12]
+    ingest_log.record_files(layout.warehouse, [
         {"run_id": run_id, "source": it.source, "cycle": cycle, "file_name": it.name, "url": it.url,
          "bytes": it.result.bytes if it.result else None, "sha256": it.result.sha256 if it.result else None,
          "status": it.status, "error": it.error, "started_at": it.started_at or now, "finished_at": now}
         for it in items
     ])
+    ingest_log.set_cycle_status(layout.warehouse, cycle, complete=complete, n_expected=n_expected,
+                                n_ok=sum(it.status in ("ok", "skipped") for it in items), missing="; ".join(problems)[:2000])
 
 
 @flow(name="ingest-weather", log_prints=False)
@@ -188,35 +233,27 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     token = earthdata_token(s)
     opts = {source: _opts(s, source, token) for source in ("GSM", "GWM", "OSCAR")}
     steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
-    files, rejected, day_url = list_rish(s.sources.rish_url, c, opts["GSM"])
-    for name in rejected:
-        logger.warning("ignored unsafe name %r listed at %s", name, day_url)
-    if not files:
-        logger.warning("cycle %s: no GSM/GWM files listed at %s; nothing written", label, day_url)
-        return CycleReport(label, False, 0, 0, missing=[f"no GSM/GWM files listed at {day_url}"]).__dict__
-    items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
-    gaps = rish.coverage(files, steps)
-    end = c + np.timedelta64(max(steps), "h")
-    oscar_files = list_oscar(s.sources.oscar_url, c, end, opts["OSCAR"])
-    items += [Download("OSCAR", f.name, s.sources.oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
-    known = ingest_log.known_checksums(layout.warehouse, [it.name for it in items])
-    items = download_all(items, layout.raw, c, opts, known)
-    ds, missing_steps, have_currents = decode_and_assemble(items, c, steps, routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg), layout.quarantine)
+    listing = list_sources(s.sources.rish_url, s.sources.oscar_url, c, steps, opts)
+    for name in listing.rejected:
+        logger.warning("ignored unsafe name %r listed at %s", name, listing.day_url)
+    if not listing.items:
+        logger.warning("cycle %s: no GSM/GWM files listed at %s; nothing written", label, listing.day_url)
+        return CycleReport(label, False, 0, 0, missing=[f"no GSM/GWM files listed at {listing.day_url}"]).__dict__
+    known = ingest_log.known_checksums(layout.warehouse, [it.name for it in listing.items])
+    items = download_all(listing.items, layout.raw, c, opts, known)
+    grid = routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg)
+    ds, missing_steps, have_currents = decode_and_assemble(items, c, steps, grid, layout.quarantine)
     problems = [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
-    for model, leads in gaps.items():
+    for model, leads in listing.gaps.items():
         if leads:
             problems.append(f"{model} leads not listed: {', '.join(map(str, leads))} h")
     if not have_currents:
         problems.append("no OSCAR analysis at or before the cycle")
     complete = not missing_steps and have_currents and not problems
-    write_cube(layout.weather_cube, ds, complete)
-    run_id = uuid.uuid4().hex[:12]
-    log_files(layout.warehouse, run_id, c, items)
-    n_ok = sum(it.status in ("ok", "skipped") for it in items)
-    ingest_log.set_cycle_status(layout.warehouse, c, complete=complete, n_expected=len(steps) + 2 + len(oscar_files),
-                                n_ok=n_ok, missing="; ".join(problems)[:2000])
+    write_cycle(layout, c, ds, items, complete, len(steps) + 2 + listing.n_oscar, problems)
     for p in problems:
         logger.warning("cycle %s: %s", label, p)
+    n_ok = sum(it.status in ("ok", "skipped") for it in items)
     return CycleReport(label, complete, len(items), n_ok, missing=problems,
                        corrupt=[it.name for it in items if it.status == "corrupt"]).__dict__
 

@@ -24,6 +24,7 @@ import os
 import resource
 import signal
 import sys
+import threading
 from pathlib import Path
 
 FAST_OVERRIDES = {
@@ -63,13 +64,16 @@ def _stop(point: str, how: str, marker: Path | None) -> None:
 
 def _counted(stop, n: int, fn, before: bool, count: dict | None = None):
     count = {"n": 0} if count is None else count  # a shared dict counts calls of several functions together
+    lock = count.setdefault("lock", threading.Lock())  # downloads and decodes run in worker threads
 
     def wrapper(*args, **kwargs):
-        count["n"] += 1
-        if before and count["n"] == n:
+        with lock:
+            count["n"] += 1
+            k = count["n"]  # this call's number, whatever other threads do meanwhile
+        if before and k == n:
             stop()
         out = fn(*args, **kwargs)
-        if not before and count["n"] == n:
+        if not before and k == n:
             stop()
         return out
 

@@ -63,7 +63,7 @@ def _fail_after(n_ok: int, real):
     return put
 
 
-@pytest.mark.parametrize("n_ok", [0, 10, 150], ids=["at-creation", "in-template", "mid-region"])
+@pytest.mark.parametrize("n_ok", [0, 10, 75], ids=["at-creation", "in-template", "mid-region"])  # creation ≈ 45 writes, region 64
 def test_disk_full_during_the_cube_write_is_a_clear_error_and_no_cycle_shows(n_ok, small_mirror, tmp_path, ingest, clean_cube, monkeypatch):
     import zarr.storage._local as zarr_local
 
@@ -89,7 +89,11 @@ def test_disk_full_during_download_stops_at_once_with_a_clear_error(small_mirror
     assert proc.returncode != 0
     assert "cannot write" in err and "File too large" in err and "free space on the data root" in err, err[-3000:]
     assert str(DataLayout(root).raw) in err
-    assert not [p for p in DataLayout(root).raw.rglob("*") if p.is_file()]  # no partial or .part file
+    # downloads run concurrently: files that fit may have landed, but each one whole, and no `.part` is left
+    sources = {p.name: p for p in small_mirror.rglob("*") if p.is_file()}
+    landed = [p for p in DataLayout(root).raw.rglob("*") if p.is_file()]
+    assert all(p.name in sources and p.read_bytes() == sources[p.name].read_bytes() for p in landed), landed
+    assert len(landed) < len([n for n in sources if n != "index.html"])  # it stopped: not everything was fetched
     assert not DataLayout(root).weather_cube.exists()
     assert ingest(root, *file_urls(small_mirror))["complete"]
     assert_same_cube(DataLayout(root).weather_cube, clean_cube)
