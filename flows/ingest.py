@@ -31,6 +31,7 @@ from pipeline.sources import rish
 from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text
 from pipeline.weather.assemble import assemble_cycle
 from pipeline.weather.grid import routing_grid
+from pipeline.weather.regrid import regrid
 from storage import cube, ingest_log, raw_store
 
 
@@ -167,10 +168,10 @@ def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opt
     return items
 
 
-def _decode_one(it: Download, quarantine_dir: Path):
-    """The decoded dataset, or None after marking the file corrupt and moving it to quarantine."""
+def _decode_one(it: Download, grid: tuple, quarantine_dir: Path):
+    """The decoded dataset on the routing grid, or None after marking the file corrupt and moving it to quarantine."""
     try:
-        return (decode_gsm if it.source == "GSM" else decode_gwm)(it.result.path)
+        return regrid((decode_gsm if it.source == "GSM" else decode_gwm)(it.result.path), grid[0], grid[1])
     except DecodeError as exc:
         it.status, it.error = "corrupt", f"{exc} (from {it.url})"
         raw_store.quarantine(quarantine_dir, it.source, it.result.path)
@@ -179,11 +180,12 @@ def _decode_one(it: Download, quarantine_dir: Path):
 
 @task(name="decode-and-assemble", cache_policy=NO_CACHE)
 def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
-    """GRIB2 files DECODE_WORKERS at a time; OSCAR NetCDF in this thread meanwhile (HDF5 is not thread-safe)."""
+    """GRIB2 files decoded and regridded DECODE_WORKERS at a time; OSCAR NetCDF in this thread meanwhile (HDF5
+    is not thread-safe)."""
     usable = [it for it in items if it.status in ("ok", "skipped")]
     grib = [it for it in usable if it.source in ("GSM", "GWM")]
     with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
-        decoded = pool.map(lambda it: _decode_one(it, quarantine_dir), grib)
+        decoded = pool.map(lambda it: _decode_one(it, grid, quarantine_dir), grib)
         osc = []
         for it in (it for it in usable if it.source == "OSCAR"):
             try:

@@ -59,3 +59,18 @@ def test_currents_latest_analysis_at_or_before_valid_time():
     assert out.uo.values[1, 0, 0] == 1.0 and out.current_age_h.values[1] == pytest.approx(4 * 24 + 18)
     assert out.uo.values[2, 0, 0] == 2.0 and out.current_age_h.values[2] == 0
     assert out.current_age_h.values[3] == pytest.approx(54)
+
+
+def test_regrid_onto_the_same_grid_is_the_identity_and_twice_equals_once():
+    lat, lon = routing_grid(1.0, -10.0, 10.0)
+    src_lat, src_lon = np.arange(-90.0, 90.5, 0.5), np.arange(0.0, 360.0, 0.5)
+    rng = np.random.default_rng(3)
+    ds = xr.Dataset({"swh": (("lat", "lon"), rng.random((src_lat.size, src_lon.size)).astype(np.float32)),
+                     "mwd": (("lat", "lon"), (rng.random((src_lat.size, src_lon.size)) * 360).astype(np.float32))},
+                    coords={"lat": src_lat, "lon": src_lon})
+    once = regrid(ds, lat, lon)
+    assert once["swh"].shape == (lat.size, lon.size)
+    twice = regrid(once, lat, lon)  # the ingest regrids in its decode workers, then assembles
+    for v in ("swh", "mwd"):
+        np.testing.assert_array_equal(twice[v].values, once[v].values)
+        np.testing.assert_array_equal(once[v].values, ds[v].sel(lat=lat, lon=lon).values)
