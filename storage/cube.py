@@ -29,6 +29,7 @@ import fcntl
 import os
 import shutil
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import dask.array
@@ -40,6 +41,7 @@ from zarr.codecs import BloscCodec
 DATA_VARS = ("u10", "v10", "swh", "mwd", "mwp", "uo", "vo")
 STATE_HIDDEN, STATE_COMPLETE, STATE_INCOMPLETE = 0, 1, 2
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
+WRITE_WORKERS = 2
 SPATIAL_SPLITS = 3  # chunks per spatial axis: (1, all steps, ≈ nlat/3, ≈ nlon/3), e.g. 107 × 240 on the 0.5° grid
 # LZ4 after byte shuffle: about as small as zstd on smooth float32 fields, faster to write and ~3× faster to
 # read (routing workers read the cube). Fixed when the store is created; appended cycles inherit it.
@@ -181,13 +183,18 @@ def _write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: 
 
 def _write_region(path: Path, index: int, cycle_ds: xr.Dataset) -> None:
     """Write the cycle's values into row `index` of every array, straight through zarr (the metadata,
-    coordinates and encodings are already in the store): the float32 arrays go in as they are, no copy."""
+    coordinates and encodings are already in the store): the float32 arrays go in as they are, no copy,
+    WRITE_WORKERS variables at a time (Blosc compresses without holding the GIL)."""
     group = zarr.open_group(str(path), mode="r+")
     age = (np.asarray(cycle_ds["current_age_h"].values, np.float32) if "current_age_h" in cycle_ds
            else np.full(cycle_ds.sizes["step"], np.nan, np.float32))
     group["current_age_h"][index] = age
-    for v in DATA_VARS:
+
+    def put(v: str) -> None:
         group[v][index] = np.asarray(cycle_ds[v].transpose("step", "lat", "lon").values, dtype=np.float32)
+
+    with ThreadPoolExecutor(WRITE_WORKERS, thread_name_prefix="cube-write") as pool:
+        list(pool.map(put, DATA_VARS))  # re-raises the first failure (e.g. a full disk)
 
 
 def _set_state(path: Path, index: int, state: int) -> None:
