@@ -118,25 +118,26 @@ def test_import_is_idempotent_and_conflicts_are_rejected(fleet, tmp_path):
 
 def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
     """`load_for_refit` (Arrow, ordered in numpy) gives the rows `load_reports` gives (ORDER BY imo, ts),
-    and the same active models and next versions, for the whole fleet and for some vessels."""
-    db = tmp_path / "w.duckdb"
-    fleet_store.import_vessels(db, fleet.vessels)
-    good, bad = validate_noon(_as_text(fleet.noon), fleet_store.known_imos(db))
-    good = good.sample(frac=1.0, random_state=0)  # stored out of order
+    and the same active models and next versions, for the whole fleet and for some vessels, whether
+    the rows were stored in time order or shuffled."""
+    good, bad = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
     good.loc[good.index[:3], "wind_kn"] = np.nan  # NULLs read as NaN
-    fleet_store.import_noon(db, good, bad)
     imo = int(fleet.vessels.imo[1])
     rows, _ = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1)
-    fleet_store.save_fits(db, rows)
     cols = ("imo", "ts_utc", "rpm", "wind_kn", "fuel_t")
-    for imos in (None, [int(fleet.vessels.imo[2]), imo]):
-        arrays, active, versions = fleet_store.load_for_refit(db, imos, cols)
-        df = fleet_store.load_reports(db, imos, columns=cols)
-        assert list(arrays) == list(cols) and len(df) == len(arrays["imo"]) > 0
-        for c in cols:
-            np.testing.assert_array_equal(arrays[c], df[c].to_numpy(), err_msg=c)
-        assert active == fleet_store.active_models(db) and imo in active
-        assert versions == fleet_store.next_versions(db) == {imo: 2}
+    for stored in (good.sort_values(["ts_utc", "imo"]), good.sample(frac=1.0, random_state=0)):
+        db = tmp_path / f"w{len(list(tmp_path.iterdir()))}.duckdb"
+        fleet_store.import_vessels(db, fleet.vessels)
+        fleet_store.import_noon(db, stored, bad)
+        fleet_store.save_fits(db, rows)
+        for imos in (None, [int(fleet.vessels.imo[2]), imo]):
+            arrays, active, versions = fleet_store.load_for_refit(db, imos, cols)
+            df = fleet_store.load_reports(db, imos, columns=cols)
+            assert list(arrays) == list(cols) and len(df) == len(arrays["imo"]) > 0
+            for c in cols:
+                np.testing.assert_array_equal(arrays[c], df[c].to_numpy(), err_msg=c)
+            assert active == fleet_store.active_models(db) and imo in active
+            assert versions == fleet_store.next_versions(db) == {imo: 2}
 
 def test_worse_or_underdetermined_models_are_not_activated(fleet):
     good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))

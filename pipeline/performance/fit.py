@@ -108,23 +108,18 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
     _fit_groups_nb(X, y, bounds, intercept, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,
                    max(int(k_folds), 1), int(k_folds) >= 2, coef, keep, n, stats)
-    out = []
-    for g in range(G):
-        dropped = [names[j] for j in range(k) if not keep[g, j]]
-        out.append(FitResult(form, target, names, coef[g], int(n[g]), float(stats[g, 0]), float(stats[g, 1]),
-                             float(stats[g, 2]), dropped, robust))
+    out, dropped_for = [], {}
+    for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):
+        if kept not in dropped_for:
+            dropped_for[kept] = [nm for nm, kp in zip(names, kept) if not kp]
+        out.append(FitResult(form, target, names, coef[g], n_g, r2, rmse, cv, list(dropped_for[kept]), robust))
     return out
 
 
 @numba.njit(cache=True)
 def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
     """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
-    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined).
-
-    A group's finite rows are copied, scaled to unit RMS per regressor, into scratch laid out
-    regressor by row, fold by fold (row p goes to CV fold p mod F), so every fold is one
-    contiguous range and the whole group stays in cache through all its solves.
-    """
+    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined)."""
     k = X.shape[1]
     G = bounds.size - 1
     nmax = 0
@@ -135,62 +130,74 @@ def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F
     w, r, buf = np.empty(nmax), np.empty(nmax), np.empty(nmax)
     rows = np.empty(nmax, dtype=np.int64)
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
-    A = np.empty((k, k + 1))
-    beta, prev = np.empty(k), np.empty(k)
-    betas = np.empty((F, k))
-    scale = np.empty(k)
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
-    full = np.zeros(1, dtype=np.int64)
-    end = np.empty(1, dtype=np.int64)
     for g in range(G):
-        m = _pack(X, y, bounds[g], bounds[g + 1], F, rows, lo, hi, Z)
-        n_out[g] = m
-        n_keep = _scale(Z, m, intercept, keep[g], scale)
-        if m == 0 or n_keep == 0:
-            continue  # nothing to fit: coefficients 0, statistics NaN
-        nf = float(m)
-        end[0] = m
-        w[:m] = 1.0
-        beta[:] = 0.0
-        med, s = np.nan, np.nan  # the last Huber location and scale: where the next ones probably lie
-        for it in range(max_solves):
-            _grams(Z, w, full, end, T, gram)
-            prev[:] = beta
-            _solve_dropped(gram[0], keep[g], beta)
-            if it > 0:
-                step, big = 0.0, 0.0
-                for i in range(k):
-                    step = max(step, abs(beta[i] - prev[i]))
-                    big = max(big, abs(beta[i]))
-                if step <= rtol * max(big, 1e-12):
-                    break  # converged: `w` is still the weights `beta` was solved with
-            if robust:
-                _residuals(Z, beta, 0, m, r)
-                med, s = _huber_weights(r, m, huber_k, med, s, buf, w)
-        # fit statistics on all rows
-        _residuals(Z, beta, 0, m, r)
-        ssr, sst, ybar = _sums(r, Z[k], m)
-        stats[g, 1] = np.sqrt(ssr / nf)
-        if sst > 0:
-            stats[g, 0] = 1.0 - ssr / sst
-        for i in range(k):
-            coef[g, i] = beta[i] / scale[i] if keep[g, i] else 0.0
-        # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block
-        if do_cv and m >= 2 * n_keep:
-            _grams(Z, w, lo, hi, T, gram)
-            A[:] = 0.0
-            for f in range(F):
-                A += gram[f]
-            cv = 0.0
-            for f in range(F):
-                for i in range(k):
-                    for j in range(k + 1):
-                        gram[f, i, j] = A[i, j] - gram[f, i, j]
-                _solve_dropped(gram[f], keep[g], betas[f])
-                _residuals(Z, betas[f], lo[f], hi[f], r)
-                for q in range(lo[f], hi[f]):
-                    cv += r[q] * r[q]
-            stats[g, 2] = np.sqrt(cv / nf)
+        n_out[g] = _fit_group(X, y, bounds[g], bounds[g + 1], intercept, robust, max_solves, rtol, huber_k, do_cv,
+                              coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
+
+
+@numba.njit(cache=True)
+def _fit_group(X, y, a, b, intercept, robust, max_solves, rtol, huber_k, do_cv, coef, keep, stats, Z, T, w, r, buf, rows,
+               gram, lo, hi):
+    """Fit rows a:b of X and y; returns how many were finite (see `_fit_groups_nb` for the outputs;
+    Z … hi are scratch).
+
+    The finite rows are copied, scaled to unit RMS per regressor, into scratch laid out regressor
+    by row, fold by fold (row p goes to CV fold p mod F), so every fold is one contiguous range and
+    the whole group stays in cache through all its solves.
+    """
+    k = X.shape[1]
+    F = lo.size
+    m = _pack(X, y, a, b, F, rows, lo, hi, Z)
+    scale = np.empty(k)
+    n_keep = _scale(Z, m, intercept, keep, scale)
+    if m == 0 or n_keep == 0:
+        return m  # nothing to fit: coefficients 0, statistics NaN
+    nf = float(m)
+    full, end = np.zeros(1, dtype=np.int64), np.full(1, m)
+    w[:m] = 1.0
+    beta, prev = np.zeros(k), np.empty(k)
+    med, s = np.nan, np.nan  # the last Huber location and scale: where the next ones probably lie
+    for it in range(max_solves):
+        _grams(Z, w, full, end, T, gram)
+        prev[:] = beta
+        _solve_dropped(gram[0], keep, beta)
+        if it > 0:
+            step, big = 0.0, 0.0
+            for i in range(k):
+                step = max(step, abs(beta[i] - prev[i]))
+                big = max(big, abs(beta[i]))
+            if step <= rtol * max(big, 1e-12):
+                break  # converged: `w` is still the weights `beta` was solved with
+        if robust:
+            _residuals(Z, beta, 0, m, r)
+            med, s = _huber_weights(r, m, huber_k, med, s, buf, w)
+    # fit statistics on all rows
+    _residuals(Z, beta, 0, m, r)
+    ssr, sst, ybar = _sums(r, Z[k], m)
+    stats[1] = np.sqrt(ssr / nf)
+    if sst > 0:
+        stats[0] = 1.0 - ssr / sst
+    for i in range(k):
+        coef[i] = beta[i] / scale[i] if keep[i] else 0.0
+    # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block
+    if do_cv and m >= 2 * n_keep:
+        _grams(Z, w, lo, hi, T, gram)
+        A = np.zeros((k, k + 1))
+        for f in range(F):
+            A += gram[f]
+        beta_f = np.empty(k)
+        cv = 0.0
+        for f in range(F):
+            for i in range(k):
+                for j in range(k + 1):
+                    gram[f, i, j] = A[i, j] - gram[f, i, j]
+            _solve_dropped(gram[f], keep, beta_f)
+            _residuals(Z, beta_f, lo[f], hi[f], r)
+            for q in range(lo[f], hi[f]):
+                cv += r[q] * r[q]
+        stats[2] = np.sqrt(cv / nf)
+    return m
 
 
 @numba.njit(cache=True)

@@ -60,6 +60,7 @@ def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], act
     results = {t: fit.fit_targets(form, t, X[t], y[t], bounds, robust=robust) for t in TARGETS}
     hold_from = bounds[:-1] + fit.holdout_start(n)
     compared = {t: _compare_with_active(t, imos, bounds, hold_from, X[t], y[t], results[t], active, form) for t in TARGETS}
+    coef_json = {t: _coefficients_json(results[t]) for t in TARGETS}
     rows, summaries = [], []
     for g, imo in enumerate(map(int, imos)):
         res = {t: results[t][g] for t in TARGETS}
@@ -85,12 +86,21 @@ def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], act
             reason += f"; dropped constant regressors: {', '.join(dropped)}"
         for t, r in res.items():
             rows.append({"imo": imo, "version": version, "form": form, "target": t,
-                         "coefficients": json.dumps(r.coefficients()), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
+                         "coefficients": coef_json[t][g], "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
                          "cv_rmse": r.cv_rmse, "status": "active" if activate else "rejected", "reason": reason,
                          "active": activate, "months_dd": months})
         summaries.append({"imo": imo, "n": int(n[g]), **scores, "changed": activate, "reason": reason, "version": version,
                           "why": next((d.reason for d in decisions if not d.activate), decisions[0].reason)})
     return rows, summaries
+
+
+def _coefficients_json(results: list[fit.FitResult]) -> list[str]:
+    """`json.dumps(r.coefficients())` of every result, formatted from one template."""
+    coef = np.array([r.coef for r in results], dtype=np.float64)
+    if not results or not np.isfinite(coef).all():  # json spells non-finite numbers its own way
+        return [json.dumps(r.coefficients()) for r in results]
+    template = "{" + ", ".join(json.dumps(name) + ": %r" for name in results[0].names) + "}"
+    return [template % row for row in map(tuple, coef.tolist())]
 
 
 def _compare_with_active(target: str, imos, bounds, hold_from, X, y, results, active: dict, form: str) -> dict:
