@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import OK, sail_route_nb
-from pipeline.routing.objectives import route_cost_nb
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb, sail_route_nb
+from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
 
 
 @dataclass(frozen=True)
@@ -51,12 +51,17 @@ class BfoaParams:
     p_engine: float = 0.3
     repulsion: float = 0.002
     d_max: float | None = None  # None: 0.5·sqrt(L) + 1
+    walk_spread: float = 0.08  # random routes: s.d. of a detour's target offset, as a share of the nodes per line
+    walk_turns: float = 0.3  # random routes: new target offsets drawn per route (expected)
+    walk_slope: float = 0.3  # random routes: chance per line of a one-node step towards the target
+    screen: float = 0.002  # jit: skip sailing the rest of a route move estimated worse by > screen × cost
 
     def arrays(self, n_lines: int) -> tuple[np.ndarray, np.ndarray]:
         ip = np.array([self.n_bacteria, self.n_chemo, self.n_cycles, self.n_repro, self.n_disperse, self.ed_every,
                        self.n_fail, self.steps_to_die, self.swim_max, self.r_max, self.k_max, self.backup], dtype=np.int64)
         d_max = self.d_max if self.d_max is not None else 0.5 * np.sqrt(n_lines) + 1.0
-        fp = np.array([self.p_engine, self.repulsion, d_max], dtype=np.float64)
+        fp = np.array([self.p_engine, self.repulsion, d_max, self.walk_spread, self.walk_turns / max(n_lines, 1),
+                       self.walk_slope, self.screen], dtype=np.float64)
         return ip, fp
 
 
@@ -72,23 +77,78 @@ def _cost_from(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, 
 
 
 @numba.njit(cache=True)
-def _random_init(nodes, rpm_idx, edge_ok, n_rpm, max_shift, r_max, k_max, backup):
+def _sail_span(nodes, rpm_idx, start, stop, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx, times_h, grid, ct, cf, out):
+    """Sail legs start..stop-1 only (ct/cf valid at line `start`); False as soon as one is infeasible."""
+    for i in range(start, stop):
+        a, b = nodes[i], nodes[i + 1]
+        if not edge_ok[i, a, b]:
+            return False
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], ct[i], rpm_options[rpm_idx[i]], vp, sc, fc, wx,
+                    times_h, grid, out)
+        if out[CODE] != OK:
+            return False
+        ct[i + 1] = ct[i] + out[H]
+        cf[i + 1] = cf[i] + out[FUEL]
+    return True
+
+
+@numba.njit(cache=True)
+def _time_price(rpm_idx, ct, cf, rpm_options):
+    """Estimated fuel (t) per hour gained by raising the slowest setting one step on this plan; 0 with one setting."""
+    if rpm_options.shape[0] < 2:
+        return 0.0
+    h, f = 0.0, 0.0
+    for j in range(rpm_idx.shape[0]):
+        if rpm_idx[j] == 0:
+            h += ct[j + 1] - ct[j]
+            f += cf[j + 1] - cf[j]
+    n = rpm_idx.shape[0]
+    if h <= 0.0:
+        h, f = ct[n] - ct[0], cf[n] - cf[0]
+    if h <= 0.0:
+        return 0.0
+    k = rpm_options[1] / rpm_options[0]
+    return (f / h) * (k * k - 1.0) / (1.0 - 1.0 / k)
+
+
+@numba.njit(cache=True)
+def _random_walk(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step):
+    """Safe random route: a walk line by line whose step heads, one node at a time, for a target offset that
+    is redrawn now and then (so random routes are smooth detours of every size, not zig-zags) and bends back
+    to the destination in time. Each node: the preferred one first, then nodes ever farther from it (random
+    side), R_max tries in all; on failure back up `backup` lines; give up after K_max tries overall.
+    Offsets are drawn ~ N(0, sigma) nodes; a new target with probability p_new per line; a step towards it with
+    probability p_step per line."""
     L2 = nodes.shape[0]
     P = edge_ok.shape[1]
     c = P // 2
     L = L2 - 2
     nodes[0] = c
     nodes[L2 - 1] = c
+    target = c + int(np.round(np.random.normal() * sigma))
     i, tries = 1, 0
     while i <= L:
         a = nodes[i - 1]
         left = L + 1 - i  # legs still to go after line i
         lo = max(0, a - max_shift, c - max_shift * left)
         hi = min(P - 1, a + max_shift, c + max_shift * left)
+        if np.random.random() < p_new:
+            target = c + int(np.round(np.random.normal() * sigma))
+        tgt = min(max(target, c - (left - 1)), c + (left - 1))  # in reach of the destination, one node a line
+        homing = abs(a - c) >= left - 1
+        step = 0
+        if tgt != a and (homing or np.random.random() < p_step):
+            step = 1 if tgt > a else -1
+            if abs(a - c) > left:  # behind on the way back: larger steps
+                step *= (abs(a - c) + left - 1) // left
+        pref = min(max(a + step, lo), hi)
         placed = False
         if lo <= hi:
-            for _ in range(r_max):
-                b = np.random.randint(lo, hi + 1)
+            for t in range(r_max):
+                off = (t + 1) // 2
+                b = pref + (off if np.random.random() < 0.5 else -off)
+                if b < lo or b > hi:
+                    b = np.random.randint(lo, hi + 1)
                 if edge_ok[i - 1, a, b] and (i < L or edge_ok[L, b, c]):
                     nodes[i] = b
                     placed = True
@@ -100,10 +160,154 @@ def _random_init(nodes, rpm_idx, edge_ok, n_rpm, max_shift, r_max, k_max, backup
             i = max(1, i - backup)
         if tries > k_max:
             return False
-    r0 = np.random.randint(0, n_rpm)
-    for j in range(rpm_idx.shape[0]):
-        rpm_idx[j] = r0 if np.random.random() < 0.8 else np.random.randint(0, n_rpm)
     return True
+
+
+@numba.njit(cache=True)
+def _retime(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
+            grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
+    """Engine re-adjustment after a move, so the arrival stays just inside the RTA; returns the new cost.
+
+    `nodes`/`rpm_idx` were sailed whole into ct/cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
+    at rpm r is estimated to take h·r/r' at r' and burn (r'/r)² times its fuel (fuel rate ∝ rpm³).
+      late   raise the rpm of random legs (the slower of two draws) until the estimated saving covers the
+             delay, sail again; at most two rounds. With the jit objective the re-sail is skipped (cost +inf)
+             when the estimated fuel already reaches `bar`, the cost the move has to beat.
+      early  by more than one step's worth: lower the rpm of random legs while the estimated arrival stays
+             before the RTA, sail again, and keep it only if it is on time and cheaper; at most two rounds.
+    """
+    n = rpm_idx.shape[0]
+    n_rpm = rpm_options.shape[0]
+    if q == np.inf or lo >= n:
+        return q
+    margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
+    for _round in range(2):
+        T = ct[n] - t_dep_h
+        if T <= t_req_h + 1e-9:
+            break
+        need = T - t_req_h + margin
+        first = n
+        extra_f = 0.0
+        for _t in range(4 * (n - lo)):
+            if need <= 0.0:
+                break
+            j = lo + np.random.randint(0, n - lo)
+            j2 = lo + np.random.randint(0, n - lo)
+            if rpm_idx[j2] < rpm_idx[j]:
+                j = j2
+            r = rpm_idx[j]
+            if r >= n_rpm - 1:
+                continue
+            ratio = rpm_options[r + 1] / rpm_options[r]
+            need -= (ct[j + 1] - ct[j]) * (1.0 - 1.0 / ratio)
+            extra_f += (cf[j + 1] - cf[j]) * (ratio * ratio - 1.0)
+            rpm_idx[j] = r + 1
+            first = min(first, j)
+        if first == n:
+            return q
+        if obj == OBJ_JIT and cf[n] + extra_f >= bar:
+            return np.inf
+        q = _cost_from(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                       times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
+        cnt[0] += 1
+        if q == np.inf:
+            return q
+    for _round in range(2):
+        T = ct[n] - t_dep_h
+        slack = t_req_h - T - margin
+        if T > t_req_h + 1e-9 or slack <= 0.0:
+            return q
+        first = n
+        for _t in range(2 * (n - lo)):
+            j = lo + np.random.randint(0, n - lo)
+            j2 = lo + np.random.randint(0, n - lo)
+            if rpm_idx[j2] > rpm_idx[j]:
+                j = j2
+            r = rpm_idx[j]
+            if r == 0:
+                continue
+            add = (ct[j + 1] - ct[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
+            if add > slack:
+                continue
+            if first == n:
+                keep_r[:] = rpm_idx
+                keep_t[:] = ct
+                keep_f[:] = cf
+            slack -= add
+            rpm_idx[j] = r - 1
+            first = min(first, j)
+        if first == n:
+            return q
+        q2 = _cost_from(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                        times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
+        cnt[0] += 1
+        if not (q2 < q and ct[n] - t_dep_h <= t_req_h + 1e-9):
+            rpm_idx[:] = keep_r
+            ct[:] = keep_t
+            cf[:] = keep_f
+            return q
+        q = q2
+    return q
+
+
+@numba.njit(cache=True)
+def _aim_engine(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
+                t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
+    """Engine settings aimed at the RTA for a route: sail it at every constant setting, take the two settings
+    whose arrivals bracket the RTA and put the share of legs on the faster one that should arrive just in
+    time (random legs), then re-time. Returns the cost."""
+    n = rpm_idx.shape[0]
+    R = rpm_options.shape[0]
+    hours = np.empty(R)
+    for r in range(R):
+        rpm_idx[:] = r
+        code, _ = sail_route_nb(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                                times_h, grid, ct, cf)
+        hours[r] = ct[n] - t_dep_h if code == OK else np.inf
+        cnt[0] += 1
+    fast = -1
+    for r in range(R):
+        if hours[r] <= t_req_h:
+            fast = r
+            break
+    if fast <= 0:  # the slowest setting is in time, or none is: one constant setting
+        rpm_idx[:] = 0 if fast == 0 else R - 1
+        for r in range(R - 1, -1, -1):
+            if fast < 0 and hours[r] < np.inf:
+                rpm_idx[:] = r  # the fastest feasible one: the least late
+                break
+    else:
+        slow = fast - 1
+        rpm_idx[:] = fast
+        if hours[slow] < np.inf:
+            share = (hours[slow] - t_req_h) / (hours[slow] - hours[fast])
+            k = int(share * n + np.random.random())
+            rpm_idx[:] = slow
+            perm = np.random.permutation(n)
+            for j in range(min(k, n)):
+                rpm_idx[perm[j]] = fast
+    q = _cost_from(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid,
+                   obj, t_req_h, window_h, f_target, early, late, ct, cf)
+    cnt[0] += 1
+    return _retime(nodes, rpm_idx, 0, q, np.inf, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                   times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
+
+
+@numba.njit(cache=True)
+def _new_bacterium(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
+                   t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt, max_shift, r_max,
+                   k_max, backup, sigma, p_new, p_step):
+    """A random bacterium: a safe random walk with engine settings aimed at the RTA. A route that cannot be
+    sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
+    q = np.inf
+    for attempt in range(4):
+        if not _random_walk(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma * 2.0 ** attempt, p_new, p_step):
+            return False, np.inf
+        q = _aim_engine(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
+                        grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
+        if q < np.inf:
+            break
+    return True, q
 
 
 @numba.njit(cache=True)
@@ -183,6 +387,7 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
     ns, n_chemo, n_cycles, n_repro, n_disp, ed_every, n_fail, to_die, swim_max, r_max, k_max, backup = (
         ip[0], ip[1], ip[2], ip[3], ip[4], ip[5], ip[6], ip[7], ip[8], ip[9], ip[10], ip[11])
     p_engine, repulsion, d_max = fp[0], fp[1], fp[2]
+    sigma, p_new, p_step, screen = max(2.0, fp[3] * lat.shape[1]), fp[4], fp[5], fp[6]
     L2, P = lat.shape
     L = L2 - 2
     n_rpm = rpm_options.shape[0]
@@ -196,33 +401,53 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
     level = np.zeros(ns, np.int64)
     fails = np.zeros(ns, np.int64)
     history = np.empty(n_cycles)
-    n_evals = 0
-    for i in range(ns):
-        if i == 0:
-            pos[0, :] = base_nodes
-            rpm[0, :] = base_rpm
-        else:
-            if not _random_init(pos[i], rpm[i], edge_ok, n_rpm, max_shift, r_max, k_max, backup):
-                pos[i, :] = base_nodes
-                rpm[i, :] = base_rpm
-        cost[i] = _cost_from(pos[i], rpm[i], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                             times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t[i], cum_f[i])
-        n_evals += 1
+    cnt = np.zeros(1, np.int64)  # routes (or route tails) sailed
     cand = np.empty(L2, np.int64)
     cand_r = np.empty(L2 - 1, np.int64)
     vec = np.empty(L2, np.int64)
     vec_r = np.empty(L2 - 1, np.int64)
     ct = np.empty(L2)
     cf = np.empty(L2)
+    keep_r = np.empty(L2 - 1, np.int64)
+    keep_t = np.empty(L2)
+    keep_f = np.empty(L2)
     on_engine = np.zeros(1, np.bool_)
+    for i in range(ns):
+        placed = False
+        if i > 0:
+            placed, q = _new_bacterium(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                                       times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r,
+                                       keep_t, keep_f, cnt, max_shift, r_max, k_max, backup, sigma, p_new, p_step)
+        if not placed:
+            # the baseline route, with its constant rpm or engine settings aimed at the RTA, whichever is cheaper
+            pos[i, :] = base_nodes
+            rpm[i, :] = base_rpm
+            cost[i] = _cost_from(pos[i], rpm[i], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                                 times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t[i], cum_f[i])
+            cnt[0] += 1
+            cand[:] = base_nodes
+            q = _aim_engine(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
+                            grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
+        if placed or q < cost[i]:
+            pos[i, :] = cand
+            rpm[i, :] = cand_r
+            cum_t[i, :] = ct
+            cum_f[i, :] = cf
+            cost[i] = q
     best_pos = pos[0].copy()
     best_rpm = rpm[0].copy()
     best_cost = cost[0]
+    best_i = 0
     for i in range(ns):
         if cost[i] < best_cost:
             best_cost = cost[i]
             best_pos[:] = pos[i]
             best_rpm[:] = rpm[i]
+            best_i = i
+    # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
+    lam = _time_price(rpm[best_i], cum_t[best_i], cum_f[best_i], rpm_options) if best_cost < np.inf else 0.0
+    do_screen = screen >= 0.0 and obj == OBJ_JIT and lam > 0.0
+    out = np.empty(N_LEG_OUT)
     for cyc in range(n_cycles):
         for i in range(ns):
             for _m in range(n_chemo):
@@ -248,6 +473,7 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                                 cand_r[j] = v
                         start = first
                     else:
+                        last = first
                         for j in range(1, L2 - 1):
                             if vec[j] != 0:
                                 v = cand[j] + vec[j] * d
@@ -255,6 +481,7 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                                     valid = False
                                     break
                                 cand[j] = v
+                                last = j
                         start = first - 1
                     if not valid:
                         break
@@ -262,9 +489,23 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                         start = 0  # the sums of an infeasible route are only valid up to where it failed
                     ct[: start + 1] = cum_t[i, : start + 1]
                     cf[: start + 1] = cum_f[i, : start + 1]
-                    q = _cost_from(cand, cand_r, start, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
+                    cnt[0] += 1
+                    resume = start
+                    if do_screen and not engine and cost[i] < np.inf:
+                        # the changed legs only; the rest is sailed when their fuel and time look worth it
+                        resume = last + 1
+                        if not _sail_span(cand, cand_r, start, resume, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx,
+                                          times_h, grid, ct, cf, out):
+                            break
+                        est = cf[resume] - cum_f[i, resume] + lam * (ct[resume] - cum_t[i, resume])
+                        if est > screen * cost[i]:
+                            break
+                    q = _cost_from(cand, cand_r, resume, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
                                    fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
-                    n_evals += 1
+                    # re-set the engine so the moved route still arrives just inside the RTA
+                    q = _retime(cand, cand_r, start, q, cost[i], lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp,
+                                sc, fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r,
+                                keep_t, keep_f, cnt)
                     if not (q < cost[i]):
                         break
                     if repulsion > 0.0 and not _beats_neighbours(pos, cost, i, cand, q, d_max):
@@ -316,15 +557,18 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                 if k == best_i:
                     continue
                 # walk in scratch space: a failed walk must not leave bacterium k half-overwritten with stale sums
-                if _random_init(cand, cand_r, edge_ok, n_rpm, max_shift, r_max, k_max, backup):
+                placed, q = _new_bacterium(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc,
+                                           wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf,
+                                           keep_r, keep_t, keep_f, cnt, max_shift, r_max, k_max, backup, sigma, p_new,
+                                           p_step)
+                if placed:
                     pos[k, :] = cand
                     rpm[k, :] = cand_r
-                    cost[k] = _cost_from(pos[k], rpm[k], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
-                                         fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t[k],
-                                         cum_f[k])
-                    n_evals += 1
+                    cum_t[k, :] = ct
+                    cum_f[k, :] = cf
+                    cost[k] = q
                     moves[k] = 0
                     level[k] = 0
                     fails[k] = 0
         history[cyc] = best_cost
-    return best_pos, best_rpm, best_cost, history, n_evals
+    return best_pos, best_rpm, best_cost, history, cnt[0]
