@@ -190,6 +190,21 @@ def _reference_fit(X, y, robust, k_folds=fit.K_FOLDS):
     return coef, np.sqrt((r ** 2).mean()), np.sqrt(cv_sq / len(y))
 
 
+def test_huber_median_equals_numpy_median_whatever_the_guess():
+    """The medians behind the Huber scale select among values near a guess when it brackets the middle,
+    else among all (also with many equal values): always exactly np.median."""
+    rng = np.random.default_rng(5)
+    for trial in range(400):
+        m = int(rng.integers(1, 400))
+        a = rng.standard_t(2, size=m)
+        if trial % 3 == 0:
+            a[: m // 2] = 0.25  # ties at the middle
+        if trial % 4 == 0:
+            a = np.round(a, 1)
+        true = np.median(a)
+        for guess, width in ((np.nan, np.nan), (true, 0.05), (true + 0.3, 0.1), (0.0, 10.0), (5.0, 0.01)):
+            assert fit._median(a, m, guess, width, np.empty((3, m))) == true, (trial, m, guess, width)
+
 def test_batched_robust_fit_equals_each_vessel_fitted_alone(fleet):
     """A fleet fit gives every vessel what a fit of that vessel alone gives, and that is the plain
     IRLS + CV written out above: each vessel stops re-weighting when its own coefficients settle,

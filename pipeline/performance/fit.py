@@ -127,7 +127,7 @@ def _fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F
         nmax = max(nmax, bounds[g + 1] - bounds[g])
     Z = np.empty((k + 1, nmax))  # scaled regressors, then the target
     T = np.empty((k, nmax))  # weighted regressors
-    w, r, buf = np.empty(nmax), np.empty(nmax), np.empty(nmax)
+    w, r, buf = np.empty(nmax), np.empty(nmax), np.empty((3, nmax))
     rows = np.empty(nmax, dtype=np.int64)
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
@@ -205,13 +205,18 @@ def _pack(X, y, a, b, F, rows, lo, hi, Z):
     """Copy the finite rows among a:b of X and y into Z[:, :m] (regressors, then the target) fold by fold:
     the p-th of them goes to fold p mod F, and fold f is slots lo[f]:hi[f]. Returns m."""
     k = X.shape[1]
-    m = 0
-    for row in range(a, b):
-        good = np.isfinite(y[row])
-        for i in range(k):
-            good &= np.isfinite(X[row, i])
-        rows[m] = row
-        m += good
+    if _all_finite(X[a:b].ravel()) and _all_finite(y[a:b]):
+        m = b - a
+        for p in range(m):
+            rows[p] = a + p
+    else:
+        m = 0
+        for row in range(a, b):
+            good = np.isfinite(y[row])
+            for i in range(k):
+                good &= np.isfinite(X[row, i])
+            rows[m] = row
+            m += good
     s = 0
     for f in range(F):
         lo[f] = s
@@ -225,16 +230,33 @@ def _pack(X, y, a, b, F, rows, lo, hi, Z):
     return m
 
 
+@numba.njit(cache=True, fastmath={"reassoc"})
+def _all_finite(v):
+    """No NaN or ±inf in v (x·0 is 0 exactly for finite x, NaN otherwise)."""
+    s = 0.0
+    for q in range(v.size):
+        s += v[q] * 0.0
+    return s == 0.0
+
+
 @numba.njit(cache=True, fastmath=True)  # finite values only (`_pack` left the others out)
 def _column_stats(z):
     """(max, min, any non-zero, sum of squares) of a finite, non-empty array."""
-    top, bottom, sq, nonzero = z[0], z[0], 0.0, False
-    for v in z:
-        top = max(top, v)
-        bottom = min(bottom, v)
-        nonzero |= v != 0.0
-        sq += v * v
-    return top, bottom, nonzero, sq
+    n = z.size
+    t0 = t1 = t2 = t3 = b0 = b1 = b2 = b3 = z[0]  # four lanes each, which the compiler keeps in vector registers
+    q = 0
+    while q + 4 <= n:
+        v0, v1, v2, v3 = z[q], z[q + 1], z[q + 2], z[q + 3]
+        t0, t1, t2, t3 = max(t0, v0), max(t1, v1), max(t2, v2), max(t3, v3)
+        b0, b1, b2, b3 = min(b0, v0), min(b1, v1), min(b2, v2), min(b3, v3)
+        q += 4
+    for p in range(q, n):
+        t0, b0 = max(t0, z[p]), min(b0, z[p])
+    top, bottom = max(max(t0, t1), max(t2, t3)), min(min(b0, b1), min(b2, b3))
+    sq = 0.0
+    for p in range(n):
+        sq += z[p] * z[p]
+    return top, bottom, top != 0.0 or bottom != 0.0, sq
 
 
 @numba.njit(cache=True)
@@ -256,7 +278,9 @@ def _scale(Z, m, intercept, keep, scale):
             rms = np.sqrt(sq / m)
             if rms != 0.0:
                 scale[i] = rms
-            zi /= scale[i]
+            c = scale[i]
+            for q in range(m):
+                zi[q] = zi[q] / c
         else:
             zi[:] = 0.0
     return n_keep
@@ -372,7 +396,8 @@ def _solve_dropped(A, keep, x):
 def _huber_weights(r, m, huber_k, med_guess, s_guess, buf, w):
     """Huber weights of residuals r[:m] into w[:m]: scale s = 1.4826 · MAD (1e-9 when the MAD is 0).
 
-    Returns (median, s); the previous ones, if known (else NaN), are guesses that make the medians cheap.
+    Returns (median, s); the previous ones, if known (else NaN), are guesses that make the medians
+    cheap. buf: (3, ≥ m) scratch.
     """
     if not (np.isfinite(med_guess) and np.isfinite(s_guess)):  # guess from the mean and standard deviation
         mean, sq = 0.0, 0.0
@@ -398,7 +423,7 @@ def _huber_weights(r, m, huber_k, med_guess, s_guess, buf, w):
 
 @numba.njit(cache=True)
 def _median(a, m, guess, width, buf):
-    """np.median of a[:m] (a is left as it is; buf is scratch).
+    """np.median of a[:m] (a is only read; buf: (3, ≥ m) scratch).
 
     If guess ± width brackets the middle order statistics, only the values inside the bracket are
     selected among (few, when the guess is good); otherwise all of them.
@@ -406,36 +431,72 @@ def _median(a, m, guess, width, buf):
     half = m // 2
     low, high = guess - width, guess + width
     below, inside = 0, 0
+    near = buf[2]
     for q in range(m):
         v = a[q]
         below += v < low
-        buf[inside] = v
+        near[inside] = v
         inside += (v >= low) & (v <= high)
     if below <= half - 1 + m % 2 and half < below + inside:
-        upper = _select(buf, 0, inside - 1, half - below)
-        if m % 2:
-            return upper
-        lower = buf[0]  # the largest of the values below the upper middle one
-        for q in range(1, half - below):
-            lower = max(lower, buf[q])
-        return (lower + upper) / 2
-    for q in range(m):
-        buf[q] = a[q]
-    return _median_inplace(buf, m)
+        return _middle(near, inside, half - below, m % 2 == 0, buf[0], buf[1])
+    return _middle(a, m, half, m % 2 == 0, buf[0], buf[1])
 
 
 @numba.njit(cache=True)
-def _median_inplace(a, m):
-    """np.median of a[:m] (reorders a[:m])."""
-    half = m // 2
-    hi = _select(a, 0, m - 1, half)
-    if m % 2:
-        return hi
-    lo = a[0]  # the largest of a[:half], which `_select` left below a[half]
-    for q in range(1, half):
-        if a[q] > lo:
-            lo = a[q]
-    return (lo + hi) / 2
+def _middle(a, n, kth, even, s0, s1):
+    """The kth smallest of a[:n], or with `even` the mean of the (kth − 1)th and kth (a is only read)."""
+    upper = _kth(a, n, kth, s0, s1)
+    if not even:
+        return upper
+    less, lower = 0, -np.inf  # how many are below `upper`, and the largest of them
+    for q in range(n):
+        v = a[q]
+        less += v < upper
+        lower = max(lower, v if v < upper else -np.inf)
+    return ((lower if less == kth else upper) + upper) / 2
+
+
+@numba.njit(cache=True)
+def _kth(a, n, kth, s0, s1):
+    """The kth smallest of a[:n] (a is only read; s0, s1: scratch of length ≥ n).
+
+    Quickselect with a branch-free partition (values ping-pong between s0 and s1), which does not
+    stall on unpredictable comparisons the way swapping in place does.
+    """
+    src, dst = a, s0
+    lo, hi = 0, n
+    while hi - lo > 24:
+        x, y, z = src[lo], src[(lo + hi) // 2], src[hi - 1]
+        pivot = max(min(x, y), min(max(x, y), z))  # median of three
+        left, right = lo, hi - 1
+        for q in range(lo, hi):  # smaller than the pivot to the left, the others to the right
+            v = src[q]
+            c = v < pivot
+            dst[left] = v
+            dst[right] = v
+            left += c
+            right -= 1 - c
+        if kth < left:
+            hi = left
+        elif left > lo:
+            lo = left
+        else:  # nothing below the pivot (many equal values): finish with the swapping quickselect
+            for q in range(lo, hi):
+                s1[q] = dst[q]
+            return _select(s1, lo, hi - 1, kth)
+        src, dst = dst, (s1 if dst is s0 else s0)
+    if src is a:
+        for q in range(lo, hi):
+            s0[q] = a[q]
+        src = s0
+    for i in range(lo + 1, hi):  # insertion sort of the few left
+        v = src[i]
+        j = i - 1
+        while j >= lo and src[j] > v:
+            src[j + 1] = src[j]
+            j -= 1
+        src[j + 1] = v
+    return src[kth]
 
 
 @numba.njit(cache=True)
