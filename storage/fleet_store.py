@@ -75,7 +75,9 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
             present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchone()[0]
             conflicts = con.execute(
                 f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
-            con.execute(f"INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc)")
+            # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
+            con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
+                        "ORDER BY g.imo, g.ts_utc")
             inserted = len(good) - present - len(conflicts)
             if len(conflicts):
                 conflicts["raw"] = raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
@@ -123,8 +125,10 @@ def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
     """What a refit reads, in one read-only connection: (noon-report `columns` as float64 arrays — "imo"
     as int64 — ordered by vessel and time; `active_models`; `next_versions`).
 
-    The rows come unordered through Arrow (no pandas) and are put in order here: cheaper than an
-    ORDER BY in the query. NULLs read as NaN.
+    The rows come as stored, through Arrow (no pandas), and are put in order here, which is cheaper
+    than an ORDER BY in the query: `import_noon` stores each import by vessel and time, so one
+    import is in order already and chronological imports need only a stable sort by vessel.
+    NULLs read as NaN.
     """
     unknown = sorted(set(columns) - set(NOON_COLUMNS))
     if unknown:

@@ -119,16 +119,18 @@ def test_import_is_idempotent_and_conflicts_are_rejected(fleet, tmp_path):
 def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
     """`load_for_refit` (Arrow, ordered in numpy) gives the rows `load_reports` gives (ORDER BY imo, ts),
     and the same active models and next versions, for the whole fleet and for some vessels, whether
-    the rows were stored in time order or shuffled."""
+    the rows came in one import, in monthly imports in time order, or in imports out of order."""
     good, bad = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
     good.loc[good.index[:3], "wind_kn"] = np.nan  # NULLs read as NaN
     imo = int(fleet.vessels.imo[1])
     rows, _ = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1)
     cols = ("imo", "ts_utc", "rpm", "wind_kn", "fuel_t")
-    for stored in (good.sort_values(["ts_utc", "imo"]), good.sample(frac=1.0, random_state=0)):
+    months = [g for _, g in good.groupby(pd.to_datetime(good["ts_utc"]).dt.to_period("M"))]
+    for imports in ([good], months, months[::-1]):
         db = tmp_path / f"w{len(list(tmp_path.iterdir()))}.duckdb"
         fleet_store.import_vessels(db, fleet.vessels)
-        fleet_store.import_noon(db, stored, bad)
+        for part in imports:
+            fleet_store.import_noon(db, part.sample(frac=1.0, random_state=0), bad.head(0))
         fleet_store.save_fits(db, rows)
         for imos in (None, [int(fleet.vessels.imo[2]), imo]):
             arrays, active, versions = fleet_store.load_for_refit(db, imos, cols)
