@@ -2,8 +2,9 @@
 
 refit path   what the `refit-performance` flow does between opening the warehouse and saving
              the fits (its `load-reports` and `fit-vessels` tasks, without the Prefect engine):
-             read the reports from DuckDB and fit the speed and fuel models of every vessel
-             (robust fit, cross-validation, hold-out check, activation decision).
+             read the reports, active models and next versions from DuckDB and fit the speed
+             and fuel models of every vessel (robust fit, cross-validation, hold-out check,
+             activation decision).
 reference    one bare `numpy.linalg.lstsq` per vessel and target over the same design matrices
              (same rows), on arrays already in memory.
 
