@@ -58,6 +58,23 @@ def test_thesis_form_matches_numpy_lstsq_on_a_hand_made_table():
     np.testing.assert_allclose(res.coef, np.linalg.lstsq(X, y, rcond=None)[0], rtol=1e-6)
 
 
+def test_direction_fold_and_joint_design_equal_their_plain_definitions():
+    """fold_rel_deg skips the float mod for the usual range but gives |((rel + 180) mod 360) − 180| exactly;
+    design_matrices gives what design_matrix gives per target, bit for bit."""
+    rng = np.random.default_rng(2)
+    rel = np.concatenate([rng.uniform(-2000, 2000, 20000), rng.integers(-720, 721, 2000).astype(float),
+                          [0.0, -0.0, 180.0, -180.0, 540.0, 360.0, 720.0, -360.0, 1e300, np.nan, np.inf],
+                          np.nextafter([180.0, -180.0, 540.0, 900.0], np.inf), np.nextafter([180.0, -180.0, 540.0], -np.inf)])
+    got = np.array([features.fold_rel_deg(r) for r in rel])
+    np.testing.assert_array_equal(got, [abs(((r + 180.0) % 360.0) - 180.0) for r in rel.tolist()])  # Python's float mod
+    n = 500
+    cols = [rng.uniform(40, 110, n), rng.uniform(5, 15, n), rng.uniform(-1, 2, n), rng.uniform(0, 40, n),
+            rng.uniform(-360, 720, n), rng.uniform(0, 8, n), rng.uniform(-360, 720, n), rng.uniform(0, 30, n)]
+    for form in (features.FORM_THESIS, features.FORM_PHYSICAL):
+        Xs, Xf = features.design_matrices(form, *cols)
+        np.testing.assert_array_equal(Xs, features.design_matrix(form, "speed", *cols))
+        np.testing.assert_array_equal(Xf, features.design_matrix(form, "fuel", *cols))
+
 def test_constant_regressor_is_dropped_and_said():
     n = 40
     rng = np.random.default_rng(1)

@@ -45,9 +45,15 @@ N_FUEL = {k: len(v) for k, v in FUEL_REGRESSORS.items()}
 
 @numba.njit(cache=True, inline="always")
 def fold_rel_deg(rel_deg: float) -> float:
-    """Relative direction folded to 0..180 (port and starboard alike)."""
-    a = abs(((rel_deg + 180.0) % 360.0) - 180.0)
-    return a
+    """Relative direction folded to 0..180 (port and starboard alike): |((rel + 180) mod 360) − 180|."""
+    t = rel_deg + 180.0
+    if 0.0 <= t < 360.0:  # the mod of the usual inputs without a division: same values exactly
+        m = t
+    elif 360.0 <= t < 720.0:
+        m = t - 360.0  # exact (Sterbenz)
+    else:
+        m = t % 360.0
+    return abs(m - 180.0)
 
 
 @numba.njit(cache=True, inline="always")
