@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-import pandas as pd
 
 from pipeline.performance import features
 
@@ -174,7 +173,7 @@ def _fit_group(X, y, a, b, intercept, robust, max_solves, rtol, huber_k, do_cv, 
             med, s = _huber_weights(r, m, huber_k, med, s, buf, w)
     # fit statistics on all rows
     _residuals(Z, beta, 0, m, r)
-    ssr, sst, ybar = _sums(r, Z[k], m)
+    ssr, sst, _ = _sums(r, Z[k], m)
     stats[1] = np.sqrt(ssr / nf)
     if sst > 0:
         stats[0] = 1.0 - ssr / sst
