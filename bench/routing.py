@@ -55,14 +55,14 @@ RTA_FACTOR = 0.9  # of the slowest-rpm great-circle passage
 DP_BUCKET_H = 0.5
 SWEEP = {  # label → BfoaParams overrides (gap vs runtime, --sweep)
     "default": {},
-    "n_bacteria 32": {"n_bacteria": 32},
+    "n_bacteria 16": {"n_bacteria": 16},
     "n_bacteria 64": {"n_bacteria": 64},
-    "n_chemo 24": {"n_chemo": 24},
     "n_cycles 80": {"n_cycles": 80},
-    "n_cycles 160": {"n_cycles": 160},
-    "swim_max 12": {"swim_max": 12},
-    "p_engine 0.1": {"p_engine": 0.1},
-    "p_engine 0.6": {"p_engine": 0.6},
+    "p_engine 0.15": {"p_engine": 0.15},
+    "p_engine 0.45": {"p_engine": 0.45},
+    "p_bend 0 (tumble anywhere)": {"p_bend": 0.0},
+    "engine re-set after sailing only": {"plan_engine": False},
+    "no route-move screen": {"screen": -1.0},
     "n_bacteria 64, n_cycles 80": {"n_bacteria": 64, "n_cycles": 80},
 }
 

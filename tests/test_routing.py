@@ -10,6 +10,7 @@ from __future__ import annotations
 import itertools
 import math
 
+import numba
 import numpy as np
 import pytest
 from global_land_mask import globe
@@ -330,7 +331,7 @@ def test_storm_on_the_great_circle_is_avoided():
     space = pr.search_space()
     base = solve(pr, storm, solver="gc", space=space)
     assert base.status == "ok" and max(g["hs_m"] for g in base.legs) > 7.0  # the baseline ploughs through it
-    for solver, params in (("dp", None), ("bfoa", FAST)):
+    for solver, params in (("dp", None), ("bfoa", MEDIUM)):
         plan = solve(pr, storm, solver=solver, seed=1, params=params, space=space)
         assert plan.status == "ok", plan.reason
         offs = node_offsets(plan, space)
@@ -421,6 +422,56 @@ def test_dateline_crossing_routes_like_the_great_circle():
         assert np.all(np.abs(lons) >= 155.0)  # never round by 0°
         assert (lons > 0).any() and (lons < 0).any()
         assert plan.hours <= pr.t_req_h
+
+
+@numba.njit
+def seed_numba(seed):
+    np.random.seed(seed)  # numba's generator is separate from numpy's
+
+
+def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
+    """The RTA-aimed engine settings and the engine re-set after a route move (calm water: leg hours are exactly
+    distance / STW, so hand formulas check them)."""
+    from pipeline.routing import bfoa
+
+    dep, arr = (30.0, -160.0), (35.0, -130.0)
+    dist = haversine_nm(*dep, *arr)
+    hours = dist / (0.14 * 77.5)  # between the 70 and 85 rpm passages: a mix of both is needed
+    pr = problem(dep, arr, hours, n_lines=10, n_points=11)
+    space = pr.search_space()
+    calm = wf.uniform("2020-12-01T00", 400)
+    inst = Instance.build(pr, space, calm)
+    args = inst.numba_args()
+    L2 = space.lat.shape[0]
+    ct, cf, kt, kf = (np.empty(L2) for _ in range(4))
+    kr, rpm = np.empty(L2 - 1, np.int64), np.empty(L2 - 1, np.int64)
+    cnt = np.zeros(1, np.int64)
+    gc = space.base_route()
+    for seed in range(1, 6):
+        seed_numba(seed)
+        q = bfoa._aim_engine(gc.copy(), rpm, *args, ct, cf, kr, kt, kf, cnt)
+        t_arr = ct[-1] - inst.t_dep_h
+        assert pr.t_req_h - pr.window_h <= t_arr <= pr.t_req_h + 1e-9, (seed, t_arr)
+        assert {0, 1} <= set(rpm.tolist())  # a mix of the two settings that bracket the RTA
+        assert q == pytest.approx(_evaluate(inst, gc, rpm)[0], rel=1e-12)
+        assert q < solve(pr, calm, solver="gc", space=space).cost  # cheaper than the constant-rpm baseline
+    # a detour (two nodes off for four lines) makes the same settings late; the re-set speeds legs up to be on time
+    detour = gc.copy()
+    detour[3:9] += np.array([1, 2, 2, 2, 2, 1])
+    late_cost, late_h, _, _ = _evaluate(inst, detour, rpm)
+    assert late_h > pr.t_req_h and late_cost > LATE_STEP_T
+    ct2, cf2 = np.empty(L2), np.empty(L2)
+    seed_numba(1)
+    lk.sail_route_nb(detour, rpm, 0, *args[:12], ct2, cf2)
+    rpm2 = rpm.copy()
+    q2 = bfoa._retime(detour, rpm2, 0, late_cost, np.inf, *args, ct2, cf2, kr, kt, kf, cnt)
+    assert ct2[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
+    assert q2 < LATE_STEP_T and q2 == pytest.approx(_evaluate(inst, detour, rpm2)[0], rel=1e-12)
+    assert np.all(rpm2 >= rpm) and rpm2.sum() > rpm.sum()  # legs only sped up
+    # with a bar below any on-time plan the re-set gives up instead of sailing (jit objective)
+    rpm3 = rpm.copy()
+    lk.sail_route_nb(detour, rpm3, 0, *args[:12], ct2, cf2)
+    assert bfoa._retime(detour, rpm3, 0, late_cost, 1.0, *args, ct2, cf2, kr, kt, kf, cnt) == math.inf
 
 
 def test_bfoa_is_reproducible_by_seed():

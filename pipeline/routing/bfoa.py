@@ -5,20 +5,40 @@ setting (index into the allowed rpm list) per leg. Every cycle each bacterium ma
 chemotactic moves:
   tumble   pick a direction vector V: +1 at line k; +1 at k, k+1; +1 at k..k+2; the same with −1;
            or +1 at k1 and −1 at k2 (single-line moves most likely, two-line next, the rest least).
-           With probability `p_engine` the vector acts on the engine settings of legs instead.
-  swim     S' = S + V·D, repeated while the cost keeps falling (at most `swim_max` times); only
+           With probability `p_engine` the vector acts on the engine settings of legs instead. With
+           probability `p_bend` k is a bend (a line where the route, or a leg where the engine plan,
+           changes), else any line: on a smooth route a move at a bend shifts it instead of adding two.
+  swim     S' = S + V·D, repeated while the judged cost keeps falling (at most `swim_max` times); only
            feasible improvements are accepted.
-  step D   adaptive per bacterium: large → medium → small after `n_fail` consecutive failed moves at
-           each size, and small → large again to escape local optima.
+  engine re-set  every move also re-sets engine settings so the ship still arrives just inside the
+           RTA: before sailing, random legs after the move are sped up (late) or slowed (early by more
+           than a step) for the move's estimated arrival (a leg of h hours at rpm r takes h·r/r' at r',
+           fuel ∝ rpm³); after sailing, the same corrects what the estimate missed (`_retime`).
+  screen   (jit objective) a route move first sails only the legs it changes; the rest of the route
+           is sailed only when their fuel change plus their time change priced at what the engine
+           re-set pays per hour is below `screen` × cost (+ the move's repulsion credit);
+           `screen_engine` ≥ 0 does the same for engine moves (off by default).
+  step D   adaptive per bacterium: large (`d_large` × nodes per line, at least 3) → medium (2) → small
+           (1) after `n_fail` consecutive failed moves at each size, and small → large again to escape
+           local optima.
   repulsion  d(S1, S2) = sqrt(Σ (P1(i) − P2(i))²) over the lines; for neighbours closer than d_max,
            dQ(S) = Σ Q_exp·(1 − d_k/d_max) with Q_exp = repulsion × |Q(S)|. A move is judged on
-           Q(S') + dQ(S') − dQ(S) (crowding is penalised, so bacteria spread), unless S' beats S
-           and every neighbour, when dQ = 0.
+           Q(S') + dQ(S') − dQ(S) (crowding is penalised, so bacteria spread and a crowded bacterium
+           may step to a slightly dearer, less crowded position), unless S' beats S and every
+           neighbour, when dQ = 0. The best plan ever met is kept apart and returned.
 After the moves: sort by cost; reproduction replaces the `n_repro` worst *mature* bacteria
 (≥ `steps_to_die` moves) with copies of the best; every `ed_every` cycles elimination/dispersal
-re-initialises `n_disperse` random bacteria, never the current best. Random initialisation walks
-line by line choosing safe nodes (R_max tries per node, K_max overall, backing up `backup` lines
-on failure). Bacterium 0 starts on the baseline route so the result is never worse than it.
+re-initialises `n_disperse` random bacteria, never the current best.
+Random initialisation is a safe random walk line by line that heads, one node at a time (chance
+`walk_slope` per line), for a target offset drawn ~ N(0, `walk_spread` × nodes per line) and redrawn
+`walk_turns` times per route on average, bending back to the destination in time: random routes are
+smooth detours of every size rather than zig-zags. Each node tries the preferred node, then nodes
+ever farther from it (R_max tries per node, K_max overall, backing up `backup` lines on failure); a
+route that cannot be sailed (weather limits) is drawn again with twice the spread (up to 4 draws).
+Its engine settings are aimed at the RTA: sailed at each constant setting, the two settings whose
+arrivals bracket the RTA are mixed over random legs in the share that should arrive just in time,
+then re-set as above. Bacterium 0 starts on the baseline route (with its constant rpm, or the aimed
+settings where cheaper) so the result is never worse than it.
 
 Everything random comes from numba's generator seeded with `seed`: same seed, same plan.
 """
@@ -36,14 +56,14 @@ from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
 
 @dataclass(frozen=True)
 class BfoaParams:
-    n_bacteria: int = 16
+    n_bacteria: int = 40
     n_chemo: int = 12
     n_cycles: int = 40
     n_repro: int = 4
     n_disperse: int = 2
     ed_every: int = 6
     n_fail: int = 3
-    steps_to_die: int = 16
+    steps_to_die: int = 36
     swim_max: int = 6
     r_max: int = 12
     k_max: int = 4000
@@ -51,17 +71,22 @@ class BfoaParams:
     p_engine: float = 0.3
     repulsion: float = 0.002
     d_max: float | None = None  # None: 0.5·sqrt(L) + 1
-    walk_spread: float = 0.08  # random routes: s.d. of a detour's target offset, as a share of the nodes per line
+    walk_spread: float = 0.1  # random routes: s.d. of a detour's target offset, as a share of the nodes per line
     walk_turns: float = 0.3  # random routes: new target offsets drawn per route (expected)
     walk_slope: float = 0.3  # random routes: chance per line of a one-node step towards the target
     screen: float = 0.002  # jit: skip sailing the rest of a route move estimated worse by > screen × cost
+    screen_engine: float = -1.0  # the same for engine moves (negative: always sail them whole)
+    d_large: float = 0.075  # the large swim length as a share of the nodes per line (at least 3; medium 2, small 1)
+    plan_engine: bool = True  # re-set the engine for a move's estimated arrival before sailing it (else after)
+    p_bend: float = 0.5  # chance a tumble is placed at a bend of the route (or engine plan) rather than anywhere
 
     def arrays(self, n_lines: int) -> tuple[np.ndarray, np.ndarray]:
         ip = np.array([self.n_bacteria, self.n_chemo, self.n_cycles, self.n_repro, self.n_disperse, self.ed_every,
                        self.n_fail, self.steps_to_die, self.swim_max, self.r_max, self.k_max, self.backup], dtype=np.int64)
         d_max = self.d_max if self.d_max is not None else 0.5 * np.sqrt(n_lines) + 1.0
         fp = np.array([self.p_engine, self.repulsion, d_max, self.walk_spread, self.walk_turns / max(n_lines, 1),
-                       self.walk_slope, self.screen], dtype=np.float64)
+                       self.walk_slope, self.screen, self.p_bend, self.screen_engine,
+                       1.0 if self.plan_engine else 0.0, self.d_large], dtype=np.float64)
         return ip, fp
 
 
@@ -161,6 +186,58 @@ def _random_walk(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, 
         if tries > k_max:
             return False
     return True
+
+
+@numba.njit(cache=True)
+def _plan_flips(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t_req_h, obj):
+    """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
+    the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
+    the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
+    re-set (n when none), or -1 when, under the jit objective, the estimated fuel reaches `bar`."""
+    n = rpm_idx.shape[0]
+    n_rpm = rpm_options.shape[0]
+    if lo >= n:
+        return n
+    margin = 0.05 * t_req_h / n
+    first = n
+    if T_est > t_req_h:
+        need = T_est - t_req_h + margin
+        for _t in range(4 * (n - lo)):
+            if need <= 0.0:
+                break
+            j = lo + np.random.randint(0, n - lo)
+            j2 = lo + np.random.randint(0, n - lo)
+            if rpm_idx[j2] < rpm_idx[j]:
+                j = j2
+            r = rpm_idx[j]
+            if r >= n_rpm - 1:
+                continue
+            ratio = rpm_options[r + 1] / rpm_options[r]
+            need -= (ct_ref[j + 1] - ct_ref[j]) * (1.0 - 1.0 / ratio)
+            F_est += (cf_ref[j + 1] - cf_ref[j]) * (ratio * ratio - 1.0)
+            rpm_idx[j] = r + 1
+            first = min(first, j)
+        if obj == OBJ_JIT and F_est >= bar:
+            return -1
+        return first
+    slack = t_req_h - T_est - margin
+    for _t in range(2 * (n - lo)):
+        if slack <= 0.0:
+            break
+        j = lo + np.random.randint(0, n - lo)
+        j2 = lo + np.random.randint(0, n - lo)
+        if rpm_idx[j2] > rpm_idx[j]:
+            j = j2
+        r = rpm_idx[j]
+        if r == 0:
+            continue
+        add = (ct_ref[j + 1] - ct_ref[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
+        if add > slack:
+            continue
+        slack -= add
+        rpm_idx[j] = r - 1
+        first = min(first, j)
+    return first
 
 
 @numba.njit(cache=True)
@@ -342,8 +419,28 @@ def _beats_neighbours(pos, cost, i, cand, q_cand, d_max):
 
 
 @numba.njit(cache=True)
-def _tumble(L, n_legs, p_engine, vec, on_engine):
-    """Fill vec (length L+2 for nodes or L+1 for legs) with a direction; return (first changed index, engine?)."""
+def _bend(x, base, top):
+    """A random index in base..top where x changes next to it (a bend of the route or of the engine plan); -1 if none."""
+    m = 0
+    for j in range(base, top + 1):
+        if (j > 0 and x[j] != x[j - 1]) or (j + 1 < x.shape[0] and x[j] != x[j + 1]):
+            m += 1
+    if m == 0:
+        return -1
+    r = np.random.randint(0, m)
+    for j in range(base, top + 1):
+        if (j > 0 and x[j] != x[j - 1]) or (j + 1 < x.shape[0] and x[j] != x[j + 1]):
+            if r == 0:
+                return j
+            r -= 1
+    return -1
+
+
+@numba.njit(cache=True)
+def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine):
+    """Fill vec (length L+2 for nodes or L+1 for legs) with a direction; return the first changed index (engine? in
+    on_engine). With probability p_bend the vector is placed at a bend (a line where the route, or a leg where the
+    engine plan, changes): there a move shifts the bend instead of adding two."""
     for j in range(vec.shape[0]):
         vec[j] = 0
     engine = np.random.random() < p_engine
@@ -355,8 +452,14 @@ def _tumble(L, n_legs, p_engine, vec, on_engine):
         base = 1
     u = np.random.random()
     sign = 1 if np.random.random() < 0.5 else -1
-    k = base + np.random.randint(0, n)
     top = base + n - 1
+    k = -1
+    if np.random.random() < p_bend:
+        k = _bend(rpm_idx if engine else nodes, base, top)
+        if k >= 0 and u >= 0.5 and u < 0.92 and np.random.random() < 0.5:
+            k = max(base, k - (1 if u < 0.8 else 2))  # a block ending at the bend rather than starting there
+    if k < 0:
+        k = base + np.random.randint(0, n)
     if u < 0.5:
         vec[k] = sign
         first = k
@@ -387,11 +490,12 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
     ns, n_chemo, n_cycles, n_repro, n_disp, ed_every, n_fail, to_die, swim_max, r_max, k_max, backup = (
         ip[0], ip[1], ip[2], ip[3], ip[4], ip[5], ip[6], ip[7], ip[8], ip[9], ip[10], ip[11])
     p_engine, repulsion, d_max = fp[0], fp[1], fp[2]
-    sigma, p_new, p_step, screen = max(2.0, fp[3] * lat.shape[1]), fp[4], fp[5], fp[6]
+    sigma, p_new, p_step, screen, p_bend = max(2.0, fp[3] * lat.shape[1]), fp[4], fp[5], fp[6], fp[7]
+    screen_engine, plan_flips, d_large = fp[8], fp[9], fp[10]
     L2, P = lat.shape
     L = L2 - 2
     n_rpm = rpm_options.shape[0]
-    steps = np.array([max(3, min(max_shift, P // 8)), 2, 1])
+    steps = np.array([max(3, min(max_shift, int(P * d_large))), 2, 1])
     pos = np.empty((ns, L2), np.int64)
     rpm = np.empty((ns, L2 - 1), np.int64)
     cum_t = np.empty((ns, L2))
@@ -446,13 +550,14 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
             best_i = i
     # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
     lam = _time_price(rpm[best_i], cum_t[best_i], cum_f[best_i], rpm_options) if best_cost < np.inf else 0.0
-    do_screen = screen >= 0.0 and obj == OBJ_JIT and lam > 0.0
+    do_screen = obj == OBJ_JIT and lam > 0.0
+    do_plan = plan_flips > 0.0 and rpm_options.shape[0] > 1
     out = np.empty(N_LEG_OUT)
     for cyc in range(n_cycles):
         for i in range(ns):
             for _m in range(n_chemo):
                 moves[i] += 1
-                first = _tumble(L, L2 - 1, p_engine, vec, on_engine)
+                first = _tumble(L, L2 - 1, p_engine, p_bend, pos[i], rpm[i], vec, on_engine)
                 engine = on_engine[0]
                 if engine:
                     for j in range(L2 - 1):
@@ -463,6 +568,7 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                     cand[:] = pos[i]
                     cand_r[:] = rpm[i]
                     valid = True
+                    last = first
                     if engine:
                         for j in range(L2 - 1):
                             if vec_r[j] != 0:
@@ -471,9 +577,9 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                                     valid = False
                                     break
                                 cand_r[j] = v
+                                last = j
                         start = first
                     else:
-                        last = first
                         for j in range(1, L2 - 1):
                             if vec[j] != 0:
                                 v = cand[j] + vec[j] * d
@@ -491,27 +597,48 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                     cf[: start + 1] = cum_f[i, : start + 1]
                     cnt[0] += 1
                     resume = start
-                    if do_screen and not engine and cost[i] < np.inf:
+                    # crowding of the current position: the most a move away from the crowd can be credited
+                    q_exp = repulsion * abs(cost[i]) if cost[i] < np.inf else 0.0
+                    dq_old = _crowding(pos, i, pos[i], ns, d_max, q_exp) if q_exp > 0.0 else 0.0
+                    tol = screen_engine if engine else screen
+                    if do_screen and tol >= 0.0 and cost[i] < np.inf:
                         # the changed legs only; the rest is sailed when their fuel and time look worth it
                         resume = last + 1
                         if not _sail_span(cand, cand_r, start, resume, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx,
                                           times_h, grid, ct, cf, out):
                             break
                         est = cf[resume] - cum_f[i, resume] + lam * (ct[resume] - cum_t[i, resume])
-                        if est > screen * cost[i]:
+                        if est > tol * cost[i] + dq_old:
+                            break
+                    if do_plan and cost[i] < np.inf:
+                        # re-set the engine on the legs after the move for the estimated arrival, then sail once
+                        if resume > start:  # the changed legs were sailed: the rest keeps its hours and fuel
+                            t_est = ct[resume] + cum_t[i, L2 - 1] - cum_t[i, resume] - t_dep_h
+                            f_est = cf[resume] + cum_f[i, L2 - 1] - cum_f[i, resume]
+                            lo_flip = resume
+                        else:
+                            t_est = cum_t[i, L2 - 1] - t_dep_h
+                            f_est = cum_f[i, L2 - 1]
+                            for j in range(start, last + 1):
+                                if cand_r[j] != rpm[i, j]:
+                                    k_r = rpm_options[cand_r[j]] / rpm_options[rpm[i, j]]
+                                    t_est += (cum_t[i, j + 1] - cum_t[i, j]) * (1.0 / k_r - 1.0)
+                                    f_est += (cum_f[i, j + 1] - cum_f[i, j]) * (k_r * k_r - 1.0)
+                            lo_flip = last + 1
+                        if _plan_flips(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], rpm_options,
+                                       t_req_h, obj) < 0:
                             break
                     q = _cost_from(cand, cand_r, resume, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
                                    fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
                     # re-set the engine so the moved route still arrives just inside the RTA
-                    q = _retime(cand, cand_r, start, q, cost[i], lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp,
+                    q = _retime(cand, cand_r, start, q, cost[i] + dq_old, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp,
                                 sc, fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r,
                                 keep_t, keep_f, cnt)
-                    if not (q < cost[i]):
+                    if q == np.inf:
                         break
-                    if repulsion > 0.0 and not _beats_neighbours(pos, cost, i, cand, q, d_max):
-                        q_exp = repulsion * abs(cost[i])
-                        dq_new = _crowding(pos, i, cand, ns, d_max, q_exp)
-                        dq_old = _crowding(pos, i, pos[i], ns, d_max, q_exp)
+                    # judged on Q(S') + dQ(S') − dQ(S), or on Q alone when S' beats S and every neighbour
+                    if not (q < cost[i] and _beats_neighbours(pos, cost, i, cand, q, d_max)):
+                        dq_new = _crowding(pos, i, cand, ns, d_max, q_exp) if q_exp > 0.0 else 0.0
                         if not (q + dq_new - dq_old < cost[i]):
                             break
                     pos[i, :] = cand
