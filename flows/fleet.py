@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from prefect import flow, get_run_logger, task
-from prefect.cache_policies import NONE as NO_CACHE
+from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
 
 from flows.ingest import ingest_weather, parse_cycle

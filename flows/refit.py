@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from prefect import flow, get_run_logger, task
+from prefect.cache_policies import NO_CACHE
 
 from flows.settings import load_settings
 from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
@@ -43,13 +44,13 @@ def import_noon_reports(path: str, data_root: str | None = None) -> dict:
     return counts
 
 
-@task(name="load-reports")
+@task(name="load-reports", cache_policy=NO_CACHE)
 def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray], dict, dict]:
     """(noon-report columns a refit needs, active models, next versions), read in one connection."""
     return fleet_store.load_for_refit(db, imos, REPORT_COLUMNS)
 
 
-@task(name="fit-vessels")
+@task(name="fit-vessels", cache_policy=NO_CACHE)  # no hashing of the fleet's report arrays
 def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, form: str,
                 robust: bool) -> tuple[list[dict], list[dict]]:
     return refit_fleet(reports, active, versions, form=form, robust=robust)
