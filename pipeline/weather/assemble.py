@@ -37,12 +37,11 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
             out[v][i] = r[v].values
         have_wind[i] = True
     for ds in gwm:
-        keep = [s for s in ds["step"].values if int(s) in pos]
+        keep = [(k, pos[int(s)]) for k, s in enumerate(ds["step"].values) if int(s) in pos]
         if not keep:
             continue
-        r = regrid(ds.sel(step=keep), lat, lon)
-        for k, s in enumerate(keep):
-            i = pos[int(s)]
+        r = regrid(ds, lat, lon)  # all its steps at once (no copy when the decoder already regridded it)
+        for k, i in keep:
             for v in WAVE_VARS:
                 out[v][i] = r[v].values[k]
             have_waves[i] = True
