@@ -432,7 +432,7 @@ def seed_numba(seed):
 def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     """The RTA-aimed engine settings and the engine re-set after a route move (calm water: leg hours are exactly
     distance / STW, so hand formulas check them)."""
-    from pipeline.routing import bfoa
+    from pipeline.routing import engine_timing
 
     dep, arr = (30.0, -160.0), (35.0, -130.0)
     dist = haversine_nm(*dep, *arr)
@@ -449,7 +449,7 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     gc = space.base_route()
     for seed in range(1, 6):
         seed_numba(seed)
-        q = bfoa._aim_engine(gc.copy(), rpm, *args, ct, cf, kr, kt, kf, cnt)
+        q = engine_timing.aim_engine_nb(gc.copy(), rpm, *args, ct, cf, kr, kt, kf, cnt)
         t_arr = ct[-1] - inst.t_dep_h
         assert pr.t_req_h - pr.window_h <= t_arr <= pr.t_req_h + 1e-9, (seed, t_arr)
         assert {0, 1} <= set(rpm.tolist())  # a mix of the two settings that bracket the RTA
@@ -464,14 +464,14 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     seed_numba(1)
     lk.sail_route_nb(detour, rpm, 0, *args[:12], ct2, cf2)
     rpm2 = rpm.copy()
-    q2 = bfoa._retime(detour, rpm2, 0, late_cost, np.inf, *args, ct2, cf2, kr, kt, kf, cnt)
+    q2 = engine_timing.retime_nb(detour, rpm2, 0, late_cost, np.inf, *args, ct2, cf2, kr, kt, kf, cnt)
     assert ct2[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
     assert q2 < LATE_STEP_T and q2 == pytest.approx(_evaluate(inst, detour, rpm2)[0], rel=1e-12)
     assert np.all(rpm2 >= rpm) and rpm2.sum() > rpm.sum()  # legs only sped up
     # with a bar below any on-time plan the re-set gives up instead of sailing (jit objective)
     rpm3 = rpm.copy()
     lk.sail_route_nb(detour, rpm3, 0, *args[:12], ct2, cf2)
-    assert bfoa._retime(detour, rpm3, 0, late_cost, 1.0, *args, ct2, cf2, kr, kt, kf, cnt) == math.inf
+    assert engine_timing.retime_nb(detour, rpm3, 0, late_cost, 1.0, *args, ct2, cf2, kr, kt, kf, cnt) == math.inf
 
 
 def test_bfoa_is_reproducible_by_seed():

@@ -13,7 +13,7 @@ chemotactic moves:
   engine re-set  every move also re-sets engine settings so the ship still arrives just inside the
            RTA: before sailing, random legs after the move are sped up (late) or slowed (early by more
            than a step) for the move's estimated arrival (a leg of h hours at rpm r takes h·r/r' at r',
-           fuel ∝ rpm³); after sailing, the same corrects what the estimate missed (`_retime`).
+           fuel ∝ rpm³); after sailing, the same corrects what the estimate missed (`retime_nb`).
   screen   (jit objective) a route move first sails only the legs it changes; the rest of the route
            is sailed only when their fuel change plus their time change priced at what the engine
            re-set pays per hour is below `screen` × cost (+ the move's repulsion credit);
@@ -50,8 +50,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb, sail_route_nb
-from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
+from pipeline.routing.leg_kernel import N_LEG_OUT
+from pipeline.routing.objectives import OBJ_JIT
+from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
+                                              time_price_nb)
+from pipeline.routing.random_route import random_walk_nb
 
 
 @dataclass(frozen=True)
@@ -91,286 +94,6 @@ class BfoaParams:
 
 
 @numba.njit(cache=True)
-def _cost_from(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-               times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t, cum_f):
-    code, _ = sail_route_nb(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
-                            fc, wx, times_h, grid, cum_t, cum_f)
-    if code != OK:
-        return np.inf
-    n = nodes.shape[0] - 1
-    return route_cost_nb(obj, cum_t[n] - t_dep_h, cum_f[n], t_req_h, window_h, f_target, early, late)
-
-
-@numba.njit(cache=True)
-def _sail_span(nodes, rpm_idx, start, stop, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx, times_h, grid, ct, cf, out):
-    """Sail legs start..stop-1 only (ct/cf valid at line `start`); False as soon as one is infeasible."""
-    for i in range(start, stop):
-        a, b = nodes[i], nodes[i + 1]
-        if not edge_ok[i, a, b]:
-            return False
-        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], ct[i], rpm_options[rpm_idx[i]], vp, sc, fc, wx,
-                    times_h, grid, out)
-        if out[CODE] != OK:
-            return False
-        ct[i + 1] = ct[i] + out[H]
-        cf[i + 1] = cf[i] + out[FUEL]
-    return True
-
-
-@numba.njit(cache=True)
-def _time_price(rpm_idx, ct, cf, rpm_options):
-    """Estimated fuel (t) per hour gained by raising the slowest setting one step on this plan; 0 with one setting."""
-    if rpm_options.shape[0] < 2:
-        return 0.0
-    h, f = 0.0, 0.0
-    for j in range(rpm_idx.shape[0]):
-        if rpm_idx[j] == 0:
-            h += ct[j + 1] - ct[j]
-            f += cf[j + 1] - cf[j]
-    n = rpm_idx.shape[0]
-    if h <= 0.0:
-        h, f = ct[n] - ct[0], cf[n] - cf[0]
-    if h <= 0.0:
-        return 0.0
-    k = rpm_options[1] / rpm_options[0]
-    return (f / h) * (k * k - 1.0) / (1.0 - 1.0 / k)
-
-
-@numba.njit(cache=True)
-def _random_walk(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step):
-    """Safe random route: a walk line by line whose step heads, one node at a time, for a target offset that
-    is redrawn now and then (so random routes are smooth detours of every size, not zig-zags) and bends back
-    to the destination in time. Each node: the preferred one first, then nodes ever farther from it (random
-    side), R_max tries in all; on failure back up `backup` lines; give up after K_max tries overall.
-    Offsets are drawn ~ N(0, sigma) nodes; a new target with probability p_new per line; a step towards it with
-    probability p_step per line."""
-    L2 = nodes.shape[0]
-    P = edge_ok.shape[1]
-    c = P // 2
-    L = L2 - 2
-    nodes[0] = c
-    nodes[L2 - 1] = c
-    target = c + int(np.round(np.random.normal() * sigma))
-    i, tries = 1, 0
-    while i <= L:
-        a = nodes[i - 1]
-        left = L + 1 - i  # legs still to go after line i
-        lo = max(0, a - max_shift, c - max_shift * left)
-        hi = min(P - 1, a + max_shift, c + max_shift * left)
-        if np.random.random() < p_new:
-            target = c + int(np.round(np.random.normal() * sigma))
-        tgt = min(max(target, c - (left - 1)), c + (left - 1))  # in reach of the destination, one node a line
-        homing = abs(a - c) >= left - 1
-        step = 0
-        if tgt != a and (homing or np.random.random() < p_step):
-            step = 1 if tgt > a else -1
-            if abs(a - c) > left:  # behind on the way back: larger steps
-                step *= (abs(a - c) + left - 1) // left
-        pref = min(max(a + step, lo), hi)
-        placed = False
-        if lo <= hi:
-            for t in range(r_max):
-                off = (t + 1) // 2
-                b = pref + (off if np.random.random() < 0.5 else -off)
-                if b < lo or b > hi:
-                    b = np.random.randint(lo, hi + 1)
-                if edge_ok[i - 1, a, b] and (i < L or edge_ok[L, b, c]):
-                    nodes[i] = b
-                    placed = True
-                    break
-        tries += 1
-        if placed:
-            i += 1
-        else:
-            i = max(1, i - backup)
-        if tries > k_max:
-            return False
-    return True
-
-
-@numba.njit(cache=True)
-def _plan_flips(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t_req_h, obj):
-    """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
-    the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
-    the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
-    re-set (n when none), or -1 when, under the jit objective, the estimated fuel reaches `bar`."""
-    n = rpm_idx.shape[0]
-    n_rpm = rpm_options.shape[0]
-    if lo >= n:
-        return n
-    margin = 0.05 * t_req_h / n
-    first = n
-    if T_est > t_req_h:
-        need = T_est - t_req_h + margin
-        for _t in range(4 * (n - lo)):
-            if need <= 0.0:
-                break
-            j = lo + np.random.randint(0, n - lo)
-            j2 = lo + np.random.randint(0, n - lo)
-            if rpm_idx[j2] < rpm_idx[j]:
-                j = j2
-            r = rpm_idx[j]
-            if r >= n_rpm - 1:
-                continue
-            ratio = rpm_options[r + 1] / rpm_options[r]
-            need -= (ct_ref[j + 1] - ct_ref[j]) * (1.0 - 1.0 / ratio)
-            F_est += (cf_ref[j + 1] - cf_ref[j]) * (ratio * ratio - 1.0)
-            rpm_idx[j] = r + 1
-            first = min(first, j)
-        if obj == OBJ_JIT and F_est >= bar:
-            return -1
-        return first
-    slack = t_req_h - T_est - margin
-    for _t in range(2 * (n - lo)):
-        if slack <= 0.0:
-            break
-        j = lo + np.random.randint(0, n - lo)
-        j2 = lo + np.random.randint(0, n - lo)
-        if rpm_idx[j2] > rpm_idx[j]:
-            j = j2
-        r = rpm_idx[j]
-        if r == 0:
-            continue
-        add = (ct_ref[j + 1] - ct_ref[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
-        if add > slack:
-            continue
-        slack -= add
-        rpm_idx[j] = r - 1
-        first = min(first, j)
-    return first
-
-
-@numba.njit(cache=True)
-def _retime(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
-            grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
-    """Engine re-adjustment after a move, so the arrival stays just inside the RTA; returns the new cost.
-
-    `nodes`/`rpm_idx` were sailed whole into ct/cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
-    at rpm r is estimated to take h·r/r' at r' and burn (r'/r)² times its fuel (fuel rate ∝ rpm³).
-      late   raise the rpm of random legs (the slower of two draws) until the estimated saving covers the
-             delay, sail again; at most two rounds. With the jit objective the re-sail is skipped (cost +inf)
-             when the estimated fuel already reaches `bar`, the cost the move has to beat.
-      early  by more than one step's worth: lower the rpm of random legs while the estimated arrival stays
-             before the RTA, sail again, and keep it only if it is on time and cheaper; at most two rounds.
-    """
-    n = rpm_idx.shape[0]
-    n_rpm = rpm_options.shape[0]
-    if q == np.inf or lo >= n:
-        return q
-    margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
-    for _round in range(2):
-        T = ct[n] - t_dep_h
-        if T <= t_req_h + 1e-9:
-            break
-        need = T - t_req_h + margin
-        first = n
-        extra_f = 0.0
-        for _t in range(4 * (n - lo)):
-            if need <= 0.0:
-                break
-            j = lo + np.random.randint(0, n - lo)
-            j2 = lo + np.random.randint(0, n - lo)
-            if rpm_idx[j2] < rpm_idx[j]:
-                j = j2
-            r = rpm_idx[j]
-            if r >= n_rpm - 1:
-                continue
-            ratio = rpm_options[r + 1] / rpm_options[r]
-            need -= (ct[j + 1] - ct[j]) * (1.0 - 1.0 / ratio)
-            extra_f += (cf[j + 1] - cf[j]) * (ratio * ratio - 1.0)
-            rpm_idx[j] = r + 1
-            first = min(first, j)
-        if first == n:
-            return q
-        if obj == OBJ_JIT and cf[n] + extra_f >= bar:
-            return np.inf
-        q = _cost_from(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                       times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
-        cnt[0] += 1
-        if q == np.inf:
-            return q
-    for _round in range(2):
-        T = ct[n] - t_dep_h
-        slack = t_req_h - T - margin
-        if T > t_req_h + 1e-9 or slack <= 0.0:
-            return q
-        first = n
-        for _t in range(2 * (n - lo)):
-            j = lo + np.random.randint(0, n - lo)
-            j2 = lo + np.random.randint(0, n - lo)
-            if rpm_idx[j2] > rpm_idx[j]:
-                j = j2
-            r = rpm_idx[j]
-            if r == 0:
-                continue
-            add = (ct[j + 1] - ct[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
-            if add > slack:
-                continue
-            if first == n:
-                keep_r[:] = rpm_idx
-                keep_t[:] = ct
-                keep_f[:] = cf
-            slack -= add
-            rpm_idx[j] = r - 1
-            first = min(first, j)
-        if first == n:
-            return q
-        q2 = _cost_from(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                        times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
-        cnt[0] += 1
-        if not (q2 < q and ct[n] - t_dep_h <= t_req_h + 1e-9):
-            rpm_idx[:] = keep_r
-            ct[:] = keep_t
-            cf[:] = keep_f
-            return q
-        q = q2
-    return q
-
-
-@numba.njit(cache=True)
-def _aim_engine(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
-                t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
-    """Engine settings aimed at the RTA for a route: sail it at every constant setting, take the two settings
-    whose arrivals bracket the RTA and put the share of legs on the faster one that should arrive just in
-    time (random legs), then re-time. Returns the cost."""
-    n = rpm_idx.shape[0]
-    R = rpm_options.shape[0]
-    hours = np.empty(R)
-    for r in range(R):
-        rpm_idx[:] = r
-        code, _ = sail_route_nb(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                                times_h, grid, ct, cf)
-        hours[r] = ct[n] - t_dep_h if code == OK else np.inf
-        cnt[0] += 1
-    fast = -1
-    for r in range(R):
-        if hours[r] <= t_req_h:
-            fast = r
-            break
-    if fast <= 0:  # the slowest setting is in time, or none is: one constant setting
-        rpm_idx[:] = 0 if fast == 0 else R - 1
-        for r in range(R - 1, -1, -1):
-            if fast < 0 and hours[r] < np.inf:
-                rpm_idx[:] = r  # the fastest feasible one: the least late
-                break
-    else:
-        slow = fast - 1
-        rpm_idx[:] = fast
-        if hours[slow] < np.inf:
-            share = (hours[slow] - t_req_h) / (hours[slow] - hours[fast])
-            k = int(share * n + np.random.random())
-            rpm_idx[:] = slow
-            perm = np.random.permutation(n)
-            for j in range(min(k, n)):
-                rpm_idx[perm[j]] = fast
-    q = _cost_from(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid,
-                   obj, t_req_h, window_h, f_target, early, late, ct, cf)
-    cnt[0] += 1
-    return _retime(nodes, rpm_idx, 0, q, np.inf, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                   times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
-
-
-@numba.njit(cache=True)
 def _new_bacterium(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
                    t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt, max_shift, r_max,
                    k_max, backup, sigma, p_new, p_step):
@@ -378,9 +101,9 @@ def _new_bacterium(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_
     sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
     q = np.inf
     for attempt in range(4):
-        if not _random_walk(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma * 2.0 ** attempt, p_new, p_step):
+        if not random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma * 2.0 ** attempt, p_new, p_step):
             return False, np.inf
-        q = _aim_engine(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
+        q = aim_engine_nb(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
                         grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
         if q < np.inf:
             break
@@ -526,11 +249,11 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
             # the baseline route, with its constant rpm or engine settings aimed at the RTA, whichever is cheaper
             pos[i, :] = base_nodes
             rpm[i, :] = base_rpm
-            cost[i] = _cost_from(pos[i], rpm[i], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+            cost[i] = cost_from_nb(pos[i], rpm[i], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
                                  times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t[i], cum_f[i])
             cnt[0] += 1
             cand[:] = base_nodes
-            q = _aim_engine(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
+            q = aim_engine_nb(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
                             grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
         if placed or q < cost[i]:
             pos[i, :] = cand
@@ -549,7 +272,7 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
             best_rpm[:] = rpm[i]
             best_i = i
     # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
-    lam = _time_price(rpm[best_i], cum_t[best_i], cum_f[best_i], rpm_options) if best_cost < np.inf else 0.0
+    lam = time_price_nb(rpm[best_i], cum_t[best_i], cum_f[best_i], rpm_options) if best_cost < np.inf else 0.0
     do_screen = obj == OBJ_JIT and lam > 0.0
     do_plan = plan_flips > 0.0 and rpm_options.shape[0] > 1
     out = np.empty(N_LEG_OUT)
@@ -604,7 +327,7 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                     if do_screen and tol >= 0.0 and cost[i] < np.inf:
                         # the changed legs only; the rest is sailed when their fuel and time look worth it
                         resume = last + 1
-                        if not _sail_span(cand, cand_r, start, resume, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx,
+                        if not sail_span_nb(cand, cand_r, start, resume, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx,
                                           times_h, grid, ct, cf, out):
                             break
                         est = cf[resume] - cum_f[i, resume] + lam * (ct[resume] - cum_t[i, resume])
@@ -625,13 +348,13 @@ def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, 
                                     t_est += (cum_t[i, j + 1] - cum_t[i, j]) * (1.0 / k_r - 1.0)
                                     f_est += (cum_f[i, j + 1] - cum_f[i, j]) * (k_r * k_r - 1.0)
                             lo_flip = last + 1
-                        if _plan_flips(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], rpm_options,
+                        if plan_flips_nb(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], rpm_options,
                                        t_req_h, obj) < 0:
                             break
-                    q = _cost_from(cand, cand_r, resume, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
+                    q = cost_from_nb(cand, cand_r, resume, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
                                    fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
                     # re-set the engine so the moved route still arrives just inside the RTA
-                    q = _retime(cand, cand_r, start, q, cost[i] + dq_old, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp,
+                    q = retime_nb(cand, cand_r, start, q, cost[i] + dq_old, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp,
                                 sc, fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r,
                                 keep_t, keep_f, cnt)
                     if q == np.inf:

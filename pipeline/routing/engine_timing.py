@@ -1,0 +1,247 @@
+"""Engine settings per leg that make a route arrive just inside the RTA (numba, used by the BFOA).
+
+cost_from_nb    sail a route from line `start` on and price it with the objective
+sail_span_nb    sail legs start..stop only (a move's changed legs), for screening a route move
+time_price_nb   what the engine re-set pays in fuel per hour gained or lost along a route
+plan_flips_nb   before sailing: which legs to speed up (late) or slow down (early by more than a step) for
+                a move's estimated arrival (a leg of h hours at rpm r takes h·r/r' at r', fuel ∝ rpm³)
+retime_nb       after sailing: the same flips, judged on the sailed route, until arrival is in the window
+aim_engine_nb   a new route's settings: of the constant settings, the two whose arrivals bracket the RTA
+                mixed over random legs in the share that should arrive just in time, then re-timed
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from pipeline.routing.leg_kernel import CODE, FUEL, H, OK, sail_leg_nb, sail_route_nb
+from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
+
+
+@numba.njit(cache=True)
+def cost_from_nb(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+               times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t, cum_f):
+    code, _ = sail_route_nb(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
+                            fc, wx, times_h, grid, cum_t, cum_f)
+    if code != OK:
+        return np.inf
+    n = nodes.shape[0] - 1
+    return route_cost_nb(obj, cum_t[n] - t_dep_h, cum_f[n], t_req_h, window_h, f_target, early, late)
+
+
+@numba.njit(cache=True)
+def sail_span_nb(nodes, rpm_idx, start, stop, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx, times_h, grid, ct, cf, out):
+    """Sail legs start..stop-1 only (ct/cf valid at line `start`); False as soon as one is infeasible."""
+    for i in range(start, stop):
+        a, b = nodes[i], nodes[i + 1]
+        if not edge_ok[i, a, b]:
+            return False
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], ct[i], rpm_options[rpm_idx[i]], vp, sc, fc, wx,
+                    times_h, grid, out)
+        if out[CODE] != OK:
+            return False
+        ct[i + 1] = ct[i] + out[H]
+        cf[i + 1] = cf[i] + out[FUEL]
+    return True
+
+
+@numba.njit(cache=True)
+def time_price_nb(rpm_idx, ct, cf, rpm_options):
+    """Estimated fuel (t) per hour gained by raising the slowest setting one step on this plan; 0 with one setting."""
+    if rpm_options.shape[0] < 2:
+        return 0.0
+    h, f = 0.0, 0.0
+    for j in range(rpm_idx.shape[0]):
+        if rpm_idx[j] == 0:
+            h += ct[j + 1] - ct[j]
+            f += cf[j + 1] - cf[j]
+    n = rpm_idx.shape[0]
+    if h <= 0.0:
+        h, f = ct[n] - ct[0], cf[n] - cf[0]
+    if h <= 0.0:
+        return 0.0
+    k = rpm_options[1] / rpm_options[0]
+    return (f / h) * (k * k - 1.0) / (1.0 - 1.0 / k)
+
+
+@numba.njit(cache=True)
+def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t_req_h, obj):
+    """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
+    the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
+    the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
+    re-set (n when none), or -1 when, under the jit objective, the estimated fuel reaches `bar`."""
+    n = rpm_idx.shape[0]
+    n_rpm = rpm_options.shape[0]
+    if lo >= n:
+        return n
+    margin = 0.05 * t_req_h / n
+    first = n
+    if T_est > t_req_h:
+        need = T_est - t_req_h + margin
+        for _t in range(4 * (n - lo)):
+            if need <= 0.0:
+                break
+            j = lo + np.random.randint(0, n - lo)
+            j2 = lo + np.random.randint(0, n - lo)
+            if rpm_idx[j2] < rpm_idx[j]:
+                j = j2
+            r = rpm_idx[j]
+            if r >= n_rpm - 1:
+                continue
+            ratio = rpm_options[r + 1] / rpm_options[r]
+            need -= (ct_ref[j + 1] - ct_ref[j]) * (1.0 - 1.0 / ratio)
+            F_est += (cf_ref[j + 1] - cf_ref[j]) * (ratio * ratio - 1.0)
+            rpm_idx[j] = r + 1
+            first = min(first, j)
+        if obj == OBJ_JIT and F_est >= bar:
+            return -1
+        return first
+    slack = t_req_h - T_est - margin
+    for _t in range(2 * (n - lo)):
+        if slack <= 0.0:
+            break
+        j = lo + np.random.randint(0, n - lo)
+        j2 = lo + np.random.randint(0, n - lo)
+        if rpm_idx[j2] > rpm_idx[j]:
+            j = j2
+        r = rpm_idx[j]
+        if r == 0:
+            continue
+        add = (ct_ref[j + 1] - ct_ref[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
+        if add > slack:
+            continue
+        slack -= add
+        rpm_idx[j] = r - 1
+        first = min(first, j)
+    return first
+
+
+@numba.njit(cache=True)
+def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
+            grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
+    """Engine re-adjustment after a move, so the arrival stays just inside the RTA; returns the new cost.
+
+    `nodes`/`rpm_idx` were sailed whole into ct/cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
+    at rpm r is estimated to take h·r/r' at r' and burn (r'/r)² times its fuel (fuel rate ∝ rpm³).
+      late   raise the rpm of random legs (the slower of two draws) until the estimated saving covers the
+             delay, sail again; at most two rounds. With the jit objective the re-sail is skipped (cost +inf)
+             when the estimated fuel already reaches `bar`, the cost the move has to beat.
+      early  by more than one step's worth: lower the rpm of random legs while the estimated arrival stays
+             before the RTA, sail again, and keep it only if it is on time and cheaper; at most two rounds.
+    """
+    n = rpm_idx.shape[0]
+    n_rpm = rpm_options.shape[0]
+    if q == np.inf or lo >= n:
+        return q
+    margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
+    for _round in range(2):
+        T = ct[n] - t_dep_h
+        if T <= t_req_h + 1e-9:
+            break
+        need = T - t_req_h + margin
+        first = n
+        extra_f = 0.0
+        for _t in range(4 * (n - lo)):
+            if need <= 0.0:
+                break
+            j = lo + np.random.randint(0, n - lo)
+            j2 = lo + np.random.randint(0, n - lo)
+            if rpm_idx[j2] < rpm_idx[j]:
+                j = j2
+            r = rpm_idx[j]
+            if r >= n_rpm - 1:
+                continue
+            ratio = rpm_options[r + 1] / rpm_options[r]
+            need -= (ct[j + 1] - ct[j]) * (1.0 - 1.0 / ratio)
+            extra_f += (cf[j + 1] - cf[j]) * (ratio * ratio - 1.0)
+            rpm_idx[j] = r + 1
+            first = min(first, j)
+        if first == n:
+            return q
+        if obj == OBJ_JIT and cf[n] + extra_f >= bar:
+            return np.inf
+        q = cost_from_nb(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                       times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
+        cnt[0] += 1
+        if q == np.inf:
+            return q
+    for _round in range(2):
+        T = ct[n] - t_dep_h
+        slack = t_req_h - T - margin
+        if T > t_req_h + 1e-9 or slack <= 0.0:
+            return q
+        first = n
+        for _t in range(2 * (n - lo)):
+            j = lo + np.random.randint(0, n - lo)
+            j2 = lo + np.random.randint(0, n - lo)
+            if rpm_idx[j2] > rpm_idx[j]:
+                j = j2
+            r = rpm_idx[j]
+            if r == 0:
+                continue
+            add = (ct[j + 1] - ct[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
+            if add > slack:
+                continue
+            if first == n:
+                keep_r[:] = rpm_idx
+                keep_t[:] = ct
+                keep_f[:] = cf
+            slack -= add
+            rpm_idx[j] = r - 1
+            first = min(first, j)
+        if first == n:
+            return q
+        q2 = cost_from_nb(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                        times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
+        cnt[0] += 1
+        if not (q2 < q and ct[n] - t_dep_h <= t_req_h + 1e-9):
+            rpm_idx[:] = keep_r
+            ct[:] = keep_t
+            cf[:] = keep_f
+            return q
+        q = q2
+    return q
+
+
+@numba.njit(cache=True)
+def aim_engine_nb(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
+                t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
+    """Engine settings aimed at the RTA for a route: sail it at every constant setting, take the two settings
+    whose arrivals bracket the RTA and put the share of legs on the faster one that should arrive just in
+    time (random legs), then re-time. Returns the cost."""
+    n = rpm_idx.shape[0]
+    R = rpm_options.shape[0]
+    hours = np.empty(R)
+    for r in range(R):
+        rpm_idx[:] = r
+        code, _ = sail_route_nb(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                                times_h, grid, ct, cf)
+        hours[r] = ct[n] - t_dep_h if code == OK else np.inf
+        cnt[0] += 1
+    fast = -1
+    for r in range(R):
+        if hours[r] <= t_req_h:
+            fast = r
+            break
+    if fast <= 0:  # the slowest setting is in time, or none is: one constant setting
+        rpm_idx[:] = 0 if fast == 0 else R - 1
+        for r in range(R - 1, -1, -1):
+            if fast < 0 and hours[r] < np.inf:
+                rpm_idx[:] = r  # the fastest feasible one: the least late
+                break
+    else:
+        slow = fast - 1
+        rpm_idx[:] = fast
+        if hours[slow] < np.inf:
+            share = (hours[slow] - t_req_h) / (hours[slow] - hours[fast])
+            k = int(share * n + np.random.random())
+            rpm_idx[:] = slow
+            perm = np.random.permutation(n)
+            for j in range(min(k, n)):
+                rpm_idx[perm[j]] = fast
+    q = cost_from_nb(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid,
+                   obj, t_req_h, window_h, f_target, early, late, ct, cf)
+    cnt[0] += 1
+    return retime_nb(nodes, rpm_idx, 0, q, np.inf, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
+                   times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)

@@ -1,0 +1,59 @@
+"""Safe random routes for the BFOA's initialisation and dispersal (numba): a random walk line by line
+that drifts towards a drawn offset and bends back to the destination in time (see bfoa.py)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step):
+    """Safe random route: a walk line by line whose step heads, one node at a time, for a target offset that
+    is redrawn now and then (so random routes are smooth detours of every size, not zig-zags) and bends back
+    to the destination in time. Each node: the preferred one first, then nodes ever farther from it (random
+    side), R_max tries in all; on failure back up `backup` lines; give up after K_max tries overall.
+    Offsets are drawn ~ N(0, sigma) nodes; a new target with probability p_new per line; a step towards it with
+    probability p_step per line."""
+    L2 = nodes.shape[0]
+    P = edge_ok.shape[1]
+    c = P // 2
+    L = L2 - 2
+    nodes[0] = c
+    nodes[L2 - 1] = c
+    target = c + int(np.round(np.random.normal() * sigma))
+    i, tries = 1, 0
+    while i <= L:
+        a = nodes[i - 1]
+        left = L + 1 - i  # legs still to go after line i
+        lo = max(0, a - max_shift, c - max_shift * left)
+        hi = min(P - 1, a + max_shift, c + max_shift * left)
+        if np.random.random() < p_new:
+            target = c + int(np.round(np.random.normal() * sigma))
+        tgt = min(max(target, c - (left - 1)), c + (left - 1))  # in reach of the destination, one node a line
+        homing = abs(a - c) >= left - 1
+        step = 0
+        if tgt != a and (homing or np.random.random() < p_step):
+            step = 1 if tgt > a else -1
+            if abs(a - c) > left:  # behind on the way back: larger steps
+                step *= (abs(a - c) + left - 1) // left
+        pref = min(max(a + step, lo), hi)
+        placed = False
+        if lo <= hi:
+            for t in range(r_max):
+                off = (t + 1) // 2
+                b = pref + (off if np.random.random() < 0.5 else -off)
+                if b < lo or b > hi:
+                    b = np.random.randint(lo, hi + 1)
+                if edge_ok[i - 1, a, b] and (i < L or edge_ok[L, b, c]):
+                    nodes[i] = b
+                    placed = True
+                    break
+        tries += 1
+        if placed:
+            i += 1
+        else:
+            i = max(1, i - backup)
+        if tries > k_max:
+            return False
+    return True
