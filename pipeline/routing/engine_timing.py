@@ -66,40 +66,40 @@ def time_price_nb(rpm_idx, ct, cf, rpm_options):
 
 
 @numba.njit(cache=True)
-def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t_req_h, obj):
-    """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
-    the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
-    the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
-    re-set (n when none), or -1 when, under the jit objective, the estimated fuel reaches `bar`."""
+def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
+    """Raise the rpm of random legs ≥ lo (the slower of two draws) one step at a time until the estimated hours
+    saved cover `need_h` (a leg of h hours at rpm r takes h·r/r' at r', burns (r'/r)² its fuel), with the legs'
+    hours and fuel from ct/cf. Returns (first leg changed, n when none; `fuel` plus the estimated extra fuel)."""
     n = rpm_idx.shape[0]
     n_rpm = rpm_options.shape[0]
-    if lo >= n:
-        return n
-    margin = 0.05 * t_req_h / n
     first = n
-    if T_est > t_req_h:
-        need = T_est - t_req_h + margin
-        for _t in range(4 * (n - lo)):
-            if need <= 0.0:
-                break
-            j = lo + np.random.randint(0, n - lo)
-            j2 = lo + np.random.randint(0, n - lo)
-            if rpm_idx[j2] < rpm_idx[j]:
-                j = j2
-            r = rpm_idx[j]
-            if r >= n_rpm - 1:
-                continue
-            ratio = rpm_options[r + 1] / rpm_options[r]
-            need -= (ct_ref[j + 1] - ct_ref[j]) * (1.0 - 1.0 / ratio)
-            F_est += (cf_ref[j + 1] - cf_ref[j]) * (ratio * ratio - 1.0)
-            rpm_idx[j] = r + 1
-            first = min(first, j)
-        if obj == OBJ_JIT and F_est >= bar:
-            return -1
-        return first
-    slack = t_req_h - T_est - margin
+    for _t in range(4 * (n - lo)):
+        if need_h <= 0.0:
+            break
+        j = lo + np.random.randint(0, n - lo)
+        j2 = lo + np.random.randint(0, n - lo)
+        if rpm_idx[j2] < rpm_idx[j]:
+            j = j2
+        r = rpm_idx[j]
+        if r >= n_rpm - 1:
+            continue
+        ratio = rpm_options[r + 1] / rpm_options[r]
+        need_h -= (ct[j + 1] - ct[j]) * (1.0 - 1.0 / ratio)
+        fuel += (cf[j + 1] - cf[j]) * (ratio * ratio - 1.0)
+        rpm_idx[j] = r + 1
+        first = min(first, j)
+    return first, fuel
+
+
+@numba.njit(cache=True)
+def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
+    """Lower the rpm of random legs ≥ lo (the faster of two draws) one step at a time while the estimated extra
+    hours fit in `slack_h`; `stop_when_spent` ends the draws once the slack is used up (otherwise all 2·(n − lo)
+    draws are made). Returns the first leg changed (n when none)."""
+    n = rpm_idx.shape[0]
+    first = n
     for _t in range(2 * (n - lo)):
-        if slack <= 0.0:
+        if stop_when_spent and slack_h <= 0.0:
             break
         j = lo + np.random.randint(0, n - lo)
         j2 = lo + np.random.randint(0, n - lo)
@@ -108,13 +108,31 @@ def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t
         r = rpm_idx[j]
         if r == 0:
             continue
-        add = (ct_ref[j + 1] - ct_ref[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
-        if add > slack:
+        add = (ct[j + 1] - ct[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
+        if add > slack_h:
             continue
-        slack -= add
+        slack_h -= add
         rpm_idx[j] = r - 1
         first = min(first, j)
     return first
+
+
+@numba.njit(cache=True)
+def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t_req_h, obj):
+    """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
+    the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
+    the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
+    re-set (n when none), or -1 when, under the jit objective, the estimated fuel reaches `bar`."""
+    n = rpm_idx.shape[0]
+    if lo >= n:
+        return n
+    margin = 0.05 * t_req_h / n
+    if T_est > t_req_h:
+        first, F_est = speed_up_nb(rpm_idx, lo, T_est - t_req_h + margin, F_est, ct_ref, cf_ref, rpm_options)
+        if obj == OBJ_JIT and F_est >= bar:
+            return -1
+        return first
+    return slow_down_nb(rpm_idx, lo, t_req_h - T_est - margin, ct_ref, rpm_options, True)
 
 
 @numba.njit(cache=True)
@@ -131,7 +149,6 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_
              before the RTA, sail again, and keep it only if it is on time and cheaper; at most two rounds.
     """
     n = rpm_idx.shape[0]
-    n_rpm = rpm_options.shape[0]
     if q == np.inf or lo >= n:
         return q
     margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
@@ -139,24 +156,7 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_
         T = ct[n] - t_dep_h
         if T <= t_req_h + 1e-9:
             break
-        need = T - t_req_h + margin
-        first = n
-        extra_f = 0.0
-        for _t in range(4 * (n - lo)):
-            if need <= 0.0:
-                break
-            j = lo + np.random.randint(0, n - lo)
-            j2 = lo + np.random.randint(0, n - lo)
-            if rpm_idx[j2] < rpm_idx[j]:
-                j = j2
-            r = rpm_idx[j]
-            if r >= n_rpm - 1:
-                continue
-            ratio = rpm_options[r + 1] / rpm_options[r]
-            need -= (ct[j + 1] - ct[j]) * (1.0 - 1.0 / ratio)
-            extra_f += (cf[j + 1] - cf[j]) * (ratio * ratio - 1.0)
-            rpm_idx[j] = r + 1
-            first = min(first, j)
+        first, extra_f = speed_up_nb(rpm_idx, lo, T - t_req_h + margin, 0.0, ct, cf, rpm_options)
         if first == n:
             return q
         if obj == OBJ_JIT and cf[n] + extra_f >= bar:
@@ -171,27 +171,12 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_
         slack = t_req_h - T - margin
         if T > t_req_h + 1e-9 or slack <= 0.0:
             return q
-        first = n
-        for _t in range(2 * (n - lo)):
-            j = lo + np.random.randint(0, n - lo)
-            j2 = lo + np.random.randint(0, n - lo)
-            if rpm_idx[j2] > rpm_idx[j]:
-                j = j2
-            r = rpm_idx[j]
-            if r == 0:
-                continue
-            add = (ct[j + 1] - ct[j]) * (rpm_options[r] / rpm_options[r - 1] - 1.0)
-            if add > slack:
-                continue
-            if first == n:
-                keep_r[:] = rpm_idx
-                keep_t[:] = ct
-                keep_f[:] = cf
-            slack -= add
-            rpm_idx[j] = r - 1
-            first = min(first, j)
+        keep_r[:] = rpm_idx
+        first = slow_down_nb(rpm_idx, lo, slack, ct, rpm_options, False)
         if first == n:
             return q
+        keep_t[:] = ct
+        keep_f[:] = cf
         q2 = cost_from_nb(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
                         times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
         cnt[0] += 1
