@@ -42,6 +42,16 @@ class FaultyHandler(SimpleHTTPRequestHandler):
             return True
         return fault.startswith(kind + "x") and self.hits[self.path] <= int(fault[len(kind) + 1:])
 
+    def _send_first_half(self) -> bytes:
+        """Headers announcing the whole file, then only its first half; returns the whole file's bytes."""
+        data = Path(self.translate_path(self.path)).read_bytes()
+        self.send_response(200)
+        self.send_header("Content-Length", str(len(data)))
+        self.end_headers()
+        self.wfile.write(data[: len(data) // 2])
+        self.wfile.flush()
+        return data
+
     def do_GET(self):
         name = self.path.rsplit("/", 1)[-1]
         self.hits[self.path] = self.hits.get(self.path, 0) + 1
@@ -59,20 +69,10 @@ class FaultyHandler(SimpleHTTPRequestHandler):
             os.close(self.connection.detach())  # linger 0: the peer gets a TCP RST, no response
             self.close_connection = True
         elif fault == "truncate":  # announce the full length, send half, drop the connection
-            data = Path(self.translate_path(self.path)).read_bytes()
-            self.send_response(200)
-            self.send_header("Content-Length", str(len(data)))
-            self.end_headers()
-            self.wfile.write(data[: len(data) // 2])
-            self.wfile.flush()
+            self._send_first_half()
             self.close_connection = True
         elif fault == "barrier2":
-            data = Path(self.translate_path(self.path)).read_bytes()
-            self.send_response(200)
-            self.send_header("Content-Length", str(len(data)))
-            self.end_headers()
-            self.wfile.write(data[: len(data) // 2])
-            self.wfile.flush()
+            data = self._send_first_half()
             self.barrier.wait(STALL_LIMIT_S)
             self.wfile.write(data[len(data) // 2:])
             self.wfile.flush()
