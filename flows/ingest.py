@@ -168,14 +168,20 @@ def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opt
     return items
 
 
-def _decode_one(it: Download, grid: tuple, quarantine_dir: Path):
-    """The decoded dataset on the routing grid, or None after marking the file corrupt and moving it to quarantine."""
+def _decoded_or_quarantined(it: Download, decode, quarantine_dir: Path):
+    """`decode(file)`, or None after marking the file corrupt and moving it to quarantine."""
     try:
-        return regrid((decode_gsm if it.source == "GSM" else decode_gwm)(it.result.path), grid[0], grid[1])
+        return decode(it.result.path)
     except DecodeError as exc:
         it.status, it.error = "corrupt", f"{exc} (from {it.url})"
         raw_store.quarantine(quarantine_dir, it.source, it.result.path)
         return None
+
+
+def _decode_grib(it: Download, grid: tuple, quarantine_dir: Path):
+    """A GSM/GWM file decoded onto the routing grid (None when corrupt)."""
+    ds = _decoded_or_quarantined(it, decode_gsm if it.source == "GSM" else decode_gwm, quarantine_dir)
+    return None if ds is None else regrid(ds, grid[0], grid[1])
 
 
 @task(name="decode-and-assemble", cache_policy=NO_CACHE)
@@ -185,14 +191,9 @@ def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list
     usable = [it for it in items if it.status in ("ok", "skipped")]
     grib = [it for it in usable if it.source in ("GSM", "GWM")]
     with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
-        decoded = pool.map(lambda it: _decode_one(it, grid, quarantine_dir), grib)
-        osc = []
-        for it in (it for it in usable if it.source == "OSCAR"):
-            try:
-                osc.append(decode_oscar(it.result.path))
-            except DecodeError as exc:
-                it.status, it.error = "corrupt", f"{exc} (from {it.url})"
-                raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+        decoded = pool.map(lambda it: _decode_grib(it, grid, quarantine_dir), grib)
+        osc = [_decoded_or_quarantined(it, decode_oscar, quarantine_dir) for it in usable if it.source == "OSCAR"]
+        osc = [ds for ds in osc if ds is not None]
         decoded = list(decoded)
     gsm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GSM"]
     gwm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GWM"]
@@ -202,7 +203,7 @@ def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list
 
 
 @task(name="write-cycle", cache_policy=NO_CACHE)
-def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complete: bool, n_expected: int,
+def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complete: bool, n_expected: int, n_ok: int,
                 problems: list[str]) -> None:
     """Cube first, then the file log, then the cycle status: the status is written last, so a run killed
     before it is never taken for a complete one."""
@@ -216,7 +217,7 @@ def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complet
         for it in items
     ])
     ingest_log.set_cycle_status(layout.warehouse, cycle, complete=complete, n_expected=n_expected,
-                                n_ok=sum(it.status in ("ok", "skipped") for it in items), missing="; ".join(problems)[:2000])
+                                n_ok=n_ok, missing="; ".join(problems)[:2000])
 
 
 @flow(name="ingest-weather", log_prints=False)
@@ -252,10 +253,10 @@ def ingest_weather(cycle: str, data_root: str | None = None, rish_url: str | Non
     if not have_currents:
         problems.append("no OSCAR analysis at or before the cycle")
     complete = not missing_steps and have_currents and not problems
-    write_cycle(layout, c, ds, items, complete, len(steps) + 2 + listing.n_oscar, problems)
+    n_ok = sum(it.status in ("ok", "skipped") for it in items)
+    write_cycle(layout, c, ds, items, complete, len(steps) + 2 + listing.n_oscar, n_ok, problems)
     for p in problems:
         logger.warning("cycle %s: %s", label, p)
-    n_ok = sum(it.status in ("ok", "skipped") for it in items)
     return CycleReport(label, complete, len(items), n_ok, missing=problems,
                        corrupt=[it.name for it in items if it.status == "corrupt"]).__dict__
 
