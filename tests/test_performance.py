@@ -13,6 +13,7 @@ from pipeline.performance.refit import refit_vessel
 from pipeline.performance.validate import NoonFileError, validate_noon
 from pipeline.synthetic.fleet import generate_fleet, is_valid_imo
 from storage import fleet_store
+from tests.noon_cases import rejection_cases
 
 
 @pytest.fixture(scope="module")
@@ -89,21 +90,7 @@ def test_constant_regressor_is_dropped_and_said():
 
 def test_every_rejection_reason(fleet):
     base = fleet.noon[fleet.noon.imo == fleet.vessels.imo[1]].head(3).iloc[0].to_dict()
-    def row(**kw):
-        r = dict(base); r.update(kw); return r
-    cases = {
-        "missing stw_kn": row(stw_kn=None),
-        "not a number in rpm": row(rpm="eighty"),
-        "bad timestamp": row(ts_utc="yesterday noon"),
-        "unknown vessel": row(imo=9999999),
-        "hours <= 0": row(hours=0),
-        "negative fuel_t": row(fuel_t=-1),
-        "out of range draft_m": row(draft_m=40),
-        "speed beyond physics": row(stw_kn=50, sog_kn=50, dist_nm=50 * base["hours"]),
-        "fuel looks like kg": row(fuel_t=base["fuel_t"] * 1000),
-        "speed looks like m/s": row(sog_kn=base["sog_kn"] / 1.943844),
-        "sog inconsistent with distance": row(dist_nm=base["dist_nm"] * 1.5),
-    }
+    cases = rejection_cases(base)
     rows = [cases[k] for k in cases] + [base, dict(base)]
     good, bad = validate_noon(_as_text(pd.DataFrame(rows)), set(fleet.vessels.imo))
     assert list(bad.reason) == list(cases) + ["duplicate timestamp in file"]

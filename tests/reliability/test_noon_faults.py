@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 from flows.cli import app
 from pipeline.synthetic.fleet import generate_fleet, imo_with_check_digit, write_fleet
 from storage import fleet_store
+from tests.noon_cases import rejection_cases
 
 CUTOFF = pd.Timestamp("2020-10-01")  # reports before it are the stored history; later ones are fresh for tests
 NEW_IMO = imo_with_check_digit(914999)
@@ -85,31 +86,9 @@ def _counts_line(out: str) -> tuple[int, int, int, int]:
     return tuple(int(x) for x in m.groups())
 
 
-def _reason_rows(base: dict) -> dict[str, dict]:
-    def row(**kw):
-        r = dict(base)
-        r.update({k: str(v) for k, v in kw.items()})
-        return r
-
-    hours, fuel, sog, dist = (float(base[k]) for k in ("hours", "fuel_t", "sog_kn", "dist_nm"))
-    return {
-        "missing stw_kn": row(stw_kn=""),
-        "not a number in rpm": row(rpm="eighty"),
-        "bad timestamp": row(ts_utc="yesterday noon"),
-        "unknown vessel": row(imo=9999999),
-        "hours <= 0": row(hours=0),
-        "negative fuel_t": row(fuel_t=-1),
-        "out of range draft_m": row(draft_m=40),
-        "speed beyond physics": row(stw_kn=50, sog_kn=50, dist_nm=50 * hours),
-        "fuel looks like kg": row(fuel_t=fuel * 1000),
-        "speed looks like m/s": row(sog_kn=round(sog / 1.943844, 4)),
-        "sog inconsistent with distance": row(dist_nm=dist * 1.5),
-    }
-
-
 def test_every_rejection_reason_through_the_cli(root, fresh, tmp_path):
     base = fresh.iloc[0].to_dict()
-    cases = _reason_rows(base)
+    cases = rejection_cases(base, as_text=True)
     # two stored reports sent again: one unchanged (already present), one changed (a conflict)
     cols = [c for c in fleet_store.NOON_COLUMNS if c != "source_file"]
     stored = _q(root, "SELECT * EXCLUDE (source_file) FROM noon_reports WHERE imo = ? ORDER BY ts_utc DESC LIMIT 2", (int(base["imo"]),))
@@ -141,7 +120,7 @@ def _mixed(fresh: pd.DataFrame, n_good: int, seed: int) -> tuple[pd.DataFrame, i
     good = fresh.iloc[:n_good]
     bad = []
     for k, (_, r) in enumerate(fresh.iloc[n_good:].iterrows()):
-        spoilt = list(_reason_rows(r.to_dict()).values())
+        spoilt = list(rejection_cases(r.to_dict(), as_text=True).values())
         bad.append(spoilt[k % len(spoilt)])
     rows = pd.concat([good, pd.DataFrame(bad)], ignore_index=True).sample(frac=1.0, random_state=seed)
     return rows.reset_index(drop=True), len(bad)
@@ -201,7 +180,7 @@ def test_a_vessel_whose_reports_are_all_bad_keeps_its_model_and_says_why(root, f
     old_imo = int(fresh.imo.iloc[0])
     bad = []
     for k, (_, r) in enumerate(fresh.iloc[:24].iterrows()):
-        spoilt = [v for key, v in _reason_rows(r.to_dict()).items() if key not in ("unknown vessel", "bad timestamp")]
+        spoilt = [v for key, v in rejection_cases(r.to_dict(), as_text=True).items() if key not in ("unknown vessel", "bad timestamp")]
         row = spoilt[k % len(spoilt)]
         bad.append(dict(row, imo=str(NEW_IMO if k % 2 else old_imo)))
     path = tmp_path / "all_bad.csv"
