@@ -26,7 +26,7 @@ OUT = REPO / "bench" / "out" / "fleet"
 def prepare(n_voyages: int) -> Path:
     import pandas as pd
 
-    from flows.cli_fleet import _import_fleet
+    from cli.fleet import _import_fleet
     from flows.ingest import ingest_weather
     from flows.refit import refit_performance
     from pipeline.synthetic.fleet import generate_fleet, write_fleet

@@ -19,7 +19,7 @@ from pipeline.synthetic.fleet import generate_fleet, write_fleet
 @pytest.fixture(scope="module")
 def fleet_root(tmp_path_factory, demo_mirror, prefect_harness):
     """A data root with a 4-vessel fleet (+ one voyage departing from land) after one nightly run."""
-    from flows.cli_fleet import _import_fleet
+    from cli.fleet import _import_fleet
     from flows.fleet import nightly
     from storage import fleet_store
 
@@ -94,7 +94,7 @@ def test_second_nightly_adds_a_run_but_no_ingest_or_fits(fleet_root):
 def test_route_cli_json_png_and_rtz(fleet_root, tmp_path):
     from typer.testing import CliRunner
 
-    from flows.cli import app
+    from cli.main import app
     from pipeline.export.rtz import validate_rtz
 
     root, fl, _, _ = fleet_root
@@ -113,7 +113,7 @@ def test_route_cli_json_png_and_rtz(fleet_root, tmp_path):
 def test_route_cli_says_what_is_missing(tmp_path):
     from typer.testing import CliRunner
 
-    from flows.cli import app
+    from cli.main import app
 
     res = CliRunner().invoke(app, ["route", "--voyage", "V1", "--data", str(tmp_path / "empty")])
     assert res.exit_code == 2 and "jitroute demo" in res.output

@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from flows.cli import app
+from cli.main import app
 from pipeline.synthetic.fleet import generate_fleet, imo_with_check_digit, write_fleet
 from storage import fleet_store
 from tests.noon_cases import rejection_cases

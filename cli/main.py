@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from flows import cli_fleet, cli_ingest, cli_performance, cli_routing
+from cli import fleet, ingest, performance, routing
 
 app = typer.Typer(
     name="jitroute",
@@ -14,7 +14,7 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-for module in (cli_ingest, cli_performance, cli_routing, cli_fleet):
+for module in (ingest, performance, routing, fleet):
     module.register(app)
 
 
