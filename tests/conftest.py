@@ -7,14 +7,13 @@ from pathlib import Path
 
 import pytest
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+JMA_FIXTURES = Path(__file__).resolve().parent / "fixtures" / "jma"
 
 
 @pytest.fixture(scope="session")
-def shared_dir() -> Path:
-    if not SHARED.exists():
-        pytest.skip(f"shared documents not found at {SHARED}")
-    return SHARED
+def jma_fixtures() -> Path:
+    """Real JMA GRIB2 files written by others (tests/fixtures/jma/README.md)."""
+    return JMA_FIXTURES
 
 
 @pytest.fixture

@@ -87,16 +87,16 @@ def test_truncated_grib_is_a_decode_error(tmp_path):
         decode_gsm(tmp_path / "cut.bin")
 
 
-def test_jma_fixtures_decode_every_field(shared_dir):
-    meps = list_fields(next((shared_dir / "fixtures").glob("*MEPS*")))
+def test_jma_fixtures_decode_every_field(jma_fixtures):
+    meps = list_fields(next(jma_fixtures.glob("*MEPS*")))
     assert len(meps) == 20  # several fields per message, each seen
     assert {f.short_name for f in meps} >= {"u", "v", "t"}
     assert all(f.centre == 34 and (f.ni, f.nj) == (241, 253) for f in meps)
-    msg = list_fields(next((shared_dir / "fixtures").glob("*MSG*")))
+    msg = list_fields(next(jma_fixtures.glob("*MSG*")))
     assert sorted({f.step_h for f in msg}) == [3, 6, 9, 12, 15, 18, 21, 24]
     assert {f.short_name for f in msg} == {"unknown"}
     with pytest.raises(DecodeError, match="10 m wind"):
-        decode_gsm(next((shared_dir / "fixtures").glob("*MEPS*")))
+        decode_gsm(next(jma_fixtures.glob("*MEPS*")))
 
 
 def _uv(t, la, lo):
@@ -138,14 +138,14 @@ def test_oscar_with_unexpected_dims_is_a_decode_error(tmp_path):
         decode_oscar(p)
 
 
-def test_grib_files_decoded_in_threads_equal_a_serial_decode(demo_mirror, shared_dir):
+def test_grib_files_decoded_in_threads_equal_a_serial_decode(demo_mirror, jma_fixtures):
     """The ingest decodes GRIB2 files in worker threads: eccodes (built thread-safe, multi-field support on)
     must give every thread exactly what a serial decode gives, including JMA's multi-field messages."""
     from concurrent.futures import ThreadPoolExecutor
 
     files = sorted(demo_mirror.rglob("*_grib2.bin"))[:12]
     jobs = [(decode_gwm if "GWM" in p.name else decode_gsm, p) for p in files]
-    jobs += [(list_fields, p) for p in sorted((shared_dir / "fixtures").glob("*grib2.bin*"))]
+    jobs += [(list_fields, p) for p in sorted(jma_fixtures.glob("*grib2.bin*"))]
     serial = [fn(p) for fn, p in jobs]
     with ThreadPoolExecutor(4) as pool:
         for _ in range(2):

@@ -28,7 +28,7 @@ from pipeline.export.voyage import (finite_or_none, iso_utc, require_legs, vesse
                                     waypoint_names, waypoints_deg)
 from pipeline.routing.geodesy import KN_PER_MS
 
-RTZ_SCHEMA_DIR = Path(__file__).parents[3] / "shared" / "rtz"
+RTZ_SCHEMA_DIR = Path(__file__).parent / "schemas"  # shipped as package data (CIRM RTZ 1.0-1.2)
 RTZ_SCHEMA_ENV = "JITROUTE_RTZ_SCHEMAS"
 JITROUTE_NS = "urn:jitroute:rtz-extension:1"
 MANUFACTURER = "jitroute"
