@@ -27,8 +27,8 @@ def prepare(n_voyages: int) -> Path:
     import pandas as pd
 
     from cli.fleet import _import_fleet
-    from flows.ingest import ingest_weather
-    from flows.refit import refit_performance
+    from flows.jobs.ingest import ingest_cycle
+    from flows.jobs.refit import refit_job
     from pipeline.synthetic.fleet import generate_fleet, write_fleet
     from pipeline.synthetic.mirror import write_mirror
     from storage import fleet_store
@@ -42,12 +42,12 @@ def prepare(n_voyages: int) -> Path:
     if not (mirror / ".complete").exists():
         write_mirror(mirror, "2020-12-01", "2020-12-01", cycles=(0,), seed=0)
         (mirror / ".complete").write_text("ok\n")
-    ingest_weather("2020-12-01T00", data_root=str(root), rish_url=(mirror / "rish").as_uri() + "/",
+    ingest_cycle("2020-12-01T00", data_root=str(root), rish_url=(mirror / "rish").as_uri() + "/",
                    oscar_url=(mirror / "oscar").as_uri() + "/")
     fl = generate_fleet("2020-12-01T00", n_vessels=12, days=365, seed=7)
     write_fleet(fl, OUT / "fleet_csv")
     _import_fleet(OUT / "fleet_csv", root)
-    refit_performance(data_root=str(root))
+    refit_job(data_root=str(root))
     base = fl.voyages
     rows = []
     for k in range(n_voyages):
@@ -63,11 +63,11 @@ def prepare(n_voyages: int) -> Path:
 
 
 def run(root: Path, address: str, voyages: list[str]) -> float:
-    from flows.fleet import route_fleet
+    from flows.jobs.fleet import route_fleet_job
 
     os.environ["JITROUTE_DASK_ADDRESS"] = address
     t0 = time.perf_counter()
-    s = route_fleet(cycle="2020-12-01T00", voyages=voyages, data_root=str(root), exports=False, trigger="bench")
+    s = route_fleet_job(cycle="2020-12-01T00", voyages=voyages, data_root=str(root), exports=False, trigger="bench")
     dt = time.perf_counter() - t0
     assert s["n"] == len(voyages), s
     return dt

@@ -3,8 +3,8 @@
 ingest, flow engine  `ingest_weather` run by Prefect (a throw-away local API, as in the tests) into a
                      fresh data root: list, download over HTTP, checksum, decode GSM/GWM/OSCAR, regrid
                      to the routing grid, write the Zarr cube, record the ingest log in DuckDB.
-ingest, .fn          the same flow function without the flow engine (`ingest_weather.fn` with the run
-                     logger disabled; its tasks still run through Prefect's task engine).
+ingest, plain        the same job without Prefect (`flows.jobs.ingest.ingest_cycle`, as the CLI runs it when
+                     no Prefect API is configured): the same steps as plain function calls.
 reference            decoding the same files in the same run with raw eccodes (`codes_get_values` of every
                      GRIB message, multi-field support on) and netCDF4 (every variable of every OSCAR file).
 
@@ -68,10 +68,9 @@ def ingest(url: str, data_root: Path, engine: bool) -> tuple[float, dict]:
     if engine:
         report = ingest_weather(CYCLE, **kw)
     else:
-        from prefect.logging import disable_run_logger
+        from flows.jobs.ingest import ingest_cycle
 
-        with disable_run_logger():
-            report = ingest_weather.fn(CYCLE, **kw)
+        report = ingest_cycle(CYCLE, **kw)
     return time.perf_counter() - t0, report
 
 
@@ -107,7 +106,7 @@ def main() -> int:
     print(f"ingest bench: cycle {CYCLE}, {n_files} files ({mb:.1f} MB: GSM + GWM GRIB2, OSCAR NetCDF) over HTTP on "
           f"127.0.0.1 → Zarr cube {cube_mb:.1f} MB; mirror written in {setup_s:.1f} s; best of {a.repeat}")
     print(f"{'':44s}{'seconds':>9s}{'MB/s':>9s}{'ratio':>8s}")
-    for label, s in (("ingest, Prefect flow engine", flow_s), ("ingest, ingest_weather.fn (no flow engine)", fn_s),
+    for label, s in (("ingest, Prefect flow engine", flow_s), ("ingest, plain job (no Prefect)", fn_s),
                      ("reference (raw eccodes + netCDF4 decode)", ref_s)):
         print(f"{label:44s}{s:9.2f}{mb / s:9.1f}{s / ref_s:7.2f}×")
     for label, s in (("flow engine", flow_s), (".fn", fn_s)):

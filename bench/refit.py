@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from flows.refit import fit_vessels, load_reports, read_table  # noqa: E402
+from flows.jobs.refit import fit_vessels, load_reports, read_table  # noqa: E402
 from pipeline.performance import features, fit  # noqa: E402
 from pipeline.performance.validate import validate_noon  # noqa: E402
 from pipeline.synthetic.fleet import generate_fleet, write_fleet  # noqa: E402

@@ -6,10 +6,10 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
-console = Console()
+from cli.console import console
+from cli.launch import run_job
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 
 
@@ -23,6 +23,7 @@ def run_table(summary: dict) -> Table:
     t.add_column("", justify="right")
     t.add_row("voyages routed", str(summary.get("n")))
     t.add_row("on time / late / not routed", f"{summary.get('n_ok')} / {summary.get('n_late')} / {summary.get('n_failed')}")
+    t.add_row("exports failed", str(len(summary.get("export_failures") or [])))
     t.add_row("fuel (t)", _f(summary.get("fuel_t")))
     t.add_row("baseline fuel (t), same voyages", _f(summary.get("baseline_fuel_t")))
     t.add_row("savings vs baseline", _f(summary.get("savings_pct"), "{:.1f} %"))
@@ -31,13 +32,17 @@ def run_table(summary: dict) -> Table:
 
 def problems_table(summary: dict) -> Table | None:
     rows = summary.get("problems") or []
-    if not rows:
+    exports = summary.get("export_failures") or []
+    if not rows and not exports:
         return None
     t = Table(title="Voyages needing attention")
     for col in ("voyage", "IMO", "status", "reason"):
         t.add_column(col)
     for r in rows:
         t.add_row(str(r["voyage_id"]), str(r["imo"]), str(r["status"]), str(r["reason"] or ""))
+    for line in exports:
+        vid, _, err = line.partition(": ")
+        t.add_row(vid, "", "export failed", err)
     return t
 
 
@@ -60,27 +65,34 @@ def register(app: typer.Typer) -> None:
                         solver: Optional[str] = typer.Option(None, help="bfoa (default) | dp | astar | gc | rhumb."),
                         data: Optional[Path] = DataOpt):
         """Route every upcoming voyage on a local dask cluster (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
-        from flows.fleet import route_fleet
+        from flows.jobs.fleet import route_fleet_job
         from flows.settings import load_settings
+        from pipeline.sources.cycles import parse_cycle
 
-        try:
-            summary = route_fleet(cycle=cycle, voyages=voyage or None, data_root=str(data) if data else None, solver=solver)
-        except RuntimeError as exc:
-            console.print(f"[red]error:[/] {exc}")
-            raise typer.Exit(2) from exc
+        if cycle:
+            parse_cycle(cycle)
+        summary = run_job("flows.fleet", "route_fleet", route_fleet_job, cycle=cycle, voyages=voyage or None,
+                          data_root=str(data) if data else None, solver=solver)
         show_run(summary, load_settings(data_root=data).data_root)
 
     @app.command()
-    def nightly(date: Optional[str] = typer.Option(None, help="Date (UTC, YYYY-MM-DD); default today."),
-                cycles: Optional[str] = typer.Option(None, help="Cycle hours, e.g. 00,12 (default from settings)."),
+    def nightly(date: Optional[str] = typer.Option(None, help="Date (UTC, YYYY-MM-DD) whose cycles to ingest; "
+                                                              "default the newest published cycles."),
+                cycles: Optional[str] = typer.Option(None, help="Cycle hours of --date, e.g. 00,12 (default from settings)."),
                 rish_url: Optional[str] = typer.Option(None, help="RISH base URL (default $JITROUTE_RISH_URL)."),
                 oscar_url: Optional[str] = typer.Option(None, help="OSCAR base URL (default $JITROUTE_OSCAR_URL)."),
                 data: Optional[Path] = DataOpt):
-        """The nightly job: ingest the date's cycles, refit models, route the fleet; prints a summary."""
-        from flows.fleet import nightly as nightly_flow
+        """The nightly job: ingest the newest published cycles (or a date's), refit models, route the fleet."""
+        from flows.jobs.fleet import nightly_job
         from flows.settings import load_settings
+        from pipeline.sources.cycles import parse_day, parse_hours
 
-        s = nightly_flow(date=date, data_root=str(data) if data else None, rish_url=rish_url, oscar_url=oscar_url, cycles=cycles)
+        if date:
+            parse_day(date)
+        if cycles:
+            parse_hours(cycles)
+        s = run_job("flows.fleet", "nightly", nightly_job, date=date, data_root=str(data) if data else None,
+                    rish_url=rish_url, oscar_url=oscar_url, cycles=cycles)
         _show_nightly(s, load_settings(data_root=data).data_root)
 
     @app.command()
@@ -89,61 +101,77 @@ def register(app: typer.Typer) -> None:
              vessels: int = typer.Option(12, help="Number of demo vessels (≥ 10 routes)."),
              workers: int = typer.Option(2, help="Local dask workers for routing.")):
         """Generate a demo mirror and fleet, then run the nightly job on them end to end."""
+        import logging
         import os
+        import time
 
-        from flows.fleet import nightly as nightly_flow
+        from flows.jobs.fleet import nightly_job
         from flows.settings import load_settings
+        from pipeline.sources.cycles import parse_day
         from pipeline.synthetic.fleet import generate_fleet, write_fleet
         from pipeline.synthetic.mirror import write_mirror
 
+        parse_day(date)
+        log = logging.getLogger("jitroute.demo")
+        t0 = time.monotonic()
         s = load_settings(data_root=data)
         root = s.layout.ensure().root.resolve()
         os.environ["JITROUTE_DASK_WORKERS"] = str(workers)
         mirror = root / "demo_mirror"
-        with console.status("[1/4] writing the demo RISH/OSCAR mirror (GRIB2 + NetCDF)…") as st:
-            if not (mirror / ".complete").exists():
-                def progress(done, total, name=""):
-                    st.update(f"[1/4] writing the demo mirror: {done}/{total} cycles")
-                write_mirror(mirror, date, date, cycles=(0, 12), seed=0, progress=progress)
-                (mirror / ".complete").write_text("ok\n")
-        console.print(f"[green]✓[/] demo mirror: {mirror}")
-        with console.status("[2/4] generating the demo fleet and importing it…"):
-            fleet_dir = root / "demo_fleet"
-            write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7), fleet_dir)
-            _import_fleet(fleet_dir, root)
-        console.print(f"[green]✓[/] fleet: {vessels} vessels, a year of noon reports, {vessels} voyages ({fleet_dir})")
-        console.print("[3/4] nightly job: ingest → refit → route (progress below)")
-        summary = nightly_flow(date=date, data_root=str(root), rish_url=(mirror / "rish").as_uri() + "/",
-                               oscar_url=(mirror / "oscar").as_uri() + "/", cycles="00,12")
-        console.print("[4/4] done")
+        log.info("[demo 1/3] writing the demo RISH/OSCAR mirror (real GRIB2 + NetCDF) in %s", mirror)
+        if not (mirror / ".complete").exists():
+            def progress(done, total, name=""):
+                log.info("[demo 1/3] demo mirror: %d/%d cycles written", done, total)
+            write_mirror(mirror, date, date, cycles=(0, 12), seed=0, progress=progress)
+            (mirror / ".complete").write_text("ok\n")
+        log.info("[demo 2/3] generating the demo fleet (%d vessels, a year of noon reports) and importing it", vessels)
+        fleet_dir = root / "demo_fleet"
+        write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7), fleet_dir)
+        _import_fleet(fleet_dir, root)
+        log.info("[demo 3/3] the nightly job on %s: ingest → refit → route", date)
+        summary = run_job("flows.fleet", "nightly", nightly_job, date=date, data_root=str(root),
+                          rish_url=(mirror / "rish").as_uri() + "/", oscar_url=(mirror / "oscar").as_uri() + "/",
+                          cycles="00,12")
         _show_nightly(summary, root)
+        console.print(f"demo finished in {time.monotonic() - t0:.0f} s")
 
     @app.command()
     def serve(timezone: str = typer.Option("UTC", help="Time zone of the nightly cron (e.g. Europe/Oslo)."),
-              nightly_cron: str = typer.Option("30 2 * * *", help="Cron of the nightly deployment."),
+              nightly_cron: str = typer.Option("30 2 * * *", help="Cron of the nightly deployment (in --timezone)."),
+              ingest_cron: Optional[str] = typer.Option(None, help="Cron (UTC) of the ingest deployment; default: when "
+                                                                  "each cycle is published (cycle hours + publish delay)."),
+              rish_url: Optional[str] = typer.Option(None, help="RISH base URL the deployments fetch from "
+                                                               "(default $JITROUTE_RISH_URL or the RISH archive)."),
+              oscar_url: Optional[str] = typer.Option(None, help="OSCAR base URL (default $JITROUTE_OSCAR_URL)."),
               data: Optional[Path] = DataOpt):
-        """Register the nightly, 6-hourly ingest and backfill deployments and run them (needs a Prefect server)."""
-        from deploy.serve import build_deployments, serve_all
+        """Register the nightly, ingest and backfill deployments and run their flow runs (needs a Prefect server)."""
+        from deploy.serve import check_api, serve_deployments
 
-        serve_all(build_deployments(timezone=timezone, nightly_cron=nightly_cron, data_root=str(data) if data else None))
+        check_api()
+        serve_deployments(timezone=timezone, nightly_cron=nightly_cron, ingest_cron=ingest_cron,
+                          data_root=str(Path(data).resolve()) if data else None, rish_url=rish_url, oscar_url=oscar_url)
 
 
 def _import_fleet(folder: Path, root: Path) -> None:
+    import logging
+
     import pandas as pd
 
-    from flows.refit import import_noon_reports
+    from flows.jobs.refit import import_noon_file
     from storage import fleet_store
 
     db = root / "warehouse.duckdb"
     fleet_store.import_vessels(db, pd.read_csv(folder / "vessels.csv"))
     fleet_store.import_voyages(db, pd.read_csv(folder / "voyages.csv"))
-    c = import_noon_reports(str(folder / "noon_reports.csv"), data_root=str(root))
-    console.print(f"  noon reports: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
-                  f"{c['rejected']} rejected")
+    c = run_job("flows.refit", "import_noon_reports", import_noon_file, path=str(folder / "noon_reports.csv"),
+                data_root=str(root))
+    logging.getLogger("jitroute.demo").info(
+        "  noon reports: %d rows → %d imported, %d already present, %d rejected", c["rows"], c["inserted"],
+        c["already_present"], c["rejected"])
 
 
 def _show_nightly(s: dict, root: Path) -> None:
-    t = Table(title=f"Nightly {s['date']}: ingest")
+    t = Table(title=f"Nightly {s['date']}: ingest (routed on cycle {s.get('cycle_used') or 'none'})")
     for col in ("cycle", "complete", "files ok", "problems"):
         t.add_column(col)
     for r in s["ingest"]:
@@ -154,4 +182,4 @@ def _show_nightly(s: dict, root: Path) -> None:
     if s.get("routing"):
         show_run(s["routing"], Path(root))
     else:
-        console.print("[yellow]routing skipped: no complete forecast cycle for the date")
+        console.print("[yellow]routing skipped: no complete forecast cycle among those ingested")

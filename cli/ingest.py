@@ -5,13 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
-from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-console = Console()
+from cli.console import console
+from cli.launch import run_job
 
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 RishOpt = typer.Option(None, "--rish-url", help="RISH base URL (https://, http:// or file://); default $JITROUTE_RISH_URL or the RISH archive.")
@@ -32,21 +31,20 @@ def _report_table(reports: list[dict]) -> Table:
 def register(app: typer.Typer) -> None:
     @app.command()
     def ingest(
-        cycle: str = typer.Option(..., "--cycle", help="Forecast cycle (model init, UTC), e.g. 2020-12-01T00."),
+        cycle: str = typer.Option(..., "--cycle", help="Forecast cycle (model init, UTC), e.g. 2020-12-01T00, or 'latest' (the newest published)."),
         data: Optional[Path] = DataOpt,
         rish_url: Optional[str] = RishOpt,
         oscar_url: Optional[str] = OscarOpt,
         force: bool = typer.Option(False, help="Re-ingest even if the cycle is already complete."),
     ):
         """Fetch, decode and write one forecast cycle (GSM wind, GWM waves, OSCAR currents) into the cube."""
-        from flows.ingest import ingest_weather, parse_cycle
+        from flows.jobs.ingest import ingest_cycle
+        from pipeline.sources.cycles import parse_cycle
 
-        try:
-            parse_cycle(cycle)
-        except ValueError as exc:
-            raise typer.BadParameter(str(exc)) from exc
-        with console.status(f"Ingesting cycle {cycle} …"):
-            report = ingest_weather(cycle, data_root=str(data) if data else None, rish_url=rish_url, oscar_url=oscar_url, force=force)
+        if cycle.strip().lower() != "latest":
+            parse_cycle(cycle)  # a bad cycle is refused before anything starts
+        report = run_job("flows.ingest", "ingest_weather", ingest_cycle, cycle=cycle, data_root=str(data) if data else None,
+                         rish_url=rish_url, oscar_url=oscar_url, force=force)
         console.print(_report_table([report]))
         if not report["complete"] and not report.get("skipped"):
             raise typer.Exit(1)
@@ -62,26 +60,24 @@ def register(app: typer.Typer) -> None:
         route: bool = typer.Option(False, "--route", help="Also re-route the fleet for every complete cycle."),
     ):
         """Ingest a range of past cycles, skipping those already complete; optionally re-route."""
-        from flows.ingest import cycles_between, ingest_weather
+        from flows.jobs.ingest import backfill_range
+        from pipeline.sources.cycles import cycles_between, parse_hours
 
-        hours = [int(h) for h in cycles.split(",") if h.strip()]
-        todo = cycles_between(start, end, hours)
-        reports = []
-        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=console) as bar:
+        todo = cycles_between(start, end, parse_hours(cycles))  # bad dates are refused before anything starts
+        args = dict(start=start, end=end, cycles=cycles, data_root=str(data) if data else None, rish_url=rish_url,
+                    oscar_url=oscar_url, route=route)
+        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console, transient=True) as bar:
             job = bar.add_task("backfill", total=len(todo))
-            for c in todo:
-                label = str(np.datetime_as_string(c, unit="h"))
-                bar.update(job, description=f"cycle {label}")
-                reports.append(ingest_weather(label, data_root=str(data) if data else None, rish_url=rish_url, oscar_url=oscar_url))
-                bar.advance(job)
-        console.print(_report_table(reports))
-        if route:
-            from flows.fleet import route_fleet
 
-            for r in reports:
-                if r["complete"]:
-                    summary = route_fleet(cycle=r["cycle"], data_root=str(data) if data else None, trigger="backfill")
-                    console.print(f"routed cycle {r['cycle']}: run {summary['run_id']} ({summary['status']})")
+            def progress(done, total, label):
+                bar.update(job, completed=done, description=f"cycle {label}")
+
+            reports = run_job("flows.ingest", "backfill", lambda **kw: backfill_range(**kw, progress=progress), **args)
+        console.print(_report_table(reports))
+        for r in reports:
+            if r.get("route_run"):
+                console.print(f"routed cycle {r['cycle']}: run {r['route_run']}")
 
     @app.command()
     def mirror(

@@ -6,10 +6,10 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
-console = Console()
+from cli.console import console, fail
+from cli.launch import run_job
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 
 
@@ -39,14 +39,10 @@ def register(app: typer.Typer) -> None:
     def noon_import(file: Path = typer.Argument(..., help="CSV or Parquet of noon reports (one or many vessels)."),
                     data: Optional[Path] = DataOpt):
         """Validate and import noon reports; bad rows go to noon_reports_rejected with a reason."""
-        from flows.refit import import_noon_reports
-        from pipeline.performance.validate import NoonFileError
+        from flows.jobs.refit import import_noon_file
 
-        try:
-            c = import_noon_reports(str(file), data_root=str(data) if data else None)
-        except (NoonFileError, FileNotFoundError) as exc:
-            console.print(f"[red]error:[/] {exc}")
-            raise typer.Exit(2) from exc
+        c = run_job("flows.refit", "import_noon_reports", import_noon_file, path=str(file),
+                    data_root=str(data) if data else None)
         console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
                       f"{c['rejected']} rejected")
         if c["reasons"] or c["conflicts"]:
@@ -64,9 +60,10 @@ def register(app: typer.Typer) -> None:
               form: str = typer.Option("physical", help="Model form: physical (default) or thesis."),
               data: Optional[Path] = DataOpt):
         """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
-        from flows.refit import refit_performance
+        from flows.jobs.refit import refit_job
 
-        summaries = refit_performance(imos=imo or None, data_root=str(data) if data else None, form=form)
+        summaries = run_job("flows.refit", "refit_performance", refit_job, imos=imo or None,
+                            data_root=str(data) if data else None, form=form)
         console.print(refit_table(summaries))
 
     @fleet.command("generate")
@@ -85,7 +82,6 @@ def register(app: typer.Typer) -> None:
         """Import vessels and voyages (and noon reports, validated) from a folder of CSV files."""
         import pandas as pd
 
-        from flows.refit import import_noon_reports
         from flows.settings import load_settings
         from storage import fleet_store
 

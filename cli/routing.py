@@ -7,18 +7,34 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
-console = Console()
+from cli.console import console, fail
 
 
 def _latlon(text: str, what: str) -> tuple[float, float]:
     try:
         lat, lon = (float(x) for x in text.split(","))
-    except ValueError as exc:
-        raise typer.BadParameter(f"{what} must be LAT,LON in degrees (e.g. 35.4,139.7), not {text!r}") from exc
+    except ValueError:
+        fail(f"{what} must be LAT,LON in degrees (e.g. 35.4,139.7), not {text!r}")
+    if not -90.0 <= lat <= 90.0:
+        hint = " (did you give LON,LAT? the order is LAT,LON)" if -90.0 <= lon <= 90.0 else ""
+        fail(f"{what}: latitude {lat:g} is outside -90..90{hint}")
+    if not -180.0 <= lon <= 360.0:
+        fail(f"{what}: longitude {lon:g} is outside -180..360")
     return lat, lon
+
+
+def _utc(text: str, what: str):
+    import numpy as np
+
+    try:
+        t = np.datetime64(text.strip().removesuffix("Z"), "s")
+        if np.isnat(t):
+            raise ValueError(text)
+    except ValueError:
+        fail(f"{what} {text!r} is not a UTC time; use e.g. 2020-12-01T13 or 2020-12-01T13:30")
+    return t
 
 
 def plan_table(plan) -> Table:
@@ -69,51 +85,55 @@ def register(app: typer.Typer) -> None:
         """Plan one voyage: waypoints, rpm per leg and ETAs, compared with the great-circle baseline."""
         import numpy as np
 
-        from flows.fleet import _write_bytes, plan_voyage
+        from flows.jobs.route_worker import cycle_field
         from flows.settings import load_settings
-        from pipeline.routing.problem import RoutingInputError
-        from pipeline.routing.search_space import VoyageGeometryError
-        from storage import cube, fleet_store
+        from pipeline.export import bundle
+        from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
+        from pipeline.sources.cycles import parse_cycle
+        from storage import cube, export_store, fleet_store
 
         s = load_settings(data_root=data)
         lay = s.layout
         if not lay.warehouse.exists():
-            _fail(f"no warehouse at {lay.warehouse}: run `jitroute demo`, or `jitroute fleet import` and `jitroute refit` first")
+            fail(f"no warehouse at {lay.warehouse}: run `jitroute demo`, or `jitroute fleet import` and `jitroute refit` first")
         if voyage:
             rows = fleet_store.load_voyages(lay.warehouse, voyage_ids=[voyage])
             if rows.empty:
-                _fail(f"voyage {voyage} is not in {lay.warehouse}")
+                fail(f"voyage {voyage} is not in {lay.warehouse}")
             v = rows.iloc[0].to_dict()
         else:
             missing = [n for n, x in (("--from", from_), ("--to", to), ("--depart", depart), ("--rta", rta), ("--imo", imo)) if x is None]
             if missing:
-                _fail(f"give {', '.join(missing)} (or --voyage ID)")
+                fail(f"give {', '.join(missing)} (or --voyage ID)")
             (la0, lo0), (la1, lo1) = _latlon(from_, "--from"), _latlon(to, "--to")
             v = {"voyage_id": "adhoc", "imo": imo, "dep_lat": la0, "dep_lon": lo0, "arr_lat": la1, "arr_lon": lo1,
-                 "depart_utc": np.datetime64(depart, "s"), "rta_utc": np.datetime64(rta, "s"), "rpm_options": None}
+                 "depart_utc": _utc(depart, "--depart"), "rta_utc": _utc(rta, "--rta"), "rpm_options": None}
         if rpm:
-            v["rpm_options"] = [float(x) for x in rpm.split(",")]
+            try:
+                v["rpm_options"] = [float(x) for x in rpm.split(",")]
+            except ValueError:
+                fail(f"--rpm must be numbers separated by commas (e.g. 60,70,80), not {rpm!r}")
         vessels = fleet_store.load_vessels(lay.warehouse)
         vessel = vessels[vessels.imo == int(v["imo"])]
         if vessel.empty:
-            _fail(f"vessel {v['imo']} is not in the warehouse: import it with `jitroute fleet import`")
+            fail(f"vessel {v['imo']} is not in the warehouse: import it with `jitroute fleet import`")
         vessel = vessel.iloc[0].to_dict()
         model = fleet_store.load_active_model(lay.warehouse, int(v["imo"]))
         if model is None:
-            _fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
+            fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
         cube_path, c = None, None
         if not calm:
-            c = np.datetime64(cycle, "s") if cycle else cube.latest_complete_cycle(lay.weather_cube)
+            c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(lay.weather_cube)
             if c is None:
-                _fail(f"no complete forecast cycle in {lay.weather_cube}: run `jitroute ingest --cycle …` (or use --calm)")
+                fail(f"no complete forecast cycle in {lay.weather_cube}: run `jitroute ingest --cycle …` (or use --calm)")
             cube_path, c = str(lay.weather_cube), str(np.datetime_as_string(np.datetime64(c, "s")))
-        routing = {"solver": solver, "objective": objective, "arrival_window_h": s.routing.arrival_window_h, "seed": seed,
-                   "n_lines": s.routing.n_lines, "n_points": s.routing.n_points, "d_point_nm": s.routing.d_point_nm}
+        job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
+                       options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed))
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
-                plan, weather = plan_voyage(v, vessel, model.to_json(), cube_path, c, routing)
-        except (RoutingInputError, VoyageGeometryError, KeyError) as exc:
-            _fail(str(exc).strip("'\""))
+                plan, weather = plan_voyage(job, cycle_field(cube_path, c) if cube_path else None)
+        except KeyError as exc:
+            fail(str(exc).strip("'\""))
         if as_json:
             print(json.dumps(plan.to_json(), indent=1))
         else:
@@ -123,27 +143,17 @@ def register(app: typer.Typer) -> None:
             console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
                           f"savings vs baseline {'n/a' if sav != sav else f'{sav:.1f} %'}; runtime {plan.runtime_s:.2f} s; "
                           f"weather {'calm water' if calm else 'cycle ' + c}")
-        if plan.legs:
-            from pipeline.export import plots
-            from pipeline.export import rtz as rtz_mod
-
-            named = dict(plan.route_row(), vessel_name=vessel.get("name"), dep_name=v.get("dep_name"), arr_name=v.get("arr_name"))
-            if png:
-                from pipeline.routing import weather_field as wf
-
-                lats, lons = zip(*plan.waypoints)
-                field = wf.snapshot(weather, plan.legs[len(plan.legs) // 2]["etd_utc"], (min(lats), max(lats)), (min(lons), max(lons)))
-                plots.route_map_png(png, named, plan.legs, plan.baseline.legs if plan.baseline else None,
-                                    field if field["hs_m"] is not None else None)
-                _say(as_json, f"map: {png}")
-            if convergence and plan.history is not None:
-                plots.convergence_png(convergence, plan.history, title=f"{plan.voyage_id}: BFOA best cost per cycle")
-                _say(as_json, f"convergence: {convergence}")
-            if rtz:
-                doc = rtz_mod.route_to_rtz(named, plan.legs)
-                rtz_mod.validate_rtz(doc)
-                _write_bytes(Path(rtz), doc)
-                _say(as_json, f"RTZ: {rtz}")
+        wanted = {"png": png, "convergence": convergence, "rtz": rtz}
+        if plan.legs and any(wanted.values()):
+            made = bundle.export_plan(plan, weather, vessel, v, kinds=[k for k, path in wanted.items() if path])
+            for kind, data in made.files.items():
+                path = Path(wanted[kind])
+                export_store.write_file(path.parent.resolve(), path.name, data)
+                _say(as_json, f"{kind}: {path}")
+            for kind, err in made.errors.items():
+                console.print(f"[red]{kind} export failed:[/] {err}")
+            if made.errors:
+                raise typer.Exit(1)
         if plan.status in ("infeasible", "failed"):
             raise typer.Exit(3)
 
@@ -159,8 +169,3 @@ class _null:
 
     def __exit__(self, *a):
         return False
-
-
-def _fail(msg: str):
-    console.print(f"[red]error:[/] {msg}")
-    raise typer.Exit(2)

@@ -1,46 +1,93 @@
-"""Prefect deployments of jitroute: nightly (cron, time zone), ingest every 6 hours, backfill on demand.
+"""Prefect deployments of jitroute: nightly (cron in a time zone), ingest when each cycle is published, backfill.
 
-`jitroute serve` calls `serve_all(build_deployments(...))`; this process then polls the Prefect
-server (PREFECT_API_URL) and runs scheduled and triggered flow runs. See deploy/README.md.
+`jitroute serve` checks that a Prefect API is reachable, builds the deployments below and serves them:
+this process registers them, the server's scheduler creates their runs, and this process runs them in
+subprocesses. See deploy/README.md.
 """
 
 from __future__ import annotations
 
-from datetime import timedelta
-
-from prefect.schedules import Cron, Interval
-
 NIGHTLY_CRON = "30 2 * * *"
-INGEST_EVERY = timedelta(hours=6)
 
 
-def build_deployments(*, timezone: str = "UTC", nightly_cron: str = NIGHTLY_CRON, data_root: str | None = None) -> list:
-    """The three deployments as RunnerDeployment objects (not yet registered)."""
-    from zoneinfo import ZoneInfo
+class ServeError(RuntimeError):
+    """Serving cannot start (no reachable Prefect API, bad time zone or cron); the message says what to do."""
+
+
+def check_api(timeout_s: float = 5.0) -> str:
+    """The configured Prefect API URL if its /health answers; else ServeError saying how to start one."""
+    import httpx
+
+    from flows.runner import prefect_api_url
+
+    how = ("start one with `.venv/bin/prefect server start` and set "
+           "PREFECT_API_URL=http://127.0.0.1:4200/api (deploy/README.md)")
+    url = prefect_api_url()
+    if not url:
+        raise ServeError(f"no Prefect API configured: {how}")
+    try:
+        r = httpx.get(url.rstrip("/") + "/health", timeout=timeout_s)
+        r.raise_for_status()
+    except httpx.HTTPError as exc:
+        raise ServeError(f"the Prefect API at {url} does not answer ({type(exc).__name__}): {how}") from None
+    return url
+
+
+def build_deployments(*, timezone: str = "UTC", nightly_cron: str = NIGHTLY_CRON, ingest_cron: str | None = None,
+                      data_root: str | None = None, rish_url: str | None = None, oscar_url: str | None = None) -> list:
+    """The three deployments as RunnerDeployment objects (not yet registered).
+
+    The ingest runs when each cycle's files are published (cron in UTC from the cycle hours and the publish
+    delay in the settings), so a restart of `serve` never shifts it; its default cycle is the newest published.
+    The nightly ingests the newest published cycles, refits and routes. Sources and data root given here are
+    the deployments' default parameters.
+    """
+    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+    from datetime import datetime
+
+    from cronsim import CronSim, CronSimError
+    from prefect.deployments.runner import EntrypointType
+    from prefect.schedules import Cron
 
     from flows.fleet import nightly
     from flows.ingest import backfill, ingest_weather
+    from flows.settings import load_settings
+    from pipeline.sources.cycles import publication_cron
 
-    ZoneInfo(timezone)  # a clear error for an unknown zone, before anything is registered
-    common = {"data_root": data_root} if data_root else {}
+    try:
+        ZoneInfo(timezone)
+    except (ZoneInfoNotFoundError, ValueError):
+        raise ServeError(f"unknown time zone {timezone!r}; use an IANA name such as UTC or Europe/Oslo") from None
+    s = load_settings()
+    ingest_cron = ingest_cron or publication_cron(s.sources.cycles_utc, s.sources.publish_delay_h)
+    for name, expr in (("--nightly-cron", nightly_cron), ("--ingest-cron", ingest_cron)):
+        try:
+            CronSim(expr, datetime(2020, 1, 1))
+        except CronSimError as exc:
+            raise ServeError(f"{name} {expr!r} is not a cron expression ({exc})") from None
+    common = {k: v for k, v in (("data_root", data_root), ("rish_url", rish_url), ("oscar_url", oscar_url)) if v}
+    module = EntrypointType.MODULE_PATH  # runs from any working directory where jitroute is installed
     return [
         nightly.to_deployment(name="nightly", schedule=Cron(nightly_cron, timezone=timezone), parameters=dict(common),
-                              description="Ingest the day's cycles, refit performance models, route the fleet.",
-                              tags=["jitroute", "nightly"]),
-        ingest_weather.to_deployment(name="ingest-6h", schedule=Interval(INGEST_EVERY, timezone=timezone),
-                                     parameters={"cycle": "latest", **common},
-                                     description="Fetch the newest forecast cycle into the cube.", tags=["jitroute", "ingest"]),
+                              description="Ingest the newest published cycles, refit performance models, route the fleet.",
+                              tags=["jitroute", "nightly"], entrypoint_type=module),
+        ingest_weather.to_deployment(name="ingest", schedule=Cron(ingest_cron, timezone="UTC"), parameters=dict(common),
+                                     description="Fetch the newest published forecast cycle into the cube.",
+                                     tags=["jitroute", "ingest"], entrypoint_type=module),
         backfill.to_deployment(name="backfill", parameters={"cycles": "00,12", "route": False, **common},
-                               description="Operators: ingest (and with route=true re-route) past dates start..end.",
-                               tags=["jitroute", "backfill"]),
+                               description="Operators: ingest (and with route=true re-route) past days start..end.",
+                               tags=["jitroute", "backfill"], entrypoint_type=module),
     ]
 
 
-def serve_all(deployments: list) -> None:
+def serve_deployments(**kwargs) -> None:
+    """Register the deployments and run their flow runs until stopped (Ctrl-C or SIGTERM)."""
     from prefect import serve
 
-    serve(*deployments)
+    serve(*build_deployments(**kwargs))
 
 
 if __name__ == "__main__":
-    serve_all(build_deployments())
+    check_api()
+    serve_deployments()

@@ -34,6 +34,12 @@ class SourceSettings:
     rish_url: str = RISH_URL_DEFAULT
     oscar_url: str = OSCAR_URL_DEFAULT
     cycles_utc: tuple[int, ...] = (0, 6, 12, 18)
+    # RISH mirrors a GSM/GWM run's files about this long after its init time; the 6-hourly ingest fires then
+    # and "the newest cycle" means the newest one published by now. OSCAR analyses lag days behind: the cube
+    # persists the latest one forward and records its age.
+    publish_delay_h: float = 5.0
+    nightly_cycles: int = 4  # the nightly ingests the newest this many published cycles (complete ones are skipped)
+    step_timeout_s: float = 3600.0  # Prefect task timeout of each ingest step
     gsm_max_lead_h: int = 132
     gsm_step_h: int = 6
     allowed_redirect_hosts: tuple[str, ...] = ()
@@ -57,7 +63,8 @@ class RoutingSettings:
     n_points: int = 21
     d_point_nm: float | None = None
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
-    voyages_per_task: int | None = None  # None: about three Prefect tasks per dask worker
+    voyages_per_task: int | None = None  # None: about three batches per dask worker thread
+    task_timeout_s: float = 6 * 3600.0  # Prefect task timeout of a fleet's routing
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,8 @@ one transaction, so a killed run leaves either all of a run's rows or none.
 
 from __future__ import annotations
 
+import os
+import socket
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -39,19 +41,63 @@ def _frame(rows: list[dict], columns: list[str], run_id: str) -> pd.DataFrame:
     return df
 
 
+def process_started(pid: int) -> str | None:
+    """The start time of process `pid` (clock ticks after boot, from /proc), None when it does not exist."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rsplit(")", 1)[1].split()[19]  # field 22 (starttime); the name in (…) may hold spaces
+
+
+def process_alive(pid: int | None, started: str | None) -> bool:
+    """Process `pid` exists and is the one that started at `started` (not a later process given the same PID)."""
+    if not pid:
+        return False
+    now = process_started(int(pid))
+    return now is not None and (started is None or now == started)
+
+
 def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n_voyages: int) -> None:
+    """Record a run as `running`, owned by this host and process (see `reap_dead_runs`)."""
+    pid = os.getpid()
     with warehouse.connect(db_path) as con:
         con.execute(
-            "INSERT INTO route_runs (run_id, started_at, cycle, n_voyages, status, solver, trigger) "
-            "VALUES (?, ?, ?, ?, 'running', ?, ?)",
+            "INSERT INTO route_runs (run_id, started_at, cycle, n_voyages, status, solver, trigger, host, pid, pid_started) "
+            "VALUES (?, ?, ?, ?, 'running', ?, ?, ?, ?, ?)",
             [run_id, _utcnow(), pd.Timestamp(cycle).to_pydatetime() if cycle is not None else None,
-             n_voyages, solver, trigger],
+             n_voyages, solver, trigger, socket.gethostname(), pid, process_started(pid)],
         )
 
 
+def reap_dead_runs(con) -> list[str]:
+    """Mark this host's `running` runs whose process is gone as failed ("process died"); returns their ids.
+
+    Called by every writer connection (storage.warehouse.connect), so a SIGKILLed run is settled by the
+    next command that opens the warehouse. Runs of other hosts are left to their own host.
+    """
+    try:
+        rows = con.execute("SELECT run_id, pid, pid_started FROM route_runs WHERE status = 'running' AND host = ?",
+                           [socket.gethostname()]).fetchall()
+    except Exception:  # a warehouse older than the owner columns (before its migration)
+        return []
+    dead = [(rid, pid) for rid, pid, started in rows if not process_alive(pid, started)]
+    for rid, pid in dead:
+        con.execute("UPDATE route_runs SET status = 'failed', finished_at = ?, reason = ? WHERE run_id = ?",
+                    [_utcnow(), f"process died (host {socket.gethostname()}, pid {pid} no longer runs)", rid])
+    return [rid for rid, _pid in dead]
+
+
+def running_run_ids(db_path: Path) -> set[str]:
+    with warehouse.connect(db_path, write=False) as con:
+        return {r[0] for r in con.execute("SELECT run_id FROM route_runs WHERE status = 'running'").fetchall()}
+
+
 def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows: list[dict],
-                      leg_rows: list[dict]) -> tuple[int, int]:
-    """Write all rows of a run in one transaction, then the Parquet partition; returns (n_ok, n_failed)."""
+                      leg_rows: list[dict], export_errors: list[str] | None = None) -> tuple[int, int]:
+    """Write all rows of a run in one transaction, then the Parquet partition; returns (n_ok, n_failed).
+
+    `export_errors`: one line per export that failed (voyage, kind, error), kept with the run."""
     routes = _frame(route_rows, ROUTE_COLUMNS, run_id)
     legs = _frame(leg_rows, LEG_COLUMNS, run_id)
     n_ok = int(routes["status"].isin(["ok", "late"]).sum()) if len(routes) else 0
@@ -65,8 +111,10 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
             con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
             con.execute(f"INSERT INTO route_legs ({', '.join(LEG_COLUMNS)}) SELECT {', '.join(LEG_COLUMNS)} FROM legs_df")
             con.execute(
-                "UPDATE route_runs SET finished_at = ?, n_ok = ?, n_failed = ?, status = ? WHERE run_id = ?",
-                [_utcnow(), n_ok, n_failed, status, run_id],
+                "UPDATE route_runs SET finished_at = ?, n_ok = ?, n_failed = ?, status = ?, n_export_failed = ?, "
+                "export_errors = ? WHERE run_id = ?",
+                [_utcnow(), n_ok, n_failed, status, len(export_errors or []),
+                 "\n".join(export_errors) if export_errors else None, run_id],
             )
             con.execute("COMMIT")
         except Exception:
@@ -80,9 +128,10 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
 
 
 def fail_run(db_path: Path, run_id: str, reason: str) -> None:
-    """Mark a run failed (e.g. no cube); nothing else of it was written."""
+    """Mark a run failed with the reason (e.g. no cube, interrupted); nothing else of it was written."""
     with warehouse.connect(db_path) as con:
-        con.execute("UPDATE route_runs SET finished_at = ?, status = 'failed' WHERE run_id = ?", [_utcnow(), run_id])
+        con.execute("UPDATE route_runs SET finished_at = ?, status = 'failed', reason = ? WHERE run_id = ?",
+                    [_utcnow(), reason[:2000], run_id])
 
 
 def run_summary(db_path: Path, run_id: str) -> dict:
@@ -107,4 +156,8 @@ def run_summary(db_path: Path, run_id: str) -> dict:
     base = out.get("baseline_fuel_t") or 0.0
     out["savings_pct"] = 100.0 * (base - (out.get("compared_fuel_t") or 0.0)) / base if base else None
     out["problems"] = problems.to_dict("records")
+    errors = out.get("export_errors")
+    out["export_failures"] = errors.splitlines() if isinstance(errors, str) and errors else []
+    if out.get("cycle") is not None and out.get("cycle") == out.get("cycle"):
+        out["cycle"] = pd.Timestamp(out["cycle"]).strftime("%Y-%m-%dT%H")
     return out

@@ -116,4 +116,34 @@ MIGRATIONS: list[Migration] = [
         GROUP BY ALL;
         """,
     ),
+    Migration(
+        "routes_003_run_owner_and_exports",
+        """
+        -- who runs it (a run whose process died is marked failed by the next writer), why a run failed,
+        -- and exports that failed (each export stands alone; the voyage's route is kept)
+        ALTER TABLE route_runs ADD COLUMN host VARCHAR;
+        ALTER TABLE route_runs ADD COLUMN pid INTEGER;
+        ALTER TABLE route_runs ADD COLUMN pid_started VARCHAR;    -- the process's start time, so a reused PID is not taken for it
+        ALTER TABLE route_runs ADD COLUMN reason VARCHAR;
+        ALTER TABLE route_runs ADD COLUMN n_export_failed INTEGER;
+        ALTER TABLE route_runs ADD COLUMN export_errors VARCHAR;  -- one line per failed export: voyage, kind, error
+
+        -- fuel and savings per run (only voyages routed with a baseline count towards savings);
+        -- n_on_time + n_late + n_infeasible + n_failed = n_voyages
+        CREATE OR REPLACE VIEW fleet_savings AS
+        SELECT u.run_id, u.started_at, u.cycle, u.trigger, u.status AS run_status, count(*) AS n_voyages,
+               count(*) FILTER (WHERE r.status = 'ok') AS n_on_time,
+               count(*) FILTER (WHERE r.status = 'late') AS n_late,
+               count(*) FILTER (WHERE r.status = 'infeasible') AS n_infeasible,
+               count(*) FILTER (WHERE r.status = 'failed') AS n_failed,
+               count(*) FILTER (WHERE r.status IN ('infeasible', 'failed')) AS n_not_routed,
+               coalesce(u.n_export_failed, 0) AS n_export_failed,
+               sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL) AS fuel_t,
+               sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL) AS baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL)
+                        / nullif(sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL), 0)) AS savings_pct
+        FROM route_runs u JOIN routes r USING (run_id)
+        GROUP BY ALL;
+        """,
+    ),
 ]

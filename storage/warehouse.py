@@ -91,6 +91,9 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
     try:
         if write:
             migrate(con)
+            from storage.route_store import reap_dead_runs  # here: route_store itself builds on this module
+
+            reap_dead_runs(con)
         yield con
         if write:  # while we still hold the file, so no other writer changes it during the copy
             con.execute("CHECKPOINT")

@@ -7,7 +7,7 @@ dateline is drawn as one piece. Legs are drawn as great circles (8 points per le
 
 Figures come from matplotlib's object API, not pyplot: rendering is Agg, headless and safe in
 worker threads. The `*_figure` functions return the Figure (for notebooks and tests), the
-`*_png` functions write it and return the Path.
+`*_png` functions write it and return the Path; `png_bytes` renders one to bytes.
 """
 
 from __future__ import annotations
@@ -294,6 +294,15 @@ def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str
 
 def fleet_map_png(path, routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Path:
     return _save(fleet_map_figure(routes_with_legs, title), path)
+
+
+def png_bytes(fig: Figure) -> bytes:
+    """The figure as PNG bytes (for exports returned by workers rather than written where they run)."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
 
 
 def _save(fig: Figure, path) -> Path:

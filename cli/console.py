@@ -1,0 +1,38 @@
+"""The one console of the command line: tables at their natural width when output is not a terminal,
+`jitroute.*` log lines as progress on stderr, and one-line errors."""
+
+from __future__ import annotations
+
+import logging
+import sys
+
+import typer
+from rich.console import Console
+
+# On a terminal rich fits tables to the window; in a pipe or file it would cut them at 80 columns.
+console = Console(width=None if sys.stdout.isatty() else 4000)
+err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 4000)
+
+
+class _ProgressHandler(logging.Handler):
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            msg = record.getMessage()
+        except Exception:  # a malformed log call must not stop the command
+            msg = str(record.msg)
+        style = {logging.WARNING: "yellow", logging.ERROR: "red", logging.CRITICAL: "red"}.get(record.levelno)
+        err_console.print(f"[{style}]{msg}[/]" if style else msg, markup=bool(style), highlight=False)
+
+
+def show_progress(level: int = logging.INFO) -> None:
+    """Print the `jitroute.*` log lines (progress, warnings) on stderr, once per process."""
+    root = logging.getLogger("jitroute")
+    if not any(isinstance(h, _ProgressHandler) for h in root.handlers):
+        root.addHandler(_ProgressHandler())
+    root.setLevel(level)
+
+
+def fail(msg: str, code: int = 2):
+    """One line on stderr, then exit with `code` (2: bad input or a state the user must fix first)."""
+    err_console.print(f"[red]error:[/] {msg}", highlight=False)
+    raise typer.Exit(code)

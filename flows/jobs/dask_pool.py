@@ -1,0 +1,80 @@
+"""Fan a fleet's voyages out over dask: an existing scheduler, or a local cluster started for the run.
+
+Plain `distributed` futures (no Prefect tasks on workers, so no worker ever starts or calls a Prefect
+API). Voyages go out in batches dealt longest-first so batches take similar time; a batch whose
+worker is lost more often than dask retries becomes `failed` rows, never lost voyages.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+from collections.abc import Callable, Iterator
+
+LOG = logging.getLogger("jitroute.fleet")
+
+
+def batches(jobs: list, per_batch: int, length_nm: Callable) -> list[list]:
+    """Deal the jobs, longest first, round-robin into batches of about `per_batch` so batches take similar time."""
+    ordered = sorted(jobs, key=lambda j: -length_nm(j))
+    n = max(1, math.ceil(len(jobs) / max(1, per_batch)))
+    return [ordered[k::n] for k in range(n) if ordered[k::n]]
+
+
+def voyages_per_batch(n_jobs: int, n_slots: int, setting: int | None) -> int:
+    """Explicit setting, else about three batches per worker thread (a batch is one dask task)."""
+    if setting:
+        return max(1, int(setting))
+    return max(1, math.ceil(n_jobs / (3 * max(1, n_slots))))
+
+
+@contextlib.contextmanager
+def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
+    """A client of the scheduler at `address`, or of a local cluster of `n_workers` single-threaded processes
+    (closed again on exit, workers included). The dashboard is on a free loopback port and logged."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    quiet = {"distributed.admin.system-monitor.gil.enabled": False}
+    for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.scheduler",
+                 "distributed.core", "distributed.process", "distributed.http.proxy"):
+        logging.getLogger(name).setLevel(logging.ERROR)  # progress is reported per voyage instead
+    with dask.config.set(quiet):
+        if address:
+            client = Client(address, timeout="30s")
+            cluster = None
+        else:
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            client = Client(cluster)
+        try:
+            LOG.info("dask: %s, dashboard %s", address or f"local cluster of {n_workers} workers", client.dashboard_link)
+            yield client
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def worker_slots(client) -> int:
+    """Worker threads of the live cluster (at least 1)."""
+    try:
+        return max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+    except Exception:
+        return 1
+
+
+def map_batches(client, fn: Callable, batches_: list[list], *args, on_done: Callable[[list, list | None, BaseException | None], None]) -> None:
+    """Run `fn(batch, *args)` for every batch on the cluster; `on_done(batch, results, error)` as each finishes."""
+    from distributed import as_completed
+
+    futures = {client.submit(fn, b, *args, pure=False): b for b in batches_}
+    for fut in as_completed(list(futures)):
+        batch = futures[fut]
+        try:
+            on_done(batch, fut.result(), None)
+        except Exception as exc:  # lost worker (KilledWorker), unpicklable result, …: the batch's voyages fail
+            on_done(batch, None, exc)
+        finally:
+            fut.release()

@@ -1,0 +1,282 @@
+"""The ingest job (one cycle) and the backfill job (a range of cycles).
+
+Four steps: list → download → decode → write. Downloads run a few at a time and GRIB2 files are
+decoded in two threads; the write step writes the cube, then the file log, then the cycle status. A file that
+is missing or corrupt is logged and the cycle is written incomplete (never silently complete);
+a later run that finds the file completes it. A cycle is skipped only when both the cube and the
+warehouse's cycle status (written last) say it is complete. Steps do not hash their inputs for
+Prefect's cache (they pass whole decoded cycles): re-runs are made idempotent by the cube and the log.
+Only one job runs on a data root at a time (storage/run_lock.py).
+"""
+
+from __future__ import annotations
+
+import logging
+import uuid
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from flows.runner import PLAIN
+from flows.settings import Settings, load_settings
+from pipeline.decode.errors import DecodeError
+from pipeline.decode.jma import decode_gsm, decode_gwm
+from pipeline.decode.oscar import decode_oscar
+from pipeline.sources import oscar as oscar_src
+from pipeline.sources import rish
+from pipeline.sources.cycles import cycles_between, label as cycle_label, newest_published_cycles, parse_cycle, utcnow_h
+from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text
+from pipeline.weather.assemble import assemble_cycle
+from pipeline.weather.grid import routing_grid
+from pipeline.weather.regrid import regrid
+from storage import cube, ingest_log, raw_store
+from storage.run_lock import job_lock
+
+LOG = logging.getLogger("jitroute.ingest")
+
+
+@dataclass
+class Download:
+    source: str
+    name: str
+    url: str
+    result: FetchResult | None = None
+    status: str = "missing"
+    error: str | None = None
+    started_at: object = None
+
+
+@dataclass
+class CycleReport:
+    cycle: str
+    complete: bool
+    n_expected: int
+    n_ok: int
+    missing: list[str] = field(default_factory=list)
+    corrupt: list[str] = field(default_factory=list)
+    skipped: bool = False
+
+
+def _opts(s: Settings, source: str, token: str | None = None) -> FetchOptions:
+    """Fetch options for RISH or OSCAR; only OSCAR requests carry the Earthdata token (`token`, else the settings')."""
+    src = s.sources
+    return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
+                        allowed_redirect_hosts=src.allowed_redirect_hosts,
+                        token=(token or src.earthdata_token) if source == "OSCAR" else None)
+
+
+def earthdata_token(s: Settings, blocks: bool = True) -> str | None:
+    """The Earthdata token: from the environment (settings), else (`blocks`: a Prefect API is in use) the Prefect
+    Secret block `s.sources.earthdata_secret_block` (`prefect block create secret`, or `Secret(value=…).save(name)`);
+    None when neither exists. The value is never logged."""
+    if s.sources.earthdata_token or not s.sources.earthdata_secret_block or not blocks:
+        return s.sources.earthdata_token
+    from prefect.blocks.system import Secret
+
+    try:
+        return Secret.load(s.sources.earthdata_secret_block).get()
+    except ValueError:  # no such block: OSCAR is fetched without a token
+        return None
+
+
+def _recorded_complete(db: Path, c: np.datetime64) -> bool:
+    """The warehouse says the cycle is complete: its status is written last, so a run killed after the
+    cube write but before the log and status is not mistaken for a finished one."""
+    status = ingest_log.cycle_status(db)
+    return bool(status["complete"][status["cycle"] == c].any())
+
+
+DOWNLOAD_WORKERS = 4  # concurrent HTTP downloads (I/O-bound; hashing and file writes release the GIL)
+DECODE_WORKERS = 2  # GRIB2 files decoded at once (eccodes is built thread-safe and releases the GIL)
+
+
+@dataclass
+class Listing:
+    items: list[Download]
+    rejected: list[str]
+    day_url: str
+    gaps: dict[str, list[int]]
+    n_oscar: int
+
+
+def list_sources(rish_url: str, oscar_url: str, cycle: np.datetime64, steps: list[int],
+                 opts: dict[str, FetchOptions]) -> Listing:
+    """The cycle's GSM/GWM files from the RISH day folder and the OSCAR files covering its leads (OSCAR is
+    not listed when RISH has nothing for the cycle)."""
+    day_url = rish.day_folder_url(rish_url, cycle)
+    try:
+        names, rejected = rish.parse_index(read_text(day_url, opts["GSM"]))
+    except FileNotFoundError:
+        names, rejected = [], []
+    files = rish.prefer_resolution(rish.files_for_cycle(names, cycle))
+    if not files:
+        return Listing([], rejected, day_url, {}, 0)
+    items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
+    try:
+        oscar_names, _ = rish.parse_index(read_text(oscar_url.rstrip("/") + "/", opts["OSCAR"]))
+    except FileNotFoundError:
+        oscar_names = []
+    oscar_files = oscar_src.files_for_window(oscar_names, cycle, cycle + np.timedelta64(max(steps), "h"))
+    items += [Download("OSCAR", f.name, oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
+    return Listing(items, rejected, day_url, rish.coverage(files, steps), len(oscar_files))
+
+
+def _fetch_one(it: Download, raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
+               known: dict[str, str]) -> Download:
+    it.started_at = ingest_log.utcnow()
+    dest = raw_store.path_for(raw_dir, it.source, cycle, it.name)
+    it.result = fetch(it.url, dest, opts[it.source], expected_sha256=known.get(it.name))
+    it.status, it.error = it.result.status, it.result.error
+    return it
+
+
+def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
+                 known: dict[str, str]) -> list[Download]:
+    """Every file, DOWNLOAD_WORKERS at a time. A local write failure (full disk) stops the ingest at once:
+    downloads not yet started are cancelled and the error is raised (files already fetched stay, whole)."""
+    pool = ThreadPoolExecutor(DOWNLOAD_WORKERS, thread_name_prefix="download")
+    try:
+        futures = [pool.submit(_fetch_one, it, raw_dir, cycle, opts, known) for it in items]
+        for done in as_completed(futures):
+            done.result()  # raises LocalWriteError
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    return items
+
+
+def _decoded_or_quarantined(it: Download, decode, quarantine_dir: Path):
+    """`decode(file)`, or None after marking the file corrupt and moving it to quarantine."""
+    try:
+        return decode(it.result.path)
+    except DecodeError as exc:
+        it.status, it.error = "corrupt", f"{exc} (from {it.url})"
+        raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+        return None
+
+
+def _decode_grib(it: Download, grid: tuple, quarantine_dir: Path):
+    """A GSM/GWM file decoded onto the routing grid (None when corrupt)."""
+    ds = _decoded_or_quarantined(it, decode_gsm if it.source == "GSM" else decode_gwm, quarantine_dir)
+    return None if ds is None else regrid(ds, grid[0], grid[1])
+
+
+def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
+    """GRIB2 files decoded and regridded DECODE_WORKERS at a time; OSCAR NetCDF in this thread meanwhile (HDF5
+    is not thread-safe)."""
+    usable = [it for it in items if it.status in ("ok", "skipped")]
+    grib = [it for it in usable if it.source in ("GSM", "GWM")]
+    with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
+        decoded = pool.map(lambda it: _decode_grib(it, grid, quarantine_dir), grib)
+        osc = [_decoded_or_quarantined(it, decode_oscar, quarantine_dir) for it in usable if it.source == "OSCAR"]
+        osc = [ds for ds in osc if ds is not None]
+        decoded = list(decoded)
+    gsm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GSM"]
+    gwm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GWM"]
+    oscar = xr.concat(osc, dim="time").sortby("time") if osc else None
+    ds, missing_steps = assemble_cycle(cycle, steps, grid[0], grid[1], gsm, gwm, oscar)
+    return ds, missing_steps, oscar is not None
+
+
+def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complete: bool, n_expected: int, n_ok: int,
+                problems: list[str]) -> None:
+    """Cube first, then the file log, then the cycle status: the status is written last, so a run killed
+    before it is never taken for a complete one."""
+    cube.write_cycle(layout.weather_cube, ds, complete=complete)
+    now = ingest_log.utcnow()
+    run_id = uuid.uuid4().hex[:12]
+    ingest_log.record_files(layout.warehouse, [
+        {"run_id": run_id, "source": it.source, "cycle": cycle, "file_name": it.name, "url": it.url,
+         "bytes": it.result.bytes if it.result else None, "sha256": it.result.sha256 if it.result else None,
+         "status": it.status, "error": it.error, "started_at": it.started_at or now, "finished_at": now}
+        for it in items
+    ])
+    ingest_log.set_cycle_status(layout.warehouse, cycle, complete=complete, n_expected=n_expected,
+                                n_ok=n_ok, missing="; ".join(problems)[:2000])
+
+
+def ingest_cycle(cycle: str | None = None, data_root: str | None = None, rish_url: str | None = None,
+                 oscar_url: str | None = None, force: bool = False, *, run=PLAIN) -> dict:
+    """Fetch, decode, regrid and write one forecast cycle into the cube; returns a CycleReport dict.
+
+    `cycle` None (or 'latest') is the newest cycle the sources have published by now.
+    """
+    s = load_settings(data_root=Path(data_root) if data_root else None,
+                      **{"sources.rish_url": rish_url, "sources.oscar_url": oscar_url})
+    layout = s.layout.ensure()
+    if cycle is None or str(cycle).strip().lower() == "latest":
+        c = newest_published_cycles(utcnow_h(), s.sources.cycles_utc, s.sources.publish_delay_h)[-1]
+    else:
+        c = parse_cycle(cycle)
+    label = cycle_label(c)
+    with job_lock(layout.locks, f"ingest {label}", say=LOG.info):
+        return _ingest_locked(s, layout, c, label, force, run)
+
+
+def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: bool, run) -> dict:
+    if not force and c in cube.complete_cycles(layout.weather_cube) and _recorded_complete(layout.warehouse, c):
+        LOG.info("cycle %s is already complete; skipping", label)
+        return CycleReport(label, True, 0, 0, skipped=True).__dict__
+    token = earthdata_token(s, blocks=run.prefect)
+    opts = {source: _opts(s, source, token) for source in ("GSM", "GWM", "OSCAR")}
+    steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
+    timeout = s.sources.step_timeout_s
+    listing = run.step(list_sources, s.sources.rish_url, s.sources.oscar_url, c, steps, opts, name="list-sources",
+                       retries=2, timeout_s=timeout)
+    for name in listing.rejected:
+        LOG.warning("ignored unsafe name %r listed at %s", name, listing.day_url)
+    if not listing.items:
+        LOG.warning("cycle %s: no GSM/GWM files listed at %s; nothing written", label, listing.day_url)
+        return CycleReport(label, False, 0, 0, missing=[f"no GSM/GWM files listed at {listing.day_url}"]).__dict__
+    known = ingest_log.known_checksums(layout.warehouse, [it.name for it in listing.items])
+    items = run.step(download_all, listing.items, layout.raw, c, opts, known, name="download", timeout_s=timeout)
+    grid = routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg)
+    ds, missing_steps, have_currents = run.step(decode_and_assemble, items, c, steps, grid, layout.quarantine,
+                                                name="decode-and-assemble", timeout_s=timeout)
+    problems = [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
+    for model, leads in listing.gaps.items():
+        if leads:
+            problems.append(f"{model} leads not listed: {', '.join(map(str, leads))} h")
+    if not have_currents:
+        problems.append("no OSCAR analysis at or before the cycle")
+    complete = not missing_steps and have_currents and not problems
+    n_ok = sum(it.status in ("ok", "skipped") for it in items)
+    run.step(write_cycle, layout, c, ds, items, complete, len(steps) + 2 + listing.n_oscar, n_ok, problems,
+             name="write-cycle", timeout_s=timeout)
+    for p in problems:
+        LOG.warning("cycle %s: %s", label, p)
+    return CycleReport(label, complete, len(items), n_ok, missing=problems,
+                       corrupt=[it.name for it in items if it.status == "corrupt"]).__dict__
+
+
+def backfill_range(start: str, end: str, cycles: str | int | list[int] = "00,12", data_root: str | None = None, rish_url: str | None = None,
+                   oscar_url: str | None = None, route: bool = False, *, run=PLAIN,
+                   progress=None) -> list[dict]:
+    """Ingest every cycle from start to end (inclusive days), skipping complete ones; optionally re-route.
+
+    `progress(done, total, label)` is called after each cycle (the CLI draws a bar with it).
+    """
+    from pipeline.sources.cycles import parse_hours
+
+    todo = cycles_between(start, end, parse_hours(cycles))
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    reports = []
+    with job_lock(s.layout.ensure().locks, f"backfill {start}..{end}", say=LOG.info):
+        for c in todo:
+            label = cycle_label(c)
+            reports.append(run.subflow("ingest-weather", ingest_cycle, cycle=label, data_root=data_root,
+                                       rish_url=rish_url, oscar_url=oscar_url))
+            LOG.info("backfill: %d/%d cycles done (%s)", len(reports), len(todo), label)
+            if progress is not None:
+                progress(len(reports), len(todo), label)
+        if route:
+            from flows.jobs.fleet import route_fleet_job
+
+            for r in reports:
+                if r["complete"]:
+                    summary = run.subflow("route-fleet", route_fleet_job, cycle=r["cycle"], data_root=data_root,
+                                          trigger="backfill")
+                    r["route_run"] = summary.get("run_id")
+    return reports

@@ -1,0 +1,81 @@
+"""The refit job (speed and fuel models from noon reports) and the noon-report import job."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from flows.runner import PLAIN
+from flows.settings import load_settings
+from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
+from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
+from storage import fleet_store
+
+LOG = logging.getLogger("jitroute.refit")
+
+
+class UnknownVesselError(ValueError):
+    """A vessel asked for by IMO that is not in the warehouse."""
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """CSV or Parquet, every column as text (validation does the typing)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            return pd.read_parquet(path).astype("string").astype(object)
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""])
+    except (ValueError, OSError, pd.errors.ParserError) as exc:
+        raise NoonFileError(f"{path}: cannot be read as CSV/Parquet ({exc})") from exc
+    if not isinstance(df.index, pd.RangeIndex):  # pandas took surplus leading fields as an index: columns shifted
+        raise NoonFileError(f"{path}: line 2 has more fields than the header's {len(df.columns)} columns; fix the file and re-import")
+    return df
+
+
+def import_noon_file(path: str, data_root: str | None = None, *, run=PLAIN) -> dict:
+    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    raw = read_table(Path(path))
+    good, bad = validate_noon(raw, fleet_store.known_imos(db), source=Path(path).name)
+    counts = fleet_store.import_noon(db, good, bad)
+    counts["rows"] = len(raw)
+    counts["reasons"] = reason_counts(bad)
+    return counts
+
+
+def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray], dict, dict]:
+    """(noon-report columns a refit needs, active models, next versions), read in one connection."""
+    return fleet_store.load_for_refit(db, imos, REPORT_COLUMNS)
+
+
+def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, form: str,
+                robust: bool) -> tuple[list[dict], list[dict]]:
+    return refit_fleet(reports, active, versions, form=form, robust=robust)
+
+
+def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "physical",
+              robust: bool = True, *, run=PLAIN) -> list[dict]:
+    """Refit every (or the given) vessel's speed and fuel model; a model becomes active only if it is
+    well determined and not worse than the active one on the newest held-out reports."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    known = fleet_store.known_imos(db)
+    unknown = sorted(set(imos or ()) - set(known))
+    if unknown:
+        raise UnknownVesselError(f"vessel(s) {', '.join(map(str, unknown))} not in {db}: import them with "
+                                 "`jitroute fleet import`")
+    reports, active, versions = run.step(load_reports, db, imos, name="load-reports")
+    summaries_missing = []
+    for imo in sorted(set(imos or known) - set(np.unique(reports["imo"]).tolist())):
+        summaries_missing.append({"imo": imo, "n": 0, "changed": False,
+                                  "reason": "no valid noon reports (all rejected or none imported): model unchanged"})
+        LOG.warning("vessel %s: no valid noon reports; model unchanged", imo)
+    rows, summaries = run.step(fit_vessels, reports, active, versions, form, robust, name="fit-vessels")
+    run.step(fleet_store.save_fits, db, rows, name="save-fits")
+    return sorted(summaries + summaries_missing, key=lambda d: d["imo"])

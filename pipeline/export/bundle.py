@@ -1,0 +1,84 @@
+"""A plan's export files as bytes: RTZ (schema-validated), GeoJSON, route map and convergence PNGs.
+
+Each export stands alone: one that fails is reported by name and the others are still made. The
+caller decides where the bytes go (a run's staging folder, a `--rtz` path), so workers need no shared
+file system and nothing is written for a voyage whose rows never reached the warehouse.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from pipeline.export import geojson, plots, rtz
+from pipeline.routing import weather_field as wf
+from pipeline.routing.plan import Plan
+
+KINDS = ("rtz", "geojson", "png", "convergence")
+SUFFIX = {"rtz": ".rtz", "geojson": ".geojson", "png": ".png", "convergence": ".convergence.png"}
+
+
+@dataclass
+class ExportBundle:
+    voyage_id: str
+    files: dict[str, bytes] = field(default_factory=dict)  # kind → bytes
+    errors: dict[str, str] = field(default_factory=dict)  # kind → what went wrong
+
+    def file_names(self) -> dict[str, str]:
+        """kind → file name in the run's folder (`<voyage_id><suffix>`)."""
+        return {kind: f"{self.voyage_id}{SUFFIX[kind]}" for kind in self.files}
+
+
+def named_route(plan: Plan, vessel: dict, voyage: dict) -> dict:
+    """The route row with the names exports show (vessel, departure and arrival ports)."""
+    return dict(plan.route_row(), vessel_name=vessel.get("name"), dep_name=voyage.get("dep_name"),
+                arr_name=voyage.get("arr_name"))
+
+
+def rtz_bytes(plan: Plan, vessel: dict, voyage: dict) -> bytes:
+    doc = rtz.route_to_rtz(named_route(plan, vessel, voyage), plan.legs)
+    rtz.validate_rtz(doc)
+    return doc
+
+
+def geojson_bytes(plan: Plan, vessel: dict, voyage: dict) -> bytes:
+    return json.dumps(geojson.route_to_geojson(named_route(plan, vessel, voyage), plan.legs), indent=1).encode()
+
+
+def route_map_bytes(plan: Plan, vessel: dict, voyage: dict, weather: wf.WeatherField) -> bytes:
+    """The route and its baseline over the wind/wave field met at mid-voyage."""
+    lats = [p[0] for p in plan.waypoints]
+    lons = [p[1] for p in plan.waypoints]
+    mid = plan.legs[len(plan.legs) // 2]["etd_utc"]
+    snap = wf.snapshot(weather, mid, (min(lats), max(lats)), (min(lons), max(lons)))
+    base_legs = plan.baseline.legs if plan.baseline is not None else None
+    fig = plots.route_map_figure(named_route(plan, vessel, voyage), plan.legs, base_legs,
+                                 snap if snap["hs_m"] is not None else None)
+    return plots.png_bytes(fig)
+
+
+def convergence_bytes(plan: Plan) -> bytes:
+    return plots.png_bytes(plots.convergence_figure(plan.history, title=f"{plan.voyage_id}: BFOA best cost per cycle"))
+
+
+def export_plan(plan: Plan, weather: wf.WeatherField, vessel: dict, voyage: dict,
+                kinds: Iterable[str] = KINDS) -> ExportBundle:
+    """Every asked-for export of a plan with legs; a failing export is recorded in `errors`, never raised."""
+    out = ExportBundle(str(plan.voyage_id))
+    if not plan.legs:
+        return out
+    makers = {
+        "rtz": lambda: rtz_bytes(plan, vessel, voyage),
+        "geojson": lambda: geojson_bytes(plan, vessel, voyage),
+        "png": lambda: route_map_bytes(plan, vessel, voyage, weather),
+        "convergence": lambda: convergence_bytes(plan),
+    }
+    for kind in kinds:
+        if kind == "convergence" and plan.history is None:
+            continue
+        try:
+            out.files[kind] = makers[kind]()
+        except Exception as exc:  # exports are secondary: keep the plan, say which export failed and why
+            out.errors[kind] = f"{type(exc).__name__}: {exc}"
+    return out

@@ -1,0 +1,89 @@
+"""One voyage to route: the typed job a fleet run sends to a worker, and the plan made from it.
+
+`RouteJob` carries plain rows (voyage, vessel, active model as JSON) so it pickles cheaply to any
+worker; `RoutingOptions` holds the solver settings of the run. `plan_voyage` is the whole per-voyage
+science: problem → search space → solve in the given weather.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from pipeline.performance.model import PerformanceModel
+from pipeline.routing import weather_field as wf
+from pipeline.routing.plan import Plan
+from pipeline.routing.problem import RoutingInputError, RoutingProblem
+from pipeline.routing.solve import solve
+from pipeline.routing.voyage import problem_from_voyage
+
+
+@dataclass(frozen=True)
+class RoutingOptions:
+    """Solver settings of a run (see pipeline.routing.solve)."""
+
+    solver: str = "bfoa"
+    objective: str = "jit"
+    arrival_window_h: float = 6.0
+    seed: int = 1
+    n_lines: int | None = None
+    n_points: int = 21
+    d_point_nm: float | None = None
+
+    @classmethod
+    def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
+        """From an object with these attribute names (the settings' routing section); None overrides are ignored."""
+        values = {k: getattr(routing_settings, k) for k in cls.__dataclass_fields__}
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class RouteJob:
+    """A voyage of a run: warehouse rows as plain dicts, the vessel's active model as JSON (None: no model)."""
+
+    voyage: dict
+    vessel: dict
+    model: dict | None
+    run_id: str
+    cycle: str | None  # ISO cycle of the cube, None for calm water
+    exports: bool = True
+    options: RoutingOptions = field(default_factory=RoutingOptions)
+
+    @property
+    def voyage_id(self) -> str:
+        return str(self.voyage.get("voyage_id"))
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def routing_problem(job: RouteJob) -> RoutingProblem:
+    """The voyage as a routing problem; RoutingInputError (naming the voyage) when it cannot be routed as given."""
+    o = job.options
+    if job.model is None:
+        raise RoutingInputError(f"voyage {job.voyage_id}: vessel {job.voyage.get('imo')} has no active performance model; "
+                                "import its noon reports and run `jitroute refit` first")
+    model = PerformanceModel.from_json(job.model)
+    return problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
+                               window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
+                               d_point_nm=o.d_point_nm)
+
+
+def calm_weather(problem: RoutingProblem) -> wf.WeatherField:
+    """Calm water and no current over the voyage's whole time span (and well beyond its RTA)."""
+    return wf.uniform(problem.depart_utc - np.timedelta64(1, "h"), 2.0 * problem.t_req_h + 240.0)
+
+
+def plan_voyage(job: RouteJob, weather: wf.WeatherField | None) -> tuple[Plan, wf.WeatherField]:
+    """Solve the job in `weather` (None: calm water). Returns (plan, the weather it was planned in).
+
+    Raises RoutingInputError / VoyageGeometryError / KeyError for voyages that cannot be routed as given.
+    """
+    problem = routing_problem(job)
+    space = problem.search_space()
+    if weather is None:
+        weather = calm_weather(problem)
+    o = job.options
+    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space), weather
