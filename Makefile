@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 demo: install
-	PREFECT_LOGGING_LEVEL=INFO $(BIN)/jitroute demo
+	$(BIN)/jitroute demo
 
 test: install
 	$(BIN)/python -m pytest
@@ -30,6 +30,7 @@ bench: install
 	$(BIN)/python bench/refit.py
 	$(BIN)/python bench/fleet.py
 	$(BIN)/python bench/routing.py
+	$(BIN)/python bench/cli.py
 
 clean:
 	rm -rf data .prefect

@@ -2,14 +2,39 @@
 
 from __future__ import annotations
 
-import sys
-
 import typer
+from typer.core import TyperGroup
 
 from cli import fleet, ingest, performance, routing
 
+# Errors that mean "the input or the data root is not as it must be": one line and exit 2, no traceback.
+USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
+               "WarehouseBusyError", "RoutingInputError", "VoyageGeometryError", "ServeError", "TimeoutError",
+               "CubeError", "ExportPathError"}
+
+
+def is_user_error(exc: BaseException) -> bool:
+    return any(cls.__name__ in USER_ERRORS for cls in type(exc).__mro__)
+
+
+class Commands(TyperGroup):
+    """Runs a command; a user error becomes one line on stderr and exit code 2."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except Exception as exc:
+            if not is_user_error(exc):
+                raise
+            from cli.console import err_console
+
+            err_console.print(f"[red]error:[/] {str(exc).strip(chr(39) + chr(34))}", highlight=False)
+            raise typer.Exit(2) from None
+
+
 app = typer.Typer(
     name="jitroute",
+    cls=Commands,
     help="Fuel-optimal just-in-time voyage planning for a fleet from JMA/OSCAR weather forecasts.",
     no_args_is_help=True,
     add_completion=False,
@@ -19,23 +44,12 @@ app = typer.Typer(
 for module in (ingest, performance, routing, fleet):
     module.register(app)
 
-# Errors that mean "the input or the data root is not as it must be": one line and exit 2, no traceback.
-USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
-               "WarehouseBusyError", "RoutingInputError", "VoyageGeometryError", "ServeError", "TimeoutError",
-               "CubeError", "ExportPathError"}
-
 
 def main() -> None:
-    from cli.console import err_console, show_progress
+    from cli.console import show_progress
 
     show_progress()
-    try:
-        app()
-    except Exception as exc:
-        if any(cls.__name__ in USER_ERRORS for cls in type(exc).__mro__):
-            err_console.print(f"[red]error:[/] {str(exc).strip(chr(39) + chr(34))}", highlight=False)
-            sys.exit(2)
-        raise
+    app()
 
 
 if __name__ == "__main__":

@@ -92,6 +92,13 @@ def register(app: typer.Typer) -> None:
         from pipeline.sources.cycles import parse_cycle
         from storage import cube, export_store, fleet_store
 
+        # Bad input is refused before anything is opened.
+        dep = _latlon(from_, "--from") if from_ is not None else None
+        arr = _latlon(to, "--to") if to is not None else None
+        t_dep = _utc(depart, "--depart") if depart is not None else None
+        t_rta = _utc(rta, "--rta") if rta is not None else None
+        if cycle is not None:
+            parse_cycle(cycle)
         s = load_settings(data_root=data)
         lay = s.layout
         if not lay.warehouse.exists():
@@ -105,9 +112,9 @@ def register(app: typer.Typer) -> None:
             missing = [n for n, x in (("--from", from_), ("--to", to), ("--depart", depart), ("--rta", rta), ("--imo", imo)) if x is None]
             if missing:
                 fail(f"give {', '.join(missing)} (or --voyage ID)")
-            (la0, lo0), (la1, lo1) = _latlon(from_, "--from"), _latlon(to, "--to")
+            (la0, lo0), (la1, lo1) = dep, arr
             v = {"voyage_id": "adhoc", "imo": imo, "dep_lat": la0, "dep_lon": lo0, "arr_lat": la1, "arr_lon": lo1,
-                 "depart_utc": _utc(depart, "--depart"), "rta_utc": _utc(rta, "--rta"), "rpm_options": None}
+                 "depart_utc": t_dep, "rta_utc": t_rta, "rpm_options": None}
         if rpm:
             try:
                 v["rpm_options"] = [float(x) for x in rpm.split(",")]

@@ -120,18 +120,26 @@ def test_route_cli_says_what_is_missing(tmp_path):
 
 
 def test_deployments_have_their_schedules_and_parameters():
-    from deploy.serve import build_deployments
+    from deploy.serve import ServeError, build_deployments
 
-    deps = {d.name: d for d in build_deployments(timezone="Europe/Oslo", nightly_cron="15 3 * * *", data_root="/srv/jit")}
-    assert set(deps) == {"nightly", "ingest-6h", "backfill"}
+    deps = {d.name: d for d in build_deployments(timezone="Europe/Oslo", nightly_cron="15 3 * * *", data_root="/srv/jit",
+                                                 rish_url="http://127.0.0.1:9/rish/")}
+    assert set(deps) == {"nightly", "ingest", "backfill"}
     cron = deps["nightly"].schedules[0].schedule
     assert cron.cron == "15 3 * * *" and cron.timezone == "Europe/Oslo"
-    assert deps["ingest-6h"].schedules[0].schedule.interval.total_seconds() == 6 * 3600
-    assert deps["ingest-6h"].parameters["cycle"] == "latest"
+    ingest = deps["ingest"].schedules[0].schedule  # anchored to publication (cycle hours + 5 h), not to serve's start
+    assert ingest.cron == "0 5,11,17,23 * * *" and ingest.timezone == "UTC"
+    assert "cycle" not in deps["ingest"].parameters  # default: the newest published cycle
     assert deps["backfill"].schedules == [] and deps["backfill"].parameters["route"] is False
     assert all(d.parameters["data_root"] == "/srv/jit" for d in deps.values())
-    with pytest.raises(Exception):
+    assert all(d.parameters["rish_url"] == "http://127.0.0.1:9/rish/" for d in deps.values())
+    assert all(d.entrypoint.startswith("flows.") for d in deps.values())  # module path: any working directory
+    cycles = deps["backfill"]._parameter_openapi_schema.properties["cycles"]
+    assert {"type": "integer"} in cycles["anyOf"]  # `-p cycles=12` arrives as a JSON integer and is accepted
+    with pytest.raises(ServeError, match="time zone"):
         build_deployments(timezone="Mars/Olympus")
+    with pytest.raises(ServeError, match="cron"):
+        build_deployments(nightly_cron="every night")
 
 
 # Last in the module: it adds a route run to the shared data root.

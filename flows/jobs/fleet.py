@@ -177,13 +177,13 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
     targets = nightly_cycles(s, date, cycles)
     labels = [cycle_label(c) for c in targets]
     with job_lock(layout.locks, f"nightly ({', '.join(labels)})", say=LOG.info):
-        LOG.info("[1/3] ingest: %d cycles (%s)", len(labels), ", ".join(labels))
+        LOG.info("[nightly 1/3] ingest: %d cycles (%s)", len(labels), ", ".join(labels))
         ingests = []
         for k, lab in enumerate(labels, 1):
-            LOG.info("[1/3] ingest %d/%d: cycle %s", k, len(labels), lab)
+            LOG.info("[nightly 1/3] ingest %d/%d: cycle %s", k, len(labels), lab)
             ingests.append(run.subflow("ingest-weather", ingest_cycle, cycle=lab, data_root=data_root, rish_url=rish_url,
                                        oscar_url=oscar_url))
-        LOG.info("[2/3] refit: speed and fuel models from noon reports")
+        LOG.info("[nightly 2/3] refit: speed and fuel models from noon reports")
         fits = run.subflow("refit-performance", refit_job, data_root=data_root)
         c = cube.latest_complete_cycle(layout.weather_cube, at_or_before=max(targets))
         summary = {"date": date or str(np.datetime64(utcnow_h(), "D")), "cycles_targeted": labels, "ingest": ingests,
@@ -193,7 +193,7 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
             LOG.warning("no complete cycle up to %s: routing skipped", labels[-1])
             summary["routing"] = None
         else:
-            LOG.info("[3/3] route the fleet on cycle %s", cycle_label(c))
+            LOG.info("[nightly 3/3] route the fleet on cycle %s", cycle_label(c))
             summary["routing"] = run.subflow("route-fleet", route_fleet_job, cycle=cycle_label(c), data_root=data_root,
                                              trigger="nightly")
     run.publish(key="nightly-summary", markdown=nightly_markdown(summary),

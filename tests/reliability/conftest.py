@@ -59,9 +59,9 @@ def oscar_files(mirror: Path) -> list[Path]:
 @pytest.fixture
 def fast_settings(monkeypatch):
     """The flows read the real settings object with short timeouts/retries and 0–12 h leads on top."""
-    import flows.ingest
+    import flows.jobs.ingest
 
-    monkeypatch.setattr(flows.ingest, "load_settings", fast_load_settings)
+    monkeypatch.setattr(flows.jobs.ingest, "load_settings", fast_load_settings)
     return FAST_OVERRIDES
 
 
@@ -84,10 +84,11 @@ def file_urls(mirror: Path) -> tuple[str, str]:
 def clean_root(small_mirror, tmp_path_factory, prefect_harness) -> Path:
     """Data root of a fault-free ingest of the small mirror (do not modify; copy it)."""
     import flows.ingest
+    import flows.jobs.ingest
 
     root = tmp_path_factory.mktemp("clean") / "data"
     mp = pytest.MonkeyPatch()
-    mp.setattr(flows.ingest, "load_settings", fast_load_settings)
+    mp.setattr(flows.jobs.ingest, "load_settings", fast_load_settings)
     try:
         report = flows.ingest.ingest_weather(CYCLE, data_root=str(root), rish_url=file_urls(small_mirror)[0],
                                              oscar_url=file_urls(small_mirror)[1])

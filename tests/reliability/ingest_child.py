@@ -83,7 +83,7 @@ def _counted(stop, n: int, fn, before: bool, count: dict | None = None):
 def install_stop(point: str, n: int, how: str, marker: Path | None = None) -> None:
     import zarr.storage._local as zarr_local
 
-    import flows.ingest as flow
+    import flows.jobs.ingest as flow
     from pipeline.sources import fetch
     from storage import cube, ingest_log
 
@@ -126,9 +126,10 @@ def main(argv: list[str]) -> int:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
     import flows.ingest as flow
+    import flows.jobs.ingest as job
 
     extra = {"sources.http_timeout_s": float(_opt(rest, "--timeout"))} if _opt(rest, "--timeout") else {}
-    flow.load_settings = load_settings_with(**extra)
+    job.load_settings = load_settings_with(**extra)
     if _opt(rest, "--stop"):
         point, n, how = _opt(rest, "--stop").split(":")
         marker = _opt(rest, "--marker")

@@ -14,6 +14,7 @@ import duckdb
 import pytest
 
 import flows.ingest
+import flows.jobs.ingest
 from flows.settings import load_settings
 from pipeline.sources.fetch import FetchOptions
 from storage.layout import DataLayout
@@ -77,7 +78,7 @@ def _prefect_files_text() -> str:
 def test_token_is_sent_to_the_oscar_host_only_and_never_stored_or_shown(mirror, tmp_path, monkeypatch, fast_settings,
                                                                         prefect_harness, capfd, caplog):
     monkeypatch.setenv("JITROUTE_EARTHDATA_TOKEN", TOKEN)
-    monkeypatch.setattr(flows.ingest, "load_settings", load_settings_with(**{"sources.allowed_redirect_hosts": ("localhost",)}))
+    monkeypatch.setattr(flows.jobs.ingest, "load_settings", load_settings_with(**{"sources.allowed_redirect_hosts": ("localhost",)}))
     oscar = oscar_files(mirror)[1]
     roots = [tmp_path / f"data{k}" for k in range(3)]  # one per run: a fetched file would be skipped next time
     outcomes = []
@@ -131,9 +132,9 @@ def test_token_comes_from_the_environment_and_is_absent_without_it(monkeypatch):
     monkeypatch.setenv("JITROUTE_EARTHDATA_TOKEN", TOKEN)
     s = load_settings()
     assert s.sources.earthdata_token == TOKEN
-    assert flows.ingest._opts(s, "OSCAR").token == TOKEN
-    assert flows.ingest._opts(s, "GSM").token is None and flows.ingest._opts(s, "GWM").token is None
-    assert TOKEN not in repr(s) and TOKEN not in repr(flows.ingest._opts(s, "OSCAR"))
+    assert flows.jobs.ingest._opts(s, "OSCAR").token == TOKEN
+    assert flows.jobs.ingest._opts(s, "GSM").token is None and flows.jobs.ingest._opts(s, "GWM").token is None
+    assert TOKEN not in repr(s) and TOKEN not in repr(flows.jobs.ingest._opts(s, "OSCAR"))
 
 
 @pytest.mark.parametrize("status", ["404", "500"])
@@ -157,16 +158,16 @@ def test_token_falls_back_to_a_prefect_secret_block(monkeypatch, prefect_harness
     other = "edl-" + secrets.token_hex(20)  # not TOKEN: the database search above must not meet a stored block
     monkeypatch.delenv("JITROUTE_EARTHDATA_TOKEN", raising=False)
     s = load_settings(**{"sources.earthdata_secret_block": "jitroute-test-earthdata"})
-    assert flows.ingest.earthdata_token(s) is None  # no block yet: OSCAR is fetched without a token
+    assert flows.jobs.ingest.earthdata_token(s) is None  # no block yet: OSCAR is fetched without a token
     Secret(value=other).save("jitroute-test-earthdata", overwrite=True)
-    assert flows.ingest.earthdata_token(s) == other
-    assert flows.ingest._opts(s, "OSCAR", other).token == other and flows.ingest._opts(s, "GSM", other).token is None
+    assert flows.jobs.ingest.earthdata_token(s) == other
+    assert flows.jobs.ingest._opts(s, "OSCAR", other).token == other and flows.jobs.ingest._opts(s, "GSM", other).token is None
     monkeypatch.setenv("JITROUTE_EARTHDATA_TOKEN", TOKEN)  # the environment wins over the block
-    assert flows.ingest.earthdata_token(load_settings(**{"sources.earthdata_secret_block": "jitroute-test-earthdata"})) == TOKEN
+    assert flows.jobs.ingest.earthdata_token(load_settings(**{"sources.earthdata_secret_block": "jitroute-test-earthdata"})) == TOKEN
 
 
 def test_redirect_hosts_come_from_the_environment(monkeypatch):
     monkeypatch.setenv("JITROUTE_ALLOWED_REDIRECT_HOSTS", "mirror.example.org, cdn.example.org")
-    assert flows.ingest._opts(load_settings(), "GSM").allowed_redirect_hosts == ("mirror.example.org", "cdn.example.org")
+    assert flows.jobs.ingest._opts(load_settings(), "GSM").allowed_redirect_hosts == ("mirror.example.org", "cdn.example.org")
     monkeypatch.delenv("JITROUTE_ALLOWED_REDIRECT_HOSTS")
     assert load_settings().sources.allowed_redirect_hosts == ()

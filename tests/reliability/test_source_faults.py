@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import flows.ingest
+import flows.jobs.ingest
 from pipeline.synthetic import weather
 from pipeline.synthetic.grib_writer import jma_grid, write_gsm_file, write_gwm_file
 from storage import cube, ingest_log
@@ -40,7 +41,7 @@ def _url_path(mirror, path) -> str:
 
 
 def test_http_errors_timeouts_and_resets_are_retried_then_missing_and_a_rerun_completes(mirror, tmp_path, ingest, monkeypatch, clean_cube):
-    monkeypatch.setattr(flows.ingest, "load_settings", load_settings_with(**{"sources.http_timeout_s": 0.5}))
+    monkeypatch.setattr(flows.jobs.ingest, "load_settings", load_settings_with(**{"sources.http_timeout_s": 0.5}))
     faults = {gsm_file(mirror, 6).name: "404", gsm_file(mirror, 12).name: "500", gwm_file(mirror).name: "stall",
               oscar_files(mirror)[1].name: "reset"}
     root = tmp_path / "data"
@@ -73,7 +74,7 @@ def test_http_errors_timeouts_and_resets_are_retried_then_missing_and_a_rerun_co
 
 
 def test_transient_faults_are_retried_and_leave_no_trace(mirror, tmp_path, ingest, monkeypatch, clean_cube):
-    monkeypatch.setattr(flows.ingest, "load_settings", load_settings_with(**{"sources.http_timeout_s": 0.5}))
+    monkeypatch.setattr(flows.jobs.ingest, "load_settings", load_settings_with(**{"sources.http_timeout_s": 0.5}))
     faults = {gsm_file(mirror, 0).name: "500x1", gsm_file(mirror, 6).name: "resetx1", gwm_file(mirror).name: "stallx1"}
     root = tmp_path / "data"
     with serve(mirror, faults) as (url, handler):
@@ -244,7 +245,7 @@ def test_redirect_to_another_host_is_refused_unless_allowed(mirror, tmp_path, in
             assert status == "error" and "redirect to another host 'localhost' refused" in error
             assert other.requests == []  # the other host was never contacted
             assert not (DataLayout(root).raw / "gsm" / "20201201" / target.name).exists()
-            monkeypatch.setattr(flows.ingest, "load_settings", load_settings_with(**{"sources.allowed_redirect_hosts": ("localhost",)}))
+            monkeypatch.setattr(flows.jobs.ingest, "load_settings", load_settings_with(**{"sources.allowed_redirect_hosts": ("localhost",)}))
             root = tmp_path / "allowed" / "data"
             assert ingest(root, url + "rish/", url + "oscar/")["complete"]
             assert [p for p, _ in other.requests] == [_url_path(mirror, target)]

@@ -1,0 +1,87 @@
+"""Processes of a test, found by a tag in their environment: whatever a command starts (dask workers,
+Prefect servers, flow-run subprocesses) inherits the tag, so after the command ends any process still
+carrying it is an orphan of ours."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+TAG_VAR = "JITROUTE_TEST_TAG"
+VENV_BIN = Path(sys.executable).parent
+
+
+def new_tag() -> str:
+    return uuid.uuid4().hex
+
+
+def tagged_env(tag: str, **extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_API_")}
+    env.update({TAG_VAR: tag, "PREFECT_SERVER_ANALYTICS_ENABLED": "false", "PYTHONUNBUFFERED": "1"})
+    env.update(extra)
+    return env
+
+
+def tagged_pids(tag: str) -> list[int]:
+    """PIDs of live processes (not zombies) whose environment carries `tag`."""
+    needle = f"{TAG_VAR}={tag}".encode()
+    found = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            if needle not in (d / "environ").read_bytes().split(b"\0"):
+                continue
+            state = (d / "stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            found.append(int(d.name))
+    return found
+
+
+def wait_until_gone(tag: str, timeout_s: float = 30.0) -> list[int]:
+    """Poll until no tagged process is left (processes may take a moment to exit); returns those still there."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = tagged_pids(tag)
+        if not left or time.monotonic() > deadline:
+            return left
+        time.sleep(0.2)
+
+
+def describe(pids: list[int]) -> str:
+    out = []
+    for pid in pids:
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        out.append(f"{pid}: {cmd[:200]}")
+    return "\n".join(out)
+
+
+def kill_tagged(tag: str) -> None:
+    for pid in tagged_pids(tag):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def jitroute(*args: str, env: dict, timeout_s: float = 600, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """Run the installed `jitroute` command as a user would."""
+    return subprocess.run([str(VENV_BIN / "jitroute"), *args], env=env, cwd=cwd, capture_output=True, text=True,
+                          timeout=timeout_s)

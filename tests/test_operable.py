@@ -1,0 +1,190 @@
+"""The command line as users run it: subprocesses of the installed `jitroute`, on a busy machine, killed
+mid-run, with bad input; checked for lost voyages, half-published exports and processes left behind."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import duckdb
+import pytest
+
+from processes import VENV_BIN, describe, jitroute, kill_tagged, new_tag, tagged_env, wait_until_gone
+
+
+@pytest.fixture(scope="module")
+def routed_root(tmp_path_factory, demo_mirror) -> Path:
+    """A data root with the 2020-12-01T00 cycle, a 3-vessel fleet and fitted models; made with plain jobs (no Prefect)."""
+    from cli.fleet import _import_fleet
+    from flows.jobs.ingest import ingest_cycle
+    from flows.jobs.refit import refit_job
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+    base = tmp_path_factory.mktemp("operable")
+    root = base / "data"
+    urls = {"rish_url": (demo_mirror / "rish").as_uri() + "/", "oscar_url": (demo_mirror / "oscar").as_uri() + "/"}
+    assert ingest_cycle("2020-12-01T00", data_root=str(root), **urls)["complete"]
+    fl = generate_fleet("2020-12-01T00", n_vessels=3, days=150, seed=11)
+    write_fleet(fl, base / "fleet")
+    _import_fleet(base / "fleet", root)
+    refit_job(data_root=str(root))
+    return root
+
+
+def _copy(root: Path, dest: Path) -> Path:
+    shutil.copytree(root, dest, ignore=shutil.ignore_patterns("locks", "exports"))
+    return dest
+
+
+def _sql(root: Path, query: str):
+    with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+        return con.execute(query).fetchall()
+
+
+@pytest.mark.parametrize("args, says", [
+    (["route", "--from", "35.3,139.8", "--to", "13.45,144.55", "--depart", "2020-13-01T13", "--rta", "2020-12-05T12",
+      "--imo", "9140607"], "--depart '2020-13-01T13' is not a UTC time"),
+    (["route", "--from", "139.8,35.3", "--to", "13.45,144.55", "--depart", "2020-12-01T13", "--rta", "2020-12-05T12",
+      "--imo", "9140607"], "did you give LON,LAT"),
+    (["backfill", "--start", "2020-12-01", "--end", "2020-1203"], "cannot read end '2020-1203'"),
+    (["nightly", "--date", "2020-12-1x"], "cannot read date '2020-12-1x'"),
+    (["ingest", "--cycle", "2020-12-01T25"], "cannot read cycle"),
+    (["refit", "--imo", "1234567"], "vessel(s) 1234567 not in"),
+    (["route-fleet", "--cycle", "2019-01-01T00"], "not in the cube"),
+    (["noon", "import", "no-such-file.csv"], "no such file"),
+])
+def test_bad_input_gets_one_line_and_exit_2(routed_root, args, says):
+    r = jitroute(*args, "--data", str(routed_root), env=tagged_env(new_tag()), timeout_s=120)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr + r.stdout
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and says in lines[0], r.stderr
+
+
+def test_tables_are_not_cut_when_output_is_not_a_terminal(routed_root):
+    r = jitroute("refit", "--data", str(routed_root), env=tagged_env(new_tag()), timeout_s=120)
+    assert r.returncode == 0, r.stderr
+    widest = max(len(line) for line in r.stdout.splitlines())
+    assert widest > 100 and "…" not in r.stdout, r.stdout  # rich would cut to 80 columns with "…"
+
+
+def test_interactive_commands_import_no_prefect_without_an_api(routed_root, tmp_path):
+    """No configured Prefect API: the quick commands run as plain functions (no temporary server)."""
+    root = _copy(routed_root, tmp_path / "data")
+    code = (
+        "import sys\n"
+        "from cli.main import app\n"
+        "for argv in (['refit', '--data', sys.argv[1]], ['route', '--voyage', 'V20001', '--data', sys.argv[1], '--calm',"
+        " '--solver', 'gc']):\n"
+        "    try:\n"
+        "        app(argv)\n"
+        "    except SystemExit as e:\n"
+        "        assert e.code in (0, None), (argv, e.code)\n"
+        "print('PREFECT_IMPORTED' if 'prefect' in sys.modules else 'NO_PREFECT')\n"
+    )
+    env = tagged_env(new_tag(), PREFECT_HOME=str(tmp_path / "no_prefect_home"))
+    r = subprocess.run([sys.executable, "-c", code, str(root)], env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert r.stdout.strip().endswith("NO_PREFECT"), r.stdout[-2000:]
+
+
+def test_with_a_prefect_api_a_command_is_recorded_as_a_flow_run(routed_root, tmp_path, prefect_harness):
+    import prefect.settings
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import FlowFilter, FlowFilterName
+
+    root = _copy(routed_root, tmp_path / "data")
+    api = str(prefect.settings.PREFECT_API_URL.value())
+    r = jitroute("refit", "--data", str(root), env=tagged_env(new_tag(), PREFECT_API_URL=api), timeout_s=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    with get_client(sync_client=True) as client:
+        runs = client.read_flow_runs(flow_filter=FlowFilter(name=FlowFilterName(any_=["refit-performance"])))
+    assert any(run.state_type.value == "COMPLETED" for run in runs)
+
+
+def test_route_fleet_on_a_busy_machine_loses_no_voyage_and_leaves_no_process(routed_root, tmp_path):
+    root = _copy(routed_root, tmp_path / "data")
+    busy_tag, tag = new_tag(), new_tag()
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"], env=tagged_env(busy_tag)) for _ in range(2)]
+    try:
+        r = jitroute("route-fleet", "--data", str(root), env=tagged_env(tag, JITROUTE_DASK_WORKERS="2"), timeout_s=600)
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = _sql(root, "SELECT voyage_id, status, reason FROM routes")
+    assert len(rows) == 3
+    assert all(status in ("ok", "late") for _v, status, _r in rows), rows
+    assert not [line for line in r.stderr.splitlines() if "Traceback" in line or "already in use" in line
+                or "leaked semaphore" in line or "still alive" in line], r.stderr[-3000:]
+    left = wait_until_gone(tag, 30)
+    kill_tagged(tag)
+    assert not left, describe(left)
+
+
+def test_a_killed_run_is_marked_failed_by_the_next_command_and_publishes_nothing(routed_root, tmp_path):
+    root = _copy(routed_root, tmp_path / "data")
+    tag = new_tag()
+    proc = subprocess.Popen([str(VENV_BIN / "jitroute"), "route-fleet", "--data", str(root)],
+                            env=tagged_env(tag, JITROUTE_DASK_WORKERS="1"), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    staged = None
+    deadline = time.monotonic() + 240
+    for line in proc.stdout:  # kill it once the first voyage's exports are staged
+        runs = root / "exports" / "runs"
+        staged = next(iter(runs.glob(".staging-*")), None) if runs.exists() else None
+        if staged is not None and any(staged.iterdir()) or "routed 1/" in line:
+            break
+        assert time.monotonic() < deadline, "route-fleet never routed a voyage"
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    kill_tagged(tag)
+    run_id, status = _sql(root, "SELECT run_id, status FROM route_runs")[0]
+    assert status == "running"  # nobody has looked yet
+    assert _sql(root, "SELECT count(*) FROM routes")[0][0] == 0
+    r = jitroute("route-fleet", "--data", str(root), "--voyage", "V20001", "--solver", "gc",
+                 env=tagged_env(tag, JITROUTE_DASK_WORKERS="1"), timeout_s=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    status, reason = _sql(root, f"SELECT status, reason FROM route_runs WHERE run_id = '{run_id}'")[0]
+    assert status == "failed" and "process died" in reason and "pid" in reason
+    runs = root / "exports" / "runs"
+    assert not (runs / run_id).exists() and not list(runs.glob(".staging-*"))
+    published = [p.name for p in runs.iterdir()]
+    assert len(published) == 1 and (runs / published[0] / "V20001.rtz").exists()
+    left = wait_until_gone(tag, 30)
+    kill_tagged(tag)
+    assert not left, describe(left)
+
+
+def test_a_failed_export_is_counted_and_the_others_still_written(routed_root, tmp_path, monkeypatch):
+    from flows.jobs.fleet import route_fleet_job
+
+    root = _copy(routed_root, tmp_path / "data")
+    monkeypatch.setenv("JITROUTE_RTZ_SCHEMAS", str(tmp_path / "no_schemas_here"))  # every RTZ export fails (workers inherit it)
+    monkeypatch.setenv("JITROUTE_DASK_WORKERS", "1")
+    summary = route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc")
+    rows = _sql(root, "SELECT voyage_id, status, reason FROM routes")
+    assert {s for _v, s, _r in rows} <= {"ok", "late"}
+    assert not any("export" in (reason or "") for _v, _s, reason in rows)  # the route stands; its reason is about the route
+    assert len(summary["export_failures"]) == 3 and all(": rtz: " in e for e in summary["export_failures"])
+    out = Path(summary["exports_dir"])
+    assert not list(out.glob("*.rtz"))
+    assert len(list(out.glob("*.geojson"))) == 3 and len(list(out.glob("V*.png"))) >= 3
+    assert _sql(root, "SELECT n_export_failed FROM fleet_savings")[0][0] == 3
+
+
+def test_serve_without_a_reachable_prefect_api_refuses_in_one_line(tmp_path):
+    from processes import free_port
+
+    home = tmp_path / "prefect_home"  # no profile: no API configured
+    for extra in ({}, {"PREFECT_API_URL": f"http://127.0.0.1:{free_port()}/api"}):
+        r = jitroute("serve", env=tagged_env(new_tag(), PREFECT_HOME=str(home), **extra), timeout_s=120)
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert "prefect server start" in lines[0] and "PREFECT_API_URL" in lines[0]
