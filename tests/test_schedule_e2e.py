@@ -48,7 +48,9 @@ def scheduled_root(tmp_path, demo_mirror):
 
 
 def _runs(api: str) -> list[dict]:
-    r = httpx.post(f"{api}/flow_runs/filter", json={"limit": 50}, timeout=10)
+    """Flow runs that have finished (the scheduler also pre-creates many future SCHEDULED ones)."""
+    done = {"flow_runs": {"state": {"type": {"any_": ["COMPLETED", "FAILED", "CRASHED", "CANCELLED"]}}}, "limit": 200}
+    r = httpx.post(f"{api}/flow_runs/filter", json=done, timeout=10)
     r.raise_for_status()
     return r.json()
 
