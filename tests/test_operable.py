@@ -188,3 +188,26 @@ def test_serve_without_a_reachable_prefect_api_refuses_in_one_line(tmp_path):
         lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
         assert r.returncode == 2 and len(lines) == 1, r.stderr
         assert "prefect server start" in lines[0] and "PREFECT_API_URL" in lines[0]
+
+
+def test_a_second_job_on_the_same_data_root_waits_and_says_for_whom(tmp_path):
+    from storage.run_lock import job_lock
+
+    holder = subprocess.Popen([sys.executable, "-c",
+                               "import sys, time\n"
+                               "from storage.run_lock import job_lock\n"
+                               "with job_lock(sys.argv[1], 'nightly (2020-12-01T00)'):\n"
+                               "    print('HELD', flush=True); sys.stdin.readline()\n", str(tmp_path / "locks")],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "HELD"
+        said = []
+        with pytest.raises(TimeoutError, match=r"nightly \(2020-12-01T00\) \(host .*, pid \d+"):
+            with job_lock(tmp_path / "locks", "ingest 2020-12-01T06", say=said.append, poll_s=0.05, wait_s=0.5):
+                pass
+        assert len(said) == 1 and said[0].startswith("waiting for nightly (2020-12-01T00)")
+    finally:
+        holder.communicate("\n", timeout=30)
+    with job_lock(tmp_path / "locks", "ingest 2020-12-01T06", wait_s=5):  # free again once the holder ends
+        with job_lock(tmp_path / "locks", "the nightly's own ingest", wait_s=0):  # re-entrant within a process
+            pass

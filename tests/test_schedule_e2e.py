@@ -104,6 +104,21 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
                             timeout=120)
         assert fr.returncode == 0, fr.stderr[-2000:]
 
+        logs_api = httpx.post(f"{api}/logs/filter", json={"limit": 200, "sort": "TIMESTAMP_ASC"}, timeout=10).json()
+        messages = [entry["message"] for entry in logs_api]
+        assert any("routed 1/2" in m for m in messages), messages[:50]  # jitroute.* loggers reach the run's logs
+        artifacts = httpx.post(f"{api}/artifacts/filter", json={"limit": 50}, timeout=10).json()
+        keys = {(a["key"], a["type"]) for a in artifacts}
+        assert ("nightly-summary", "markdown") in keys and ("nightly-summary-table", "table") in keys, keys
+        summary_md = next(a["data"] for a in artifacts if a["key"] == "nightly-summary")
+        assert "fleet_map.png" in summary_md and "2020-12-01T00" in summary_md
+
+        # An operator's backfill with a bare number for the cycle hours (arrives as a JSON integer)
+        bf = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "run", "backfill/backfill", "-p", "start=2020-12-01",
+                             "-p", "end=2020-12-01", "-p", "cycles=0", "--watch"], env=client_env, capture_output=True,
+                            text=True, timeout=300)
+        assert bf.returncode == 0 and "Completed" in bf.stdout, (bf.stdout[-2000:], bf.stderr[-2000:])
+
         with duckdb.connect(str(root / "warehouse.snapshot.duckdb"), read_only=True) as con:
             runs = con.execute("SELECT status, trigger, n_voyages, cycle FROM route_runs WHERE trigger = 'nightly'").fetchall()
         assert runs and runs[0][0] in ("ok", "partial") and runs[0][2] == 2, runs
