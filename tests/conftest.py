@@ -43,3 +43,24 @@ def demo_mirror(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("mirror")
     write_mirror(out, "2020-12-01", "2020-12-01", cycles=(0,), seed=0)
     return out
+
+
+def mirror_urls(mirror: Path) -> dict[str, str]:
+    return {"rish_url": (mirror / "rish").as_uri() + "/", "oscar_url": (mirror / "oscar").as_uri() + "/"}
+
+
+def fleet_data_root(base: Path, mirror: Path, *, n_vessels: int, days: int, seed: int, refit: bool) -> Path:
+    """`base/data`: the mirror's 2020-12-01T00 cycle ingested and a generated fleet imported (optionally refitted),
+    all through the plain jobs (no Prefect)."""
+    from cli.fleet import _import_fleet
+    from flows.jobs.ingest import ingest_cycle
+    from flows.jobs.refit import refit_job
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+    root = base / "data"
+    assert ingest_cycle("2020-12-01T00", data_root=str(root), **mirror_urls(mirror))["complete"]
+    write_fleet(generate_fleet("2020-12-01T00", n_vessels=n_vessels, days=days, seed=seed), base / "fleet")
+    _import_fleet(base / "fleet", root)
+    if refit:
+        refit_job(data_root=str(root))
+    return root

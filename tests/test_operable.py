@@ -14,26 +14,14 @@ from pathlib import Path
 import duckdb
 import pytest
 
-from processes import VENV_BIN, describe, jitroute, kill_tagged, new_tag, tagged_env, wait_until_gone
+from tests.conftest import fleet_data_root
+from tests.processes import VENV_BIN, describe, jitroute, kill_tagged, new_tag, tagged_env, wait_until_gone
 
 
 @pytest.fixture(scope="module")
 def routed_root(tmp_path_factory, demo_mirror) -> Path:
     """A data root with the 2020-12-01T00 cycle, a 3-vessel fleet and fitted models; made with plain jobs (no Prefect)."""
-    from cli.fleet import _import_fleet
-    from flows.jobs.ingest import ingest_cycle
-    from flows.jobs.refit import refit_job
-    from pipeline.synthetic.fleet import generate_fleet, write_fleet
-
-    base = tmp_path_factory.mktemp("operable")
-    root = base / "data"
-    urls = {"rish_url": (demo_mirror / "rish").as_uri() + "/", "oscar_url": (demo_mirror / "oscar").as_uri() + "/"}
-    assert ingest_cycle("2020-12-01T00", data_root=str(root), **urls)["complete"]
-    fl = generate_fleet("2020-12-01T00", n_vessels=3, days=150, seed=11)
-    write_fleet(fl, base / "fleet")
-    _import_fleet(base / "fleet", root)
-    refit_job(data_root=str(root))
-    return root
+    return fleet_data_root(tmp_path_factory.mktemp("operable"), demo_mirror, n_vessels=3, days=150, seed=11, refit=True)
 
 
 def _copy(root: Path, dest: Path) -> Path:
@@ -180,7 +168,7 @@ def test_a_failed_export_is_counted_and_the_others_still_written(routed_root, tm
 
 
 def test_serve_without_a_reachable_prefect_api_refuses_in_one_line(tmp_path):
-    from processes import free_port
+    from tests.processes import free_port
 
     home = tmp_path / "prefect_home"  # no profile: no API configured
     for extra in ({}, {"PREFECT_API_URL": f"http://127.0.0.1:{free_port()}/api"}):

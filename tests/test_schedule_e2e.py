@@ -16,7 +16,8 @@ import duckdb
 import httpx
 import pytest
 
-from processes import VENV_BIN, describe, free_port, kill_tagged, new_tag, tagged_env, wait_until_gone
+from tests.conftest import fleet_data_root, mirror_urls
+from tests.processes import VENV_BIN, describe, free_port, kill_tagged, new_tag, tagged_env, wait_until_gone
 
 pytestmark = pytest.mark.slow
 
@@ -34,17 +35,7 @@ def _poll(what: str, fn, timeout_s: float, every_s: float = 1.0):
 @pytest.fixture
 def scheduled_root(tmp_path, demo_mirror):
     """A data root with one complete cycle (2020-12-01T00) and a 2-vessel fleet, prepared without Prefect."""
-    from cli.fleet import _import_fleet
-    from flows.jobs.ingest import ingest_cycle
-    from pipeline.synthetic.fleet import generate_fleet, write_fleet
-
-    root = tmp_path / "data"
-    urls = {"rish_url": (demo_mirror / "rish").as_uri() + "/", "oscar_url": (demo_mirror / "oscar").as_uri() + "/"}
-    assert ingest_cycle("2020-12-01T00", data_root=str(root), **urls)["complete"]
-    fl = generate_fleet("2020-12-01T00", n_vessels=2, days=120, seed=5)
-    write_fleet(fl, tmp_path / "fleet")
-    _import_fleet(tmp_path / "fleet", root)
-    return root, urls
+    return fleet_data_root(tmp_path, demo_mirror, n_vessels=2, days=120, seed=5, refit=False), mirror_urls(demo_mirror)
 
 
 def _runs(api: str) -> list[dict]:
