@@ -153,30 +153,49 @@ def test_voyage_without_legs_is_refused_naming_it(voyage):
 
 # --- GeoJSON ----------------------------------------------------------------------------------
 
-def test_geojson_is_json_safe_and_continuous_across_the_dateline(voyage):
+def test_geojson_is_json_safe_and_cut_at_the_antimeridian(voyage):
     route, legs = voyage
     gj = route_to_geojson(route, legs)
     back = json.loads(json.dumps(gj, allow_nan=False))
     assert back == gj
     line, *points = back["features"]
-    coords = np.array(line["geometry"]["coordinates"])
-    assert line["geometry"]["type"] == "LineString" and len(coords) == len(legs) + 1
-    assert np.abs(np.diff(coords[:, 0])).max() < 180.0
-    assert coords[3, 0] == pytest.approx(180.4)  # −179.6 unwrapped
-    np.testing.assert_allclose((coords[:, 0] + 180.0) % 360.0 - 180.0, [p[1] for p in POINTS], atol=1e-9)
+    assert line["geometry"]["type"] == "MultiLineString"  # RFC 7946 §3.1.9: cut, not drawn across the map
+    west, east = line["geometry"]["coordinates"]
+    assert [len(west), len(east)] == [4, len(legs) + 1 - 3 + 1]
+    assert west[-1][0] == 180.0 and east[0][0] == -180.0 and west[-1][1] == east[0][1]  # the parts meet at ±180
+    # the crossing latitude lies on the leg from 179.5 °E to 179.6 °W (−179.6), a fifth of the way (0.5 of 0.9°)
+    (x2, y2), (x3, y3) = west[-2], east[1]
+    assert (x2, x3) == (179.5, -179.6) and west[-1][1] == pytest.approx(y2 + (y3 - y2) * 0.5 / 0.9, abs=1e-6)
+    coords = np.array(west[:-1] + east[1:])
+    np.testing.assert_allclose(coords[:, 0], [p[1] for p in POINTS], atol=1e-9)
     np.testing.assert_allclose(coords[:, 1], [p[0] for p in POINTS])
+    assert all(-180.0 <= x <= 180.0 for part in (west, east) for x, _y in part)
+    lats = [p[0] for p in POINTS]
+    assert back["bbox"] == line["bbox"] == [min(p[1] for p in POINTS if p[1] > 0), min(lats),
+                                            max(p[1] for p in POINTS if p[1] < 0), max(lats)]
+    assert back["bbox"][0] > back["bbox"][2]  # §5.2: a box across the antimeridian has west > east
     props = line["properties"]
     assert props["savings_pct"] is None and props["reason"] is None
     assert props["depart_utc"] == "2021-01-10T06:00:00Z" and props["baseline_fuel_t"] == 30.0
 
     assert [p["properties"]["index"] for p in points] == list(range(len(legs) + 1))
-    assert [p["geometry"]["coordinates"][0] for p in points] == list(coords[:, 0])
+    assert [p["geometry"]["coordinates"][0] for p in points] == [p[1] for p in POINTS]
     p0, p1, _p2, p3, last = (p["properties"] for p in points)
     assert p0["eta_utc"] is None and p0["etd_utc"] == "2021-01-10T06:00:00Z" and p0["rpm"] == 71.26
     assert p1["eta_utc"] == pd.Timestamp(legs[0]["eta_utc"]).round("s").strftime("%Y-%m-%dT%H:%M:%SZ")
     assert p1["current_kn"] is None and p1["sog_kn"] == 12.9  # leg 1 starts at waypoint 1
     assert p3["lon_deg"] == -179.6 and p3["beyond_forecast"] is True
     assert last["rpm"] is None and last["name"] == "Dutch Harbor"
+
+
+def test_geojson_of_a_route_that_stays_on_one_side_is_one_line_with_a_plain_bbox():
+    from pipeline.export.geojson import bbox_of, split_at_antimeridian
+
+    lat, lon = np.array([35.0, 30.0, 20.0]), np.array([139.8, 141.0, 144.6])
+    assert split_at_antimeridian(lat, lon) == [[[139.8, 35.0], [141.0, 30.0], [144.6, 20.0]]]
+    assert bbox_of(lat, lon) == [139.8, 20.0, 144.6, 35.0]
+    west_bound = split_at_antimeridian(np.array([50.0, 51.0]), np.array([-179.0, -181.0]))  # 179 °W → 179 °E
+    assert west_bound == [[[-179.0, 50.0], [-180.0, 50.5]], [[180.0, 50.5], [179.0, 51.0]]]
 
 
 # --- PNG --------------------------------------------------------------------------------------
