@@ -5,12 +5,12 @@ from __future__ import annotations
 import typer
 from typer.core import TyperGroup
 
-from cli import fleet, ingest, performance, routing
+from cli import fleet, ingest, performance, routing, weather
 
 # Errors that mean "the input or the data root is not as it must be": one line and exit 2, no traceback.
 USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
                "WarehouseBusyError", "RoutingInputError", "VoyageGeometryError", "ServeError", "TimeoutError",
-               "CubeError", "ExportPathError"}
+               "CubeError", "ExportPathError", "WeatherMapError"}
 
 
 def is_user_error(exc: BaseException) -> bool:
@@ -41,7 +41,7 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-for module in (ingest, performance, routing, fleet):
+for module in (ingest, performance, routing, fleet, weather):
     module.register(app)
 
 

@@ -199,3 +199,15 @@ def test_a_second_job_on_the_same_data_root_waits_and_says_for_whom(tmp_path):
     with job_lock(tmp_path / "locks", "ingest 2020-12-01T06", wait_s=5):  # free again once the holder ends
         with job_lock(tmp_path / "locks", "the nightly's own ingest", wait_s=0):  # re-entrant within a process
             pass
+
+
+def test_weather_map_command_draws_a_step_and_refuses_what_does_not_exist(routed_root, tmp_path):
+    env = tagged_env(new_tag())
+    r = jitroute("weather", "map", "--var", "wind", "--step", "24", "--out", str(tmp_path / "w.png"), "--data",
+                 str(routed_root), env=env, timeout_s=180)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "w.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for args, says in ((["--var", "rain"], "is not one of wind, waves, currents"), (["--step", "7"], "has no step 7 h"),
+                       (["--cycle", "2019-01-01T00"], "is not in the cube")):
+        r = jitroute("weather", "map", *args, "--data", str(routed_root), env=env, timeout_s=180)
+        assert r.returncode == 2 and says in r.stderr and "Traceback" not in r.stderr, r.stderr

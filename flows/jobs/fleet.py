@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from flows.jobs import dask_pool
+from flows.jobs import dask_pool, weather_maps
 from flows.jobs.ingest import ingest_cycle
 from flows.jobs.refit import refit_job
 from flows.jobs.route_worker import failed_result, plain, route_batch
@@ -143,6 +143,12 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
             pairs = [(r, by_voyage.get(r["voyage_id"], [])) for r in out["rows"]]
             fig = plots.fleet_map_figure(pairs, title=f"run {run_id} · cycle {cycle_label(c)}")
             export_store.write_file(staging, "fleet_map.png", plots.png_bytes(fig))
+            for var in ("waves", "wind"):  # the weather of the cycle at its start, for people to look at
+                try:
+                    export_store.write_file(staging, f"weather_{var}_{cycle_label(c)}.png",
+                                            weather_maps.step_png(layout.weather_cube, c, 0, var))
+                except Exception as exc:  # a picture; the run's data does not depend on it
+                    out["export_errors"].append(f"fleet: weather map {var}: {type(exc).__name__}: {exc}")
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
                                       out["export_errors"])
     except BaseException as exc:
@@ -152,7 +158,8 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     published = export_store.publish(layout.exports, run_id) if exports else None
     summary = route_store.run_summary(layout.warehouse, run_id)
     summary.update(run_id=run_id, exports_dir=str(published) if published else None,
-                   fleet_map=str(published / "fleet_map.png") if published and (published / "fleet_map.png").exists() else None)
+                   fleet_map=str(published / "fleet_map.png") if published and (published / "fleet_map.png").exists() else None,
+                   weather_maps=sorted(str(p) for p in published.glob("weather_*.png")) if published else [])
     for line in summary["export_failures"]:
         LOG.warning("export failed: %s", line)
     run.publish(key="route-fleet", markdown=run_markdown(summary), table=summary_table(summary),
@@ -225,6 +232,7 @@ def run_markdown(r: dict) -> str:
         lines += ["", f"Exports: `{r['exports_dir']}`"]
     if r.get("fleet_map"):
         lines += [f"Fleet map: [{r['fleet_map']}](file://{r['fleet_map']})"]
+    lines += [f"Weather: [{Path(p).name}](file://{p})" for p in r.get("weather_maps") or []]
     problems = r.get("problems") or []
     if problems or r.get("export_failures"):
         lines += ["", "## Needing attention", "", "| voyage | status | reason |", "|---|---|---|"]
