@@ -63,6 +63,9 @@ def register(app: typer.Typer) -> None:
     def route_fleet_cmd(cycle: Optional[str] = typer.Option(None, help="Cube cycle (default: newest complete)."),
                         voyage: Optional[list[str]] = typer.Option(None, "--voyage", help="Only these voyages."),
                         solver: Optional[str] = typer.Option(None, help="bfoa (default) | dp | astar | gc | rhumb."),
+                        batch_size: Optional[int] = typer.Option(None, "--batch-size", min=1,
+                                                                 help="Voyages per dask task (default: about three "
+                                                                      "tasks per worker thread of the live cluster)."),
                         data: Optional[Path] = DataOpt):
         """Route every upcoming voyage on a local dask cluster (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
         from flows.jobs.fleet import route_fleet_job
@@ -72,7 +75,7 @@ def register(app: typer.Typer) -> None:
         if cycle:
             parse_cycle(cycle)
         summary = run_job("flows.fleet", "route_fleet", route_fleet_job, cycle=cycle, voyages=voyage or None,
-                          data_root=str(data) if data else None, solver=solver)
+                          data_root=str(data) if data else None, solver=solver, batch_size=batch_size)
         show_run(summary, load_settings(data_root=data).data_root)
 
     @app.command()

@@ -13,10 +13,11 @@ from flows.runner import InPrefect, register_flow
 @register_flow
 @flow(name="route-fleet")
 def route_fleet(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
-                solver: str | None = None, seed: int | None = None, trigger: str = "manual", exports: bool = True) -> dict:
+                solver: str | None = None, seed: int | None = None, trigger: str = "manual", exports: bool = True,
+                batch_size: int | None = None) -> dict:
     """Route every upcoming voyage (or the given ones) on one cube cycle (default: the newest complete one)."""
     return route_fleet_job(cycle, voyages, data_root=data_root, solver=solver, seed=seed, trigger=trigger,
-                           exports=exports, run=InPrefect())
+                           exports=exports, batch_size=batch_size, run=InPrefect())
 
 
 @register_flow

@@ -114,9 +114,10 @@ def route_voyages(jobs: list[RouteJob], cube_path: str, staging: Path | None, da
 
 def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
                     solver: str | None = None, seed: int | None = None, trigger: str = "manual", exports: bool = True,
-                    *, run=PLAIN) -> dict:
+                    batch_size: int | None = None, *, run=PLAIN) -> dict:
     """Route every upcoming voyage (or the given ones) on one cube cycle (default: the newest complete one)."""
-    s = load_settings(data_root=Path(data_root) if data_root else None, **{"routing.solver": solver, "routing.seed": seed})
+    s = load_settings(data_root=Path(data_root) if data_root else None,
+                      **{"routing.solver": solver, "routing.seed": seed, "routing.voyages_per_task": batch_size})
     layout = s.layout.ensure()
     c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(layout.weather_cube)
     if c is None:
