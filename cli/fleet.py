@@ -129,14 +129,9 @@ def register(app: typer.Typer) -> None:
 
 
 def _import_fleet(folder: Path, root: Path) -> None:
-    import pandas as pd
+    from flows.refit import import_fleet, import_noon_reports
 
-    from flows.refit import import_noon_reports
-    from storage import fleet_store
-
-    db = root / "warehouse.duckdb"
-    fleet_store.import_vessels(db, pd.read_csv(folder / "vessels.csv"))
-    fleet_store.import_voyages(db, pd.read_csv(folder / "voyages.csv"))
+    import_fleet(str(folder), data_root=str(root))  # validated: refused rows are kept with their reason
     c = import_noon_reports(str(folder / "noon_reports.csv"), data_root=str(root))
     console.print(f"  noon reports: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
                   f"{c['rejected']} rejected")

@@ -11,6 +11,7 @@ from prefect.cache_policies import NO_CACHE
 
 from flows.settings import load_settings
 from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
+from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -42,6 +43,25 @@ def import_noon_reports(path: str, data_root: str | None = None) -> dict:
     counts["rows"] = len(raw)
     counts["reasons"] = reason_counts(bad)
     return counts
+
+
+@flow(name="import-fleet")
+def import_fleet(folder: str, data_root: str | None = None) -> dict:
+    """Validate and store `vessels.csv` and `voyages.csv` of `folder` (vessels first: voyages need them);
+    refused rows go to `vessels_rejected` / `voyages_rejected` with their reason."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    out = {}
+    for name, validate, store in (("vessels", lambda raw, src: validate_vessels(raw, src), fleet_store.import_vessels),
+                                  ("voyages", lambda raw, src: validate_voyages(raw, fleet_store.known_imos(db), src),
+                                   fleet_store.import_voyages)):
+        path = Path(folder) / f"{name}.csv"
+        good, bad = validate(read_table(path), path.name)
+        out[name] = store(db, good, bad)
+        out[f"{name}_rejected"] = reason_counts(bad)
+        for _, row in bad.iterrows():
+            get_run_logger().warning("%s: row refused (%s): %r", path, row["reason"], row["raw"][:200])
+    return out
 
 
 @task(name="load-reports", cache_policy=NO_CACHE)
