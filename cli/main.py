@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import sys
+
 import typer
 
-from cli import fleet, ingest, performance, routing
+from cli import cube, errors, fleet, ingest, performance, routing
 
 app = typer.Typer(
     name="jitroute",
@@ -14,12 +16,19 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-for module in (ingest, performance, routing, fleet):
+for module in (ingest, performance, routing, fleet, cube):
     module.register(app)
 
 
 def main() -> None:
-    app()
+    errors.quiet_store_tracebacks()
+    try:
+        app()
+    except Exception as exc:
+        if not errors.is_store_error(exc):
+            raise
+        print(f"error: {exc}", file=sys.stderr)  # one line naming the file and the recovery
+        sys.exit(2)
 
 
 if __name__ == "__main__":

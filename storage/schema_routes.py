@@ -116,4 +116,32 @@ MIGRATIONS: list[Migration] = [
         GROUP BY ALL;
         """,
     ),
+    Migration(
+        "routes_003_latest_good_plan",
+        # the newest attempt may have failed (no weather, a lost worker): the plan to sail is then still the
+        # newest successful one, flagged, with the failure's reason beside it
+        """
+        CREATE OR REPLACE VIEW latest_routes AS
+        WITH attempts AS (
+            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
+                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
+            FROM routes r JOIN route_runs u USING (run_id)
+        ),
+        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
+        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
+            SELECT * FROM attempts
+            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
+        )
+        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
+               n.run_id <> s.run_id AS newer_attempt_failed,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
+               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
+               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at
+        FROM shown s
+        JOIN newest n USING (voyage_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels x ON x.imo = s.imo;
+        """,
+    ),
 ]
