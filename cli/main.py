@@ -6,7 +6,7 @@ import sys
 
 import typer
 
-from cli import cube, errors, fleet, ingest, performance, routing
+from cli import cube, errors, fleet, ingest, performance, routing, signals
 
 app = typer.Typer(
     name="jitroute",
@@ -21,6 +21,7 @@ for module in (ingest, performance, routing, fleet, cube):
 
 
 def main() -> None:
+    signals.install()
     errors.quiet_store_tracebacks()
     try:
         app()
