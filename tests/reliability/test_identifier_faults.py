@@ -226,3 +226,42 @@ def test_fuzzed_voyage_ids_through_a_csv_file_and_the_warehouse(tmp_path_factory
     con.close()
     assert stored == set(good.voyage_id) and all(voyage_id_problem(v) is None for v in stored)
     assert n_refused == len(bad.drop_duplicates(subset=["raw", "reason"]))
+
+
+_NOON_COLS = ["imo", "ts_utc", "rpm", "draft_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t"]
+_noon_cell = st.one_of(st.text(max_size=8), st.sampled_from(["", "inf", "1e400", "9140607", "9140607.9", "80", "10", "12", "24",
+                                                             "288", "1.5", "2020-11-01T12:00Z", "2020-11-01 21:00+09:00",
+                                                             "01/11/2018 12:00", "2099-01-01T00:00Z"]))
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(noon=st.lists(st.fixed_dictionaries({c: _noon_cell for c in _NOON_COLS}), max_size=6),
+       vessels=st.lists(st.fixed_dictionaries({"imo": _noon_cell | st.integers(10**6, 10**7).map(str), "name": st.text(max_size=8),
+                                               "dwt": _noon_cell}), max_size=5))
+def test_fuzzed_noon_and_vessel_csv_files_through_the_warehouse(tmp_path_factory, noon, vessels):
+    """Arbitrary noon-report and vessel rows in real CSV files, read, validated and stored as the imports do:
+    every row read is stored, already present or refused with a reason; nothing non-finite, ambiguous or with a
+    bad IMO gets in."""
+    from flows.refit import read_table
+    from pipeline.performance.validate import validate_noon
+    from storage import fleet_store
+
+    folder = tmp_path_factory.mktemp("fuzzcsv")
+    db = folder / "warehouse.duckdb"
+    pd.DataFrame(vessels, columns=["imo", "name", "dwt"]).to_csv(folder / "vessels.csv", index=False)
+    pd.DataFrame(noon, columns=_NOON_COLS).to_csv(folder / "noon.csv", index=False)
+    raw_v = read_table(folder / "vessels.csv")
+    good_v, bad_v = validate_vessels(raw_v, "vessels.csv")
+    assert len(good_v) + len(bad_v) == len(raw_v)
+    fleet_store.import_vessels(db, pd.concat([good_v, pd.DataFrame([{"imo": 9140607, "name": "X"}])], ignore_index=True)
+                               .drop_duplicates("imo"), bad_v)
+    raw_n = read_table(folder / "noon.csv")
+    good_n, bad_n = validate_noon(raw_n, fleet_store.known_imos(db), "noon.csv")
+    counts = fleet_store.import_noon(db, good_n, bad_n)
+    assert counts["inserted"] + counts["already_present"] + counts["rejected"] == len(raw_n)
+    con = duckdb.connect(str(db), read_only=True)
+    assert all(is_valid_imo(i) for (i,) in con.execute("SELECT imo FROM vessels").fetchall())
+    assert con.execute("SELECT count(*) FROM noon_reports WHERE isinf(fuel_t) OR isinf(rpm) OR ts_utc > now()::TIMESTAMP "
+                       "OR ts_utc::DATE = '2018-01-11'").fetchone()[0] == 0
+    assert con.execute("SELECT count(*) FROM noon_reports").fetchone()[0] == counts["inserted"]
+    con.close()
