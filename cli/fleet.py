@@ -158,14 +158,10 @@ def register(app: typer.Typer) -> None:
 def _import_fleet(folder: Path, root: Path) -> None:
     import logging
 
-    import pandas as pd
+    from flows.jobs.refit import import_fleet_folder, import_noon_file
 
-    from flows.jobs.refit import import_noon_file
-    from storage import fleet_store
-
-    db = root / "warehouse.duckdb"
-    fleet_store.import_vessels(db, pd.read_csv(folder / "vessels.csv"))
-    fleet_store.import_voyages(db, pd.read_csv(folder / "voyages.csv"))
+    # validated: refused rows are kept with their reason
+    run_job("flows.refit", "import_fleet", import_fleet_folder, folder=str(folder), data_root=str(root))
     c = run_job("flows.refit", "import_noon_reports", import_noon_file, path=str(folder / "noon_reports.csv"),
                 data_root=str(root))
     logging.getLogger("jitroute.demo").info(

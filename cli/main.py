@@ -5,30 +5,22 @@ from __future__ import annotations
 import typer
 from typer.core import TyperGroup
 
-from cli import fleet, ingest, performance, routing, weather
-
-# Errors that mean "the input or the data root is not as it must be": one line and exit 2, no traceback.
-USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
-               "WarehouseBusyError", "RoutingInputError", "VoyageGeometryError", "ServeError", "TimeoutError",
-               "CubeError", "ExportPathError", "WeatherMapError"}
-
-
-def is_user_error(exc: BaseException) -> bool:
-    return any(cls.__name__ in USER_ERRORS for cls in type(exc).__mro__)
+from cli import cube, errors, fleet, ingest, performance, routing, signals, weather
 
 
 class Commands(TyperGroup):
-    """Runs a command; a user error becomes one line on stderr and exit code 2."""
+    """Runs a command; a user error (cli/errors.py) becomes one line on stderr and exit code 2."""
 
     def invoke(self, ctx):
         try:
             return super().invoke(ctx)
         except Exception as exc:
-            if not is_user_error(exc):
+            if not errors.is_user_error(exc):
                 raise
             from cli.console import err_console
 
-            err_console.print(f"[red]error:[/] {str(exc).strip(chr(39) + chr(34))}", highlight=False)
+            msg = str(errors.user_error_of(exc)).strip(chr(39) + chr(34))
+            err_console.print(f"[red]error:[/] {msg}", highlight=False)
             raise typer.Exit(2) from None
 
 
@@ -41,13 +33,15 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-for module in (ingest, performance, routing, fleet, weather):
+for module in (ingest, performance, routing, fleet, weather, cube):
     module.register(app)
 
 
 def main() -> None:
     from cli.console import show_progress
 
+    signals.install()
+    errors.quiet_user_error_tracebacks()
     show_progress()
     app()
 

@@ -79,15 +79,21 @@ def register(app: typer.Typer) -> None:
     @fleet.command("import")
     def fleet_import(folder: Path = typer.Argument(..., help="Folder with vessels.csv, voyages.csv and optionally noon_reports.csv."),
                      data: Optional[Path] = DataOpt):
-        """Import vessels and voyages (and noon reports, validated) from a folder of CSV files."""
-        import pandas as pd
+        """Import vessels and voyages (validated; refused rows are kept with a reason) and noon reports from a folder."""
+        from flows.jobs.refit import import_fleet_folder
 
-        from flows.settings import load_settings
-        from storage import fleet_store
-
-        db = load_settings(data_root=data).layout.ensure().warehouse
-        n_v = fleet_store.import_vessels(db, pd.read_csv(folder / "vessels.csv"))
-        n_voy = fleet_store.import_voyages(db, pd.read_csv(folder / "voyages.csv"))
-        console.print(f"{n_v} vessels, {n_voy} voyages imported")
+        c = run_job("flows.refit", "import_fleet", import_fleet_folder, folder=str(folder),
+                    data_root=str(data) if data else None)
+        n_rej = {k: sum(c[f"{k}_rejected"].values()) for k in ("vessels", "voyages")}
+        console.print(f"{c['vessels']} vessels, {c['voyages']} voyages imported; "
+                      f"{n_rej['vessels']} vessel rows and {n_rej['voyages']} voyage rows refused")
+        if n_rej["vessels"] or n_rej["voyages"]:
+            t = Table(title="Refused rows by reason (tables vessels_rejected, voyages_rejected)")
+            for col in ("file", "reason", "rows"):
+                t.add_column(col)
+            for k in ("vessels", "voyages"):
+                for reason, n in sorted(c[f"{k}_rejected"].items(), key=lambda kv: -kv[1]):
+                    t.add_row(f"{k}.csv", reason, str(n))
+            console.print(t)
         if (folder / "noon_reports.csv").exists():
             noon_import(folder / "noon_reports.csv", data)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from prefect import flow
 
-from flows.jobs.refit import import_noon_file, refit_job
+from flows.jobs.refit import import_fleet_folder, import_noon_file, refit_job
 from flows.runner import InPrefect, register_flow
 
 
@@ -13,6 +13,13 @@ from flows.runner import InPrefect, register_flow
 def import_noon_reports(path: str, data_root: str | None = None) -> dict:
     """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
     return import_noon_file(path, data_root=data_root, run=InPrefect())
+
+
+@register_flow
+@flow(name="import-fleet")
+def import_fleet(folder: str, data_root: str | None = None) -> dict:
+    """Validate and store vessels.csv and voyages.csv of a folder; refused rows go to *_rejected with their reason."""
+    return import_fleet_folder(folder, data_root=data_root, run=InPrefect())
 
 
 @register_flow

@@ -46,6 +46,15 @@ class SourceSettings:
     http_timeout_s: float = 60.0
     http_retries: int = 3
     http_backoff_s: float = 1.0
+    # `http_timeout_s` bounds each read; these bound a whole file (a server dripping bytes never times out)
+    http_deadline_s: float = 1800.0  # per file, all attempts
+    http_min_rate_bps: float = 4096.0  # average over each window below, else the attempt fails
+    http_rate_window_s: float = 30.0
+    # size caps: an announced Content-Length above the cap is refused, a body past it is stopped
+    gsm_max_bytes: int = 256 << 20  # a global 0.5° GSM lead is tens of MB
+    gwm_max_bytes: int = 512 << 20
+    oscar_max_bytes: int = 512 << 20
+    index_max_bytes: int = 16 << 20  # listing pages
     # Never logged or stored; read from the environment, else from the Prefect Secret block named below.
     earthdata_token: str | None = field(default=None, repr=False)
     earthdata_secret_block: str = "jitroute-earthdata-token"

@@ -62,6 +62,14 @@ class CubeError(RuntimeError):
     pass
 
 
+class CorruptChunkError(CubeError):
+    """A chunk file of the cube cannot be decoded (damaged on disk); the message names it and the fix."""
+
+
+METADATA_NODES = ("", *DATA_VARS, "cycle", "step", "lat", "lon", "cycle_state", "current_age_h")  # "" is the group
+DECODE_ERRORS = (RuntimeError, ValueError, OSError, KeyError)  # what zarr/numcodecs raise for a damaged chunk
+
+
 @contextlib.contextmanager
 def writer_lock(lock_dir: Path | None, store: Path) -> Iterator[None]:
     """Exclusive lock per store (file `<lock_dir or store's folder>/<store name>.lock`)."""
@@ -162,6 +170,10 @@ def _write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: 
     if missing:
         raise CubeError(f"cycle {cycle} lacks variables {missing}")
     with writer_lock(lock_dir, path):
+        damaged = metadata_problems(path) if path.exists() else []
+        if damaged:
+            raise CubeError(f"{path}: the store is damaged ({'; '.join(damaged)}); nothing was written. Run "
+                            "`jitroute cube check`, then `jitroute cube repair` (moves the store aside) and re-ingest")
         if not (path / "zarr.json").exists():
             path.parent.mkdir(parents=True, exist_ok=True)
             _create_store(path, _template(cycle_ds, cycle))
@@ -217,6 +229,9 @@ def _open_consistent(path: Path, lock_dir: Path | None) -> xr.Dataset:
 def open_cube(path: Path, *, include_incomplete: bool = True, lock_dir: Path | None = None) -> xr.Dataset:
     """Lazy (dask) view of every visible cycle, sorted by cycle."""
     path = Path(path)
+    if path.exists() and not (path / "zarr.json").exists():
+        raise CubeError(f"{path}: the store is damaged ({'; '.join(metadata_problems(path))}): run `jitroute cube check`, "
+                        "then `jitroute cube repair`")
     if not (path / "zarr.json").exists():
         raise FileNotFoundError(f"no weather cube at {path}: run `jitroute ingest` (or `jitroute demo`) first")
     ds = _open_consistent(path, lock_dir)
@@ -247,7 +262,10 @@ def latest_complete_cycle(path: Path, at_or_before=None) -> np.datetime64 | None
 
 
 def load_cycle(path: Path, cycle, lat_range_deg: tuple[float, float] | None = None) -> xr.Dataset:
-    """One visible cycle, eager, dims (step, lat, lon); only the latitude band `lat_range_deg` if given."""
+    """One visible cycle, eager, dims (step, lat, lon); only the latitude band `lat_range_deg` if given.
+
+    A chunk damaged on disk raises CorruptChunkError naming the chunk, the cycle and the re-ingest that fixes it.
+    """
     ds = open_cube(path)
     c = np.datetime64(cycle, "ns")
     if c not in ds["cycle"].values:
@@ -256,4 +274,98 @@ def load_cycle(path: Path, cycle, lat_range_deg: tuple[float, float] | None = No
     if lat_range_deg is not None:
         lo, hi = sorted(lat_range_deg)
         one = one.sel(lat=slice(lo, hi)) if one.lat.values[0] < one.lat.values[-1] else one.sel(lat=slice(hi, lo))
-    return one.load()
+    try:
+        return one.load()
+    except DECODE_ERRORS as exc:
+        bad = [p for p in corrupt_chunks(path, cycles=[c])] or None
+        label = np.datetime_as_string(np.datetime64(c, "h"), unit="h")
+        where = ", ".join(str(p.chunk) for p in bad[:3]) if bad else f"(reading failed: {exc})"
+        raise CorruptChunkError(f"cube chunk {where} of cycle {label} is corrupt ({type(exc).__name__}: {exc}): "
+                                f"run `jitroute ingest --cycle {label} --force`") from exc
+
+
+# --- checking and repairing a store damaged on disk ---------------------------------------------------------------
+
+
+def metadata_problems(path: Path) -> list[str]:
+    """What is missing or unreadable among the store's metadata files (`zarr.json` of the group and arrays)."""
+    import json
+
+    out = []
+    for node in METADATA_NODES:
+        meta = Path(path) / node / "zarr.json" if node else Path(path) / "zarr.json"
+        if not meta.exists():
+            out.append(f"{meta.relative_to(Path(path).parent)} is missing")
+            continue
+        try:
+            json.loads(meta.read_text())
+        except (OSError, ValueError) as exc:
+            out.append(f"{meta.relative_to(Path(path).parent)} is unreadable ({exc})")
+    return out
+
+
+class BadChunk:
+    """One chunk that does not decode: `chunk` is its file, `variable` and `cycle` what it holds."""
+
+    def __init__(self, chunk: Path, variable: str, cycle: np.datetime64, error: str):
+        self.chunk, self.variable, self.cycle, self.error = chunk, variable, cycle, error
+
+    def __repr__(self) -> str:
+        return f"BadChunk({self.chunk}, {self.variable}, {self.cycle})"
+
+
+def corrupt_chunks(path: Path, cycles: list | None = None) -> list[BadChunk]:
+    """Decode every chunk of the data variables (of `cycles`, default all) and list those that fail."""
+    path = Path(path)
+    group = zarr.open_group(str(path), mode="r")
+    times = xr.open_zarr(path, consolidated=False, chunks={})["cycle"].values.astype("datetime64[ns]")
+    wanted = range(len(times)) if cycles is None else [int(i) for c in cycles for i in np.flatnonzero(times == np.datetime64(c, "ns"))]
+    bad = []
+    for v in DATA_VARS:
+        arr = group[v]
+        _, _, clat, clon = arr.chunks
+        nlat, nlon = arr.shape[2], arr.shape[3]
+        for i in wanted:
+            for j in range(-(-nlat // clat)):
+                for k in range(-(-nlon // clon)):
+                    try:
+                        arr[i, :, j * clat:(j + 1) * clat, k * clon:(k + 1) * clon]
+                    except DECODE_ERRORS as exc:
+                        bad.append(BadChunk(path / v / "c" / str(i) / "0" / str(j) / str(k), v, times[i],
+                                            f"{type(exc).__name__}: {exc}"))
+    return bad
+
+
+def check_store(path: Path) -> tuple[list[str], list[BadChunk]]:
+    """(metadata problems, corrupt chunks) of the store; chunks are only read when the metadata is whole."""
+    path = Path(path)
+    meta = metadata_problems(path)
+    if meta:
+        return meta, []
+    try:
+        return [], corrupt_chunks(path)
+    except DECODE_ERRORS as exc:  # e.g. the cycle axis itself does not decode
+        return [f"{path.name}: the store cannot be read ({type(exc).__name__}: {exc})"], []
+
+
+def move_aside(path: Path, lock_dir: Path | None = None) -> Path:
+    """Move a damaged store to `<store>.damaged-<UTC time>` (kept for inspection), under the writer lock, and
+    remove a `<store>.creating` left by a failed creation; the next ingest creates a fresh store."""
+    import time
+
+    path = Path(path)
+    with writer_lock(lock_dir, path):
+        shutil.rmtree(path.with_name(path.name + ".creating"), ignore_errors=True)
+        aside = path.with_name(f"{path.name}.damaged-{time.strftime('%Y%m%dT%H%M%S', time.gmtime())}")
+        os.replace(path, aside)
+    return aside
+
+
+def hide_cycles(path: Path, cycles: list, lock_dir: Path | None = None) -> None:
+    """Set the cycles back to hidden (readers stop seeing them) until a re-ingest writes them again."""
+    path = Path(path)
+    with writer_lock(lock_dir, path):
+        times = _cycles_in_store(path)
+        for c in cycles:
+            for i in np.flatnonzero(times == np.datetime64(c, "ns")):
+                _set_state(path, int(i), STATE_HIDDEN)

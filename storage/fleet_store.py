@@ -37,19 +37,49 @@ def _upsert(db_path: Path, table: str, df: pd.DataFrame, columns: list[str], key
     return len(df)
 
 
-def import_vessels(db_path: Path, df: pd.DataFrame) -> int:
-    return _upsert(db_path, "vessels", df, VESSEL_COLUMNS, "imo")
+def import_vessels(db_path: Path, df: pd.DataFrame, rejected: pd.DataFrame | None = None) -> int:
+    """Upsert good vessel rows; rows refused by validation go to `vessels_rejected` with their reason."""
+    n = _upsert(db_path, "vessels", df, VESSEL_COLUMNS, "imo")
+    _store_rejected(db_path, "vessels_rejected", rejected, ["imo"])
+    return n
 
 
-def import_voyages(db_path: Path, df: pd.DataFrame) -> int:
+def import_voyages(db_path: Path, df: pd.DataFrame, rejected: pd.DataFrame | None = None) -> int:
+    """Upsert good voyage rows; rows refused by validation go to `voyages_rejected` with their reason."""
     df = df.copy()
     for c in ("depart_utc", "rta_utc"):
         df[c] = pd.to_datetime(df[c], utc=True).dt.tz_localize(None)
     if "status" not in df:
         df["status"] = "planned"
-    df["rpm_options"] = [list(map(float, r)) if not isinstance(r, str) else [float(x) for x in r.strip("[]").split(",") if x.strip()]
+    df["rpm_options"] = [None if r is None or (isinstance(r, float) and r != r)
+                         else list(map(float, r)) if not isinstance(r, str)
+                         else [float(x) for x in r.strip("[]").split(",") if x.strip()]
                          for r in df["rpm_options"]]
-    return _upsert(db_path, "voyages", df, VOYAGE_COLUMNS, "voyage_id")
+    n = _upsert(db_path, "voyages", df, VOYAGE_COLUMNS, "voyage_id")
+    _store_rejected(db_path, "voyages_rejected", rejected, ["voyage_id", "imo"])
+    return n
+
+
+def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, keys: list[str]) -> None:
+    """Refused rows (`raw`, `reason`, `source_file` + `keys` as far as readable); the same raw row refused
+    for the same reason is stored once, so re-imports add nothing."""
+    if rejected is None or not len(rejected):
+        return
+    rej = pd.DataFrame({k: rejected[k] if k in rejected else None for k in keys})
+    if "imo" in rej:
+        rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
+    if "voyage_id" in rej:
+        rej["voyage_id"] = rej["voyage_id"].astype("string")
+    rej["raw"] = rejected["raw"].astype("string")
+    rej["reason"] = rejected["reason"].astype("string")
+    rej["source_file"] = rejected["source_file"].astype("string") if "source_file" in rejected else None
+    rej["rejected_at"] = _utcnow()
+    cols = [*keys, "raw", "reason", "source_file", "rejected_at"]
+    rej = rej.drop_duplicates(subset=["raw", "reason"])
+    with warehouse.connect(db_path) as con:
+        con.register("rej_df", rej[cols])
+        con.execute(f"INSERT INTO {table} ({', '.join(cols)}) SELECT r.* FROM rej_df r WHERE NOT EXISTS "
+                    f"(SELECT 1 FROM {table} x WHERE x.raw = r.raw AND x.reason = r.reason)")
 
 
 def known_imos(db_path: Path) -> set[int]:

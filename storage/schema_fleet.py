@@ -75,4 +75,14 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE noon_reports_rejected ALTER COLUMN ts_utc DROP NOT NULL;
         """,
     ),
+    Migration(
+        "fleet_003_rejected_vessels_voyages",
+        # rows of vessels.csv / voyages.csv refused on import, with the reason and the row as it came in
+        """
+        CREATE TABLE vessels_rejected (imo BIGINT, raw VARCHAR, reason VARCHAR NOT NULL, source_file VARCHAR,
+                                       rejected_at TIMESTAMP);
+        CREATE TABLE voyages_rejected (voyage_id VARCHAR, imo BIGINT, raw VARCHAR, reason VARCHAR NOT NULL,
+                                       source_file VARCHAR, rejected_at TIMESTAMP);
+        """,
+    ),
 ]

@@ -117,16 +117,44 @@ MIGRATIONS: list[Migration] = [
         """,
     ),
     Migration(
-        "routes_003_run_owner_and_exports",
+        "routes_003_latest_good_plan",
+        # the newest attempt may have failed (no weather, a lost worker): the plan to sail is then still the
+        # newest successful one, flagged, with the failure's reason beside it
+        """
+        CREATE OR REPLACE VIEW latest_routes AS
+        WITH attempts AS (
+            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
+                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
+            FROM routes r JOIN route_runs u USING (run_id)
+        ),
+        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
+        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
+            SELECT * FROM attempts
+            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
+        )
+        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
+               n.run_id <> s.run_id AS newer_attempt_failed,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
+               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
+               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at
+        FROM shown s
+        JOIN newest n USING (voyage_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels x ON x.imo = s.imo;
+        """,
+    ),
+    Migration(
+        "routes_004_run_owner_and_exports",
         """
         -- who runs it (a run whose process died is marked failed by the next writer), why a run failed,
         -- and exports that failed (each export stands alone; the voyage's route is kept)
-        ALTER TABLE route_runs ADD COLUMN host VARCHAR;
-        ALTER TABLE route_runs ADD COLUMN pid INTEGER;
-        ALTER TABLE route_runs ADD COLUMN pid_started VARCHAR;    -- the process's start time, so a reused PID is not taken for it
-        ALTER TABLE route_runs ADD COLUMN reason VARCHAR;
-        ALTER TABLE route_runs ADD COLUMN n_export_failed INTEGER;
-        ALTER TABLE route_runs ADD COLUMN export_errors VARCHAR;  -- one line per failed export: voyage, kind, error
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS host VARCHAR;
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS pid INTEGER;
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS pid_started VARCHAR;    -- the process's start time, so a reused PID is not taken for it
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS reason VARCHAR;
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS n_export_failed INTEGER;
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS export_errors VARCHAR;  -- one line per failed export: voyage, kind, error
 
         -- fuel and savings per run (only voyages routed with a baseline count towards savings);
         -- n_on_time + n_late + n_infeasible + n_failed = n_voyages

@@ -34,6 +34,25 @@ class WarehouseBusyError(RuntimeError):
     pass
 
 
+class WarehouseCorruptError(RuntimeError):
+    """The warehouse file is damaged; the message names it and how to recover from the snapshot."""
+
+
+_CORRUPT_SIGNS = ("not a valid duckdb database", "corrupt database file", "checksum", "serialization error")
+
+
+def _corrupt(path: Path, exc: Exception) -> WarehouseCorruptError:
+    snap = path.with_name(path.stem + ".snapshot.duckdb")
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return WarehouseCorruptError(
+        f"warehouse {path} is damaged ({first}); recover it from the snapshot: "
+        f"`mv {path} {path}.damaged && cp {snap} {path}`, then re-run (work since the last write is re-done by the re-run)")
+
+
+def _is_corrupt(exc: Exception) -> bool:
+    return any(sign in str(exc).lower() for sign in _CORRUPT_SIGNS)
+
+
 def _all_migrations() -> list[Migration]:
     # Imported here so each schema module can be edited on its own.
     from storage import schema_fleet, schema_ingest, schema_routes
@@ -47,7 +66,12 @@ def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnecti
     while True:
         try:
             return duckdb.connect(str(path), read_only=read_only)
-        except duckdb.IOException as exc:  # another process holds the file lock
+        except duckdb.Error as exc:
+            if _is_corrupt(exc):
+                raise _corrupt(path, exc) from exc
+            if not isinstance(exc, duckdb.IOException):
+                raise
+            # another process holds the file lock
             if "lock" not in str(exc).lower() or time.monotonic() >= deadline:
                 raise WarehouseBusyError(
                     f"warehouse {path} is held by another process ({exc}); "
@@ -98,6 +122,10 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
         if write:  # while we still hold the file, so no other writer changes it during the copy
             con.execute("CHECKPOINT")
             publish_snapshot(path)
+    except duckdb.Error as exc:
+        if _is_corrupt(exc):  # a damaged block met while reading or writing
+            raise _corrupt(path, exc) from exc
+        raise
     finally:
         con.close()
 

@@ -9,6 +9,12 @@ Faults are keyed by file name (or path suffix):
   "redirect:<url>"      302 to <url>
   "barrier2"            send headers and half the body, wait until a second request for the same
                         file has got that far too, then send the rest (forces two downloads to overlap)
+  "drip" / "drip:<s>"   announce the full length, then send one byte every <s> seconds (default 0.05)
+                        until the client goes away or the server stops; `handler.dripping` is set when
+                        the first byte has gone out
+  "endless"             200 without a length, then zeros without end (until the client goes away)
+  "huge"                announce 5 GB (Content-Length 5000000000), then zeros without end
+  "redirect-loop"       302 to the same path, every time
 Every request's path and headers are recorded in `handler.requests`; `handler.hits` counts them.
 """
 
@@ -32,6 +38,7 @@ class FaultyHandler(SimpleHTTPRequestHandler):
     requests: list[tuple[str, dict[str, str]]] = []
     stop: threading.Event = threading.Event()
     barrier: threading.Barrier = threading.Barrier(2)
+    dripping: threading.Event = threading.Event()
 
     def log_message(self, *args):  # keep test output clean
         pass
@@ -51,6 +58,31 @@ class FaultyHandler(SimpleHTTPRequestHandler):
         self.wfile.write(data[: len(data) // 2])
         self.wfile.flush()
         return data
+
+    def _drip(self, interval_s: float) -> None:
+        data = Path(self.translate_path(self.path)).read_bytes()
+        self.send_response(200)
+        self.send_header("Content-Length", str(len(data)))
+        self.end_headers()
+        try:
+            for k in range(len(data)):
+                self.wfile.write(data[k:k + 1])
+                self.wfile.flush()
+                self.dripping.set()
+                if self.stop.wait(interval_s):  # the pace of the drip; returns at once when the server stops
+                    break
+        except (BrokenPipeError, ConnectionResetError):  # the client gave up
+            pass
+        self.close_connection = True
+
+    def _zeros_until_gone(self) -> None:
+        block = bytes(64 << 10)
+        try:
+            while not self.stop.is_set():
+                self.wfile.write(block)
+        except (BrokenPipeError, ConnectionResetError):  # the client stopped reading and closed
+            pass
+        self.close_connection = True
 
     def do_GET(self):
         name = self.path.rsplit("/", 1)[-1]
@@ -76,6 +108,19 @@ class FaultyHandler(SimpleHTTPRequestHandler):
             self.barrier.wait(STALL_LIMIT_S)
             self.wfile.write(data[len(data) // 2:])
             self.wfile.flush()
+        elif fault == "drip" or fault.startswith("drip:"):
+            self._drip(float(fault.split(":", 1)[1]) if ":" in fault else 0.05)
+        elif fault in ("endless", "huge"):
+            self.send_response(200)
+            if fault == "huge":
+                self.send_header("Content-Length", "5000000000")
+            self.end_headers()
+            self._zeros_until_gone()
+        elif fault == "redirect-loop":
+            self.send_response(302)
+            self.send_header("Location", self.path)
+            self.send_header("Content-Length", "0")
+            self.end_headers()
         elif fault.startswith("redirect:"):
             self.send_response(302)
             self.send_header("Location", fault[len("redirect:"):])
@@ -88,7 +133,8 @@ class FaultyHandler(SimpleHTTPRequestHandler):
 def serve(folder: Path, faults: dict[str, str] | None = None):
     """Serve `folder`; yields (the base URL 'http://127.0.0.1:PORT/', the handler class with hits/requests)."""
     handler = type("Handler", (FaultyHandler,), {"faults": dict(faults or {}), "hits": {}, "requests": [],
-                                                 "stop": threading.Event(), "barrier": threading.Barrier(2)})
+                                                 "stop": threading.Event(), "barrier": threading.Barrier(2),
+                                                 "dripping": threading.Event()})
     server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(handler, directory=str(folder)))
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()

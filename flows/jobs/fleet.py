@@ -23,6 +23,8 @@ from flows.jobs.refit import refit_job
 from flows.jobs.route_worker import failed_result, plain, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
+from pipeline.export.bundle import SUFFIX
+from pipeline.export.paths import ExportPathError, export_path
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
@@ -94,12 +96,13 @@ def route_voyages(jobs: list[RouteJob], cube_path: str, staging: Path | None, da
             legs.extend(res["legs"])
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
-            for name, data in res.get("exports", {}).items():
-                try:
-                    export_store.write_file(staging, name, data)
-                except (OSError, export_store.ExportPathError) as exc:
-                    export_errors.append(f"{r['voyage_id']}: {name}: {exc}")
-                    LOG.error("voyage %s: export %s not written: %s", r["voyage_id"], name, exc)
+            for kind, data in res.get("exports", {}).items():
+                try:  # the voyage ID makes the file name: resolved inside the run folder, or refused naming the voyage
+                    path = export_path(staging, r["voyage_id"], SUFFIX[kind])
+                    export_store.write_file(path.parent, path.name, data)
+                except (OSError, ExportPathError) as exc:
+                    export_errors.append(f"{r['voyage_id']}: {kind}: {exc}")
+                    LOG.error("voyage %s: %s export not written: %s", r["voyage_id"], kind, exc)
             done += 1
             LOG.info("routed %d/%d: %s %s%s", done, len(jobs), r["voyage_id"], r["status"],
                      f" ({r['reason']})" if r.get("reason") else "")

@@ -64,7 +64,9 @@ def _opts(s: Settings, source: str, token: str | None = None) -> FetchOptions:
     """Fetch options for RISH or OSCAR; only OSCAR requests carry the Earthdata token (`token`, else the settings')."""
     src = s.sources
     return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
-                        allowed_redirect_hosts=src.allowed_redirect_hosts,
+                        allowed_redirect_hosts=src.allowed_redirect_hosts, deadline_s=src.http_deadline_s,
+                        min_rate_bps=src.http_min_rate_bps, rate_window_s=src.http_rate_window_s,
+                        max_bytes=getattr(src, f"{source.lower()}_max_bytes"), max_index_bytes=src.index_max_bytes,
                         token=(token or src.earthdata_token) if source == "OSCAR" else None)
 
 
@@ -100,6 +102,7 @@ class Listing:
     day_url: str
     gaps: dict[str, list[int]]
     n_oscar: int
+    problems: list[str] = field(default_factory=list)
 
 
 def list_sources(rish_url: str, oscar_url: str, cycle: np.datetime64, steps: list[int],
@@ -115,13 +118,17 @@ def list_sources(rish_url: str, oscar_url: str, cycle: np.datetime64, steps: lis
     if not files:
         return Listing([], rejected, day_url, {}, 0)
     items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
+    problems = []
     try:
         oscar_names, _ = rish.parse_index(read_text(oscar_url.rstrip("/") + "/", opts["OSCAR"]))
     except FileNotFoundError:
         oscar_names = []
+    except ConnectionError as exc:  # wind and waves are still worth ingesting; the cycle stays incomplete
+        oscar_names = []
+        problems.append(f"OSCAR listing unreachable ({exc})")
     oscar_files = oscar_src.files_for_window(oscar_names, cycle, cycle + np.timedelta64(max(steps), "h"))
     items += [Download("OSCAR", f.name, oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
-    return Listing(items, rejected, day_url, rish.coverage(files, steps), len(oscar_files))
+    return Listing(items, rejected, day_url, rish.coverage(files, steps), len(oscar_files), problems)
 
 
 def _fetch_one(it: Download, raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
@@ -235,7 +242,7 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
     grid = routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg)
     ds, missing_steps, have_currents = run.step(decode_and_assemble, items, c, steps, grid, layout.quarantine,
                                                 name="decode-and-assemble", timeout_s=timeout)
-    problems = [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
+    problems = listing.problems + [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
     for model, leads in listing.gaps.items():
         if leads:
             problems.append(f"{model} leads not listed: {', '.join(map(str, leads))} h")

@@ -10,6 +10,7 @@ import pandas as pd
 
 from flows.runner import PLAIN
 from flows.settings import load_settings
+from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
@@ -47,6 +48,24 @@ def import_noon_file(path: str, data_root: str | None = None, *, run=PLAIN) -> d
     counts["rows"] = len(raw)
     counts["reasons"] = reason_counts(bad)
     return counts
+
+
+def import_fleet_folder(folder: str, data_root: str | None = None, *, run=PLAIN) -> dict:
+    """Validate and store `vessels.csv` and `voyages.csv` of `folder` (vessels first: voyages need them);
+    refused rows go to `vessels_rejected` / `voyages_rejected` with their reason."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    out = {}
+    for name, validate, store in (("vessels", lambda raw, src: validate_vessels(raw, src), fleet_store.import_vessels),
+                                  ("voyages", lambda raw, src: validate_voyages(raw, fleet_store.known_imos(db), src),
+                                   fleet_store.import_voyages)):
+        path = Path(folder) / f"{name}.csv"
+        good, bad = validate(read_table(path), path.name)
+        out[name] = store(db, good, bad)
+        out[f"{name}_rejected"] = reason_counts(bad)
+        for _, row in bad.iterrows():
+            LOG.warning("%s: row refused (%s): %r", path, row["reason"], row["raw"][:200])
+    return out
 
 
 def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray], dict, dict]:

@@ -63,8 +63,7 @@ def route_one(job: RouteJob, cube_path: str | None) -> dict:
            "log": []}
     if job.exports and plan.legs:
         bundle = export_plan(plan, weather, job.vessel, job.voyage)
-        names = bundle.file_names()
-        out["exports"] = {names[kind]: data for kind, data in bundle.files.items()}
+        out["exports"] = dict(bundle.files)  # kind → bytes; the run's process names and writes them
         out["export_errors"] = bundle.errors
         out["log"] += [("error", f"voyage {job.voyage_id}: {kind} export failed: {err}")
                        for kind, err in bundle.errors.items()]

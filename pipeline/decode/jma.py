@@ -74,6 +74,17 @@ def _require_global(grid: GridInfo, path: Path) -> None:
                                 "expected a global GSM/GWM grid")
 
 
+def _require_values(ds: xr.Dataset, path: Path) -> None:
+    """Every field (at every lead) has at least one valid value: an all-missing field would otherwise pass as
+    data and leave the cycle "complete" with nothing in it."""
+    for name, da in ds.data_vars.items():
+        valid = np.isfinite(da.values).reshape(-1, da.sizes["lat"] * da.sizes["lon"]).any(axis=1)
+        if not valid.all():
+            steps = np.atleast_1d(ds["step"].values)[~valid] if "step" in da.dims else np.atleast_1d(ds["step"].values)
+            raise DecodeError(path, f"no valid values in {name} at lead {', '.join(f'{int(s)} h' for s in steps)} "
+                                    "(every grid point is missing)")
+
+
 def decode_gsm(path: Path) -> xr.Dataset:
     """One GSM file (one lead time) → u10, v10 (lat, lon) with scalar cycle, step, valid_time."""
     values, grid, cycle = read_fields(path, GSM_WIND)
@@ -85,6 +96,7 @@ def decode_gsm(path: Path) -> xr.Dataset:
     if len(steps) != 1:
         raise DecodeError(path, f"expected one lead time in a GSM file, found {steps}")
     ds = _canonical(values, grid, cycle, steps).isel(step=0)
+    _require_values(ds, path)
     return ds.assign_coords(valid_time=ds.cycle + np.timedelta64(int(ds.step), "h"))
 
 
@@ -112,4 +124,6 @@ def decode_gwm(path: Path) -> xr.Dataset:
     steps = sorted(set(values["swh"]) & set(values["mwd"]) & set(values["mwp"]))
     if not steps:
         raise DecodeError(path, "wave fields do not share any lead time")
-    return _canonical(values, grid, cycle, steps)
+    ds = _canonical(values, grid, cycle, steps)
+    _require_values(ds, path)
+    return ds

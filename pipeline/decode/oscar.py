@@ -55,6 +55,8 @@ def decode_oscar(path: Path) -> xr.Dataset:
         v = ds[k].values.astype(np.float32)
         v[(v <= -999.0) | (np.abs(v) > 20.0)] = np.nan  # fill values and garbage
         ds[k] = (("time", "lat", "lon"), v, ATTRS[k])
+        if not np.isfinite(v).any():  # an all-fill file would give a "complete" cycle without currents
+            raise DecodeError(path, f"no valid values in {k[0]} (every value is fill or out of range)")
     ds["lat"].attrs = {"units": "degrees_north"}
     ds["lon"].attrs = {"units": "degrees_east"}
     return ds

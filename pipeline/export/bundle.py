@@ -22,12 +22,8 @@ SUFFIX = {"rtz": ".rtz", "geojson": ".geojson", "png": ".png", "convergence": ".
 @dataclass
 class ExportBundle:
     voyage_id: str
-    files: dict[str, bytes] = field(default_factory=dict)  # kind → bytes
+    files: dict[str, bytes] = field(default_factory=dict)  # kind → bytes (file `<voyage_id><SUFFIX[kind]>`)
     errors: dict[str, str] = field(default_factory=dict)  # kind → what went wrong
-
-    def file_names(self) -> dict[str, str]:
-        """kind → file name in the run's folder (`<voyage_id><suffix>`)."""
-        return {kind: f"{self.voyage_id}{SUFFIX[kind]}" for kind in self.files}
 
 
 def named_route(plan: Plan, vessel: dict, voyage: dict) -> dict:

@@ -3,7 +3,11 @@
 Nothing is silently dropped. Reasons (first failing check wins, in this order):
   missing <col>                      required value empty / NaN
   not a number in <col>              text where a number belongs
-  bad timestamp                      unparseable ts_utc
+  not a finite number in <col>       inf, or a number beyond float range such as 1e400
+  not an integer in imo              e.g. 9140607.9 (never truncated to another vessel's number)
+  bad timestamp                      ts_utc not ISO 8601 (pipeline.timestamps; naive = UTC, offsets per value)
+  ambiguous timestamp (…)            a day/month/year date such as 01/11/2018 12:00
+  timestamp in the future            after the time of the import (+ FUTURE_TOLERANCE)
   unknown vessel                     IMO not in the vessels table
   hours <= 0                         reporting period not positive
   negative <col>                     negative where impossible
@@ -19,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+
+from pipeline.timestamps import parse_iso_column
 
 REQUIRED = ("imo", "ts_utc", "rpm", "draft_m", "stw_kn", "hours", "fuel_t")
 NUMERIC = ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
@@ -36,14 +42,18 @@ RANGES = {
 MAX_SPEED_KN = 35.0
 MAX_FUEL_TPH = 20.0
 MS_TO_KN = 1.943844
+FUTURE_TOLERANCE = pd.Timedelta(hours=1)  # clock skew between ship and shore
 
 
 class NoonFileError(ValueError):
     """The file as a whole cannot be read as noon reports (e.g. a required column is absent)."""
 
 
-def validate_noon(raw: pd.DataFrame, known_imos: set[int] | None = None, source: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(good rows with typed columns, rejected rows with `reason` and the original `raw` text)."""
+def validate_noon(raw: pd.DataFrame, known_imos: set[int] | None = None, source: str = "",
+                  now: pd.Timestamp | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(good rows with typed columns, rejected rows with `reason` and the original `raw` text).
+
+    `now` (naive UTC; default the current time) is the limit for report times."""
     absent = [c for c in REQUIRED if c not in raw.columns]
     if absent:
         raise NoonFileError(f"{source or 'noon report file'}: required columns missing: {', '.join(absent)}")
@@ -64,15 +74,19 @@ def validate_noon(raw: pd.DataFrame, known_imos: set[int] | None = None, source:
             continue
         num = pd.to_numeric(df[c], errors="coerce")
         flag(num.isna() & df[c].notna() & ~df[c].astype(str).str.strip().isin(["", "nan", "NaN", "None"]), f"not a number in {c}")
+        flag(np.isinf(num.astype(float)), f"not a finite number in {c}")
         df[c] = num
         if c in OPTIONAL_DEFAULTS:
             df[c] = df[c].fillna(OPTIONAL_DEFAULTS[c])
     imo = pd.to_numeric(df["imo"], errors="coerce")
     flag(imo.isna() & reason.isna(), "not a number in imo")
-    df["imo"] = imo.fillna(0).astype("int64")
-    ts = pd.to_datetime(df["ts_utc"], errors="coerce", utc=True)
-    flag(ts.isna(), "bad timestamp")
-    df["ts_utc"] = ts.dt.tz_localize(None)
+    flag(imo.notna() & ((imo % 1 != 0) | np.isinf(imo.astype(float))), "not an integer in imo")
+    df["imo"] = imo.where(imo.notna() & (imo % 1 == 0) & (imo.abs() < 2**62), 0).astype("int64")
+    ts, why = parse_iso_column(df["ts_utc"])
+    reason = reason.mask(why.notna() & reason.isna(), why)
+    flag(ts > (pd.Timestamp.now("UTC").tz_localize(None) if now is None else pd.Timestamp(now)) + FUTURE_TOLERANCE,
+         "timestamp in the future")
+    df["ts_utc"] = ts
     if known_imos is not None:
         flag(~df["imo"].isin(list(known_imos)), "unknown vessel")
     flag(df["hours"] <= 0, "hours <= 0")

@@ -17,6 +17,15 @@ class RoutingInputError(ValueError):
     """The voyage cannot be routed as given (the message names the voyage and the problem)."""
 
 
+MAX_VOYAGE_H = 90 * 24.0  # longer is a typing mistake in the RTA, not a voyage (same limit as the voyages import)
+
+
+def _place(role: str, name: str) -> str:
+    """'departure Yokohama', or just 'departure' when the voyage names no port (never 'departure departure')."""
+    name = (name or "").strip()
+    return role if not name or name.lower() == role else f"{role} {name}"
+
+
 @dataclass(frozen=True)
 class RoutingProblem:
     dep: tuple[float, float]  # (lat, lon) degrees, at sea
@@ -55,6 +64,10 @@ class RoutingProblem:
             raise RoutingInputError(f"voyage {self.voyage_id}: allowed rpm settings must be positive numbers, got {self.rpm_options}")
         if self.rta_utc <= self.depart_utc:
             raise RoutingInputError(f"voyage {self.voyage_id}: RTA {self.rta_utc} is not after departure {self.depart_utc}")
+        if self.t_req_h > MAX_VOYAGE_H:
+            raise RoutingInputError(f"voyage {self.voyage_id}: RTA {self.rta_utc} is {self.t_req_h / 24:.0f} days after departure "
+                                    f"{self.depart_utc}, more than the {MAX_VOYAGE_H / 24:.0f} days a voyage can plausibly take; "
+                                    "check the RTA (its year)")
         if self.objective not in OBJECTIVES:
             raise RoutingInputError(f"voyage {self.voyage_id}: unknown objective {self.objective!r}; use one of {sorted(OBJECTIVES)}")
 
@@ -66,8 +79,8 @@ class RoutingProblem:
         return build_search_space(self.dep, self.arr, n_lines=self.n_lines, n_points=self.n_points,
                                   d_point_nm=self.d_point_nm, base=self.base, max_shift=self.max_shift,
                                   lat_limits=self.lat_limits, limit_lines=list(self.limit_lines),
-                                  dep_name=f"voyage {self.voyage_id}: departure {self.dep_name}",
-                                  arr_name=f"voyage {self.voyage_id}: destination {self.arr_name}")
+                                  dep_name=f"voyage {self.voyage_id}: {_place('departure', self.dep_name)}",
+                                  arr_name=f"voyage {self.voyage_id}: {_place('destination', self.arr_name)}")
 
     def lat_band_deg(self, space: SearchSpace, margin_deg: float = 1.0) -> tuple[float, float]:
         ok = space.lat[space.node_ok]

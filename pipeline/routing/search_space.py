@@ -117,6 +117,9 @@ def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_
     lat1, lon1 = arr
     dist = geo.rhumb_distance_nm(lat0, lon0, lat1, lon1) if base == "rhumb" else geo.gc_distance_nm(lat0, lon0, lat1, lon1)
     if dist < 1.0:
+        who, _, dep_short = dep_name.rpartition(": ")  # "voyage V: departure A" and "voyage V: destination B"
+        if who and arr_name.startswith(who + ": "):  # name the voyage once
+            raise VoyageGeometryError(f"{who}: {dep_short} and {arr_name[len(who) + 2:]} are the same place ({dist:.2f} NM apart)")
         raise VoyageGeometryError(f"{dep_name} and {arr_name} are the same place ({dist:.2f} NM apart)")
     L = n_lines if n_lines is not None else default_n_lines(dist)
     P = int(n_points) | 1  # odd, so there is a centre node

@@ -227,3 +227,62 @@ def test_a_header_only_file_imports_nothing_and_says_so(root, tmp_path):
     path.write_text(",".join(c for c in fleet_store.NOON_COLUMNS if c != "source_file") + "\n")
     code, out = _cli("noon", "import", str(path), "--data", str(root))
     assert code == 0 and _counts_line(out) == (0, 0, 0, 0), out
+
+
+def _iso(ts: pd.Timestamp, offset_h: int | None) -> str:
+    """`ts` (naive UTC) written in another time zone (`+HH:00`), or naive when `offset_h` is None."""
+    if offset_h is None:
+        return ts.strftime("%Y-%m-%d %H:%M:%S")
+    return (ts + pd.Timedelta(hours=offset_h)).strftime("%Y-%m-%dT%H:%M:%S") + f"{offset_h:+03d}:00"
+
+
+def test_dates_are_iso_8601_per_value_and_implausible_values_are_refused(root, fresh, tmp_path):
+    utc = [pd.Timestamp(t).tz_localize(None) for t in fresh.ts_utc.iloc[:6]]
+    mixed = [dict(fresh.iloc[k].to_dict(), ts_utc=_iso(utc[k], (9, None, -5, None, 0, 9)[k])) for k in range(6)]
+    base = fresh.iloc[10].to_dict()
+    imo = str(base["imo"])
+    bad = {  # row -> the reason it must be stored with
+        "ambiguous": (dict(base, ts_utc="01/11/2018 12:00"), "ambiguous timestamp (day/month order unknown; use ISO 8601, e.g. 2020-12-01T12:00Z)"),
+        "dotted": (dict(base, ts_utc="13.11.2018 12:00"), "ambiguous timestamp (day/month order unknown; use ISO 8601, e.g. 2020-12-01T12:00Z)"),
+        "future": (dict(base, ts_utc=(pd.Timestamp.now("UTC") + pd.Timedelta(days=30)).strftime("%Y-%m-%dT%H:%MZ")),
+                   "timestamp in the future"),
+        "inf": (dict(fresh.iloc[11].to_dict(), fuel_t="inf"), "not a finite number in fuel_t"),
+        "1e400": (dict(fresh.iloc[12].to_dict(), fuel_t="1e400"), "not a finite number in fuel_t"),
+        "fraction": (dict(fresh.iloc[13].to_dict(), imo=imo + ".9"), "not an integer in imo"),
+    }
+    path = tmp_path / "dates.csv"
+    pd.DataFrame([*mixed, *(row for row, _ in bad.values())]).to_csv(path, index=False)
+    code, out = _cli("noon", "import", str(path), "--data", str(root))
+    assert code == 0 and _counts_line(out) == (12, 6, 0, 6), out
+    stored = sorted(r[0] for r in _q(root, "SELECT ts_utc FROM noon_reports WHERE source_file = 'dates.csv'"))
+    assert stored == sorted(t.to_pydatetime() for t in utc)  # every offset converted to the same UTC instant
+    got = sorted(_q(root, "SELECT reason FROM noon_reports_rejected WHERE source_file = 'dates.csv'"))
+    assert got == sorted((r,) for _, r in bad.values())
+    assert not _q(root, "SELECT * FROM noon_reports WHERE ts_utc::DATE IN ('2018-01-11', '2018-11-01', '2018-11-13')")
+    assert not _q(root, "SELECT * FROM noon_reports WHERE ts_utc > now()::TIMESTAMP OR isinf(fuel_t)")
+
+
+# --- fuzzing the noon import ------------------------------------------------------------------------------------
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from pipeline.performance.validate import validate_noon  # noqa: E402
+
+_CELL = st.one_of(st.text(max_size=10), st.sampled_from(["", "nan", "inf", "-inf", "1e400", "9140607", "9140607.9", "0", "24",
+                                                         "12.5", "2020-11-01T12:00Z", "2020-11-01 21:00+09:00", "01/11/2018 12:00",
+                                                         "2099-01-01T00:00Z", "-3"]))
+_COLS = ["imo", "ts_utc", "rpm", "draft_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t"]
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(rows=st.lists(st.fixed_dictionaries({c: _CELL for c in _COLS}), max_size=6))
+def test_noon_validation_of_arbitrary_text_never_raises_and_keeps_only_sound_rows(rows):
+    raw = pd.DataFrame(rows, columns=_COLS).astype(object)
+    now = pd.Timestamp("2021-01-01")
+    good, bad = validate_noon(raw, {9140607}, "fuzz.csv", now=now)
+    assert len(good) + len(bad) == len(raw) and (bad["reason"].notna().all() if len(bad) else True)
+    for c in ("rpm", "draft_m", "stw_kn", "hours", "fuel_t"):
+        assert np.isfinite(good[c].astype(float)).all(), c
+    assert (good["imo"] == 9140607).all()
+    assert (good["ts_utc"] <= now + pd.Timedelta(hours=1)).all() and good["ts_utc"].notna().all()

@@ -111,3 +111,22 @@ def test_a_bad_voyage_does_not_stop_the_others():
     assert out["VPAST"]["status"] == "failed" and "not after departure" in out["VPAST"]["reason"]
     assert out["VNOMODEL"]["status"] == "failed" and "jitroute refit" in out["VNOMODEL"]["reason"]
     assert out["VNOPOS"]["status"] == "failed" and "arr_lat is missing" in out["VNOPOS"]["reason"]
+
+
+def test_an_rta_years_after_departure_is_refused_not_routed_ok():
+    with pytest.raises(RoutingInputError, match=r"VTEST: RTA 2030-12-03T06:00:00 is 3654 days after departure .* check the RTA"):
+        problem(rta_utc="2030-12-03T06")
+    assert problem(rta_utc="2021-02-20T06").t_req_h == pytest.approx(81 * 24)  # a long but real passage is fine
+
+
+@pytest.mark.parametrize("names, says", [({}, "voyage VTEST: departure 35.6800,139.7600 is on land"),
+                                         ({"dep_name": "departure"}, "voyage VTEST: departure 35.6800,139.7600 is on land"),
+                                         ({"dep_name": "Tokyo city"}, "voyage VTEST: departure Tokyo city 35.6800,139.7600 is on land")])
+def test_messages_say_each_thing_once(names, says):
+    with pytest.raises(VoyageGeometryError) as exc:
+        solve(problem(dep=(35.68, 139.76), **names), calm())
+    assert str(exc.value).startswith(says) and "departure departure" not in str(exc.value)
+    with pytest.raises(VoyageGeometryError) as exc:
+        solve(problem(arr=DEP), calm())
+    assert str(exc.value).startswith("voyage VTEST: departure and destination are the same place"), str(exc.value)
+    assert str(exc.value).count("VTEST") == 1

@@ -60,7 +60,7 @@ def _prefect_text(run_ids: list[UUID]) -> str:
         parts += [a.model_dump_json() for a in client.read_artifacts(
             artifact_filter=ArtifactFilter(), flow_run_filter=runs, task_run_filter=TaskRunFilter(), limit=200, offset=0,
             sort=ArtifactSort.ID_DESC)]
-    assert logs and len(tasks) == 4 + 4 + 1, "the API returned too little for the search to prove anything"
+    assert logs and len(tasks) == 4 + 4 + 4, "the API returned too little for the search to prove anything"
     return "\n".join(parts)
 
 
@@ -92,13 +92,13 @@ def test_token_is_sent_to_the_oscar_host_only_and_never_stored_or_shown(mirror, 
             # 2. the OSCAR download itself fails after retries
             outcomes.append(_run(roots[1], f"file://{mirror}/rish/", oscar_url + "oscar/"))
         with serve(mirror, {"oscar/": "redirect:http://127.0.0.9:9/oscar/"}) as (oscar_url, _):
-            # 3. the OSCAR index redirects to a host that is not allowed: the flow fails with an exception
+            # 3. the OSCAR index redirects to a host that is not allowed: the listing is unreachable, the cycle incomplete
             outcomes.append(_run(roots[2], f"file://{mirror}/rish/", oscar_url + "oscar/"))
-    (r1, _), (r2, _), (exc, _) = outcomes
+    (r1, _), (r2, _), (r3, _) = outcomes
     run_ids = [i for _, i in outcomes]
     assert not r1["complete"] and f"GSM {gsm_file(mirror, 6).name}: missing" in r1["missing"]
     assert f"OSCAR {oscar.name}: missing" in r2["missing"]
-    assert isinstance(exc, PermissionError) and "refused" in str(exc)
+    assert not r3["complete"] and any(m.startswith("OSCAR listing unreachable") and "refused" in m for m in r3["missing"]), r3
 
     # the header went to the OSCAR host, on every request there, and nowhere else
     assert [p for p, _ in osc.requests] == ["/oscar/", f"/oscar/{oscar.name}"]
@@ -112,9 +112,9 @@ def test_token_is_sent_to_the_oscar_host_only_and_never_stored_or_shown(mirror, 
     places = {
         "stdout/stderr": captured.out + captured.err,
         "log records": "\n".join(f"{r.getMessage()} {r.exc_text or ''}" for r in caplog.records),
-        "exception": "".join(traceback.format_exception(exc)) + repr(exc),
-        "warehouse": "\n".join(_warehouse_text(DataLayout(r).warehouse) for r in roots[:2]),
-        "snapshot": "\n".join(_warehouse_text(DataLayout(r).warehouse_snapshot) for r in roots[:2]),
+        "reports": repr(outcomes),
+        "warehouse": "\n".join(_warehouse_text(DataLayout(r).warehouse) for r in roots),
+        "snapshot": "\n".join(_warehouse_text(DataLayout(r).warehouse_snapshot) for r in roots),
         "data root paths": "\n".join(str(p) for r in roots for p in r.rglob("*")),
         "data root files": "\n".join(p.read_bytes().decode("latin-1") for r in roots for p in r.rglob("*") if p.is_file()),
         "prefect api": _prefect_text(run_ids),

@@ -1,0 +1,30 @@
+"""Where a voyage's export files go: always inside the run folder, whatever the voyage ID says."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.validate_ids import InvalidIdentifier, check_voyage_id
+
+
+class ExportPathError(InvalidIdentifier):
+    """A voyage's export file would land outside its run folder (or the voyage ID is unusable)."""
+
+
+def export_path(run_dir: Path, voyage_id: str, suffix: str) -> Path:
+    """`run_dir / (voyage_id + suffix)`, refused (ExportPathError naming the voyage) unless the voyage ID is a
+    plain name (`pipeline.validate_ids.VOYAGE_ID_PATTERN`) and the resolved file lies directly in `run_dir`.
+
+    `suffix` is the file ending, e.g. ".rtz" or "_plan.png"; it must not contain a path separator either.
+    """
+    try:
+        vid = check_voyage_id(voyage_id)
+    except InvalidIdentifier as exc:
+        raise ExportPathError(f"{exc}: its export files are not written") from exc
+    if "/" in suffix or "\\" in suffix or "\x00" in suffix or ".." in suffix:
+        raise ExportPathError(f"voyage {vid}: export suffix {suffix!r} is not a plain file ending")
+    base = Path(run_dir).resolve()
+    target = (base / f"{vid}{suffix}").resolve()
+    if target.parent != base:
+        raise ExportPathError(f"voyage {vid}: export file {target} would be outside the run folder {base}; not written")
+    return target

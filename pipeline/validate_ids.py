@@ -1,0 +1,60 @@
+"""Identifiers that become file names or keys: voyage IDs and IMO numbers.
+
+A voyage ID names its export files (`<run folder>/<voyage_id>.rtz`), so it must be a plain name:
+`VOYAGE_ID_PATTERN` — a letter or digit, then up to 63 letters, digits, `.`, `_` or `-` — and no `..`.
+That excludes path separators, absolute paths, control characters, newlines and spaces.
+IMO numbers are seven digits whose last is the check digit: the sum of the first six digits weighted
+7, 6, 5, 4, 3, 2, modulo 10.
+"""
+
+from __future__ import annotations
+
+import re
+
+VOYAGE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+VOYAGE_ID_MAX_LEN = 64
+_VOYAGE_ID = re.compile(VOYAGE_ID_PATTERN)
+
+
+def voyage_id_problem(voyage_id) -> str | None:
+    """Why `voyage_id` is not a usable voyage ID (None when it is). The reason never repeats the ID
+    itself, which may hold control characters; callers keep the raw text separately."""
+    if voyage_id is None or (isinstance(voyage_id, float) and voyage_id != voyage_id):
+        return "missing voyage_id"
+    vid = str(voyage_id)
+    if vid.strip() == "":
+        return "missing voyage_id"
+    if len(vid) > VOYAGE_ID_MAX_LEN:
+        return f"voyage_id longer than {VOYAGE_ID_MAX_LEN} characters ({len(vid)})"
+    if any(ord(ch) < 32 or ord(ch) == 127 for ch in vid):
+        return "voyage_id contains control characters or a line break"
+    if "/" in vid or "\\" in vid:
+        return "voyage_id contains a path separator"
+    if ".." in vid:
+        return "voyage_id contains '..'"
+    if not _VOYAGE_ID.match(vid):
+        return "voyage_id has characters other than letters, digits, '.', '_' and '-' (or does not start with a letter or digit)"
+    return None
+
+
+class InvalidIdentifier(ValueError):
+    """An identifier that cannot be used as given; the message says why and names it safely."""
+
+
+def check_voyage_id(voyage_id) -> str:
+    """`voyage_id` as a string, or InvalidIdentifier naming it (repr, so control characters show)."""
+    problem = voyage_id_problem(voyage_id)
+    if problem:
+        shown = repr(str(voyage_id)) if len(str(voyage_id)) <= 80 else repr(str(voyage_id)[:80]) + "…"
+        raise InvalidIdentifier(f"voyage {shown}: {problem}; a voyage ID must match {VOYAGE_ID_PATTERN} without '..'")
+    return str(voyage_id)
+
+
+def imo_check_digit(first_six: int) -> int:
+    digits = [int(c) for c in f"{int(first_six):06d}"]
+    return sum(d * w for d, w in zip(digits, range(7, 1, -1))) % 10
+
+
+def is_valid_imo(imo: int) -> bool:
+    """Seven digits whose last is the IMO check digit of the first six."""
+    return 1_000_000 <= int(imo) <= 9_999_999 and imo_check_digit(int(imo) // 10) == int(imo) % 10
