@@ -211,3 +211,27 @@ def test_weather_map_command_draws_a_step_and_refuses_what_does_not_exist(routed
                        (["--cycle", "2019-01-01T00"], "is not in the cube")):
         r = jitroute("weather", "map", *args, "--data", str(routed_root), env=env, timeout_s=180)
         assert r.returncode == 2 and says in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_sigterm_stops_route_fleet_cleanly_and_leaves_no_process(routed_root, tmp_path):
+    root = _copy(routed_root, tmp_path / "data")
+    tag = new_tag()
+    proc = subprocess.Popen([str(VENV_BIN / "jitroute"), "route-fleet", "--data", str(root), "--batch-size", "1"],
+                            env=tagged_env(tag, JITROUTE_DASK_WORKERS="1"), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    for line in proc.stdout:  # stop it once it is routing
+        if "routed 1/" in line:
+            break
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 143, out[-3000:]
+    assert time.monotonic() - t0 < 15, "route-fleet took too long to stop after SIGTERM"
+    left = wait_until_gone(tag, 20)
+    kill_tagged(tag)
+    assert not left, describe(left)
+    status, reason = _sql(root, "SELECT status, reason FROM route_runs")[0]
+    assert status == "failed" and reason, (status, reason)
+    assert _sql(root, "SELECT count(*) FROM routes")[0][0] == 0  # all or nothing
+    runs = root / "exports" / "runs"
+    assert not runs.exists() or not any(runs.iterdir()), list(runs.iterdir())

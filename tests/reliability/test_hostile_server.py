@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import flows.ingest
+import flows.jobs.ingest
 from pipeline.sources.fetch import FetchOptions, fetch, read_text
 from storage import cube
 from storage.layout import DataLayout
@@ -112,7 +113,7 @@ def test_a_redirect_loop_on_a_file_ends_as_an_error(mirror, tmp_path):
 
 
 def test_ingest_with_a_dripping_and_an_endless_file_ends_with_both_missing(mirror, tmp_path, ingest, monkeypatch):
-    monkeypatch.setattr(flows.ingest, "load_settings", load_settings_with(**{
+    monkeypatch.setattr(flows.jobs.ingest, "load_settings", load_settings_with(**{
         "sources.http_deadline_s": 3.0, "sources.http_min_rate_bps": 2000.0, "sources.http_rate_window_s": 0.5,
         "sources.gwm_max_bytes": 4 << 20}))
     drip, endless = gsm_file(mirror, 12), gwm_file(mirror)
