@@ -52,13 +52,13 @@ def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray
 
 @task(name="fit-vessels", cache_policy=NO_CACHE)  # no hashing of the fleet's report arrays
 def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, form: str,
-                robust: bool) -> tuple[list[dict], list[dict]]:
+                robust: bool | None) -> tuple[list[dict], list[dict]]:
     return refit_fleet(reports, active, versions, form=form, robust=robust)
 
 
 @flow(name="refit-performance")
 def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "physical",
-                      robust: bool = True) -> list[dict]:
+                      robust: bool | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; a model becomes active only if it is
     well determined and not worse than the active one on the newest held-out reports."""
     s = load_settings(data_root=Path(data_root) if data_root else None)

@@ -2,6 +2,7 @@
 
 import io
 import json
+from pathlib import Path
 
 import duckdb
 import numpy as np
@@ -76,16 +77,51 @@ def test_direction_fold_and_joint_design_equal_their_plain_definitions():
         np.testing.assert_array_equal(Xs, features.design_matrix(form, "speed", *cols))
         np.testing.assert_array_equal(Xf, features.design_matrix(form, "fuel", *cols))
 
-def test_constant_regressor_is_dropped_and_said():
+def test_constant_regressor_is_dropped_only_beside_an_intercept():
     n = 40
     rng = np.random.default_rng(1)
     rpm = rng.uniform(60, 100, n)
-    X = features.design_matrix(features.FORM_THESIS, "speed", rpm, np.full(n, 10.0), np.zeros(n), np.zeros(n), np.zeros(n),
-                               np.zeros(n), np.zeros(n), np.zeros(n))
-    res = fit.fit_target("thesis", "speed", X, 0.15 * rpm)
-    # draft is constant here, so it cannot be told apart from the intercept: dropped too
-    assert set(res.dropped) == {"draft_m", "trim_m", "wind_dir_rel_deg", "wind_kn", "wave_dir_rel_deg", "wave_m"}
+    zeros = np.zeros(n)
+    X = features.design_matrix(features.FORM_THESIS, "speed", rpm, np.full(n, 10.0), zeros, zeros, zeros, zeros, zeros, zeros)
+    res = fit.fit_target("thesis", "speed", X, 0.15 * rpm + 2.0)
+    # no intercept in the thesis form: the constant draft is its only constant term and stays; all-zero columns go
+    assert set(res.dropped) == {"trim_m", "wind_dir_rel_deg", "wind_kn", "wave_dir_rel_deg", "wave_m"}
+    np.testing.assert_allclose(res.coef[:3], [0.2, 0.0, 0.15], atol=1e-9)
+    X = features.design_matrix(features.FORM_PHYSICAL, "speed", rpm, np.full(n, 10.0), np.full(n, 0.5), zeros, zeros, zeros,
+                               zeros, np.full(n, 3.0))
+    res = fit.fit_target("physical", "speed", X, 0.15 * rpm + 2.0)
+    # beside the intercept "1" a constant draft, trim or fouling cannot be told apart from it: dropped and said
+    assert {"draft_m", "trim_m", "months_dd"} <= set(res.dropped) and "1" not in res.dropped
     assert res.rmse < 1e-8
+
+
+GAS_NIRVANA = Path(__file__).parent / "fixtures" / "gas_nirvana_fig3_15.csv"
+
+
+def gas_nirvana() -> pd.DataFrame:
+    """The thesis's 22 hourly records of MV Gas Nirvana (figure 3.15), oldest first, as noon-report columns."""
+    df = pd.read_csv(GAS_NIRVANA, comment="#").sort_values("ts_utc").reset_index(drop=True)
+    return df.assign(imo=9140607, hours=1.0, months_since_drydock=0.0)
+
+
+def test_thesis_form_reproduces_the_published_gas_nirvana_fit():
+    """Ordinary least squares, no intercept, on [draft, trim, rpm, wind direction, wind speed]: the thesis's
+    speed coefficients, R² and RMSE. Trim is 2 on every row: it is kept (the only constant term); the wave
+    columns are all zero (0/0 in the table): β = 0."""
+    inp = fit.inputs_from_reports(gas_nirvana())
+    X = fit.design("thesis", "speed", inp)
+    assert X.shape == (22, 7) and (X[:, 1] == 2.0).all()
+    res = fit.fit_target("thesis", "speed", X, inp["stw_kn"])
+    assert not res.robust
+    np.testing.assert_allclose(res.coef[:5], [1.80521, 12.63045, -0.13117, -0.02029, -0.09710], atol=1e-4)
+    assert res.dropped == ["wave_dir_rel_deg", "wave_m"] and (res.coef[5:] == 0).all()
+    assert res.r2 == pytest.approx(0.8854, abs=1e-4) and res.rmse == pytest.approx(0.580, abs=1e-3)
+    # the refit path takes the form's default: no Huber re-weighting for the thesis form
+    assert fit.robust_default("thesis") is False and fit.robust_default("physical") is True
+    rows, _ = refit_vessel(9140607, gas_nirvana(), None, 1, form="thesis")
+    stored = json.loads(next(r for r in rows if r["target"] == "speed")["coefficients"])
+    np.testing.assert_allclose([stored[k] for k in ("draft_m", "trim_m", "rpm", "wind_dir_rel_deg", "wind_kn")],
+                               [1.80521, 12.63045, -0.13117, -0.02029, -0.09710], atol=1e-4)
 
 
 def test_every_rejection_reason(fleet):

@@ -40,6 +40,11 @@ FUEL_REGRESSORS = {
     FORM_PHYSICAL: ("1", "r3", "r3_draft", "r3_months", "wind_kn2_cos", "wave_m2_cos2half"),
 }
 N_SPEED = {k: len(v) for k, v in SPEED_REGRESSORS.items()}
+# The thesis form has no intercept, so a constant column (e.g. a trim that never changes) is the only
+# constant term and stays in the fit; a form with an intercept "1" drops its other constant columns.
+KEEP_CONSTANT = {FORM_THESIS: True, FORM_PHYSICAL: False}
+# Huber re-weighting by default: the thesis form is published as ordinary least squares.
+ROBUST_DEFAULT = {FORM_THESIS: False, FORM_PHYSICAL: True}
 N_FUEL = {k: len(v) for k, v in FUEL_REGRESSORS.items()}
 
 

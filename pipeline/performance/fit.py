@@ -66,6 +66,11 @@ def inputs_from_reports(reports) -> dict[str, np.ndarray]:
     }
 
 
+def robust_default(form: str) -> bool:
+    """Whether `form` is fitted with Huber re-weighting unless told otherwise (the thesis form is not)."""
+    return features.ROBUST_DEFAULT[features.FORM_IDS[form]]
+
+
 def design(form: str, target: str, inp: dict[str, np.ndarray]) -> np.ndarray:
     return features.design_matrix(features.FORM_IDS[form], target, inp["rpm"], inp["draft_m"], inp["trim_m"], inp["wind_kn"],
                                   inp["wind_rel_deg"], inp["hs_m"], inp["wave_rel_deg"], inp["months_dd"])
@@ -79,9 +84,11 @@ def designs(form: str, inp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: bool = False, k_folds: int = K_FOLDS) -> FitResult:
-    """Least squares of y on X (regressor names from `features`); constant/all-zero regressors are dropped.
+    """Least squares of y on X (regressor names from `features`); all-zero regressors are dropped (β = 0).
 
-    A constant column is kept only where it is the model's intercept ("1"). With `robust`, Huber
+    Constant columns: in a form with an intercept ("1") the others are dropped (they cannot be told
+    apart from it); in a form without one (`features.KEEP_CONSTANT`, the thesis form) they are kept,
+    being its only constant term. With `robust`, Huber
     weights (scale 1.4826·MAD) are re-estimated until the coefficients settle (ROBUST_RTOL), at most
     ROBUST_ITERATIONS solves.
     """
@@ -101,7 +108,8 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     y = np.ascontiguousarray(y, dtype=np.float64)
     bounds = np.ascontiguousarray(bounds, dtype=np.int64)
     G, k = bounds.size - 1, X.shape[1]
-    intercept = np.array([nm == "1" for nm in names], dtype=np.bool_)
+    keep_all = features.KEEP_CONSTANT[fid]
+    intercept = np.array([keep_all or nm == "1" for nm in names], dtype=np.bool_)  # constant but kept (if non-zero)
     coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
     n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
     fit_kernels.fit_groups_nb(X, y, bounds, intercept, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,

@@ -19,9 +19,10 @@ REPORT_COLUMNS = ("imo", *fit.INPUT_COLUMNS)  # what a refit reads of the noon r
 
 
 def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = "physical",
-                 robust: bool = True) -> tuple[list[dict], dict]:
+                 robust: bool | None = None) -> tuple[list[dict], dict]:
     """(perf_models rows for speed and fuel, summary dict) for one vessel's time-ordered reports.
 
+    `robust`: Huber re-weighting; None takes the form's default (`fit.robust_default`: off for the thesis form).
     Both targets are activated together or not at all: routing needs a consistent pair. The new
     pair must not be worse than the active one on the newest 20 % of reports.
     """
@@ -32,7 +33,7 @@ def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: 
 
 
 def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = "physical",
-                robust: bool = True) -> tuple[list[dict], list[dict]]:
+                robust: bool | None = None) -> tuple[list[dict], list[dict]]:
     """`refit_vessel` for every vessel in `reports` (time-ordered within each vessel), fitted together.
 
     `reports`: a DataFrame or a mapping of column → array (as `fleet_store.load_for_refit` gives)
@@ -52,8 +53,9 @@ def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, f
 
 
 def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], active: dict, versions: dict, form: str,
-           robust: bool) -> tuple[list[dict], list[dict]]:
+           robust: bool | None) -> tuple[list[dict], list[dict]]:
     """Vessel g is rows bounds[g]:bounds[g+1] of the model inputs `inp`."""
+    robust = fit.robust_default(form) if robust is None else bool(robust)
     n = np.diff(bounds)
     y = {"speed": inp["stw_kn"], "fuel": inp["fuel_tph"]}
     X = fit.designs(form, inp)
