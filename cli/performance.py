@@ -65,6 +65,13 @@ def register(app: typer.Typer) -> None:
               data: Optional[Path] = DataOpt):
         """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
         from flows.refit import refit_performance
+        from pipeline.performance.refit import check_form
+
+        try:
+            check_form(form)
+        except ValueError as exc:
+            console.print(f"[red]error:[/] {exc}")
+            raise typer.Exit(2) from exc
 
         summaries = refit_performance(imos=imo or None, data_root=str(data) if data else None, form=form)
         console.print(refit_table(summaries))

@@ -10,7 +10,7 @@ from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 
 from flows.settings import load_settings
-from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
+from pipeline.performance.refit import REPORT_COLUMNS, check_form, refit_fleet
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -61,6 +61,7 @@ def refit_performance(imos: list[int] | None = None, data_root: str | None = Non
                       robust: bool | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; a model becomes active only if it is
     well determined and not worse than the active one on the newest held-out reports."""
+    check_form(form)  # before anything is read
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     logger = get_run_logger()

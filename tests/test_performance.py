@@ -287,3 +287,44 @@ def test_fuzzy_model_reproduces_published_outputs(inputs, expected):
 def test_fuzzy_fires_the_published_rules():
     assert fuzzy.fired_rules(8, 4, 1) == [23, 26]
     assert fuzzy.fired_rules(10, 5, 7) == [17, 18]
+
+
+@pytest.mark.parametrize("form", ["mlp/fuzzy", "fuzzy", "Physical", ""])
+def test_refit_refuses_a_form_that_does_not_exist_in_one_line(form, tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "400")
+    res = CliRunner().invoke(app, ["refit", "--form", form, "--data", str(tmp_path / "d")])
+    assert res.exit_code == 2, res.output
+    assert res.output.strip().count("\n") == 0 and "unknown model form" in res.output and "thesis" in res.output
+    assert not (tmp_path / "d").exists()  # refused before anything was created
+
+
+def test_calm_water_speed_and_fuel_do_not_depend_on_heading():
+    """No wind and no waves: every form gives one speed and one fuel rate whatever the (meaningless)
+    relative direction, including the −180° routing gets from atan2(−0, −0); and a leg sailed north
+    takes as long as the same leg sailed south."""
+    from pipeline.performance.model import PerformanceModel, reference_model
+    from pipeline.routing import leg_kernel as lk
+    from pipeline.routing import weather_field as wf
+
+    gn = gas_nirvana()
+    inp = fit.inputs_from_reports(gn)
+    X = fit.designs("thesis", inp)
+    thesis = PerformanceModel("thesis", fit.fit_target("thesis", "speed", X["speed"], inp["stw_kn"]).coef,
+                              fit.fit_target("thesis", "fuel", X["fuel"], inp["fuel_tph"]).coef)
+    rel = np.array([-180.0, -90.0, -0.0, 0.0, 45.0, 90.0, 180.0, 270.0, 359.0])
+    for m in (thesis, reference_model()):
+        for rpm in (100.0, 120.0):
+            stw = m.stw_kn(rpm, 6.0, 2.0, 0.0, rel, 0.0, rel)
+            fuel = m.fuel_tph(rpm, 6.0, 2.0, 0.0, rel, 0.0, rel)
+            assert np.ptp(stw) == 0.0 and np.ptp(fuel) == 0.0 and stw[0] > 5.0, (m.form, stw)
+    calm = wf.uniform(np.datetime64("2020-12-01T00"), 240.0)
+    for m in (thesis, reference_model()):
+        vp = lk.vessel_params(m.form_id, 6.0, 2.0, 0.0, None, None, 1.0)
+        north = lk.sail_leg(0.0, 150.0, 3.0, 150.0, 0.0, 120.0, vp, m.speed_coef, m.fuel_coef, calm)
+        south = lk.sail_leg(3.0, 150.0, 0.0, 150.0, 0.0, 120.0, vp, m.speed_coef, m.fuel_coef, calm)
+        assert north[lk.CODE] == south[lk.CODE] == lk.OK
+        assert north[lk.H] == pytest.approx(south[lk.H], rel=1e-12) and north[lk.FUEL] == pytest.approx(south[lk.FUEL], rel=1e-12)

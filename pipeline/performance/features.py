@@ -62,6 +62,17 @@ def fold_rel_deg(rel_deg: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
+def calm_dir_deg(amount, rel_deg):
+    """The folded relative direction (0..180) of wind or waves, 0 when there are none (amount ≤ 0).
+
+    A calm has no direction: routing derives it from atan2(−0, −0) = −180°, which would make the
+    thesis form's linear direction term, and so calm-water speed and fuel, depend on the heading.
+    0 is what the thesis's own records show for no waves (0/0).
+    """
+    return fold_rel_deg(rel_deg) if amount > 0.0 else 0.0
+
+
+@numba.njit(cache=True, inline="always")
 def weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg):
     """The physical form's weather regressors (speed and fuel alike): (Vw²·cos θw, Hs²·cos²(θs/2))."""
     wr = fold_rel_deg(wind_rel_deg)
@@ -100,9 +111,9 @@ def speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_r
         out[0] = draft_m
         out[1] = trim_m
         out[2] = rpm
-        out[3] = fold_rel_deg(wind_rel_deg)
+        out[3] = calm_dir_deg(wind_kn, wind_rel_deg)
         out[4] = wind_kn
-        out[5] = fold_rel_deg(wave_rel_deg)
+        out[5] = calm_dir_deg(hs_m, wave_rel_deg)
         out[6] = hs_m
     else:
         wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)

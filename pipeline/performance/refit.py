@@ -15,6 +15,14 @@ import pandas as pd
 from pipeline.performance import fit
 
 TARGETS = ("speed", "fuel")
+FORMS = tuple(fit.features.FORM_IDS)  # the forms a refit can fit
+
+
+def check_form(form: str) -> str:
+    """`form` if a refit can fit it, else ValueError naming the forms that exist."""
+    if form not in FORMS:
+        raise ValueError(f"unknown model form {form!r}; use one of: {', '.join(FORMS)}")
+    return form
 REPORT_COLUMNS = ("imo", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
 
 
@@ -55,6 +63,7 @@ def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, f
 def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], active: dict, versions: dict, form: str,
            robust: bool | None) -> tuple[list[dict], list[dict]]:
     """Vessel g is rows bounds[g]:bounds[g+1] of the model inputs `inp`."""
+    check_form(form)
     robust = fit.robust_default(form) if robust is None else bool(robust)
     n = np.diff(bounds)
     y = {"speed": inp["stw_kn"], "fuel": inp["fuel_tph"]}
