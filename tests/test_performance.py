@@ -328,3 +328,60 @@ def test_calm_water_speed_and_fuel_do_not_depend_on_heading():
         south = lk.sail_leg(3.0, 150.0, 0.0, 150.0, 0.0, 120.0, vp, m.speed_coef, m.fuel_coef, calm)
         assert north[lk.CODE] == south[lk.CODE] == lk.OK
         assert north[lk.H] == pytest.approx(south[lk.H], rel=1e-12) and north[lk.FUEL] == pytest.approx(south[lk.FUEL], rel=1e-12)
+
+
+def test_physical_weather_loss_is_largest_head_on_always_a_loss_and_bounded(fleet):
+    """A fitted physical model: at 30 kn wind and 4 m seas the speed loss falls from head to beam to
+    following and is never a gain; it never takes more than half the calm speed; fuel never drops
+    below the calm-water rate at the same rpm (50 kn following wind and 8 m seas included)."""
+    from pipeline.performance.model import PerformanceModel
+
+    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    imo = int(fleet.vessels.imo[0])
+    rows, _ = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1)
+    coef = {r["target"]: np.array(list(json.loads(r["coefficients"]).values())) for r in rows}
+    m = PerformanceModel("physical", coef["speed"], coef["fuel"])
+    assert (coef["speed"][4:6] > 0).all() and (coef["fuel"][4:6] > 0).all()
+    rel = np.arange(0.0, 360.0, 5.0)
+    calm = m.stw_kn(85.0, 9.0, 0.5)
+    stw = m.stw_kn(85.0, 9.0, 0.5, 30.0, rel, 4.0, rel)
+    loss = calm - stw
+    head, beam, following = loss[rel == 0][0], loss[rel == 90][0], loss[rel == 180][0]
+    assert head > beam > following > 0
+    assert (loss > 0).all() and (np.diff(loss[rel <= 180]) < 0).all()  # falls all the way from head to following
+    np.testing.assert_allclose(loss[rel > 180], loss[(rel > 0) & (rel < 180)][::-1], rtol=1e-12)  # port = starboard
+    # bounded: a hurricane head-on takes at most half the calm-water speed
+    assert m.stw_kn(85.0, 9.0, 0.5, 120.0, 0.0, 15.0, 0.0) == pytest.approx(0.5 * calm, rel=1e-12)
+    fuel_calm = m.fuel_tph(85.0, 9.0, 0.5)
+    for wind, hs in ((50.0, 8.0), (30.0, 4.0), (5.0, 0.5)):
+        fuel = m.fuel_tph(85.0, 9.0, 0.5, wind, rel, hs, rel)
+        assert (fuel >= fuel_calm).all() and fuel[rel == 180][0] < fuel[rel == 90][0] < fuel[rel == 0][0]
+    # the direction shape on its own: 1 head-on, 0.45 beam, 0.14 following
+    np.testing.assert_allclose([features.direction_weight(a) for a in (0.0, 90.0, 180.0, -90.0, 270.0)],
+                               [1.0, 0.45, 0.14, 0.45, 0.45], atol=1e-12)
+
+
+def test_physical_fit_never_learns_a_weather_gain():
+    """Reports in which following wind makes the ship faster (and burn less): the fit leaves the wind term
+    out rather than give it the wrong sign, so the model never predicts a gain, and routing's kernels
+    give what the vectorised model gives."""
+    from pipeline.performance.model import PerformanceModel
+
+    rng = np.random.default_rng(4)
+    n = 300
+    rpm, draft, trim = rng.uniform(60, 100, n), rng.uniform(6, 12, n), rng.normal(0.5, 0.4, n)
+    wind, wrel = rng.uniform(0, 40, n), rng.uniform(0, 180, n)
+    hs, srel = rng.uniform(0, 5, n), rng.uniform(0, 180, n)
+    stw = 0.15 * rpm + 0.001 * wind**2 * (1 - np.cos(np.radians(wrel))) - 0.08 * hs**2 + rng.normal(0, 0.1, n)  # wind helps
+    fuel = 1.4 * (rpm / 100) ** 3 - 0.0002 * wind**2 + rng.normal(0, 0.01, n)
+    cols = (rpm, draft, trim, wind, wrel, hs, srel, np.zeros(n))
+    sp = fit.fit_target("physical", "speed", features.design_matrix(1, "speed", *cols), stw)
+    fu = fit.fit_target("physical", "fuel", features.design_matrix(1, "fuel", *cols), fuel)
+    assert "wind_loss" in sp.dropped and sp.coef[4] == 0.0 and sp.coef[5] > 0.05  # the wave loss is still learnt
+    assert "wind_load" in fu.dropped and fu.coef[4] == 0.0
+    m = PerformanceModel("physical", sp.coef, fu.coef)
+    rel = np.arange(0.0, 181.0, 15.0)
+    assert (m.stw_kn(80.0, 9.0, 0.5, 40.0, rel, 3.0, rel) < m.stw_kn(80.0, 9.0, 0.5)).all()
+    for a in rel:
+        assert features.stw_kn_nb(1, m.speed_coef, 80.0, 9.0, 0.5, 40.0, a, 3.0, a, 0.0) == m.stw_kn(80.0, 9.0, 0.5, 40.0, a, 3.0, a)
+        assert features.fuel_tph_nb(1, m.fuel_coef, 80.0, 9.0, 0.5, 40.0, a, 3.0, a, 0.0) == m.fuel_tph(80.0, 9.0, 0.5, 40.0, a, 3.0, a)

@@ -99,7 +99,9 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
                 k_folds: int = K_FOLDS) -> list[FitResult]:
     """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y.
 
-    Rows with a non-finite regressor or target are left out (per group, order kept). Each group
+    Weather regressors (`features.NON_NEGATIVE`) are held ≥ 0: one that comes out negative is left
+    out (β = 0, listed in `dropped`) and the rest solved again. Rows with a non-finite regressor or
+    target are left out (per group, order kept). Each group
     stops re-weighting when its own coefficients settle, so it gets what `fit_target` gives it alone.
     """
     fid = features.FORM_IDS[form]
@@ -112,7 +114,8 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     intercept = np.array([keep_all or nm == "1" for nm in names], dtype=np.bool_)  # constant but kept (if non-zero)
     coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
     n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
-    fit_kernels.fit_groups_nb(X, y, bounds, intercept, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,
+    nonneg = np.array([nm in features.NON_NEGATIVE for nm in names], dtype=np.bool_)
+    fit_kernels.fit_groups_nb(X, y, bounds, intercept, nonneg, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,
                    max(int(k_folds), 1), int(k_folds) >= 2, coef, keep, n, stats)
     out, dropped_for = [], {}
     for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):

@@ -13,7 +13,7 @@ from pipeline.performance.huber import huber_weights
 
 
 @numba.njit(cache=True)
-def fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
+def fit_groups_nb(X, y, bounds, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
     """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
     stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined)."""
     k = X.shape[1]
@@ -28,12 +28,12 @@ def fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F,
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
     for g in range(G):
-        n_out[g] = _fit_group(X, y, bounds[g], bounds[g + 1], intercept, robust, max_solves, rtol, huber_k, do_cv,
+        n_out[g] = _fit_group(X, y, bounds[g], bounds[g + 1], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
                               coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
 
 
 @numba.njit(cache=True)
-def _fit_group(X, y, a, b, intercept, robust, max_solves, rtol, huber_k, do_cv, coef, keep, stats, Z, T, w, r, buf, rows,
+def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, coef, keep, stats, Z, T, w, r, buf, rows,
                gram, lo, hi):
     """Fit rows a:b of X and y; returns how many were finite (see `_fit_groups_nb` for the outputs;
     Z … hi are scratch).
@@ -57,7 +57,7 @@ def _fit_group(X, y, a, b, intercept, robust, max_solves, rtol, huber_k, do_cv, 
     for it in range(max_solves):
         _grams(Z, w, full, end, T, gram)
         prev[:] = beta
-        _solve_dropped(gram[0], keep, beta)
+        _solve_nonneg(gram[0], keep, nonneg, beta, Z, m)
         if it > 0:
             step, big = 0.0, 0.0
             for i in range(k):
@@ -245,6 +245,28 @@ def _residuals(Z, beta, a, b, out):
         zi = Z[i, a:b]
         for q in range(b - a):
             o[q] -= c * zi[q]
+
+
+@numba.njit(cache=True)
+def _solve_nonneg(A, keep, nonneg, x, Z, m):
+    """`_solve_dropped`, then while a regressor that must not be negative (`nonneg`) is, leave the most
+    negative one out (keep False, β = 0, its column of Z zeroed for later solves) and solve again.
+    A (the normal equations) is overwritten."""
+    k = A.shape[0]
+    while True:
+        _solve_dropped(A, keep, x)
+        worst, low = -1, 0.0
+        for i in range(k):
+            if keep[i] and nonneg[i] and x[i] < low:
+                worst, low = i, x[i]
+        if worst < 0:
+            return
+        keep[worst] = False
+        for j in range(k + 1):
+            A[worst, j] = 0.0
+        for j in range(k):
+            A[j, worst] = 0.0
+        Z[worst, :m] = 0.0
 
 
 @numba.njit(cache=True)

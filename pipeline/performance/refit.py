@@ -94,7 +94,7 @@ def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], act
         reason = "; ".join(f"{t}: {d.reason}" for t, d in zip(TARGETS, decisions))
         dropped = sorted({c for r in res.values() for c in r.dropped})
         if dropped:
-            reason += f"; dropped constant regressors: {', '.join(dropped)}"
+            reason += f"; left out (constant, or weather that came out as a gain): {', '.join(dropped)}"
         for t, r in res.items():
             rows.append({"imo": imo, "version": version, "form": form, "target": t,
                          "coefficients": coef_json[t][g], "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
