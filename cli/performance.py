@@ -19,13 +19,14 @@ def _fmt(x, nd=3):
 
 def refit_table(summaries: list[dict]) -> Table:
     t = Table(title="Performance models")
-    for col in ("IMO", "n", "STW R²", "STW RMSE kn", "STW cv", "fuel R²", "fuel RMSE t/h", "fuel cv", "changed"):
-        t.add_column(col, no_wrap=True, justify="right" if col != "changed" else "left")
+    for col in ("IMO", "n", "form", "STW R²", "STW RMSE kn", "STW held-out", "fuel R²", "fuel RMSE t/h", "fuel held-out", "changed"):
+        t.add_column(col, no_wrap=True, justify="right" if col not in ("changed", "form") else "left")
     t.add_column("why")
     for s in summaries:
-        t.add_row(str(s["imo"]), str(s["n"]), _fmt(s.get("speed_r2")), _fmt(s.get("speed_rmse")), _fmt(s.get("speed_cv_rmse")),
-                  _fmt(s.get("fuel_r2")), _fmt(s.get("fuel_rmse")), _fmt(s.get("fuel_cv_rmse")),
-                  "[green]yes" if s["changed"] else "[yellow]no", s.get("why", s.get("reason", "")))
+        t.add_row(str(s["imo"]), str(s["n"]), s.get("form", "-"), _fmt(s.get("speed_r2")), _fmt(s.get("speed_rmse")),
+                  _fmt(s.get("speed_holdout_rmse")), _fmt(s.get("fuel_r2")), _fmt(s.get("fuel_rmse"), 4),
+                  _fmt(s.get("fuel_holdout_rmse"), 4), "[green]yes" if s["changed"] else "[yellow]no",
+                  s.get("flag") or s.get("why") or s.get("reason", ""))
     return t
 
 
@@ -61,7 +62,8 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),
-              form: str = typer.Option("physical", help="Model form: physical (default) or thesis."),
+              form: str = typer.Option("best", help="Model form: best (default: every form scored on the newest "
+                                                    "reports, the best proposed), physical or thesis."),
               data: Optional[Path] = DataOpt):
         """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
         from flows.refit import refit_performance

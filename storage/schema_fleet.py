@@ -75,4 +75,17 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE noon_reports_rejected ALTER COLUMN ts_utc DROP NOT NULL;
         """,
     ),
+    Migration(
+        "fleet_003_model_validation",
+        # a model is scored on reports it was not fitted on; the rows it was fitted on are identified
+        # (data_hash: the same rows and form give the same model, stored once); a contradiction between
+        # new reports and the active model is flagged on it
+        """
+        ALTER TABLE perf_models ADD COLUMN holdout_rmse DOUBLE;   -- RMSE on the newest reports, fitted without them
+        ALTER TABLE perf_models ADD COLUMN n_holdout INTEGER;
+        ALTER TABLE perf_models ADD COLUMN data_hash VARCHAR;     -- digest of the rows, form and fit settings
+        ALTER TABLE perf_models ADD COLUMN data_to_utc TIMESTAMP; -- newest report the coefficients were fitted on
+        ALTER TABLE perf_models ADD COLUMN flag VARCHAR;          -- why new reports contradict this (active) model
+        """,
+    ),
 ]

@@ -116,4 +116,17 @@ MIGRATIONS: list[Migration] = [
         GROUP BY ALL;
         """,
     ),
+    Migration(
+        "routes_003_model_quality_validation",
+        # model quality shows the held-out score and any flag raised by new reports
+        """
+        CREATE OR REPLACE VIEW model_quality AS
+        SELECT m.imo, s.name AS vessel_name, m.target, m.form, m.version, m.fitted_at, m.n_rows, m.r2, m.rmse,
+               m.cv_rmse, m.n_holdout, m.holdout_rmse, m.data_to_utc, m.flag,
+               (SELECT count(*) FROM noon_reports n WHERE n.imo = m.imo) AS n_reports,
+               (SELECT count(*) FROM noon_reports_rejected x WHERE x.imo = m.imo) AS n_rejected
+        FROM perf_models m LEFT JOIN vessels s ON s.imo = m.imo
+        WHERE m.active;
+        """,
+    ),
 ]

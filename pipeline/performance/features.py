@@ -197,6 +197,23 @@ def predict_nb(form, target_speed, coef, rpm, draft_m, trim_m, wind_kn, wind_rel
                                  months_dd[i])
 
 
+MODEL_INPUTS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd")  # in call order
+
+
+@numba.njit(cache=True)
+def predict_rows_nb(form, target_speed, coefs, which, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd,
+                    out):
+    """`predict_nb` with the coefficients coefs[which[i]] for row i (many vessels' models at once)."""
+    for i in range(out.size):
+        c = coefs[which[i]]
+        if target_speed:
+            out[i] = stw_kn_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
+                               months_dd[i])
+        else:
+            out[i] = fuel_tph_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
+                                 months_dd[i])
+
+
 def predict(form: int, target: str, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """What routing gets (`stw_kn_nb` / `fuel_tph_nb`), for broadcastable inputs; flat float64 array."""
     cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)

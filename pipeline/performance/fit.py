@@ -1,4 +1,4 @@
-"""Least-squares fits of the speed and fuel models, with diagnostics and the activation rule.
+"""Least-squares fits of the speed and fuel models, with diagnostics (the activation rule is in `refit`).
 
 Regressors come from `features.design_matrix` (one definition shared with routing). Columns
 are scaled to unit RMS before solving the normal equations, so rpm³ and wind² terms do not
@@ -22,8 +22,6 @@ import numpy as np
 from pipeline.performance import features, fit_kernels
 
 K_FOLDS = 5
-MIN_ROWS_PER_COEF = 5
-NOT_WORSE_TOLERANCE = 1.02  # a new model may be at most 2 % worse on held-out rows
 ROBUST_ITERATIONS = 8  # at most this many iteratively re-weighted least-squares solves with Huber weights
 ROBUST_RTOL = 1e-5  # ... stopping once no coefficient moves by more than this (relative to the largest)
 HUBER_K = 1.345
@@ -123,26 +121,6 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
             dropped_for[kept] = [nm for nm, kp in zip(names, kept) if not kp]
         out.append(FitResult(form, target, names, coef[g], n_g, r2, rmse, cv, list(dropped_for[kept]), robust))
     return out
-
-
-@dataclass(frozen=True)
-class Decision:
-    activate: bool
-    reason: str
-
-
-def decide(new: FitResult, old_rmse_on_holdout: float | None, new_rmse_on_holdout: float | None) -> Decision:
-    """Activate only with enough rows and when not worse than the active model on held-out rows."""
-    n_coef = len(new.names) - len(new.dropped)
-    if new.n < MIN_ROWS_PER_COEF * max(n_coef, 1):
-        return Decision(False, f"under-determined: {new.n} rows for {n_coef} coefficients (need ≥ {MIN_ROWS_PER_COEF * n_coef})")
-    if not np.isfinite(new.rmse):
-        return Decision(False, "fit failed (no usable rows)")
-    if old_rmse_on_holdout is None or not np.isfinite(old_rmse_on_holdout):
-        return Decision(True, "first model")
-    if new_rmse_on_holdout is not None and new_rmse_on_holdout > NOT_WORSE_TOLERANCE * old_rmse_on_holdout:
-        return Decision(False, f"worse on held-out rows: RMSE {new_rmse_on_holdout:.3f} vs active {old_rmse_on_holdout:.3f}")
-    return Decision(True, f"held-out RMSE {new_rmse_on_holdout:.3f} vs active {old_rmse_on_holdout:.3f}")
 
 
 def holdout_split(n: int, frac: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
