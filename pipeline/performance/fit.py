@@ -94,13 +94,16 @@ def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: 
 
 
 def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np.ndarray, *, robust: bool = False,
-                k_folds: int = K_FOLDS) -> list[FitResult]:
+                k_folds: int = K_FOLDS, start: np.ndarray | None = None, max_solves: int | None = None) -> list[FitResult]:
     """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y.
 
     Weather regressors (`features.NON_NEGATIVE`) are held ≥ 0: one that comes out negative is left
     out (β = 0, listed in `dropped`) and the rest solved again. Rows with a non-finite regressor or
     target are left out (per group, order kept). Each group
     stops re-weighting when its own coefficients settle, so it gets what `fit_target` gives it alone.
+    `start` (groups × regressors): coefficients the robust re-weighting starts from (fewer solves when
+    they are close, e.g. a fit of most of the same rows); `max_solves` caps the re-weighted solves (default
+    ROBUST_ITERATIONS); k_folds < 2: no cross-validation (cv_rmse NaN).
     """
     fid = features.FORM_IDS[form]
     names = (features.SPEED_REGRESSORS if target == "speed" else features.FUEL_REGRESSORS)[fid]
@@ -113,8 +116,11 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
     n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
     nonneg = np.array([nm in features.NON_NEGATIVE for nm in names], dtype=np.bool_)
-    fit_kernels.fit_groups_nb(X, y, bounds, intercept, nonneg, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,
-                   max(int(k_folds), 1), int(k_folds) >= 2, coef, keep, n, stats)
+    warm = start is not None
+    beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
+    solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
+    fit_kernels.fit_groups_nb(X, y, bounds, intercept, nonneg, bool(robust), solves, ROBUST_RTOL, HUBER_K,
+                              max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
     out, dropped_for = [], {}
     for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):
         if kept not in dropped_for:

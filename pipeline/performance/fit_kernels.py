@@ -13,9 +13,11 @@ from pipeline.performance.huber import huber_weights
 
 
 @numba.njit(cache=True)
-def fit_groups_nb(X, y, bounds, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
+def fit_groups_nb(X, y, bounds, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep, n_out,
+                  stats):
     """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
-    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined)."""
+    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined). With `warm` (and `robust`), group g's first
+    Huber weights come from the coefficients beta0[g] (e.g. a fit of most of the same rows)."""
     k = X.shape[1]
     G = bounds.size - 1
     nmax = 0
@@ -29,12 +31,12 @@ def fit_groups_nb(X, y, bounds, intercept, nonneg, robust, max_solves, rtol, hub
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
     for g in range(G):
         n_out[g] = _fit_group(X, y, bounds[g], bounds[g + 1], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
-                              coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
+                              warm, beta0[g], coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
 
 
 @numba.njit(cache=True)
-def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, coef, keep, stats, Z, T, w, r, buf, rows,
-               gram, lo, hi):
+def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, warm, beta0, coef, keep, stats, Z, T, w,
+               r, buf, rows, gram, lo, hi):
     """Fit rows a:b of X and y; returns how many were finite (see `_fit_groups_nb` for the outputs;
     Z … hi are scratch).
 
@@ -54,11 +56,17 @@ def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k,
     w[:m] = 1.0
     beta, prev = np.zeros(k), np.empty(k)
     med, s = np.nan, np.nan  # the last Huber location and scale: where the next ones probably lie
+    started = warm and robust
+    if started:  # weights from the given coefficients: the re-weighting starts near where it ends
+        for i in range(k):
+            beta[i] = beta0[i] * scale[i] if keep[i] else 0.0
+        _residuals(Z, beta, 0, m, r)
+        med, s = huber_weights(r, m, huber_k, med, s, buf, w)
     for it in range(max_solves):
         _grams(Z, w, full, end, T, gram)
         prev[:] = beta
         _solve_nonneg(gram[0], keep, nonneg, beta, Z, m)
-        if it > 0:
+        if it > 0 or started:
             step, big = 0.0, 0.0
             for i in range(k):
                 step = max(step, abs(beta[i] - prev[i]))

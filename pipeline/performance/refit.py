@@ -36,6 +36,7 @@ TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
 BEST = "best"  # fit every candidate form and propose the best on held-out rows
 REPORT_COLUMNS = ("imo", "ts_utc", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
+ALL_ROWS_SOLVES = 2  # robust solves of an accepted model's refit on all rows, from the training fit
 _HASHED = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd", "stw_kn", "fuel_tph")
 
 
@@ -173,13 +174,21 @@ def _usable(model: dict | None) -> bool:
 
 
 def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]]:
-    """form → per vessel, a digest of its rows, the form and the fit settings."""
-    M = np.column_stack([inp[c] for c in _HASHED] + [ts.astype(np.int64).astype(np.float64)])
-    base = [hashlib.blake2b(M[a:b].tobytes(), digest_size=16) for a, b in zip(bounds[:-1], bounds[1:])]
-    out = {}
-    for form in forms:
-        tag = f"{form}|robust={robust_of[form]}|holdout={gate.holdout_frac}".encode()
-        out[form] = [(h2 := h.copy(), h2.update(tag), h2.hexdigest())[2] for h in base]
+    """form → per vessel, a digest of its rows, the form and the fit settings.
+
+    Each row is folded to two numbers (its timestamp, and a weighted sum of its values with unrelated
+    irrational weights) before each vessel's rows are hashed: much cheaper than hashing every value.
+    """
+    c = np.zeros(ts.size)
+    for j, col in enumerate(_HASHED):
+        c += np.sqrt(j + 2.0) * np.nan_to_num(inp[col], nan=-1.2345e9)
+    R = np.column_stack([c, ts.astype(np.int64).astype(np.float64)]).ravel()
+    tags = {f: f"{f}|robust={robust_of[f]}|holdout={gate.holdout_frac}".encode() for f in forms}
+    out = {f: [] for f in forms}
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+        rows = R[2 * a:2 * b].tobytes()
+        for f in forms:
+            out[f].append(hashlib.blake2b(rows + tags[f], digest_size=16).hexdigest())
     return out
 
 
@@ -210,7 +219,8 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     for form in forms:
         X = fit.designs(form, inp)
         c = _Candidate(form, robust_of[form], X,
-                       {t: fit.fit_targets(form, t, X[t][train_rows], y[t][train_rows], train_bounds, robust=robust_of[form])
+                       {t: fit.fit_targets(form, t, X[t][train_rows], y[t][train_rows], train_bounds, robust=robust_of[form],
+                                           k_folds=0)  # scored on the held-out rows instead
                         for t in TARGETS})
         for t in TARGETS:
             coefs = np.array([r.coef for r in c.train[t]])
@@ -221,10 +231,16 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_bounds = np.r_[0, np.cumsum(n_hold)]
     act_hold, act_flag = _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate)
 
+    # per-vessel values as Python numbers: the loop below reads them one by one
+    scores_of = {f: (c.hold_rmse["speed"] / hold_mean["speed"] + c.hold_rmse["fuel"] / hold_mean["fuel"]).tolist()
+                 for f, c in cands.items()}
+    rmse_of = {f: {t: c.hold_rmse[t].tolist() for t in TARGETS} for f, c in cands.items()}
+    mean_of = {t: hold_mean[t].tolist() for t in TARGETS}
+    n_list, n_hold_list = n.tolist(), n_hold.tolist()
     plans, summaries = [], []
-    for g, imo in enumerate(map(int, imos)):
-        verdicts = {f: _gate(c, g, n_train[g], n_hold[g], hold_mean, gate) for f, c in cands.items()}
-        score = {f: sum(c.hold_rmse[t][g] / hold_mean[t][g] for t in TARGETS) for f, c in cands.items()}
+    for g, imo in enumerate(imos.tolist()):
+        verdicts = {f: _gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for f, c in cands.items()}
+        score = {f: scores_of[f][g] for f in forms}
         passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
         pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
         best = min(pool, key=lambda f: (score[f] if np.isfinite(score[f]) else np.inf, forms.index(f)))
@@ -243,20 +259,19 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
             if worse:
                 why = f"worse than the active model on the {unseen.sum()} held-out rows it was not fitted on: RMSE " + ", ".join(worse)
         activate = why is None
-        scores = "; ".join(f"{f} speed {cands[f].hold_rmse['speed'][g]:.3f} kn, fuel {cands[f].hold_rmse['fuel'][g]:.4f} t/h"
-                           for f in forms)
+        scores = "; ".join(f"{f} speed {rmse_of[f]['speed'][g]:.3f} kn, fuel {rmse_of[f]['fuel'][g]:.4f} t/h" for f in forms)
         if activate:
             why = (f"passes the gate and is not worse on held-out rows than the active v{act['version']} ({act['form']})"
                    if g in act_hold
                    else "first model" if not act else "passes the gate (active model not comparable)")
-        reason = f"{best}: {why}; held-out ({n_hold[g]} newest rows): {scores}"
+        reason = f"{best}: {why}; held-out ({n_hold_list[g]} newest rows): {scores}"
         dropped = sorted({d for t in TARGETS for d in c.train[t][g].dropped})
         if dropped:
             reason += f"; left out (constant, or weather that came out as a gain): {', '.join(dropped)}"
-        summary = {"imo": imo, "n": int(n[g]), "n_holdout": int(n_hold[g]), "form": best, "changed": False,
+        summary = {"imo": imo, "n": n_list[g], "n_holdout": n_hold_list[g], "form": best, "changed": False,
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
-                   "flag": act_flag.get(g), "speed_holdout_rmse": float(c.hold_rmse["speed"][g]),
-                   "fuel_holdout_rmse": float(c.hold_rmse["fuel"][g])}
+                   "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
+                   "fuel_holdout_rmse": rmse_of[best]["fuel"][g]}
         summary.update(_scores(c.train, g))
         seen = fitted.get(imo, {}).get(hashes[best][g])
         if seen is not None:  # these rows were fitted with this form before: the same model
@@ -294,7 +309,7 @@ def _split(imos, bounds, ts, active, gate: Gate) -> np.ndarray:
     return hold_from
 
 
-def _gate(c: _Candidate, g: int, n_train: int, n_hold: int, hold_mean, gate: Gate) -> str | None:
+def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, gate: Gate) -> str | None:
     """Why candidate c fails the absolute gate for vessel g, or None."""
     for t in TARGETS:
         r = c.train[t][g]
@@ -308,7 +323,7 @@ def _gate(c: _Candidate, g: int, n_train: int, n_hold: int, hold_mean, gate: Gat
         if not (r2 >= gate.min_r2):
             return f"{t} R² {r2:.3f} below {gate.min_r2:g}"
     for t, share in (("speed", gate.max_speed_rmse_share), ("fuel", gate.max_fuel_rmse_share)):
-        rmse, mean = c.hold_rmse[t][g], hold_mean[t][g]
+        rmse, mean = hold_rmse[t][g], hold_mean[t][g]
         if not (rmse <= share * mean):
             return f"held-out {t} RMSE {rmse:.4g} above {100 * share:g} % of its mean {mean:.4g}"
     return None
@@ -373,6 +388,17 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
     return hold, flags
 
 
+def _coefficients_json(r: fit.FitResult) -> str:
+    """`json.dumps(r.coefficients())`, formatted from a template where every value is finite (cheaper)."""
+    values = r.coef.tolist()
+    if not all(np.isfinite(values)):
+        return json.dumps(r.coefficients())
+    return _TEMPLATES.setdefault(r.names, "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}") % tuple(values)
+
+
+_TEMPLATES: dict[tuple, str] = {}
+
+
 def _scores(results: dict, g: int) -> dict:
     return {f"{t}_{k}": float(getattr(results[t][g], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")}
 
@@ -385,7 +411,10 @@ def _rows(plans, cands, bounds, train_bounds, train_rows, inp, ts, y, hold_from,
         rows = _ranges(bounds[gs], bounds[gs + 1])
         sub = np.r_[0, np.cumsum(bounds[gs + 1] - bounds[gs])]
         c = cands[form]
-        res = {t: fit.fit_targets(form, t, c.X[t][rows], y[t][rows], sub, robust=c.robust) for t in TARGETS}
+        # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
+        # all rows (the Huber weights of the rows it was fitted on hardly change)
+        res = {t: fit.fit_targets(form, t, c.X[t][rows], y[t][rows], sub, robust=c.robust, max_solves=ALL_ROWS_SOLVES,
+                                  start=np.array([c.train[t][g].coef for g in gs])) for t in TARGETS}
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
     out = []
@@ -396,7 +425,7 @@ def _rows(plans, cands, bounds, train_bounds, train_rows, inp, ts, y, hold_from,
         for t in TARGETS:
             r = res[t]
             out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,
-                        "coefficients": json.dumps(r.coefficients()), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
+                        "coefficients": _coefficients_json(r), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
                         "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": int(n_hold[g]),
                         "status": "active" if activate else "rejected", "reason": summary["reason"], "active": activate,
                         "months_dd": float(inp["months_dd"][last]) if last >= bounds[g] else 0.0,
