@@ -73,6 +73,7 @@ def register(app: typer.Typer) -> None:
         from flows.settings import load_settings
         from pipeline.routing.problem import RoutingInputError
         from pipeline.routing.search_space import VoyageGeometryError
+        from pipeline.performance.model import model_from_stored
         from storage import cube, fleet_store
 
         s = load_settings(data_root=data)
@@ -98,7 +99,7 @@ def register(app: typer.Typer) -> None:
         if vessel.empty:
             _fail(f"vessel {v['imo']} is not in the warehouse: import it with `jitroute fleet import`")
         vessel = vessel.iloc[0].to_dict()
-        model = fleet_store.load_active_model(lay.warehouse, int(v["imo"]))
+        model = model_from_stored(fleet_store.active_model(lay.warehouse, int(v["imo"])), int(v["imo"]))
         if model is None:
             _fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
         cube_path, c = None, None

@@ -28,6 +28,7 @@ from prefect.futures import as_completed
 from flows.ingest import ingest_weather, parse_cycle
 from flows.refit import refit_performance
 from flows.settings import Settings, load_settings
+from pipeline.performance.model import model_from_stored
 from storage import cube, fleet_store, route_store, warehouse
 from storage.route_store import ROUTE_COLUMNS
 
@@ -245,7 +246,7 @@ def route_fleet(cycle: str | None = None, voyages: list[str] | None = None, data
     vessels = {int(v["imo"]): {k: _plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(layout.warehouse).to_dict("records")}
     models = {}
     for imo in set(table["imo"].astype(int)):
-        m = fleet_store.load_active_model(layout.warehouse, imo)
+        m = model_from_stored(fleet_store.active_model(layout.warehouse, imo), imo)
         models[imo] = m.to_json() if m is not None else None
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S")
     run_id = f"{stamp}-{uuid.uuid4().hex[:6]}"

@@ -1,4 +1,8 @@
-"""Reads and writes of the fleet tables: vessels, noon reports, performance models, voyages."""
+"""Reads and writes of the fleet tables: vessels, noon reports, performance models, voyages.
+
+Plain values in and out (DataFrames, dicts, tuples): building model objects from stored rows is the
+pipeline's job (`pipeline.performance.model.model_from_stored`).
+"""
 
 from __future__ import annotations
 
@@ -10,8 +14,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.performance.model import PerformanceModel
-from pipeline.performance.validate import raw_text
 from storage import warehouse
 
 NOON_COLUMNS = ["imo", "ts_utc", "lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t",
@@ -80,7 +82,7 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
                         "ORDER BY g.imo, g.ts_utc")
             inserted = len(good) - present - len(conflicts)
             if len(conflicts):
-                conflicts["raw"] = raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
+                conflicts["raw"] = _raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
                 conflicts["reason"] = "conflicts with a stored report for the same vessel and time"
                 rejected = pd.concat([rejected, conflicts], ignore_index=True)
             rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
@@ -263,9 +265,15 @@ def load_voyages(db_path: Path, *, voyage_ids: list[str] | None = None, departin
         return con.execute(q + " ORDER BY depart_utc, voyage_id", params).fetchdf()
 
 
-def load_active_model(db_path: Path, imo: int) -> PerformanceModel | None:
-    m = active_models(db_path).get(int(imo))
-    if not m or "speed" not in m or "fuel" not in m:
-        return None
-    return PerformanceModel(form=m["form"], speed_coef=np.array(list(m["speed"].values())), fuel_coef=np.array(list(m["fuel"].values())),
-                            months_dd=float(m["months_dd"]), imo=int(imo), version=m["version"])
+def active_model(db_path: Path, imo: int) -> dict | None:
+    """The active model of vessel `imo` as `active_models` gives it (plain values), or None."""
+    return active_models(db_path).get(int(imo))
+
+
+def _raw_text(df: pd.DataFrame) -> pd.Series:
+    """Each row as 'v1|v2|…' text, as validation keeps rejected rows (`validate.raw_text`, same format)."""
+    cols = [df[c].astype("string").fillna("") for c in df.columns]
+    out = cols[0]
+    for c in cols[1:]:
+        out = out + "|" + c
+    return out.astype(object)

@@ -470,3 +470,36 @@ def test_physical_fit_never_learns_a_weather_gain():
     for a in rel:
         assert features.stw_kn_nb(1, m.speed_coef, 80.0, 9.0, 0.5, 40.0, a, 3.0, a, 0.0) == m.stw_kn(80.0, 9.0, 0.5, 40.0, a, 3.0, a)
         assert features.fuel_tph_nb(1, m.fuel_coef, 80.0, 9.0, 0.5, 40.0, a, 3.0, a, 0.0) == m.fuel_tph(80.0, 9.0, 0.5, 40.0, a, 3.0, a)
+
+
+def test_storage_returns_plain_rows_and_the_pipeline_builds_models(fleet, tmp_path):
+    """storage imports nothing from pipeline; a stored active model comes back as plain values and
+    `model_from_stored` builds the model routing uses (None for coefficients of an older form definition)."""
+    import ast
+
+    from pipeline.performance.model import model_from_stored
+    from pipeline.performance.validate import raw_text
+
+    root = Path(__file__).resolve().parents[1] / "storage"
+    for path in root.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            assert not any(n.split(".")[0] == "pipeline" for n in names), f"{path.name} imports {names}"
+    sample = _as_text(fleet.noon.head(5))
+    assert fleet_store._raw_text(sample).tolist() == raw_text(sample).tolist()  # one format for the raw column
+
+    db = tmp_path / "w.duckdb"
+    fleet_store.import_vessels(db, fleet.vessels)
+    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    imo = int(fleet.vessels.imo[1])
+    rows, s = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1, form="physical")
+    fleet_store.save_fits(db, rows)
+    stored = fleet_store.active_model(db, imo)
+    assert isinstance(stored, dict) and stored["form"] == "physical" and isinstance(stored["speed"], dict)
+    m = model_from_stored(stored, imo)
+    assert (m.imo, m.version, m.form) == (imo, 1, "physical")
+    np.testing.assert_array_equal(m.speed_coef, list(json.loads(rows[0]["coefficients"]).values()))
+    assert m.months_dd == pytest.approx(good[good.imo == imo].months_since_drydock.max())
+    old = dict(stored, speed={k.replace("wind_loss", "wind_kn2_cos"): v for k, v in stored["speed"].items()})
+    assert model_from_stored(old, imo) is None and model_from_stored(None) is None
+    assert fleet_store.active_model(db, 1234567) is None

@@ -62,6 +62,20 @@ class PerformanceModel:
                    months_dd=float(d.get("months_dd", 0.0)), imo=d.get("imo"), version=d.get("version"))
 
 
+def model_from_stored(stored: dict | None, imo: int | None = None) -> PerformanceModel | None:
+    """The model of a stored active model (`fleet_store.active_models` values), or None if there is none or its
+    coefficients are not those of its form as defined now (a model stored before a form changed: refit it)."""
+    if not stored or "speed" not in stored or "fuel" not in stored or stored.get("form") not in features.FORM_IDS:
+        return None
+    fid = features.FORM_IDS[stored["form"]]
+    if tuple(stored["speed"]) != features.SPEED_REGRESSORS[fid] or tuple(stored["fuel"]) != features.FUEL_REGRESSORS[fid]:
+        return None
+    return PerformanceModel(form=stored["form"], speed_coef=np.array(list(stored["speed"].values()), dtype=np.float64),
+                            fuel_coef=np.array(list(stored["fuel"].values()), dtype=np.float64),
+                            months_dd=float(stored.get("months_dd") or 0.0), imo=None if imo is None else int(imo),
+                            version=stored.get("version"))
+
+
 def reference_model(design_speed_kn: float = 14.0, rpm_max: float = 100.0, design_fuel_tph: float = 1.5) -> PerformanceModel:
     """A plausible physical-form model from design data, for vessels without a fit and for tests.
 
