@@ -63,7 +63,7 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),
               form: str = typer.Option("best", help="Model form: best (default: every form scored on the newest "
-                                                    "reports, the best proposed), physical or thesis."),
+                                                    "reports, the best proposed), physical, thesis or mlp."),
               data: Optional[Path] = DataOpt):
         """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
         from flows.refit import refit_performance

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.performance import features, fit, fuzzy, huber
+from pipeline.performance import features, fit, fuzzy, huber, mlp
 from pipeline.performance.refit import REPORT_COLUMNS, Gate, fitted_from_rows, refit_fleet, refit_vessel, storage_actions
 from pipeline.performance.validate import NoonFileError, validate_noon
 from pipeline.synthetic.fleet import generate_fleet, is_valid_imo
@@ -503,3 +503,61 @@ def test_storage_returns_plain_rows_and_the_pipeline_builds_models(fleet, tmp_pa
     old = dict(stored, speed={k.replace("wind_loss", "wind_kn2_cos"): v for k, v in stored["speed"].items()})
     assert model_from_stored(old, imo) is None and model_from_stored(None) is None
     assert fleet_store.active_model(db, 1234567) is None
+
+
+def _nonlinear_reports(n=400, seed=8):
+    """Time-ordered inputs and targets with a speed curve no least-squares form here has (a saturating rpm law)."""
+    rng = np.random.default_rng(seed)
+    rpm, draft, trim = rng.uniform(50, 110, n), rng.uniform(6, 12, n), rng.normal(0.5, 0.5, n)
+    wind, wrel, hs, srel = rng.gamma(3, 5, n), rng.uniform(0, 180, n), rng.gamma(2, 0.8, n), rng.uniform(0, 180, n)
+    X = mlp.inputs(rpm, draft, trim, wind, wrel, hs, srel)
+    speed = 16 * np.tanh(rpm / 70) - 0.1 * draft - 0.0012 * X[:, 3] ** 2 - 0.15 * X[:, 4] ** 2
+    fuel = 1.6 * (rpm / 100) ** 3 * (1 + 0.02 * draft) + 0.0004 * X[:, 3] ** 2
+    Y = np.column_stack([speed + rng.normal(0, 0.15, n), fuel * rng.normal(1, 0.02, n)])
+    return (rpm, draft, trim, wind, wrel, hs, srel), X, Y, np.column_stack([speed, fuel])
+
+
+def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_shown():
+    _, X, Y, truth = _nonlinear_reports()
+    fit_rows = slice(0, 300)
+    p1, info = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
+    p2, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
+    p3, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=4)
+    assert p1.shape == (mlp.N_PARAMS,) == (256,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
+    assert (info["n_train"], info["n_val"]) == (240, 60) and info["best_epoch"] < info["epochs"] <= mlp.MAX_EPOCHS
+    # the validation rows are the newest: spoiling them changes where training stops, not what it learns from
+    spoiled = Y[fit_rows].copy()
+    spoiled[240:] += 3.0
+    p4, info4 = mlp.train(X[fit_rows], spoiled, seed=3)
+    np.testing.assert_array_equal(p4[: 2 * mlp.N_IN], p1[: 2 * mlp.N_IN])  # input scaling from the older rows only
+    assert info4["best_epoch"] != info["best_epoch"]
+    # on rows it never saw, speed within 25 % of the noise and fuel within 3 %
+    pred = mlp.forward(p1, X[300:])
+    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.25 * 0.15 + 0.1
+    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.03
+    # routing's compiled forward pass is the same network
+    for i in range(300, 310):
+        for out in (0, 1):
+            assert mlp.forward_nb(p1, *X[i], out) == pytest.approx(pred[i - 300, out], rel=1e-12)
+
+
+def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
+    from pipeline.performance.model import PerformanceModel
+
+    cols, X, Y, truth = _nonlinear_reports(n=360)
+    reports = pd.DataFrame({"imo": 9140607, "ts_utc": pd.date_range("2020-01-01", periods=360, freq="D"), "rpm": cols[0],
+                            "draft_m": cols[1], "trim_m": cols[2], "wind_kn": cols[3], "wind_dir_rel_deg": cols[4], "wave_m": cols[5],
+                            "wave_dir_rel_deg": cols[6], "months_since_drydock": 0.0, "stw_kn": Y[:, 0], "fuel_t": Y[:, 1] * 24,
+                            "hours": 24.0})
+    rows, s = refit_vessel(9140607, reports, None, 1, form="best")
+    assert s["changed"] and s["form"] == "mlp" and "physical speed" in s["reason"] and "thesis speed" in s["reason"]
+    assert s["speed_holdout_rmse"] < 0.25 and [r["form"] for r in rows] == ["mlp", "mlp"]
+    coef = np.array(list(json.loads(rows[0]["coefficients"]).values()))
+    assert np.array_equal(coef, list(json.loads(rows[1]["coefficients"]).values()))  # one network, two outputs
+    m = PerformanceModel("mlp", coef, coef)
+    np.testing.assert_allclose(m.stw_kn(80.0, 9.0, 0.5, 20.0, 30.0, 2.0, 40.0),
+                               mlp.forward(coef, mlp.inputs(80.0, 9.0, 0.5, 20.0, 30.0, 2.0, 40.0))[0, 0], rtol=1e-12)
+    rel = np.array([-180.0, -0.0, 0.0, 90.0, 180.0, 270.0])
+    assert np.ptp(m.stw_kn(90.0, 9.0, 0.5, 0.0, rel, 0.0, rel)) == 0.0 and np.ptp(m.fuel_tph(90.0, 9.0, 0.5, 0.0, rel, 0.0, rel)) == 0.0
+    with pytest.raises(ValueError, match="no design matrix"):
+        features.design_matrix(features.FORM_MLP, "speed", *(np.zeros(2) for _ in range(8)))

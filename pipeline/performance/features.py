@@ -25,6 +25,8 @@ Forms (ids are what numba kernels take):
                     1 head-on, 0.45 on the beam, 0.14 following. Predictions bound the loss to
                     MAX_SPEED_LOSS_SHARE of the calm-water speed and never put fuel below the
                     calm-water rate at the same rpm (nor the extra above MAX_FUEL_ADD_SHARE of it).
+  FORM_MLP = 2      a 5-30-2 network, speed and fuel from the same inputs (see `mlp`); its "coefficients"
+                    are the network's parameter vector, the same for both targets. No design matrix.
 """
 
 from __future__ import annotations
@@ -34,25 +36,30 @@ import math
 import numba
 import numpy as np
 
+from pipeline.performance import mlp
+
 FORM_THESIS = 0
 FORM_PHYSICAL = 1
-FORM_IDS = {"thesis": FORM_THESIS, "physical": FORM_PHYSICAL}
+FORM_MLP = 2
+FORM_IDS = {"thesis": FORM_THESIS, "physical": FORM_PHYSICAL, "mlp": FORM_MLP}
 
 SPEED_REGRESSORS = {
     FORM_THESIS: ("draft_m", "trim_m", "rpm", "wind_dir_rel_deg", "wind_kn", "wave_dir_rel_deg", "wave_m"),
     FORM_PHYSICAL: ("1", "rpm", "draft_m", "trim_m", "wind_loss", "wave_loss", "months_dd"),
+    FORM_MLP: mlp.PARAM_NAMES,
 }
 FUEL_REGRESSORS = {
     FORM_THESIS: SPEED_REGRESSORS[FORM_THESIS],
     FORM_PHYSICAL: ("1", "r3", "r3_draft", "r3_months", "wind_load", "wave_load"),
+    FORM_MLP: mlp.PARAM_NAMES,
 }
 NON_NEGATIVE = {"wind_loss", "wave_loss", "wind_load", "wave_load"}  # weather costs speed and fuel, never gives
 N_SPEED = {k: len(v) for k, v in SPEED_REGRESSORS.items()}
 # The thesis form has no intercept, so a constant column (e.g. a trim that never changes) is the only
 # constant term and stays in the fit; a form with an intercept "1" drops its other constant columns.
-KEEP_CONSTANT = {FORM_THESIS: True, FORM_PHYSICAL: False}
+KEEP_CONSTANT = {FORM_THESIS: True, FORM_PHYSICAL: False, FORM_MLP: False}
 # Huber re-weighting by default: the thesis form is published as ordinary least squares.
-ROBUST_DEFAULT = {FORM_THESIS: False, FORM_PHYSICAL: True}
+ROBUST_DEFAULT = {FORM_THESIS: False, FORM_PHYSICAL: True, FORM_MLP: False}
 N_FUEL = {k: len(v) for k, v in FUEL_REGRESSORS.items()}
 
 
@@ -80,6 +87,13 @@ MAX_FUEL_ADD_SHARE = 1.0  # ... and at most doubles the calm-water fuel rate at 
 def direction_weight(rel_deg: float) -> float:
     """Share of the head-on loss at relative direction rel_deg (0 head, 180 following; either side)."""
     c = math.cos(math.radians(fold_rel_deg(rel_deg)))
+    return DIR_A + DIR_B * c + DIR_C * c * c
+
+
+def direction_weight_array(rel_deg) -> np.ndarray:
+    """`direction_weight` of an array (numpy)."""
+    rel = np.asarray(rel_deg, dtype=np.float64)
+    c = np.cos(np.radians(np.abs(((rel + 180.0) % 360.0) - 180.0)))
     return DIR_A + DIR_B * c + DIR_C * c * c
 
 
@@ -153,6 +167,9 @@ def fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_re
 def stw_kn_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
     """Speed through water (kn) for one condition; never below 0. Physical form: the calm-water speed
     less a weather loss that is ≥ 0 and at most MAX_SPEED_LOSS_SHARE of it."""
+    if form == FORM_MLP:
+        v = mlp.forward_nb(coef, rpm, draft_m, trim_m, wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg), 0)
+        return max(v, 0.0)
     if form == FORM_PHYSICAL:
         calm = coef[0] + coef[1] * rpm + coef[2] * draft_m + coef[3] * trim_m + coef[6] * months_dd
         wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
@@ -170,6 +187,9 @@ def stw_kn_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wav
 def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
     """Fuel rate (t/h) for one condition; never below 0. Physical form: never below the calm-water rate
     at the same rpm, the weather adding at most MAX_FUEL_ADD_SHARE of it."""
+    if form == FORM_MLP:
+        f = mlp.forward_nb(coef, rpm, draft_m, trim_m, wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg), 1)
+        return max(f, 0.0)
     if form == FORM_PHYSICAL:
         r = rpm / 100.0
         r3 = r * r * r
@@ -224,6 +244,7 @@ def predict(form: int, target: str, coef, rpm, draft_m, trim_m, wind_kn, wind_re
 
 def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """Regressor matrix (n_obs × n_regressors) for `target` in {"speed", "fuel"}."""
+    _linear(form)
     cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     k = N_SPEED[form] if target == "speed" else N_FUEL[form]
     X = np.empty((cols[0].size, k))
@@ -233,10 +254,16 @@ def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_re
 
 def design_matrices(form: int, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> tuple[np.ndarray, np.ndarray]:
     """(speed, fuel) regressor matrices, as `design_matrix` gives them, in one pass (weather terms computed once)."""
+    _linear(form)
     cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     Xs, Xf = np.empty((cols[0].size, N_SPEED[form])), np.empty((cols[0].size, N_FUEL[form]))
     _fill_both(form, *cols, Xs, Xf)
     return Xs, Xf
+
+
+def _linear(form: int) -> None:
+    if form == FORM_MLP:
+        raise ValueError("the MLP form has no design matrix: its inputs are mlp.inputs(...)")
 
 
 def _columns(*arrays) -> list[np.ndarray]:

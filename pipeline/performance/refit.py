@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from pipeline.performance import features, fit
+from pipeline.performance import features, fit, mlp
 
 TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
@@ -56,6 +56,8 @@ class Gate:
     step_sigmas: float = 4.0  # new reports whose mean residual under the active model moved by more than
     min_new_rows: int = 3  # ... this many standard deviations (with at least this many new rows) are flagged
     candidates: tuple[str, ...] = FORMS  # the forms `form="best"` tries
+    mlp_seed: int = mlp.DEFAULT_SEED  # the MLP form's weights are initialised from this seed
+    mlp_min_rows: int = 100  # training rows the MLP form needs
 
 
 def check_form(form: str) -> str:
@@ -217,11 +219,9 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
     cands = {}
     for form in forms:
-        X = fit.designs(form, inp)
-        c = _Candidate(form, robust_of[form], X,
-                       {t: fit.fit_targets(form, t, X[t][train_rows], y[t][train_rows], train_bounds, robust=robust_of[form],
-                                           k_folds=0)  # scored on the held-out rows instead
-                        for t in TARGETS})
+        X = _designs(form, inp)
+        c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, train_rows, train_bounds, robust_of[form], gate,
+                                                           k_folds=0))  # scored on the held-out rows instead
         for t in TARGETS:
             coefs = np.array([r.coef for r in c.train[t]])
             c.hold_pred[t] = _predict(form, t, coefs, hold_which, hold_rows, inp)
@@ -288,7 +288,39 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         summary.update(changed=activate, version=versions.get(imo, 1))
         plans.append((g, imo, best, activate, summary, hashes[best][g]))
         summaries.append(summary)
-    return _rows(plans, cands, bounds, train_bounds, train_rows, inp, ts, y, hold_from, n_hold), summaries
+    return _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate), summaries
+
+
+def _designs(form: str, inp) -> dict[str, np.ndarray]:
+    """target → the form's regressors (least-squares forms) or the network's inputs (MLP, both targets)."""
+    if form == "mlp":
+        X = mlp.inputs(*(inp[c] for c in features.MODEL_INPUTS[:-1]))
+        return {t: X for t in TARGETS}
+    return fit.designs(form, inp)
+
+
+def _fit_form(form, X, y, rows, bounds, robust, gate: Gate, *, k_folds=fit.K_FOLDS, start=None, max_solves=None) -> dict:
+    """target → one `fit.FitResult` per group: group g is rows[bounds[g]:bounds[g+1]] of X and y."""
+    if form != "mlp":
+        return {t: fit.fit_targets(form, t, X[t][rows], y[t][rows], bounds, robust=robust, k_folds=k_folds,
+                                   start=None if start is None else start[t], max_solves=max_solves) for t in TARGETS}
+    Xr, Y = X["speed"][rows], np.column_stack([y["speed"][rows], y["fuel"][rows]])
+    out = {t: [] for t in TARGETS}
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+        p, _ = mlp.train(Xr[a:b], Y[a:b], seed=gate.mlp_seed)
+        pred = mlp.forward(p, Xr[a:b])
+        for j, t in enumerate(TARGETS):
+            out[t].append(_result("mlp", t, p, Y[a:b, j], np.maximum(pred[:, j], 0.0)))
+    return out
+
+
+def _result(form: str, target: str, coef: np.ndarray, y: np.ndarray, pred: np.ndarray) -> fit.FitResult:
+    ok = np.isfinite(y) & np.isfinite(pred)
+    r = y[ok] - pred[ok]
+    n = int(ok.sum())
+    sst = float(((y[ok] - y[ok].mean()) ** 2).sum()) if n else 0.0
+    return fit.FitResult(form, target, mlp.PARAM_NAMES, coef, n, 1.0 - float(r @ r) / sst if sst > 0 else float("nan"),
+                         float(np.sqrt(np.mean(r * r))) if n else float("nan"), float("nan"))
 
 
 def _split(imos, bounds, ts, active, gate: Gate) -> np.ndarray:
@@ -313,6 +345,10 @@ def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, 
     """Why candidate c fails the absolute gate for vessel g, or None."""
     for t in TARGETS:
         r = c.train[t][g]
+        if c.form == "mlp":  # regularised by early stopping rather than counted per parameter
+            if r.n < gate.mlp_min_rows:
+                return f"too few reports for the network: {r.n} training rows (need ≥ {gate.mlp_min_rows})"
+            continue
         n_coef = len(r.names) - len(r.dropped)
         if r.n < gate.min_rows_per_coef * max(n_coef, 1):
             return f"under-determined: {r.n} training rows for {n_coef} {t} coefficients (need ≥ {gate.min_rows_per_coef * n_coef})"
@@ -403,7 +439,7 @@ def _scores(results: dict, g: int) -> dict:
     return {f"{t}_{k}": float(getattr(results[t][g], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")}
 
 
-def _rows(plans, cands, bounds, train_bounds, train_rows, inp, ts, y, hold_from, n_hold) -> list[dict]:
+def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> list[dict]:
     """perf_models rows: an accepted model refitted on all its vessel's rows, a refused one as fitted on the training rows."""
     full = {}
     for form in {p[2] for p in plans if p[3]}:
@@ -413,8 +449,8 @@ def _rows(plans, cands, bounds, train_bounds, train_rows, inp, ts, y, hold_from,
         c = cands[form]
         # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
         # all rows (the Huber weights of the rows it was fitted on hardly change)
-        res = {t: fit.fit_targets(form, t, c.X[t][rows], y[t][rows], sub, robust=c.robust, max_solves=ALL_ROWS_SOLVES,
-                                  start=np.array([c.train[t][g].coef for g in gs])) for t in TARGETS}
+        res = _fit_form(form, c.X, y, rows, sub, c.robust, gate, max_solves=ALL_ROWS_SOLVES,
+                        start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
     out = []
