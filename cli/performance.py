@@ -1,4 +1,4 @@
-"""`jitroute noon import`, `jitroute refit`, `jitroute fleet generate|import`."""
+"""`jitroute noon import`, `jitroute refit`, `jitroute model fuzzy`, `jitroute fleet generate|import`."""
 
 from __future__ import annotations
 
@@ -77,6 +77,25 @@ def register(app: typer.Typer) -> None:
 
         summaries = refit_performance(imos=imo or None, data_root=str(data) if data else None, form=form)
         console.print(refit_table(summaries))
+
+    model = typer.Typer(help="Performance models: quick evaluations.", no_args_is_help=True)
+    app.add_typer(model, name="model")
+
+    @model.command("fuzzy")
+    def model_fuzzy(speed: float = typer.Argument(..., help="Ship speed, m/s (5–11)."),
+                    resistance: float = typer.Argument(..., help="Resistance, ×10⁴ N (0–6)."),
+                    wave: float = typer.Argument(..., help="Significant wave height, m (0–8).")):
+        """Fuel rate of the 27-rule Mamdani fuzzy model (the Greek fuzzy fuel-consumption work)."""
+        from pipeline.performance import fuzzy
+
+        for name, value, (lo, hi) in (("SPEED", speed, fuzzy.SPEED_RANGE), ("RESISTANCE", resistance, fuzzy.RESISTANCE_RANGE),
+                                      ("WAVE", wave, fuzzy.WAVE_RANGE)):
+            if not lo <= value <= hi:
+                console.print(f"[red]error:[/] {name} {value:g} is outside the model's range {lo:g}–{hi:g}")
+                raise typer.Exit(2)
+        rate = fuzzy.fuel_tph(speed, resistance, wave)
+        rules = ", ".join(map(str, fuzzy.fired_rules(speed, resistance, wave)))
+        console.print(f"fuel {rate:.3f} t/h (rules fired: {rules})")
 
     @fleet.command("generate")
     def fleet_generate(out: Path = typer.Option(..., "--out"), start: str = typer.Option("2020-12-01T00", help="Reports end and voyages start here (UTC)."),

@@ -561,3 +561,16 @@ def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
     assert np.ptp(m.stw_kn(90.0, 9.0, 0.5, 0.0, rel, 0.0, rel)) == 0.0 and np.ptp(m.fuel_tph(90.0, 9.0, 0.5, 0.0, rel, 0.0, rel)) == 0.0
     with pytest.raises(ValueError, match="no design matrix"):
         features.design_matrix(features.FORM_MLP, "speed", *(np.zeros(2) for _ in range(8)))
+
+
+def test_fuzzy_model_from_the_command_line(monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "200")
+    res = CliRunner().invoke(app, ["model", "fuzzy", "10", "5", "7"])
+    assert res.exit_code == 0 and res.output.strip() == f"fuel {fuzzy.fuel_tph(10, 5, 7):.3f} t/h (rules fired: 17, 18)"
+    assert abs(float(res.output.split()[1]) - 2.57) < 0.01  # the published output
+    res = CliRunner().invoke(app, ["model", "fuzzy", "12", "5", "7"])
+    assert res.exit_code == 2 and "SPEED 12 is outside the model's range 5–11" in res.output
