@@ -574,3 +574,22 @@ def test_fuzzy_model_from_the_command_line(monkeypatch):
     assert abs(float(res.output.split()[1]) - 2.57) < 0.01  # the published output
     res = CliRunner().invoke(app, ["model", "fuzzy", "12", "5", "7"])
     assert res.exit_code == 2 and "SPEED 12 is outside the model's range 5–11" in res.output
+
+
+@pytest.mark.parametrize("imo,seed", [(9140607, 1), (9140619, 2)])
+def test_forms_scored_against_a_truth_outside_all_of_them(imo, seed):
+    """Quadratic losses with their own head/beam/following shape, 5 % noise, 2 % outliers; the 55 days after
+    the fitted year are never part of the fit. The form a refit chooses is within 10 % of the noise floor on
+    speed and within 5 % fuel MAPE; the thesis form is told apart as worse."""
+    from pipeline.performance.benchmark import score_forms
+    from pipeline.synthetic import truth
+
+    df, true = truth.reports(truth.TrueVessel(imo), "2020-12-01", 420, seed)
+    fitted, later, true_later = df.iloc[:365], df.iloc[365:], true.iloc[365:]
+    _, chosen = refit_vessel(imo, fitted, None, 1)
+    assert chosen["changed"]
+    scores = score_forms(fitted, later, true_later).set_index("form")
+    print(f"\n{scores.round(3).to_string()}\nchosen: {chosen['form']}")
+    assert scores.loc[chosen["form"], "speed_vs_floor"] <= 1.10 and scores.loc[chosen["form"], "fuel_mape_pct"] <= 5.0
+    assert scores.loc["thesis", "fuel_mape_pct"] > 3 * scores.loc[chosen["form"], "fuel_mape_pct"]
+    assert 0.6 < scores.loc["thesis", "noise_floor_kn"] < 0.9  # 5 % of ~15 kn, plus the outliers
