@@ -1,4 +1,4 @@
-"""`jitroute noon import`, `jitroute refit`, `jitroute model fuzzy`, `jitroute fleet generate|import`."""
+"""`jitroute noon import`, `jitroute refit`, `jitroute bunker import`, `jitroute model fuzzy`, `jitroute fleet generate|import`."""
 
 from __future__ import annotations
 
@@ -77,6 +77,29 @@ def register(app: typer.Typer) -> None:
 
         summaries = refit_performance(imos=imo or None, data_root=str(data) if data else None, form=form)
         console.print(refit_table(summaries))
+
+    bunker = typer.Typer(help="Bunker logs: import with validation.", no_args_is_help=True)
+    app.add_typer(bunker, name="bunker")
+
+    @bunker.command("import")
+    def bunker_import(file: Path = typer.Argument(..., help="CSV or Parquet: imo, bill_no, date_utc, port, supplier, fuel_type, "
+                                                            "received_t, rob_t."),
+                      data: Optional[Path] = DataOpt):
+        """Validate and import bunker logs; rejected rows are listed with a reason."""
+        from flows.refit import import_bunker_logs
+        from pipeline.performance.validate import NoonFileError
+
+        try:
+            c = import_bunker_logs(str(file), data_root=str(data) if data else None)
+        except (NoonFileError, FileNotFoundError) as exc:
+            console.print(f"[red]error:[/] {exc}")
+            raise typer.Exit(2) from exc
+        console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
+                      f"{c['rejected']} rejected")
+        for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
+            console.print(f"  {n} × {reason}")
+        for key in c["conflicts"]:
+            console.print(f"  conflicts with the stored row: {key} (delete it first to correct it)")
 
     model = typer.Typer(help="Performance models: quick evaluations.", no_args_is_help=True)
     app.add_typer(model, name="model")

@@ -1,4 +1,4 @@
-"""Prefect flows `refit-performance` and `import-noon-reports`."""
+"""Prefect flows `refit-performance`, `import-noon-reports` and `import-bunker-logs`."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from prefect.cache_policies import NO_CACHE
 
 from flows.settings import load_settings
 from pipeline.performance.refit import REPORT_COLUMNS, Gate, check_form, fitted_from_rows, refit_fleet, storage_actions
+from pipeline.performance.bunker import validate_bunker
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -41,6 +42,20 @@ def import_noon_reports(path: str, data_root: str | None = None) -> dict:
     counts = fleet_store.import_noon(db, good, bad)
     counts["rows"] = len(raw)
     counts["reasons"] = reason_counts(bad)
+    return counts
+
+
+@flow(name="import-bunker-logs")
+def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
+    """Validate a bunker-log file and store good rows; rejected and conflicting rows are returned with a reason."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    raw = read_table(Path(path))
+    good, bad = validate_bunker(raw, fleet_store.known_imos(db), source=Path(path).name)
+    counts = fleet_store.import_bunkers(db, good)
+    conflicts = counts.pop("conflicts")
+    counts.update(rows=len(raw), rejected=len(bad) + len(conflicts), reasons=reason_counts(bad),
+                  conflicts=[f"{r.imo} {r.bill_no} {r.fuel_type}" for r in conflicts.itertuples()])
     return counts
 
 

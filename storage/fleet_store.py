@@ -107,6 +107,29 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
     return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)), "conflicts": int(len(conflicts))}
 
 
+BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]
+
+
+def import_bunkers(db_path: Path, good: pd.DataFrame) -> dict[str, int]:
+    """Insert validated bunker-log rows; a row identical to a stored one is a no-op, one that differs from the
+    stored row of the same (imo, bill_no, fuel_type) is not stored. Returns counts and the conflicting rows."""
+    good = good.reindex(columns=BUNKER_COLUMNS)
+    key = "imo, bill_no, fuel_type"
+    same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))
+    with warehouse.connect(db_path) as con:
+        con.register("g", good)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            present = con.execute(f"SELECT count(*) FROM g JOIN bunker_logs b USING ({key}) WHERE {same}").fetchone()[0]
+            conflicts = con.execute(f"SELECT g.* FROM g JOIN bunker_logs b USING ({key}) WHERE NOT ({same})").fetchdf()
+            con.execute(f"INSERT INTO bunker_logs SELECT g.* FROM g ANTI JOIN bunker_logs b USING ({key})")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return {"inserted": int(len(good) - present - len(conflicts)), "already_present": int(present), "conflicts": conflicts}
+
+
 def load_reports(db_path: Path, imos: list[int] | None = None, columns: Sequence[str] | None = None) -> pd.DataFrame:
     """All stored noon reports (optionally of some vessels, only some columns), ordered by vessel and time, in one query.
 

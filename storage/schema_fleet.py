@@ -88,4 +88,22 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE perf_models ADD COLUMN flag VARCHAR;          -- why new reports contradict this (active) model
         """,
     ),
+    Migration(
+        "fleet_004_bunker_logs",
+        # what was bunkered, where and from whom, and what remained on board (the thesis's Bunker Logs)
+        """
+        CREATE TABLE bunker_logs (
+            imo BIGINT NOT NULL,
+            bill_no VARCHAR NOT NULL,         -- the bunker delivery note
+            date_utc TIMESTAMP NOT NULL,
+            port VARCHAR,
+            supplier VARCHAR,
+            fuel_type VARCHAR NOT NULL,       -- HFO | LFO | MGO | MDO | DO | LNG | ... (upper case)
+            received_t DOUBLE NOT NULL,       -- tonnes received
+            rob_t DOUBLE,                     -- tonnes of this fuel remaining on board before receiving
+            source_file VARCHAR,
+            PRIMARY KEY (imo, bill_no, fuel_type)
+        );
+        """,
+    ),
 ]

@@ -593,3 +593,79 @@ def test_forms_scored_against_a_truth_outside_all_of_them(imo, seed):
     assert scores.loc[chosen["form"], "speed_vs_floor"] <= 1.10 and scores.loc[chosen["form"], "fuel_mape_pct"] <= 5.0
     assert scores.loc["thesis", "fuel_mape_pct"] > 3 * scores.loc[chosen["form"], "fuel_mape_pct"]
     assert 0.6 < scores.loc["thesis", "noise_floor_kn"] < 0.9  # 5 % of ~15 kn, plus the outliers
+
+
+GAS_NIRVANA_VESSEL = pd.DataFrame([{"imo": 9140607, "name": "GAS NIRVANA", "type": "lpg", "dwt": 3500.0, "design_speed_kn": 16.0,
+                                    "mcr_kw": 3000.0, "rpm_max": 125.0, "design_fuel_tph": 1.8}])
+
+
+def test_bunker_logs_import_with_validation_from_the_command_line(tmp_path, monkeypatch):
+    import logging
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "300")
+    monkeypatch.setattr(logging, "raiseExceptions", False)  # Prefect's console handler outlives CliRunner's stream
+    data = tmp_path / "data"
+    data.mkdir()
+    fleet_store.import_vessels(data / "warehouse.duckdb", GAS_NIRVANA_VESSEL)
+    good = pd.read_csv(Path(__file__).parent / "fixtures" / "gas_nirvana_bunker_logs.csv", comment="#", dtype=str)
+    bad = pd.DataFrame([
+        dict(good.iloc[0], bill_no="b1", received_t="-5"),
+        dict(good.iloc[0], bill_no="b2", received_t="150000"),
+        dict(good.iloc[0], bill_no="b3", date_utc="31/31/2020"),
+        dict(good.iloc[0], bill_no="b4", imo="9999999"),
+        dict(good.iloc[0], bill_no="b5", fuel_type=""),
+        dict(good.iloc[0], bill_no="b6", received_t="lots"),
+        dict(good.iloc[1]),
+    ])
+    path = tmp_path / "bunkers.csv"
+    pd.concat([good, bad]).to_csv(path, index=False)
+    res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    assert res.exit_code == 0, res.output
+    assert "14 rows → 7 imported, 0 already present, 7 rejected" in res.output
+    for reason in ("negative received_t", "received looks like kg", "bad date", "unknown vessel", "missing fuel_type",
+                   "not a number in received_t", "duplicate bill and fuel in file"):
+        assert f"1 × {reason}" in res.output
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        rows = con.execute("SELECT fuel_type, sum(received_t) FROM bunker_logs GROUP BY 1 ORDER BY 1").fetchall()
+    assert rows == [("DO", 150.0), ("LFO", 490.0)]
+    # importing again adds nothing; a changed quantity for a stored note is refused, not overwritten
+    res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    assert "0 imported, 7 already present" in res.output
+    good.loc[0, "received_t"] = "55"
+    good.to_csv(path, index=False)
+    res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    assert "conflicts with the stored row: 9140607 bnk20201201 DO" in res.output
+
+
+def test_voyage_performance_sets_plan_beside_actual(tmp_path):
+    from storage import warehouse
+
+    db = tmp_path / "w.duckdb"
+    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
+    voyage = dict(imo=9140607, dep_lat=20.8, dep_lon=106.8, arr_lat=10.7, arr_lon=106.8, draft_m=6.0, trim_m=2.0,
+                  rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)
+    fleet_store.import_voyages(db, pd.DataFrame([
+        dict(voyage, voyage_id="voy20200001", dep_name="Hai Phong", arr_name="Sai Gon", depart_utc="2020-12-06T00:00Z",
+             rta_utc="2020-12-10T12:00Z"),
+        dict(voyage, voyage_id="voy20200002", dep_name="Sai Gon", arr_name="Hai Phong", depart_utc="2020-12-15T00:00Z",
+             rta_utc="2020-12-19T12:00Z")]))
+    days = pd.date_range("2020-12-06T12:00", "2020-12-10T12:00", freq="D").append(
+        pd.date_range("2020-12-15T12:00", "2020-12-19T12:00", freq="D"))  # at sea; none in port (rpm 0 is no report)
+    noon = pd.DataFrame({"imo": "9140607", "ts_utc": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "rpm": "120", "draft_m": "6",
+                         "stw_kn": "12", "sog_kn": "12", "dist_nm": "288", "hours": "24", "fuel_t": "20"})
+    fleet_store.import_noon(db, *validate_noon(noon, {9140607}))
+    with warehouse.connect(db) as con:
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', '2020-12-05', 'ok')")
+        con.execute("INSERT INTO routes (run_id, voyage_id, imo, status, depart_utc, eta_utc, rta_utc, fuel_t, model_version) "
+                    "VALUES ('r1', 'voy20200001', 9140607, 'ok', '2020-12-06', '2020-12-10 06:00', '2020-12-10 12:00', 95.0, 3)")
+    with duckdb.connect(str(db), read_only=True) as con:
+        vp = con.execute("SELECT * FROM voyage_performance ORDER BY voyage_id").fetchdf().set_index("voyage_id")
+    v1 = vp.loc["voy20200001"]
+    assert v1.n_reports == 5 and v1.actual_fuel_t == 100.0 and v1.planned_fuel_t == 95.0 and v1.model_version == 3
+    assert v1.fuel_error_pct == pytest.approx(-5.0) and v1.arrival_error_h == pytest.approx(6.0) and v1.late_h == 0.0
+    v2 = vp.loc["voy20200002"]  # sailed, never planned: actuals without a plan
+    assert v2.n_reports == 5 and v2.actual_fuel_t == 100.0 and pd.isna(v2.planned_fuel_t) and pd.isna(v2.fuel_error_pct)
