@@ -287,7 +287,8 @@ def test_a_broken_speed_log_batch_is_flagged_and_refused(history):
 def _reference_fit(X, y, robust, k_folds=fit.K_FOLDS):
     """The documented fit, written plainly: drop constant regressors (but the intercept), scale to unit
     RMS, Huber IRLS by weighted lstsq until the step is ≤ ROBUST_RTOL of the largest coefficient (at most
-    ROBUST_ITERATIONS solves), k-fold CV (row p in fold p mod k) refitted from the rows with the last weights."""
+    ROBUST_ITERATIONS solves; re-weighting only before a solve), k-fold CV (row p in fold p mod k) refitted from the
+    rows with the weights of the last solve."""
     ok = np.isfinite(X).all(axis=1) & np.isfinite(y)
     X, y = X[ok], y[ok]
     keep = (X.max(axis=0) - X.min(axis=0) > 1e-12) | ((X == 1.0).all(axis=0))
@@ -300,7 +301,7 @@ def _reference_fit(X, y, robust, k_folds=fit.K_FOLDS):
         beta = np.linalg.lstsq(Z * sw[:, None], y * sw, rcond=None)[0]
         if it and np.abs(beta - prev).max() <= fit.ROBUST_RTOL * max(np.abs(beta).max(), 1e-12):
             break
-        if robust:
+        if robust and it < fit.ROBUST_ITERATIONS - 1:  # new weights only for a solve that follows
             r = y - Z @ beta
             s = 1.4826 * np.median(np.abs(r - np.median(r))) or 1e-9
             w = np.minimum(1.0, fit.HUBER_K * s / np.abs(r))

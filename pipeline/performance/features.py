@@ -221,17 +221,20 @@ MODEL_INPUTS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "
 
 
 @numba.njit(cache=True)
-def predict_rows_nb(form, target_speed, coefs, which, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd,
-                    out):
-    """`predict_nb` with the coefficients coefs[which[i]] for row i (many vessels' models at once)."""
-    for i in range(out.size):
-        c = coefs[which[i]]
-        if target_speed:
-            out[i] = stw_kn_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
-                               months_dd[i])
-        else:
-            out[i] = fuel_tph_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
-                                 months_dd[i])
+def predict_ranges_nb(form, target_speed, coefs, starts, ends, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg,
+                      months_dd, out):
+    """`predict_nb` of group g's coefficients coefs[g] at rows starts[g]:ends[g] of the inputs, into consecutive slots of out."""
+    q = 0
+    for g in range(starts.size):
+        c = coefs[g]
+        for i in range(starts[g], ends[g]):
+            if target_speed:
+                out[q] = stw_kn_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
+                                   months_dd[i])
+            else:
+                out[q] = fuel_tph_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i],
+                                     wave_rel_deg[i], months_dd[i])
+            q += 1
 
 
 def predict(form: int, target: str, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:

@@ -94,8 +94,10 @@ def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: 
 
 
 def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np.ndarray, *, robust: bool = False,
-                k_folds: int = K_FOLDS, start: np.ndarray | None = None, max_solves: int | None = None) -> list[FitResult]:
-    """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y.
+                k_folds: int = K_FOLDS, start: np.ndarray | None = None, max_solves: int | None = None,
+                ends: np.ndarray | None = None, rtol: float = ROBUST_RTOL) -> list[FitResult]:
+    """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y
+    — or, with `ends`, rows bounds[g]:ends[g] (groups need not tile X: no copy of the rows fitted).
 
     Weather regressors (`features.NON_NEGATIVE`) are held ≥ 0: one that comes out negative is left
     out (β = 0, listed in `dropped`) and the rest solved again. Rows with a non-finite regressor or
@@ -103,14 +105,15 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     stops re-weighting when its own coefficients settle, so it gets what `fit_target` gives it alone.
     `start` (groups × regressors): coefficients the robust re-weighting starts from (fewer solves when
     they are close, e.g. a fit of most of the same rows); `max_solves` caps the re-weighted solves (default
-    ROBUST_ITERATIONS); k_folds < 2: no cross-validation (cv_rmse NaN).
+    ROBUST_ITERATIONS) and `rtol` the step that counts as settled; k_folds < 2: no cross-validation (cv_rmse NaN).
     """
     fid = features.FORM_IDS[form]
     names = (features.SPEED_REGRESSORS if target == "speed" else features.FUEL_REGRESSORS)[fid]
     X = np.ascontiguousarray(X, dtype=np.float64)
     y = np.ascontiguousarray(y, dtype=np.float64)
     bounds = np.ascontiguousarray(bounds, dtype=np.int64)
-    G, k = bounds.size - 1, X.shape[1]
+    starts, ends = (bounds[:-1], bounds[1:]) if ends is None else (bounds, np.ascontiguousarray(ends, dtype=np.int64))
+    G, k = starts.size, X.shape[1]
     keep_all = features.KEEP_CONSTANT[fid]
     intercept = np.array([keep_all or nm == "1" for nm in names], dtype=np.bool_)  # constant but kept (if non-zero)
     coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
@@ -119,7 +122,7 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     warm = start is not None
     beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
-    fit_kernels.fit_groups_nb(X, y, bounds, intercept, nonneg, bool(robust), solves, ROBUST_RTOL, HUBER_K,
+    fit_kernels.fit_groups_nb(X, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
                               max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
     out, dropped_for = [], {}
     for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):

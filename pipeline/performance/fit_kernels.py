@@ -13,16 +13,16 @@ from pipeline.performance.huber import huber_weights
 
 
 @numba.njit(cache=True)
-def fit_groups_nb(X, y, bounds, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep, n_out,
+def fit_groups_nb(X, y, starts, ends, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep, n_out,
                   stats):
-    """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
+    """Fit every group (group g: rows starts[g]:ends[g]; see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
     stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined). With `warm` (and `robust`), group g's first
     Huber weights come from the coefficients beta0[g] (e.g. a fit of most of the same rows)."""
     k = X.shape[1]
-    G = bounds.size - 1
+    G = starts.size
     nmax = 0
     for g in range(G):
-        nmax = max(nmax, bounds[g + 1] - bounds[g])
+        nmax = max(nmax, ends[g] - starts[g])
     Z = np.empty((k + 1, nmax))  # scaled regressors, then the target
     T = np.empty((k, nmax))  # weighted regressors
     w, r, buf = np.empty(nmax), np.empty(nmax), np.empty((3, nmax))
@@ -30,7 +30,7 @@ def fit_groups_nb(X, y, bounds, intercept, nonneg, robust, max_solves, rtol, hub
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
     for g in range(G):
-        n_out[g] = _fit_group(X, y, bounds[g], bounds[g + 1], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
+        n_out[g] = _fit_group(X, y, starts[g], ends[g], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
                               warm, beta0[g], coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
 
 
@@ -73,7 +73,7 @@ def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k,
                 big = max(big, abs(beta[i]))
             if step <= rtol * max(big, 1e-12):
                 break  # converged: `w` is still the weights `beta` was solved with
-        if robust:
+        if robust and it < max_solves - 1:  # new weights only for a solve that follows
             _residuals(Z, beta, 0, m, r)
             med, s = huber_weights(r, m, huber_k, med, s, buf, w)
     # fit statistics on all rows

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import pandas as pd
 
@@ -36,7 +38,8 @@ TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
 BEST = "best"  # fit every candidate form and propose the best on held-out rows
 REPORT_COLUMNS = ("imo", "ts_utc", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
-ALL_ROWS_SOLVES = 2  # robust solves of an accepted model's refit on all rows, from the training fit
+TRAIN_RTOL = 1e-2  # robust re-weighting of a candidate on its training rows stops when no coefficient moves more
+ALL_ROWS_SOLVES = 1  # robust solves of an accepted model's refit on all rows, from the training fit
 _HASHED = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd", "stw_kn", "fuel_tph")
 
 
@@ -157,12 +160,13 @@ def _rmse_by_group(y, pred, which, G):
         return np.sqrt(np.bincount(which, weights=np.where(ok, sq, 0.0), minlength=G) / np.bincount(which, weights=ok, minlength=G))
 
 
-def _predict(form: str, target: str, coefs: np.ndarray, which: np.ndarray, rows: np.ndarray, inp) -> np.ndarray:
-    """Predictions of the model of group which[i] at row rows[i], as routing computes them."""
-    out = np.empty(rows.size)
-    cols = [np.ascontiguousarray(inp[c][rows]) for c in features.MODEL_INPUTS]
-    features.predict_rows_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
-                             which.astype(np.int64), *cols, out)
+def _predict(form: str, target: str, coefs: np.ndarray, starts: np.ndarray, ends: np.ndarray, inp) -> np.ndarray:
+    """Predictions, as routing computes them, of group g's model (coefs[g]) at rows starts[g]:ends[g], concatenated."""
+    starts, ends = np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)
+    out = np.empty(int((ends - starts).sum()))
+    cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in features.MODEL_INPUTS]
+    features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
+                               starts, ends, *cols, out)
     return out
 
 
@@ -176,22 +180,34 @@ def _usable(model: dict | None) -> bool:
 
 
 def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]]:
-    """form → per vessel, a digest of its rows, the form and the fit settings.
-
-    Each row is folded to two numbers (its timestamp, and a weighted sum of its values with unrelated
-    irrational weights) before each vessel's rows are hashed: much cheaper than hashing every value.
-    """
-    c = np.zeros(ts.size)
-    for j, col in enumerate(_HASHED):
-        c += np.sqrt(j + 2.0) * np.nan_to_num(inp[col], nan=-1.2345e9)
-    R = np.column_stack([c, ts.astype(np.int64).astype(np.float64)]).ravel()
-    tags = {f: f"{f}|robust={robust_of[f]}|holdout={gate.holdout_frac}".encode() for f in forms}
-    out = {f: [] for f in forms}
-    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
-        rows = R[2 * a:2 * b].tobytes()
-        for f in forms:
-            out[f].append(hashlib.blake2b(rows + tags[f], digest_size=16).hexdigest())
+    """form → per vessel, a digest of its rows (every value and timestamp), the form and the fit settings."""
+    # one array type for all (contiguous, writable: a read-only one is copied) so numba takes them as one tuple type
+    cols = tuple(np.require(inp[c], np.float64, ("C", "W")).view(np.uint64) for c in _HASHED)
+    cols += (np.require(ts.astype("datetime64[us]"), None, ("C", "W")).view(np.uint64),)
+    h = np.empty((bounds.size - 1, 2), dtype=np.uint64)
+    _row_hashes_nb(cols, np.ascontiguousarray(bounds, dtype=np.int64), h)
+    digests = [f"{a:016x}{b:016x}" for a, b in h.tolist()]
+    out = {}
+    for f in forms:
+        tag = hashlib.blake2b(f"{f}|robust={robust_of[f]}|holdout={gate.holdout_frac}".encode(), digest_size=4).hexdigest()
+        out[f] = [d + tag for d in digests]
     return out
+
+
+@numba.njit(cache=True)
+def _row_hashes_nb(bits, bounds, out):
+    """Two independent 64-bit FNV-1a-style hashes per group of the bit patterns of rows bounds[g]:bounds[g+1] of
+    the columns `bits` (a tuple of uint64 views), row by row: a change to any value or timestamp changes them."""
+    for g in range(bounds.size - 1):
+        h1 = np.uint64(14695981039346656037)
+        h2 = np.uint64(0x9E3779B97F4A7C15)
+        for i in range(bounds[g], bounds[g + 1]):
+            for j in range(len(bits)):
+                v = bits[j][i]
+                h1 = (h1 ^ v) * np.uint64(1099511628211)
+                h2 = (h2 ^ (v >> np.uint64(7))) * np.uint64(0x100000001B3) + np.uint64(0x632BE59BD9B4E019)
+        out[g, 0] = h1
+        out[g, 1] = h2
 
 
 @dataclass
@@ -209,9 +225,8 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     G = imos.size
     n = np.diff(bounds)
     hold_from = _split(imos, bounds, ts, active, gate)
-    train_rows, hold_rows = _ranges(bounds[:-1], hold_from), _ranges(hold_from, bounds[1:])
+    hold_rows = _ranges(hold_from, bounds[1:])
     n_train, n_hold = hold_from - bounds[:-1], bounds[1:] - hold_from
-    train_bounds = np.r_[0, np.cumsum(n_train)]
     hold_which = np.repeat(np.arange(G), n_hold)
     y = {"speed": inp["stw_kn"], "fuel": inp["fuel_tph"]}
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
@@ -220,11 +235,13 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     cands = {}
     for form in forms:
         X = _designs(form, inp)
-        c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, train_rows, train_bounds, robust_of[form], gate,
-                                                           k_folds=0))  # scored on the held-out rows instead
+        # no k-fold CV (the candidate is scored on the held-out rows instead); re-weighting stops at TRAIN_RTOL:
+        # the candidate is only scored and, if accepted, the start of the refit on all rows
+        c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, bounds[:-1], hold_from, robust_of[form], gate,
+                                                           k_folds=0, rtol=TRAIN_RTOL))
         for t in TARGETS:
             coefs = np.array([r.coef for r in c.train[t]])
-            c.hold_pred[t] = _predict(form, t, coefs, hold_which, hold_rows, inp)
+            c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
             c.hold_rmse[t] = _rmse_by_group(y[t][hold_rows], c.hold_pred[t], hold_which, G)
         cands[form] = c
     hashes = _data_hashes(inp, ts, bounds, forms, robust_of, gate)
@@ -299,16 +316,17 @@ def _designs(form: str, inp) -> dict[str, np.ndarray]:
     return fit.designs(form, inp)
 
 
-def _fit_form(form, X, y, rows, bounds, robust, gate: Gate, *, k_folds=fit.K_FOLDS, start=None, max_solves=None) -> dict:
-    """target → one `fit.FitResult` per group: group g is rows[bounds[g]:bounds[g+1]] of X and y."""
+def _fit_form(form, X, y, starts, ends, robust, gate: Gate, *, k_folds=fit.K_FOLDS, start=None, max_solves=None,
+              rtol=fit.ROBUST_RTOL) -> dict:
+    """target → one `fit.FitResult` per group: group g is rows starts[g]:ends[g] of X and y."""
     if form != "mlp":
-        return {t: fit.fit_targets(form, t, X[t][rows], y[t][rows], bounds, robust=robust, k_folds=k_folds,
-                                   start=None if start is None else start[t], max_solves=max_solves) for t in TARGETS}
-    Xr, Y = X["speed"][rows], np.column_stack([y["speed"][rows], y["fuel"][rows]])
+        return {t: fit.fit_targets(form, t, X[t], y[t], starts, ends=ends, robust=robust, k_folds=k_folds,
+                                   start=None if start is None else start[t], max_solves=max_solves, rtol=rtol) for t in TARGETS}
+    Y = np.column_stack([y["speed"], y["fuel"]])
     out = {t: [] for t in TARGETS}
-    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
-        p, _ = mlp.train(Xr[a:b], Y[a:b], seed=gate.mlp_seed)
-        pred = mlp.forward(p, Xr[a:b])
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        p, _ = mlp.train(X["speed"][a:b], Y[a:b], seed=gate.mlp_seed)
+        pred = mlp.forward(p, X["speed"][a:b])
         for j, t in enumerate(TARGETS):
             out[t].append(_result("mlp", t, p, Y[a:b, j], np.maximum(pred[:, j], 0.0)))
     return out
@@ -395,7 +413,7 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
         rows = _ranges(bounds[gi], bounds[gi + 1])
         which = np.repeat(np.arange(gi.size), bounds[gi + 1] - bounds[gi])
         pred = {t: _predict(form, t, np.array([list(active[int(imos[g])][t].values()) for g in groups], dtype=np.float64),
-                            which, rows, inp) for t in TARGETS}
+                            bounds[gi], bounds[gi + 1], inp) for t in TARGETS}
         starts = np.r_[0, np.cumsum(bounds[gi + 1] - bounds[gi])]
         for j, g in enumerate(groups):
             a = active[int(imos[g])]
@@ -427,9 +445,12 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
 def _coefficients_json(r: fit.FitResult) -> str:
     """`json.dumps(r.coefficients())`, formatted from a template where every value is finite (cheaper)."""
     values = r.coef.tolist()
-    if not all(np.isfinite(values)):
+    if not all(map(math.isfinite, values)):
         return json.dumps(r.coefficients())
-    return _TEMPLATES.setdefault(r.names, "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}") % tuple(values)
+    template = _TEMPLATES.get(r.names)
+    if template is None:
+        template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
+    return template % tuple(values)
 
 
 _TEMPLATES: dict[tuple, str] = {}
@@ -444,26 +465,26 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
     full = {}
     for form in {p[2] for p in plans if p[3]}:
         gs = np.array([p[0] for p in plans if p[3] and p[2] == form])
-        rows = _ranges(bounds[gs], bounds[gs + 1])
-        sub = np.r_[0, np.cumsum(bounds[gs + 1] - bounds[gs])]
         c = cands[form]
         # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
         # all rows (the Huber weights of the rows it was fitted on hardly change)
-        res = _fit_form(form, c.X, y, rows, sub, c.robust, gate, max_solves=ALL_ROWS_SOLVES,
+        res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
     out = []
+    first, end, hold, n_hold = bounds[:-1].tolist(), bounds[1:].tolist(), hold_from.tolist(), n_hold.tolist()
     for g, imo, form, activate, summary, data_hash in plans:
         res = full[g] if activate else {t: cands[form].train[t][g] for t in TARGETS}
-        last = bounds[g + 1] - 1 if activate else hold_from[g] - 1
+        last = end[g] - 1 if activate else hold[g] - 1
+        used = last >= first[g]
         summary.update({f"{t}_{k}": float(getattr(res[t], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")})
+        months, data_to = (float(inp["months_dd"][last]), ts[last].item()) if used else (0.0, None)  # .item(): a datetime
         for t in TARGETS:
             r = res[t]
             out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,
                         "coefficients": _coefficients_json(r), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
-                        "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": int(n_hold[g]),
+                        "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": n_hold[g],
                         "status": "active" if activate else "rejected", "reason": summary["reason"], "active": activate,
-                        "months_dd": float(inp["months_dd"][last]) if last >= bounds[g] else 0.0,
-                        "data_hash": data_hash, "data_to_utc": pd.Timestamp(ts[last]).to_pydatetime() if last >= bounds[g] else None})
+                        "months_dd": months, "data_hash": data_hash, "data_to_utc": data_to})
     return out
