@@ -132,13 +132,7 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     return out
 
 
-def holdout_split(n: int, frac: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
-    """Train on the older rows, hold out the newest `frac` (rows must be time-ordered)."""
-    cut = int(holdout_start(n, frac))
-    idx = np.arange(n)
-    return idx[:cut], idx[cut:]
-
-
 def holdout_start(n, frac: float = 0.2):
-    """Index of the first held-out row for (an array of) group sizes n (round half to even)."""
+    """Index of the first held-out row for (an array of) group sizes n (round half to even): the newest `frac`
+    of each group's time-ordered rows are held out (see `refit._split`)."""
     return np.round(np.asarray(n) * (1.0 - frac)).astype(np.int64)
