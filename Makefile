@@ -28,6 +28,7 @@ test: install
 bench: install
 	$(BIN)/python bench/ingest.py
 	$(BIN)/python bench/refit.py
+	$(BIN)/python bench/models.py
 	$(BIN)/python bench/fleet.py
 	$(BIN)/python bench/routing.py
 	$(BIN)/python bench/cli.py

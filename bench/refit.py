@@ -2,9 +2,10 @@
 
 refit path   what the `refit-performance` flow does between opening the warehouse and saving
              the fits (its `load-reports` and `fit-vessels` tasks, without the Prefect engine):
-             read the reports, active models and next versions from DuckDB and fit the speed
-             and fuel models of every vessel (robust fit, cross-validation, hold-out check,
-             activation decision).
+             read the reports, active models, next versions and stored fits from DuckDB, fit the
+             speed and fuel models of every vessel on its older reports (robust fit, cross-
+             validation), score them on the newest, decide (gate), and refit the accepted ones on
+             all their reports.
 reference    one bare `numpy.linalg.lstsq` per vessel and target over the same design matrices
              (same rows), on arrays already in memory.
 
@@ -29,7 +30,8 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from flows.jobs.refit import fit_vessels, load_reports, read_table  # noqa: E402
-from pipeline.performance import features, fit  # noqa: E402
+from pipeline.performance import features  # noqa: E402
+from pipeline.performance.refit import Gate  # noqa: E402
 from pipeline.performance.validate import validate_noon  # noqa: E402
 from pipeline.synthetic.fleet import generate_fleet, write_fleet  # noqa: E402
 from storage import fleet_store  # noqa: E402
@@ -52,9 +54,9 @@ def build_warehouse(out: Path, n_vessels: int, days: int) -> tuple[Path, dict]:
 def refit_path(db: Path) -> tuple[float, float, list[dict], list[dict], int]:
     """(load seconds, fit seconds, perf_models rows, summaries, reports) of one refit of every vessel."""
     t0 = time.perf_counter()
-    reports, active, versions = load_reports.fn(db, None)  # reports, active models, next versions
+    reports, active, versions, fitted = load_reports(db, None)  # reports, active models, next versions, stored fits
     t1 = time.perf_counter()
-    rows, summaries = fit_vessels.fn(reports, active, versions, FORM, True)
+    rows, summaries = fit_vessels(reports, active, versions, FORM, None, Gate(), fitted)
     t2 = time.perf_counter()
     return t1 - t0, t2 - t1, rows, summaries, len(reports["imo"])
 

@@ -1,4 +1,4 @@
-"""`jitroute noon import`, `jitroute refit`, `jitroute fleet generate|import`."""
+"""`jitroute noon import`, `jitroute refit`, `jitroute bunker import`, `jitroute model fuzzy`, `jitroute fleet generate|import`."""
 
 from __future__ import annotations
 
@@ -19,13 +19,14 @@ def _fmt(x, nd=3):
 
 def refit_table(summaries: list[dict]) -> Table:
     t = Table(title="Performance models")
-    for col in ("IMO", "n", "STW R²", "STW RMSE kn", "STW cv", "fuel R²", "fuel RMSE t/h", "fuel cv", "changed"):
-        t.add_column(col, no_wrap=True, justify="right" if col != "changed" else "left")
+    for col in ("IMO", "n", "form", "STW R²", "STW RMSE kn", "STW held-out", "fuel R²", "fuel RMSE t/h", "fuel held-out", "changed"):
+        t.add_column(col, no_wrap=True, justify="right" if col not in ("changed", "form") else "left")
     t.add_column("why")
     for s in summaries:
-        t.add_row(str(s["imo"]), str(s["n"]), _fmt(s.get("speed_r2")), _fmt(s.get("speed_rmse")), _fmt(s.get("speed_cv_rmse")),
-                  _fmt(s.get("fuel_r2")), _fmt(s.get("fuel_rmse")), _fmt(s.get("fuel_cv_rmse")),
-                  "[green]yes" if s["changed"] else "[yellow]no", s.get("why", s.get("reason", "")))
+        t.add_row(str(s["imo"]), str(s["n"]), s.get("form", "-"), _fmt(s.get("speed_r2")), _fmt(s.get("speed_rmse")),
+                  _fmt(s.get("speed_holdout_rmse")), _fmt(s.get("fuel_r2")), _fmt(s.get("fuel_rmse"), 4),
+                  _fmt(s.get("fuel_holdout_rmse"), 4), "[green]yes" if s["changed"] else "[yellow]no",
+                  s.get("flag") or s.get("why") or s.get("reason", ""))
     return t
 
 
@@ -57,14 +58,58 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),
-              form: str = typer.Option("physical", help="Model form: physical (default) or thesis."),
+              form: str = typer.Option("best", help="Model form: best (default: every form scored on the newest "
+                                                    "reports, the best proposed), physical, thesis or mlp."),
               data: Optional[Path] = DataOpt):
         """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
         from flows.jobs.refit import refit_job
+        from pipeline.performance.refit import check_form
+
+        try:
+            check_form(form)  # before anything is read
+        except ValueError as exc:
+            fail(str(exc))
 
         summaries = run_job("flows.refit", "refit_performance", refit_job, imos=imo or None,
                             data_root=str(data) if data else None, form=form)
         console.print(refit_table(summaries))
+
+    bunker = typer.Typer(help="Bunker logs: import with validation.", no_args_is_help=True)
+    app.add_typer(bunker, name="bunker")
+
+    @bunker.command("import")
+    def bunker_import(file: Path = typer.Argument(..., help="CSV or Parquet: imo, bill_no, date_utc, port, supplier, fuel_type, "
+                                                            "received_t, rob_t."),
+                      data: Optional[Path] = DataOpt):
+        """Validate and import bunker logs; rejected rows are listed with a reason."""
+        from flows.jobs.refit import import_bunker_file
+
+        c = run_job("flows.refit", "import_bunker_logs", import_bunker_file, path=str(file),
+                    data_root=str(data) if data else None)
+        console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
+                      f"{c['rejected']} rejected")
+        for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
+            console.print(f"  {n} × {reason}")
+        for key in c["conflicts"]:
+            console.print(f"  conflicts with the stored row: {key} (delete it first to correct it)")
+
+    model = typer.Typer(help="Performance models: quick evaluations.", no_args_is_help=True)
+    app.add_typer(model, name="model")
+
+    @model.command("fuzzy")
+    def model_fuzzy(speed: float = typer.Argument(..., help="Ship speed, m/s (5–11)."),
+                    resistance: float = typer.Argument(..., help="Resistance, ×10⁴ N (0–6)."),
+                    wave: float = typer.Argument(..., help="Significant wave height, m (0–8).")):
+        """Fuel rate of the 27-rule Mamdani fuzzy model (the Greek fuzzy fuel-consumption work)."""
+        from pipeline.performance import fuzzy
+
+        for name, value, (lo, hi) in (("SPEED", speed, fuzzy.SPEED_RANGE), ("RESISTANCE", resistance, fuzzy.RESISTANCE_RANGE),
+                                      ("WAVE", wave, fuzzy.WAVE_RANGE)):
+            if not lo <= value <= hi:
+                fail(f"{name} {value:g} is outside the model's range {lo:g}–{hi:g}")
+        rate = fuzzy.fuel_tph(speed, resistance, wave)
+        rules = ", ".join(map(str, fuzzy.fired_rules(speed, resistance, wave)))
+        console.print(f"fuel {rate:.3f} t/h (rules fired: {rules})")
 
     @fleet.command("generate")
     def fleet_generate(out: Path = typer.Option(..., "--out"), start: str = typer.Option("2020-12-01T00", help="Reports end and voyages start here (UTC)."),

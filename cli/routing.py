@@ -88,6 +88,7 @@ def register(app: typer.Typer) -> None:
         from flows.jobs.route_worker import cycle_field
         from flows.settings import load_settings
         from pipeline.export import bundle
+        from pipeline.performance.model import model_from_stored
         from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
         from pipeline.sources.cycles import parse_cycle
         from storage import cube, export_store, fleet_store
@@ -125,7 +126,7 @@ def register(app: typer.Typer) -> None:
         if vessel.empty:
             fail(f"vessel {v['imo']} is not in the warehouse: import it with `jitroute fleet import`")
         vessel = vessel.iloc[0].to_dict()
-        model = fleet_store.load_active_model(lay.warehouse, int(v["imo"]))
+        model = model_from_stored(fleet_store.active_model(lay.warehouse, int(v["imo"])), int(v["imo"]))
         if model is None:
             fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
         cube_path, c = None, None

@@ -1,10 +1,11 @@
-"""Prefect flows `refit-performance` and `import-noon-reports`; the work is in flows/jobs/refit.py."""
+"""Prefect flows `refit-performance`, `import-fleet`, `import-noon-reports` and `import-bunker-logs`; the work is in
+flows/jobs/refit.py."""
 
 from __future__ import annotations
 
 from prefect import flow
 
-from flows.jobs.refit import import_fleet_folder, import_noon_file, refit_job
+from flows.jobs.refit import import_bunker_file, import_fleet_folder, import_noon_file, refit_job
 from flows.runner import InPrefect, register_flow
 
 
@@ -23,8 +24,15 @@ def import_fleet(folder: str, data_root: str | None = None) -> dict:
 
 
 @register_flow
+@flow(name="import-bunker-logs")
+def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
+    """Validate a bunker-log file and store good rows; rejected and conflicting rows are returned with a reason."""
+    return import_bunker_file(path, data_root=data_root, run=InPrefect())
+
+
+@register_flow
 @flow(name="refit-performance")
-def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "physical",
-                      robust: bool = True) -> list[dict]:
+def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
+                      robust: bool | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; activation only for a model that is not worse."""
     return refit_job(imos, data_root=data_root, form=form, robust=robust, run=InPrefect())

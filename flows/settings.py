@@ -12,6 +12,7 @@ import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from pipeline.performance.refit import Gate
 from storage.layout import DataLayout
 
 RISH_URL_DEFAULT = "https://database.rish.kyoto-u.ac.jp/arch/jmadata/data/gpv/original/"
@@ -79,6 +80,7 @@ class RoutingSettings:
 @dataclass(frozen=True)
 class Settings:
     data_root: Path = Path("data")
+    performance: Gate = field(default_factory=Gate)  # what a refitted model must pass to become active
     grid: GridSettings = field(default_factory=GridSettings)
     sources: SourceSettings = field(default_factory=SourceSettings)
     routing: RoutingSettings = field(default_factory=RoutingSettings)

@@ -1,4 +1,8 @@
-"""Reads and writes of the fleet tables: vessels, noon reports, performance models, voyages."""
+"""Reads and writes of the fleet tables: vessels, noon reports, performance models, voyages.
+
+Plain values in and out (DataFrames, dicts, tuples): building model objects from stored rows is the
+pipeline's job (`pipeline.performance.model.model_from_stored`).
+"""
 
 from __future__ import annotations
 
@@ -10,8 +14,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.performance.model import PerformanceModel
-from pipeline.performance.validate import raw_text
 from storage import warehouse
 
 NOON_COLUMNS = ["imo", "ts_utc", "lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t",
@@ -110,7 +112,7 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
                         "ORDER BY g.imo, g.ts_utc")
             inserted = len(good) - present - len(conflicts)
             if len(conflicts):
-                conflicts["raw"] = raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
+                conflicts["raw"] = _raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
                 conflicts["reason"] = "conflicts with a stored report for the same vessel and time"
                 rejected = pd.concat([rejected, conflicts], ignore_index=True)
             rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
@@ -135,6 +137,29 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
     return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)), "conflicts": int(len(conflicts))}
 
 
+BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]
+
+
+def import_bunkers(db_path: Path, good: pd.DataFrame) -> dict[str, int]:
+    """Insert validated bunker-log rows; a row identical to a stored one is a no-op, one that differs from the
+    stored row of the same (imo, bill_no, fuel_type) is not stored. Returns counts and the conflicting rows."""
+    good = good.reindex(columns=BUNKER_COLUMNS)
+    key = "imo, bill_no, fuel_type"
+    same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))
+    with warehouse.connect(db_path) as con:
+        con.register("g", good)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            present = con.execute(f"SELECT count(*) FROM g JOIN bunker_logs b USING ({key}) WHERE {same}").fetchone()[0]
+            conflicts = con.execute(f"SELECT g.* FROM g JOIN bunker_logs b USING ({key}) WHERE NOT ({same})").fetchdf()
+            con.execute(f"INSERT INTO bunker_logs SELECT g.* FROM g ANTI JOIN bunker_logs b USING ({key})")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return {"inserted": int(len(good) - present - len(conflicts)), "already_present": int(present), "conflicts": conflicts}
+
+
 def load_reports(db_path: Path, imos: list[int] | None = None, columns: Sequence[str] | None = None) -> pd.DataFrame:
     """All stored noon reports (optionally of some vessels, only some columns), ordered by vessel and time, in one query.
 
@@ -151,9 +176,11 @@ def load_reports(db_path: Path, imos: list[int] | None = None, columns: Sequence
         return con.execute(f"SELECT {select} FROM noon_reports ORDER BY imo, ts_utc").fetchdf()
 
 
-def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]) -> tuple[dict[str, np.ndarray], dict[int, dict], dict[int, int]]:
+def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
+                   ) -> tuple[dict[str, np.ndarray], dict[int, dict], dict[int, int], list[tuple]]:
     """What a refit reads, in one read-only connection: (noon-report `columns` as float64 arrays — "imo"
-    as int64 — ordered by vessel and time; `active_models`; `next_versions`).
+    as int64, "ts_utc" as datetime64[us] — ordered by vessel and time; `active_models`; `next_versions`;
+    `fitted_models`).
 
     The rows come as stored, through Arrow (no pandas), and are put in order here, which is cheaper
     than an ORDER BY in the query: `import_noon` stores each import by vessel and time, so one
@@ -170,7 +197,7 @@ def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
             table = con.sql(query + " WHERE imo IN (SELECT unnest(?))", params=[list(map(int, imos))]).to_arrow_table()
         else:
             table = con.sql(query).to_arrow_table()
-        active, versions = _active_models(con), _next_versions(con)
+        active, versions, fitted = _active_models(con), _next_versions(con), _fitted_models(con)
     arrays = {c: table.column(c).to_numpy() for c in table.column_names}
     imo, ts_us = arrays.pop("imo").astype(np.int64), arrays.pop("ts_us")
     order = None if _ordered(imo, ts_us) else _order(imo, ts_us)
@@ -183,7 +210,7 @@ def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
         else:
             v = arrays[c].astype(np.float64, copy=False)
         out[c] = v if order is None else v[order]
-    return out, active, versions
+    return out, active, versions, fitted
 
 
 def _ordered(imo: np.ndarray, ts: np.ndarray) -> bool:
@@ -199,18 +226,31 @@ def _order(imo: np.ndarray, ts: np.ndarray) -> np.ndarray:
 
 
 def active_models(db_path: Path) -> dict[int, dict]:
-    """imo → {"version", "form", "months_dd", "speed": {name: coef}, "fuel": {name: coef}} of active models."""
+    """imo → {"version", "form", "months_dd", "data_to_utc", "speed": {name: coef}, "fuel": {name: coef}} of
+    active models: plain values (pipeline.performance.model builds models from them)."""
     with warehouse.connect(db_path, write=False) as con:
         return _active_models(con)
 
 
 def _active_models(con) -> dict[int, dict]:
-    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd FROM perf_models WHERE active").fetchall()
+    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd, data_to_utc FROM perf_models "
+                       "WHERE active").fetchall()
     out: dict[int, dict] = {}
-    for imo, version, form, target, coefs, months in rows:
-        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0})
+    for imo, version, form, target, coefs, months, data_to in rows:
+        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0, "data_to_utc": data_to})
         d[target] = json.loads(coefs)
     return out
+
+
+def fitted_models(db_path: Path) -> list[tuple]:
+    """(imo, version, data_hash, active) of every stored model version."""
+    with warehouse.connect(db_path, write=False) as con:
+        return _fitted_models(con)
+
+
+def _fitted_models(con) -> list[tuple]:
+    return con.execute("SELECT imo, version, any_value(data_hash), bool_or(active) FROM perf_models "
+                       "GROUP BY imo, version ORDER BY imo, version").fetchall()
 
 
 def next_versions(db_path: Path) -> dict[int, int]:
@@ -222,20 +262,42 @@ def _next_versions(con) -> dict[int, int]:
     return {int(i): int(v) + 1 for i, v in con.execute("SELECT imo, max(version) FROM perf_models GROUP BY imo").fetchall()}
 
 
-def save_fits(db_path: Path, rows: list[dict]) -> None:
-    """Store fit rows (one per vessel and target); activating one deactivates the vessel's older models."""
-    if not rows:
+FIT_COLUMNS = ["imo", "version", "fitted_at", "form", "target", "coefficients", "n_rows", "r2", "rmse", "cv_rmse", "holdout_rmse",
+               "n_holdout", "status", "reason", "active", "months_dd", "data_hash", "data_to_utc"]
+
+
+def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[int, str]] | None = None,
+              flags: dict[int, str] | None = None) -> None:
+    """Store fit rows (one per vessel and target); activating one deactivates the vessel's older models.
+
+    `reactivate`: imo → (stored version, reason) to make active again (instead of storing a copy);
+    `flags`: imo → why new reports contradict its active model (kept on the active rows). One transaction.
+    """
+    reactivate, flags = reactivate or {}, flags or {}
+    if not rows and not reactivate and not flags:
         return
-    df = pd.DataFrame(rows)
-    df["fitted_at"] = _utcnow()
-    cols = ["imo", "version", "fitted_at", "form", "target", "coefficients", "n_rows", "r2", "rmse", "cv_rmse", "status",
-            "reason", "active", "months_dd"]
     with warehouse.connect(db_path) as con:
-        con.register("fits", df.reindex(columns=cols))
         con.execute("BEGIN TRANSACTION")
-        con.execute("UPDATE perf_models SET active = false, status = 'superseded' WHERE active AND imo IN (SELECT imo FROM fits WHERE active)")
-        con.execute(f"INSERT INTO perf_models ({', '.join(cols)}) SELECT {', '.join(cols)} FROM fits")
-        con.execute("COMMIT")
+        try:
+            for imo, text in flags.items():
+                con.execute("UPDATE perf_models SET flag = ? WHERE active AND imo = ?", [text, int(imo)])
+            if reactivate:
+                pairs = pd.DataFrame([{"imo": int(i), "version": int(v), "reason": r} for i, (v, r) in reactivate.items()])
+                con.register("again", pairs)
+                con.execute("UPDATE perf_models SET active = false, status = 'superseded' WHERE active AND imo IN (SELECT imo FROM again)")
+                con.execute("UPDATE perf_models p SET active = true, status = 'active', flag = NULL, reason = a.reason "
+                            "FROM again a WHERE p.imo = a.imo AND p.version = a.version")
+            if rows:
+                df = pd.DataFrame(rows)
+                df["fitted_at"] = _utcnow()
+                con.register("fits", df.reindex(columns=FIT_COLUMNS))
+                con.execute("UPDATE perf_models SET active = false, status = 'superseded' "
+                            "WHERE active AND imo IN (SELECT imo FROM fits WHERE active)")
+                con.execute(f"INSERT INTO perf_models ({', '.join(FIT_COLUMNS)}) SELECT {', '.join(FIT_COLUMNS)} FROM fits")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
 
 
 def load_vessels(db_path: Path) -> pd.DataFrame:
@@ -256,9 +318,15 @@ def load_voyages(db_path: Path, *, voyage_ids: list[str] | None = None, departin
         return con.execute(q + " ORDER BY depart_utc, voyage_id", params).fetchdf()
 
 
-def load_active_model(db_path: Path, imo: int) -> PerformanceModel | None:
-    m = active_models(db_path).get(int(imo))
-    if not m or "speed" not in m or "fuel" not in m:
-        return None
-    return PerformanceModel(form=m["form"], speed_coef=np.array(list(m["speed"].values())), fuel_coef=np.array(list(m["fuel"].values())),
-                            months_dd=float(m["months_dd"]), imo=int(imo), version=m["version"])
+def active_model(db_path: Path, imo: int) -> dict | None:
+    """The active model of vessel `imo` as `active_models` gives it (plain values), or None."""
+    return active_models(db_path).get(int(imo))
+
+
+def _raw_text(df: pd.DataFrame) -> pd.Series:
+    """Each row as 'v1|v2|…' text, as validation keeps rejected rows (`validate.raw_text`, same format)."""
+    cols = [df[c].astype("string").fillna("") for c in df.columns]
+    out = cols[0]
+    for c in cols[1:]:
+        out = out + "|" + c
+    return out.astype(object)

@@ -85,4 +85,35 @@ MIGRATIONS: list[Migration] = [
                                        source_file VARCHAR, rejected_at TIMESTAMP);
         """,
     ),
+    Migration(
+        "fleet_003_model_validation",
+        # a model is scored on reports it was not fitted on; the rows it was fitted on are identified
+        # (data_hash: the same rows and form give the same model, stored once); a contradiction between
+        # new reports and the active model is flagged on it
+        """
+        ALTER TABLE perf_models ADD COLUMN holdout_rmse DOUBLE;   -- RMSE on the newest reports, fitted without them
+        ALTER TABLE perf_models ADD COLUMN n_holdout INTEGER;
+        ALTER TABLE perf_models ADD COLUMN data_hash VARCHAR;     -- digest of the rows, form and fit settings
+        ALTER TABLE perf_models ADD COLUMN data_to_utc TIMESTAMP; -- newest report the coefficients were fitted on
+        ALTER TABLE perf_models ADD COLUMN flag VARCHAR;          -- why new reports contradict this (active) model
+        """,
+    ),
+    Migration(
+        "fleet_004_bunker_logs",
+        # what was bunkered, where and from whom, and what remained on board (the thesis's Bunker Logs)
+        """
+        CREATE TABLE bunker_logs (
+            imo BIGINT NOT NULL,
+            bill_no VARCHAR NOT NULL,         -- the bunker delivery note
+            date_utc TIMESTAMP NOT NULL,
+            port VARCHAR,
+            supplier VARCHAR,
+            fuel_type VARCHAR NOT NULL,       -- HFO | LFO | MGO | MDO | DO | LNG | ... (upper case)
+            received_t DOUBLE NOT NULL,       -- tonnes received
+            rob_t DOUBLE,                     -- tonnes of this fuel remaining on board before receiving
+            source_file VARCHAR,
+            PRIMARY KEY (imo, bill_no, fuel_type)
+        );
+        """,
+    ),
 ]

@@ -174,4 +174,47 @@ MIGRATIONS: list[Migration] = [
         GROUP BY ALL;
         """,
     ),
+    Migration(
+        "routes_003_model_quality_validation",
+        # model quality shows the held-out score and any flag raised by new reports
+        """
+        CREATE OR REPLACE VIEW model_quality AS
+        SELECT m.imo, s.name AS vessel_name, m.target, m.form, m.version, m.fitted_at, m.n_rows, m.r2, m.rmse,
+               m.cv_rmse, m.n_holdout, m.holdout_rmse, m.data_to_utc, m.flag,
+               (SELECT count(*) FROM noon_reports n WHERE n.imo = m.imo) AS n_reports,
+               (SELECT count(*) FROM noon_reports_rejected x WHERE x.imo = m.imo) AS n_rejected
+        FROM perf_models m LEFT JOIN vessels s ON s.imo = m.imo
+        WHERE m.active;
+        """,
+    ),
+    Migration(
+        "routes_004_voyage_performance",
+        # plan against actual: each voyage's newest plan beside what its noon reports show. A voyage's
+        # reports are its vessel's reports at sea after departure, up to the next voyage's departure (at most
+        # RTA + 3 days); the last of them stands for the arrival.
+        """
+        CREATE VIEW voyage_performance AS
+        WITH windows AS (
+            SELECT voyage_id, imo, depart_utc, rta_utc,
+                   least(coalesce(lead(depart_utc) OVER (PARTITION BY imo ORDER BY depart_utc), rta_utc + INTERVAL 3 DAY),
+                         rta_utc + INTERVAL 3 DAY) AS window_end_utc
+            FROM voyages),
+        sailed AS (
+            SELECT w.voyage_id, count(*) AS n_reports, sum(n.fuel_t) AS actual_fuel_t, sum(n.hours) AS actual_hours,
+                   sum(n.dist_nm) AS actual_dist_nm, max(n.ts_utc) AS actual_arrival_utc
+            FROM windows w JOIN noon_reports n ON n.imo = w.imo AND n.ts_utc > w.depart_utc AND n.ts_utc <= w.window_end_utc
+            WHERE coalesce(n.dist_nm, 0) > 0 OR coalesce(n.stw_kn, 0) > 0.5  -- at sea
+            GROUP BY w.voyage_id)
+        SELECT v.voyage_id, v.imo, s.name AS vessel_name, v.dep_name, v.arr_name, v.depart_utc, v.rta_utc,
+               p.run_id, p.status AS plan_status, p.model_version, p.fuel_t AS planned_fuel_t, p.eta_utc AS planned_eta_utc,
+               a.n_reports, a.actual_fuel_t, a.actual_hours, a.actual_dist_nm, a.actual_arrival_utc,
+               100 * (p.fuel_t - a.actual_fuel_t) / nullif(a.actual_fuel_t, 0) AS fuel_error_pct,
+               date_diff('second', p.eta_utc, a.actual_arrival_utc) / 3600.0 AS arrival_error_h,
+               date_diff('second', v.rta_utc, a.actual_arrival_utc) / 3600.0 AS late_h
+        FROM voyages v
+        LEFT JOIN vessels s USING (imo)
+        LEFT JOIN latest_routes p USING (voyage_id)
+        LEFT JOIN sailed a USING (voyage_id);
+        """,
+    ),
 ]

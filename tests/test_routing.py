@@ -219,14 +219,15 @@ def test_currents_wind_and_waves_act_along_the_course():
     assert out[lk.STW_KN] == pytest.approx(stw - 1.0, rel=1e-6)  # the field stores float32
     assert out[lk.FUEL] == pytest.approx((rate + 0.18) * dist / (stw - 1.0), rel=1e-6)
     assert out[lk.WIND_KN] == pytest.approx(30.0, rel=1e-6)
-    # 4 m head seas (coming from 090°) cost 1.5 kn and 0.01·16 t/h; following seas cost nothing
+    # 4 m head seas (coming from 090°) cost 1.5 kn and 0.01·16 t/h; following seas 0.14 of that (Kwon's shape)
     f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=90.0)
     out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
     assert out[lk.STW_KN] == pytest.approx(stw - 1.5, rel=1e-6)
     assert out[lk.FUEL] == pytest.approx((rate + 0.16) * dist / (stw - 1.5), rel=1e-6)
     f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=270.0)
     out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
-    assert out[lk.STW_KN] == pytest.approx(stw, rel=1e-6) and out[lk.FUEL] == pytest.approx(rate * dist / stw, rel=1e-6)
+    assert out[lk.STW_KN] == pytest.approx(stw - 0.14 * 1.5, rel=1e-6)
+    assert out[lk.FUEL] == pytest.approx((rate + 0.14 * 0.16) * dist / (stw - 0.14 * 1.5), rel=1e-6)
     # limits: Hs 4 m against a 3.5 m limit, 30 kn wind against 25 kn, a head current the ship cannot stem
     f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=90.0)
     assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_hs=3.5), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.WAVE_LIMIT

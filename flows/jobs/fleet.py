@@ -24,6 +24,7 @@ from flows.jobs.route_worker import failed_result, plain, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.export.bundle import SUFFIX
+from pipeline.performance.model import model_from_stored
 from pipeline.export.paths import ExportPathError, export_path
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
@@ -65,7 +66,7 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
     models = {}
     for imo in set(table["imo"].astype(int)):
-        m = fleet_store.load_active_model(db, imo)
+        m = model_from_stored(fleet_store.active_model(db, imo), imo)
         models[imo] = m.to_json() if m is not None else None
     cyc = str(np.datetime_as_string(cycle, unit="s"))
     jobs = []

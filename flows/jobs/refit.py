@@ -1,4 +1,4 @@
-"""The refit job (speed and fuel models from noon reports) and the noon-report import job."""
+"""The refit job (speed and fuel models from noon reports) and the import jobs (fleet, noon reports, bunker logs)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import pandas as pd
 from flows.runner import PLAIN
 from flows.settings import load_settings
 from pipeline.fleet_validate import validate_vessels, validate_voyages
-from pipeline.performance.refit import REPORT_COLUMNS, refit_fleet
+from pipeline.performance.bunker import validate_bunker
+from pipeline.performance.refit import REPORT_COLUMNS, Gate, check_form, fitted_from_rows, refit_fleet, storage_actions
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -68,20 +69,36 @@ def import_fleet_folder(folder: str, data_root: str | None = None, *, run=PLAIN)
     return out
 
 
-def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray], dict, dict]:
-    """(noon-report columns a refit needs, active models, next versions), read in one connection."""
-    return fleet_store.load_for_refit(db, imos, REPORT_COLUMNS)
+def import_bunker_file(path: str, data_root: str | None = None, *, run=PLAIN) -> dict:
+    """Validate a bunker-log file and store good rows; rejected and conflicting rows are returned with a reason."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    raw = read_table(Path(path))
+    good, bad = validate_bunker(raw, fleet_store.known_imos(db), source=Path(path).name)
+    counts = fleet_store.import_bunkers(db, good)
+    conflicts = counts.pop("conflicts")
+    counts.update(rows=len(raw), rejected=len(bad) + len(conflicts), reasons=reason_counts(bad),
+                  conflicts=[f"{r.imo} {r.bill_no} {r.fuel_type}" for r in conflicts.itertuples()])
+    return counts
 
 
-def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, form: str,
-                robust: bool) -> tuple[list[dict], list[dict]]:
-    return refit_fleet(reports, active, versions, form=form, robust=robust)
+def load_reports(db: Path, imos: list[int] | None) -> tuple[dict[str, np.ndarray], dict, dict, dict]:
+    """(noon-report columns a refit needs, active models, next versions, stored fits), read in one connection."""
+    reports, active, versions, fitted = fleet_store.load_for_refit(db, imos, REPORT_COLUMNS)
+    return reports, active, versions, fitted_from_rows(fitted)
 
 
-def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "physical",
-              robust: bool = True, *, run=PLAIN) -> list[dict]:
-    """Refit every (or the given) vessel's speed and fuel model; a model becomes active only if it is
-    well determined and not worse than the active one on the newest held-out reports."""
+def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, form: str, robust: bool | None,
+                gate: Gate = Gate(), fitted: dict | None = None) -> tuple[list[dict], list[dict]]:
+    return refit_fleet(reports, active, versions, form=form, robust=robust, gate=gate, fitted=fitted)
+
+
+def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
+              robust: bool | None = None, *, run=PLAIN) -> list[dict]:
+    """Refit every (or the given) vessel's speed and fuel model ("best": every form, the best on held-out
+    reports proposed); a model becomes active only if it passes the gate (settings.performance) and is
+    not worse than the active one on the same held-out reports."""
+    check_form(form)  # before anything is read
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     known = fleet_store.known_imos(db)
@@ -89,12 +106,16 @@ def refit_job(imos: list[int] | None = None, data_root: str | None = None, form:
     if unknown:
         raise UnknownVesselError(f"vessel(s) {', '.join(map(str, unknown))} not in {db}: import them with "
                                  "`jitroute fleet import`")
-    reports, active, versions = run.step(load_reports, db, imos, name="load-reports")
+    reports, active, versions, fitted = run.step(load_reports, db, imos, name="load-reports")
     summaries_missing = []
     for imo in sorted(set(imos or known) - set(np.unique(reports["imo"]).tolist())):
         summaries_missing.append({"imo": imo, "n": 0, "changed": False,
                                   "reason": "no valid noon reports (all rejected or none imported): model unchanged"})
         LOG.warning("vessel %s: no valid noon reports; model unchanged", imo)
-    rows, summaries = run.step(fit_vessels, reports, active, versions, form, robust, name="fit-vessels")
-    run.step(fleet_store.save_fits, db, rows, name="save-fits")
+    rows, summaries = run.step(fit_vessels, reports, active, versions, form, robust, s.performance, fitted,
+                               name="fit-vessels")
+    reactivate, flags = storage_actions(summaries)
+    for imo, text in flags.items():
+        LOG.warning("vessel %s: %s", imo, text)
+    run.step(fleet_store.save_fits, db, rows, reactivate=reactivate, flags=flags, name="save-fits")
     return sorted(summaries + summaries_missing, key=lambda d: d["imo"])

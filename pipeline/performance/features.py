@@ -15,9 +15,18 @@ Each form maps these inputs to a row of regressors; a model is a coefficient vec
 
 Forms (ids are what numba kernels take):
   FORM_THESIS = 0   V = a1·D + a2·T + a3·rpm + a4·WindDir + a5·WindSpd + a6·WaveDir + a7·WaveHt
-                    (no intercept, relative directions in degrees 0..180); fuel the same form.
-  FORM_PHYSICAL = 1 speed: 1, rpm, D, T, Vw²·cos θw, Hs²·cos²(θs/2), months
-                    fuel:  1, r³, r³·D, r³·months, Vw²·cos θw, Hs²·cos²(θs/2)   with r = rpm/100
+                    (no intercept, relative directions in degrees 0..180, 0 in a calm); fuel the same form.
+  FORM_PHYSICAL = 1 speed = calm(1, rpm, D, T, months) − loss,  loss = a_w·Vw²·w(θw) + a_s·Hs²·w(θs)
+                    fuel  = calm(1, r³, r³·D, r³·months) + b_w·Vw²·w(θw) + b_s·Hs²·w(θs)   (r = rpm/100)
+                    The weather terms enter the speed regressors negated ("wind_loss", "wave_loss") so
+                    that every weather coefficient is ≥ 0: the fit holds them there (a term that comes
+                    out as a gain is left out), so weather is never a gain. w(θ) is the direction
+                    shape of Kwon's speed-loss coefficients (Beaufort 6, normalised to head seas):
+                    1 head-on, 0.45 on the beam, 0.14 following. Predictions bound the loss to
+                    MAX_SPEED_LOSS_SHARE of the calm-water speed and never put fuel below the
+                    calm-water rate at the same rpm (nor the extra above MAX_FUEL_ADD_SHARE of it).
+  FORM_MLP = 2      a 5-30-2 network, speed and fuel from the same inputs (see `mlp`); its "coefficients"
+                    are the network's parameter vector, the same for both targets. No design matrix.
 """
 
 from __future__ import annotations
@@ -27,19 +36,30 @@ import math
 import numba
 import numpy as np
 
+from pipeline.performance import mlp
+
 FORM_THESIS = 0
 FORM_PHYSICAL = 1
-FORM_IDS = {"thesis": FORM_THESIS, "physical": FORM_PHYSICAL}
+FORM_MLP = 2
+FORM_IDS = {"thesis": FORM_THESIS, "physical": FORM_PHYSICAL, "mlp": FORM_MLP}
 
 SPEED_REGRESSORS = {
     FORM_THESIS: ("draft_m", "trim_m", "rpm", "wind_dir_rel_deg", "wind_kn", "wave_dir_rel_deg", "wave_m"),
-    FORM_PHYSICAL: ("1", "rpm", "draft_m", "trim_m", "wind_kn2_cos", "wave_m2_cos2half", "months_dd"),
+    FORM_PHYSICAL: ("1", "rpm", "draft_m", "trim_m", "wind_loss", "wave_loss", "months_dd"),
+    FORM_MLP: mlp.PARAM_NAMES,
 }
 FUEL_REGRESSORS = {
     FORM_THESIS: SPEED_REGRESSORS[FORM_THESIS],
-    FORM_PHYSICAL: ("1", "r3", "r3_draft", "r3_months", "wind_kn2_cos", "wave_m2_cos2half"),
+    FORM_PHYSICAL: ("1", "r3", "r3_draft", "r3_months", "wind_load", "wave_load"),
+    FORM_MLP: mlp.PARAM_NAMES,
 }
+NON_NEGATIVE = {"wind_loss", "wave_loss", "wind_load", "wave_load"}  # weather costs speed and fuel, never gives
 N_SPEED = {k: len(v) for k, v in SPEED_REGRESSORS.items()}
+# The thesis form has no intercept, so a constant column (e.g. a trim that never changes) is the only
+# constant term and stays in the fit; a form with an intercept "1" drops its other constant columns.
+KEEP_CONSTANT = {FORM_THESIS: True, FORM_PHYSICAL: False, FORM_MLP: False}
+# Huber re-weighting by default: the thesis form is published as ordinary least squares.
+ROBUST_DEFAULT = {FORM_THESIS: False, FORM_PHYSICAL: True, FORM_MLP: False}
 N_FUEL = {k: len(v) for k, v in FUEL_REGRESSORS.items()}
 
 
@@ -56,13 +76,42 @@ def fold_rel_deg(rel_deg: float) -> float:
     return abs(m - 180.0)
 
 
+# w(θ) = DIR_A + DIR_B·cos θ + DIR_C·cos² θ through Kwon's 2Cβ at Beaufort 6 (2, 0.9, 0.28 head, beam,
+# following), normalised: w(0) = 1, w(90°) = 0.45, w(180°) = 0.14, falling all the way round.
+DIR_A, DIR_B, DIR_C = 0.45, 0.43, 0.12
+MAX_SPEED_LOSS_SHARE = 0.5  # weather takes at most half the calm-water speed
+MAX_FUEL_ADD_SHARE = 1.0  # ... and at most doubles the calm-water fuel rate at the same rpm
+
+
+@numba.njit(cache=True, inline="always")
+def direction_weight(rel_deg: float) -> float:
+    """Share of the head-on loss at relative direction rel_deg (0 head, 180 following; either side)."""
+    c = math.cos(math.radians(fold_rel_deg(rel_deg)))
+    return DIR_A + DIR_B * c + DIR_C * c * c
+
+
+def direction_weight_array(rel_deg) -> np.ndarray:
+    """`direction_weight` of an array (numpy)."""
+    rel = np.asarray(rel_deg, dtype=np.float64)
+    c = np.cos(np.radians(np.abs(((rel + 180.0) % 360.0) - 180.0)))
+    return DIR_A + DIR_B * c + DIR_C * c * c
+
+
+@numba.njit(cache=True, inline="always")
+def calm_dir_deg(amount, rel_deg):
+    """The folded relative direction (0..180) of wind or waves, 0 when there are none (amount ≤ 0).
+
+    A calm has no direction: routing derives it from atan2(−0, −0) = −180°, which would make the
+    thesis form's linear direction term, and so calm-water speed and fuel, depend on the heading.
+    0 is what the thesis's own records show for no waves (0/0).
+    """
+    return fold_rel_deg(rel_deg) if amount > 0.0 else 0.0
+
+
 @numba.njit(cache=True, inline="always")
 def weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg):
-    """The physical form's weather regressors (speed and fuel alike): (Vw²·cos θw, Hs²·cos²(θs/2))."""
-    wr = fold_rel_deg(wind_rel_deg)
-    sr = fold_rel_deg(wave_rel_deg)
-    c = math.cos(math.radians(sr) / 2.0)
-    return wind_kn * wind_kn * math.cos(math.radians(wr)), hs_m * hs_m * c * c
+    """The physical form's weather loads (speed and fuel alike, ≥ 0): (Vw²·w(θw), Hs²·w(θs))."""
+    return wind_kn * wind_kn * direction_weight(wind_rel_deg), hs_m * hs_m * direction_weight(wave_rel_deg)
 
 
 @numba.njit(cache=True, inline="always")
@@ -71,8 +120,8 @@ def _speed_physical(rpm, draft_m, trim_m, wind_term, wave_term, months_dd, out):
     out[1] = rpm
     out[2] = draft_m
     out[3] = trim_m
-    out[4] = wind_term
-    out[5] = wave_term
+    out[4] = -wind_term
+    out[5] = -wave_term
     out[6] = months_dd
 
 
@@ -95,9 +144,9 @@ def speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_r
         out[0] = draft_m
         out[1] = trim_m
         out[2] = rpm
-        out[3] = fold_rel_deg(wind_rel_deg)
+        out[3] = calm_dir_deg(wind_kn, wind_rel_deg)
         out[4] = wind_kn
-        out[5] = fold_rel_deg(wave_rel_deg)
+        out[5] = calm_dir_deg(hs_m, wave_rel_deg)
         out[6] = hs_m
     else:
         wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
@@ -116,7 +165,16 @@ def fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_re
 
 @numba.njit(cache=True)
 def stw_kn_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
-    """Speed through water (kn) for one condition; never below 0."""
+    """Speed through water (kn) for one condition; never below 0. Physical form: the calm-water speed
+    less a weather loss that is ≥ 0 and at most MAX_SPEED_LOSS_SHARE of it."""
+    if form == FORM_MLP:
+        v = mlp.forward_nb(coef, rpm, draft_m, trim_m, wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg), 0)
+        return max(v, 0.0)
+    if form == FORM_PHYSICAL:
+        calm = coef[0] + coef[1] * rpm + coef[2] * draft_m + coef[3] * trim_m + coef[6] * months_dd
+        wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+        loss = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
+        return max(calm - min(loss, MAX_SPEED_LOSS_SHARE * max(calm, 0.0)), 0.0)
     row = np.empty(coef.shape[0])
     speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, row)
     v = 0.0
@@ -127,7 +185,18 @@ def stw_kn_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wav
 
 @numba.njit(cache=True)
 def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
-    """Fuel rate (t/h) for one condition; never below 0."""
+    """Fuel rate (t/h) for one condition; never below 0. Physical form: never below the calm-water rate
+    at the same rpm, the weather adding at most MAX_FUEL_ADD_SHARE of it."""
+    if form == FORM_MLP:
+        f = mlp.forward_nb(coef, rpm, draft_m, trim_m, wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg), 1)
+        return max(f, 0.0)
+    if form == FORM_PHYSICAL:
+        r = rpm / 100.0
+        r3 = r * r * r
+        calm = max(coef[0] + coef[1] * r3 + coef[2] * r3 * draft_m + coef[3] * r3 * months_dd, 0.0)
+        wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+        extra = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
+        return calm + min(extra, MAX_FUEL_ADD_SHARE * calm)
     row = np.empty(coef.shape[0])
     fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, row)
     f = 0.0
@@ -136,8 +205,49 @@ def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, w
     return max(f, 0.0)
 
 
+@numba.njit(cache=True)
+def predict_nb(form, target_speed, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out):
+    """`stw_kn_nb` (target_speed) or `fuel_tph_nb` of every row of the (equal-length) input arrays into out."""
+    for i in range(out.size):
+        if target_speed:
+            out[i] = stw_kn_nb(form, coef, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
+                               months_dd[i])
+        else:
+            out[i] = fuel_tph_nb(form, coef, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
+                                 months_dd[i])
+
+
+MODEL_INPUTS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd")  # in call order
+
+
+@numba.njit(cache=True)
+def predict_ranges_nb(form, target_speed, coefs, starts, ends, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg,
+                      months_dd, out):
+    """`predict_nb` of group g's coefficients coefs[g] at rows starts[g]:ends[g] of the inputs, into consecutive slots of out."""
+    q = 0
+    for g in range(starts.size):
+        c = coefs[g]
+        for i in range(starts[g], ends[g]):
+            if target_speed:
+                out[q] = stw_kn_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
+                                   months_dd[i])
+            else:
+                out[q] = fuel_tph_nb(form, c, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i],
+                                     wave_rel_deg[i], months_dd[i])
+            q += 1
+
+
+def predict(form: int, target: str, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
+    """What routing gets (`stw_kn_nb` / `fuel_tph_nb`), for broadcastable inputs; flat float64 array."""
+    cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
+    out = np.empty(cols[0].size)
+    predict_nb(form, target == "speed", np.ascontiguousarray(coef, dtype=np.float64), *cols, out)
+    return out
+
+
 def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """Regressor matrix (n_obs × n_regressors) for `target` in {"speed", "fuel"}."""
+    _linear(form)
     cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     k = N_SPEED[form] if target == "speed" else N_FUEL[form]
     X = np.empty((cols[0].size, k))
@@ -147,10 +257,16 @@ def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_re
 
 def design_matrices(form: int, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> tuple[np.ndarray, np.ndarray]:
     """(speed, fuel) regressor matrices, as `design_matrix` gives them, in one pass (weather terms computed once)."""
+    _linear(form)
     cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     Xs, Xf = np.empty((cols[0].size, N_SPEED[form])), np.empty((cols[0].size, N_FUEL[form]))
     _fill_both(form, *cols, Xs, Xf)
     return Xs, Xf
+
+
+def _linear(form: int) -> None:
+    if form == FORM_MLP:
+        raise ValueError("the MLP form has no design matrix: its inputs are mlp.inputs(...)")
 
 
 def _columns(*arrays) -> list[np.ndarray]:

@@ -1,4 +1,4 @@
-"""Least-squares fits of the speed and fuel models, with diagnostics and the activation rule.
+"""Least-squares fits of the speed and fuel models, with diagnostics (the activation rule is in `refit`).
 
 Regressors come from `features.design_matrix` (one definition shared with routing). Columns
 are scaled to unit RMS before solving the normal equations, so rpm³ and wind² terms do not
@@ -22,8 +22,6 @@ import numpy as np
 from pipeline.performance import features, fit_kernels
 
 K_FOLDS = 5
-MIN_ROWS_PER_COEF = 5
-NOT_WORSE_TOLERANCE = 1.02  # a new model may be at most 2 % worse on held-out rows
 ROBUST_ITERATIONS = 8  # at most this many iteratively re-weighted least-squares solves with Huber weights
 ROBUST_RTOL = 1e-5  # ... stopping once no coefficient moves by more than this (relative to the largest)
 HUBER_K = 1.345
@@ -66,6 +64,11 @@ def inputs_from_reports(reports) -> dict[str, np.ndarray]:
     }
 
 
+def robust_default(form: str) -> bool:
+    """Whether `form` is fitted with Huber re-weighting unless told otherwise (the thesis form is not)."""
+    return features.ROBUST_DEFAULT[features.FORM_IDS[form]]
+
+
 def design(form: str, target: str, inp: dict[str, np.ndarray]) -> np.ndarray:
     return features.design_matrix(features.FORM_IDS[form], target, inp["rpm"], inp["draft_m"], inp["trim_m"], inp["wind_kn"],
                                   inp["wind_rel_deg"], inp["hs_m"], inp["wave_rel_deg"], inp["months_dd"])
@@ -79,9 +82,11 @@ def designs(form: str, inp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: bool = False, k_folds: int = K_FOLDS) -> FitResult:
-    """Least squares of y on X (regressor names from `features`); constant/all-zero regressors are dropped.
+    """Least squares of y on X (regressor names from `features`); all-zero regressors are dropped (β = 0).
 
-    A constant column is kept only where it is the model's intercept ("1"). With `robust`, Huber
+    Constant columns: in a form with an intercept ("1") the others are dropped (they cannot be told
+    apart from it); in a form without one (`features.KEEP_CONSTANT`, the thesis form) they are kept,
+    being its only constant term. With `robust`, Huber
     weights (scale 1.4826·MAD) are re-estimated until the coefficients settle (ROBUST_RTOL), at most
     ROBUST_ITERATIONS solves.
     """
@@ -89,23 +94,36 @@ def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: 
 
 
 def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np.ndarray, *, robust: bool = False,
-                k_folds: int = K_FOLDS) -> list[FitResult]:
-    """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y.
+                k_folds: int = K_FOLDS, start: np.ndarray | None = None, max_solves: int | None = None,
+                ends: np.ndarray | None = None, rtol: float = ROBUST_RTOL) -> list[FitResult]:
+    """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y
+    — or, with `ends`, rows bounds[g]:ends[g] (groups need not tile X: no copy of the rows fitted).
 
-    Rows with a non-finite regressor or target are left out (per group, order kept). Each group
+    Weather regressors (`features.NON_NEGATIVE`) are held ≥ 0: one that comes out negative is left
+    out (β = 0, listed in `dropped`) and the rest solved again. Rows with a non-finite regressor or
+    target are left out (per group, order kept). Each group
     stops re-weighting when its own coefficients settle, so it gets what `fit_target` gives it alone.
+    `start` (groups × regressors): coefficients the robust re-weighting starts from (fewer solves when
+    they are close, e.g. a fit of most of the same rows); `max_solves` caps the re-weighted solves (default
+    ROBUST_ITERATIONS) and `rtol` the step that counts as settled; k_folds < 2: no cross-validation (cv_rmse NaN).
     """
     fid = features.FORM_IDS[form]
     names = (features.SPEED_REGRESSORS if target == "speed" else features.FUEL_REGRESSORS)[fid]
     X = np.ascontiguousarray(X, dtype=np.float64)
     y = np.ascontiguousarray(y, dtype=np.float64)
     bounds = np.ascontiguousarray(bounds, dtype=np.int64)
-    G, k = bounds.size - 1, X.shape[1]
-    intercept = np.array([nm == "1" for nm in names], dtype=np.bool_)
+    starts, ends = (bounds[:-1], bounds[1:]) if ends is None else (bounds, np.ascontiguousarray(ends, dtype=np.int64))
+    G, k = starts.size, X.shape[1]
+    keep_all = features.KEEP_CONSTANT[fid]
+    intercept = np.array([keep_all or nm == "1" for nm in names], dtype=np.bool_)  # constant but kept (if non-zero)
     coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
     n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
-    fit_kernels.fit_groups_nb(X, y, bounds, intercept, bool(robust), ROBUST_ITERATIONS if robust else 1, ROBUST_RTOL, HUBER_K,
-                   max(int(k_folds), 1), int(k_folds) >= 2, coef, keep, n, stats)
+    nonneg = np.array([nm in features.NON_NEGATIVE for nm in names], dtype=np.bool_)
+    warm = start is not None
+    beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
+    solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
+    fit_kernels.fit_groups_nb(X, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
+                              max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
     out, dropped_for = [], {}
     for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):
         if kept not in dropped_for:
@@ -114,33 +132,7 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     return out
 
 
-@dataclass(frozen=True)
-class Decision:
-    activate: bool
-    reason: str
-
-
-def decide(new: FitResult, old_rmse_on_holdout: float | None, new_rmse_on_holdout: float | None) -> Decision:
-    """Activate only with enough rows and when not worse than the active model on held-out rows."""
-    n_coef = len(new.names) - len(new.dropped)
-    if new.n < MIN_ROWS_PER_COEF * max(n_coef, 1):
-        return Decision(False, f"under-determined: {new.n} rows for {n_coef} coefficients (need ≥ {MIN_ROWS_PER_COEF * n_coef})")
-    if not np.isfinite(new.rmse):
-        return Decision(False, "fit failed (no usable rows)")
-    if old_rmse_on_holdout is None or not np.isfinite(old_rmse_on_holdout):
-        return Decision(True, "first model")
-    if new_rmse_on_holdout is not None and new_rmse_on_holdout > NOT_WORSE_TOLERANCE * old_rmse_on_holdout:
-        return Decision(False, f"worse on held-out rows: RMSE {new_rmse_on_holdout:.3f} vs active {old_rmse_on_holdout:.3f}")
-    return Decision(True, f"held-out RMSE {new_rmse_on_holdout:.3f} vs active {old_rmse_on_holdout:.3f}")
-
-
-def holdout_split(n: int, frac: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
-    """Train on the older rows, hold out the newest `frac` (rows must be time-ordered)."""
-    cut = int(holdout_start(n, frac))
-    idx = np.arange(n)
-    return idx[:cut], idx[cut:]
-
-
 def holdout_start(n, frac: float = 0.2):
-    """Index of the first held-out row for (an array of) group sizes n (round half to even)."""
+    """Index of the first held-out row for (an array of) group sizes n (round half to even): the newest `frac`
+    of each group's time-ordered rows are held out (see `refit._split`)."""
     return np.round(np.asarray(n) * (1.0 - frac)).astype(np.int64)

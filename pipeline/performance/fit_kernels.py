@@ -13,14 +13,16 @@ from pipeline.performance.huber import huber_weights
 
 
 @numba.njit(cache=True)
-def fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F, do_cv, coef, keep, n_out, stats):
-    """Fit every group (see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
-    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined)."""
+def fit_groups_nb(X, y, starts, ends, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep, n_out,
+                  stats):
+    """Fit every group (group g: rows starts[g]:ends[g]; see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
+    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined). With `warm` (and `robust`), group g's first
+    Huber weights come from the coefficients beta0[g] (e.g. a fit of most of the same rows)."""
     k = X.shape[1]
-    G = bounds.size - 1
+    G = starts.size
     nmax = 0
     for g in range(G):
-        nmax = max(nmax, bounds[g + 1] - bounds[g])
+        nmax = max(nmax, ends[g] - starts[g])
     Z = np.empty((k + 1, nmax))  # scaled regressors, then the target
     T = np.empty((k, nmax))  # weighted regressors
     w, r, buf = np.empty(nmax), np.empty(nmax), np.empty((3, nmax))
@@ -28,13 +30,13 @@ def fit_groups_nb(X, y, bounds, intercept, robust, max_solves, rtol, huber_k, F,
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
     for g in range(G):
-        n_out[g] = _fit_group(X, y, bounds[g], bounds[g + 1], intercept, robust, max_solves, rtol, huber_k, do_cv,
-                              coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
+        n_out[g] = _fit_group(X, y, starts[g], ends[g], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
+                              warm, beta0[g], coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
 
 
 @numba.njit(cache=True)
-def _fit_group(X, y, a, b, intercept, robust, max_solves, rtol, huber_k, do_cv, coef, keep, stats, Z, T, w, r, buf, rows,
-               gram, lo, hi):
+def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, warm, beta0, coef, keep, stats, Z, T, w,
+               r, buf, rows, gram, lo, hi):
     """Fit rows a:b of X and y; returns how many were finite (see `_fit_groups_nb` for the outputs;
     Z … hi are scratch).
 
@@ -54,18 +56,24 @@ def _fit_group(X, y, a, b, intercept, robust, max_solves, rtol, huber_k, do_cv, 
     w[:m] = 1.0
     beta, prev = np.zeros(k), np.empty(k)
     med, s = np.nan, np.nan  # the last Huber location and scale: where the next ones probably lie
+    started = warm and robust
+    if started:  # weights from the given coefficients: the re-weighting starts near where it ends
+        for i in range(k):
+            beta[i] = beta0[i] * scale[i] if keep[i] else 0.0
+        _residuals(Z, beta, 0, m, r)
+        med, s = huber_weights(r, m, huber_k, med, s, buf, w)
     for it in range(max_solves):
         _grams(Z, w, full, end, T, gram)
         prev[:] = beta
-        _solve_dropped(gram[0], keep, beta)
-        if it > 0:
+        _solve_nonneg(gram[0], keep, nonneg, beta, Z, m)
+        if it > 0 or started:
             step, big = 0.0, 0.0
             for i in range(k):
                 step = max(step, abs(beta[i] - prev[i]))
                 big = max(big, abs(beta[i]))
             if step <= rtol * max(big, 1e-12):
                 break  # converged: `w` is still the weights `beta` was solved with
-        if robust:
+        if robust and it < max_solves - 1:  # new weights only for a solve that follows
             _residuals(Z, beta, 0, m, r)
             med, s = huber_weights(r, m, huber_k, med, s, buf, w)
     # fit statistics on all rows
@@ -245,6 +253,28 @@ def _residuals(Z, beta, a, b, out):
         zi = Z[i, a:b]
         for q in range(b - a):
             o[q] -= c * zi[q]
+
+
+@numba.njit(cache=True)
+def _solve_nonneg(A, keep, nonneg, x, Z, m):
+    """`_solve_dropped`, then while a regressor that must not be negative (`nonneg`) is, leave the most
+    negative one out (keep False, β = 0, its column of Z zeroed for later solves) and solve again.
+    A (the normal equations) is overwritten."""
+    k = A.shape[0]
+    while True:
+        _solve_dropped(A, keep, x)
+        worst, low = -1, 0.0
+        for i in range(k):
+            if keep[i] and nonneg[i] and x[i] < low:
+                worst, low = i, x[i]
+        if worst < 0:
+            return
+        keep[worst] = False
+        for j in range(k + 1):
+            A[worst, j] = 0.0
+        for j in range(k):
+            A[j, worst] = 0.0
+        Z[worst, :m] = 0.0
 
 
 @numba.njit(cache=True)

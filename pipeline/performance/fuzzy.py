@@ -31,6 +31,7 @@ RESISTANCE = {"small": lambda x: trapmf(x, 0, 0, 1, 3), "medium": lambda x: trim
 WAVE = {"small": lambda x: trapmf(x, 0, 0, 1, 3), "medium": lambda x: trapmf(x, 1, 3, 5, 7), "big": lambda x: trapmf(x, 5, 7, 8, 8)}
 FUEL = {"low": lambda y: trapmf(y, 0.5, 0.5, 1, 1.5), "medium": lambda y: trapmf(y, 1, 1.5, 2, 2.5), "high": lambda y: trapmf(y, 2, 2.5, 3, 3)}
 FUEL_RANGE = (0.5, 3.0)
+SPEED_RANGE, RESISTANCE_RANGE, WAVE_RANGE = (5.0, 11.0), (0.0, 6.0), (0.0, 8.0)  # the inputs' universes
 
 # (speed, resistance, wave) → fuel, rules 1..27 in the order of the published tables
 _OUT = {

@@ -41,16 +41,16 @@ class PerformanceModel:
         return features.FORM_IDS[self.form]
 
     def stw_kn(self, rpm, draft_m, trim_m, wind_kn=0.0, wind_rel_deg=0.0, hs_m=0.0, wave_rel_deg=0.0):
-        """Speed through water (kn), vectorised over broadcastable inputs; floored at 0."""
-        args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg)))
-        X = features.design_matrix(self.form_id, "speed", *args, np.full(args[0].shape, self.months_dd))
-        return np.maximum(X @ self.speed_coef, 0.0).reshape(args[0].shape)
+        """Speed through water (kn), vectorised over broadcastable inputs: what routing gets (`features.stw_kn_nb`)."""
+        return self._predict("speed", self.speed_coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
 
     def fuel_tph(self, rpm, draft_m, trim_m, wind_kn=0.0, wind_rel_deg=0.0, hs_m=0.0, wave_rel_deg=0.0):
-        """Fuel rate (t/h), vectorised over broadcastable inputs; floored at 0."""
-        args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg)))
-        X = features.design_matrix(self.form_id, "fuel", *args, np.full(args[0].shape, self.months_dd))
-        return np.maximum(X @ self.fuel_coef, 0.0).reshape(args[0].shape)
+        """Fuel rate (t/h), vectorised over broadcastable inputs: what routing gets (`features.fuel_tph_nb`)."""
+        return self._predict("fuel", self.fuel_coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+
+    def _predict(self, target, coef, *inputs):
+        shape = np.broadcast_shapes(*(np.shape(a) for a in inputs))
+        return features.predict(self.form_id, target, coef, *inputs, self.months_dd).reshape(shape)
 
     def to_json(self) -> dict:
         return {"form": self.form, "speed_coef": self.speed_coef.tolist(), "fuel_coef": self.fuel_coef.tolist(),
@@ -62,14 +62,28 @@ class PerformanceModel:
                    months_dd=float(d.get("months_dd", 0.0)), imo=d.get("imo"), version=d.get("version"))
 
 
+def model_from_stored(stored: dict | None, imo: int | None = None) -> PerformanceModel | None:
+    """The model of a stored active model (`fleet_store.active_models` values), or None if there is none or its
+    coefficients are not those of its form as defined now (a model stored before a form changed: refit it)."""
+    if not stored or "speed" not in stored or "fuel" not in stored or stored.get("form") not in features.FORM_IDS:
+        return None
+    fid = features.FORM_IDS[stored["form"]]
+    if tuple(stored["speed"]) != features.SPEED_REGRESSORS[fid] or tuple(stored["fuel"]) != features.FUEL_REGRESSORS[fid]:
+        return None
+    return PerformanceModel(form=stored["form"], speed_coef=np.array(list(stored["speed"].values()), dtype=np.float64),
+                            fuel_coef=np.array(list(stored["fuel"].values()), dtype=np.float64),
+                            months_dd=float(stored.get("months_dd") or 0.0), imo=None if imo is None else int(imo),
+                            version=stored.get("version"))
+
+
 def reference_model(design_speed_kn: float = 14.0, rpm_max: float = 100.0, design_fuel_tph: float = 1.5) -> PerformanceModel:
     """A plausible physical-form model from design data, for vessels without a fit and for tests.
 
     STW ≈ design speed at max rpm in calm water, proportional to rpm; fuel ∝ rpm³. Head wind
-    costs ~1 kn at 30 kn wind, head seas ~1.5 kn at 4 m.
+    costs ~1 kn at 30 kn wind, head seas ~1.5 kn at 4 m (less from the beam, least following).
     """
     a_rpm = design_speed_kn / rpm_max
-    speed = np.array([0.0, a_rpm, 0.0, 0.0, -1.0 / 900.0, -1.5 / 16.0, 0.0])
+    speed = np.array([0.0, a_rpm, 0.0, 0.0, 1.0 / 900.0, 1.5 / 16.0, 0.0])
     r3max = (rpm_max / 100.0) ** 3
     fuel = np.array([0.0, design_fuel_tph / r3max, 0.0, 0.0, 0.0002, 0.01])
     return PerformanceModel(form="physical", speed_coef=speed, fuel_coef=fuel)

@@ -1,131 +1,490 @@
-"""Refit vessels' speed and fuel models and decide whether each new pair replaces the active one.
+"""Refit vessels' speed and fuel models, validated on reports they were not fitted on, behind a gate.
 
-A whole fleet is refitted in one pass (`refit_fleet`): the fits are batched across vessels
-(see `fit.fit_targets`) and only the bookkeeping — decisions, rows, summaries — is per vessel.
-`refit_vessel` is the same code for one vessel.
+Per vessel, its reports in time order:
+  1. the older rows train, the newest `Gate.holdout_frac` are held out and never fitted on;
+  2. every candidate form is fitted on the training rows and scored on the held-out rows (RMSE of
+     speed and fuel rate) — the same rows for every form and for the active model;
+  3. the best form is proposed: the smallest held-out RMSE relative to the held-out mean, speed and
+     fuel added, among the forms that pass the gate (the best of all if none does);
+  4. it is activated only if it passes the absolute gate (enough rows per coefficient, fit R² of
+     speed and fuel ≥ `min_r2`, held-out RMSE ≤ a share of the held-out mean), is not worse than
+     the active model on the same held-out rows (whatever the active model's form), and the
+     reports newer than the active model do not contradict it (a step change in its residuals,
+     e.g. a broken speed log: the vessel is flagged and nothing is activated);
+  5. an accepted model is refitted on all rows and stored active; a refused one is stored
+     `rejected` with the reason.
+Nothing is stored twice: the same rows fitted with the same form and settings (`data_hash`) give
+the same model, so a refit with nothing new stores nothing, and a form switched back to re-activates
+the version it gave before (if it wins the comparison) instead of storing a copy.
+
+A fleet is refitted in one pass (`refit_fleet`): the fits are batched across vessels (see
+`fit.fit_targets`) and only the bookkeeping is per vessel. `refit_vessel` is the same code for one.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
+from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import pandas as pd
 
-from pipeline.performance import fit
+from pipeline.performance import features, fit, mlp
 
 TARGETS = ("speed", "fuel")
-REPORT_COLUMNS = ("imo", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
+FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
+BEST = "best"  # fit every candidate form and propose the best on held-out rows
+REPORT_COLUMNS = ("imo", "ts_utc", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
+TRAIN_RTOL = 1e-2  # robust re-weighting of a candidate on its training rows stops when no coefficient moves more
+ALL_ROWS_SOLVES = 1  # robust solves of an accepted model's refit on all rows, from the training fit
+_HASHED = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd", "stw_kn", "fuel_tph")
 
 
-def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = "physical",
-                 robust: bool = True) -> tuple[list[dict], dict]:
-    """(perf_models rows for speed and fuel, summary dict) for one vessel's time-ordered reports.
+@dataclass(frozen=True)
+class Gate:
+    """What a new model must pass to become active (units: shares of the held-out mean, kn and t/h)."""
 
-    Both targets are activated together or not at all: routing needs a consistent pair. The new
-    pair must not be worse than the active one on the newest 20 % of reports.
-    """
+    min_r2: float = 0.5  # fit R² of speed and of fuel rate
+    max_speed_rmse_share: float = 0.10  # held-out speed RMSE ≤ this × mean held-out speed
+    max_fuel_rmse_share: float = 0.15  # held-out fuel-rate RMSE ≤ this × mean held-out fuel rate
+    not_worse: float = 1.02  # worse than the active model (speed or fuel, on the held-out rows it was not fitted
+    worse_sigmas: float = 2.0  # on) means RMSE above this share of its RMSE *and* squared errors larger by more than
+    # this many standard errors (paired): two fits of the same truth differ by a few % by chance
+    holdout_frac: float = 0.2  # newest share of each vessel's reports held out (see `_split`)
+    min_holdout_rows: int = 5
+    min_rows_per_coef: int = 5  # training rows per fitted coefficient
+    step_sigmas: float = 4.0  # new reports whose mean residual under the active model moved by more than
+    min_new_rows: int = 3  # ... this many standard deviations (with at least this many new rows) are flagged
+    candidates: tuple[str, ...] = FORMS  # the forms `form="best"` tries
+    mlp_seed: int = mlp.DEFAULT_SEED  # the MLP form's weights are initialised from this seed
+    mlp_min_rows: int = 100  # training rows the MLP form needs
+
+
+def check_form(form: str) -> str:
+    """`form` if a refit can fit it ("best" or one of `FORMS`), else ValueError naming the choices."""
+    if form != BEST and form not in FORMS:
+        raise ValueError(f"unknown model form {form!r}; use one of: {', '.join((BEST, *FORMS))}")
+    return form
+
+
+def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = BEST,
+                 robust: bool | None = None, gate: Gate = Gate(), fitted: dict | None = None) -> tuple[list[dict], dict]:
+    """(perf_models rows, summary) for one vessel's time-ordered reports; see `refit_fleet`."""
     imo = int(imo)
-    rows, summaries = _refit(np.array([imo]), np.array([0, len(reports)]), fit.inputs_from_reports(reports),
-                             {imo: active} if active else {}, {imo: version}, form, robust)
+    reports = {c: np.asarray(reports[c]) for c in reports.columns} if isinstance(reports, pd.DataFrame) else reports
+    reports = {**reports, "imo": np.full(len(reports["rpm"]), imo)}
+    rows, summaries = refit_fleet(reports, {imo: active} if active else {}, {imo: version}, form=form, robust=robust,
+                                  gate=gate, fitted={imo: fitted[imo]} if fitted and imo in fitted else None)
     return rows, summaries[0]
 
 
-def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = "physical",
-                robust: bool = True) -> tuple[list[dict], list[dict]]:
-    """`refit_vessel` for every vessel in `reports` (time-ordered within each vessel), fitted together.
+def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = BEST,
+                robust: bool | None = None, gate: Gate = Gate(), fitted: dict[int, dict] | None = None
+                ) -> tuple[list[dict], list[dict]]:
+    """Refit every vessel in `reports` (time-ordered within each vessel), fitted together.
 
     `reports`: a DataFrame or a mapping of column → array (as `fleet_store.load_for_refit` gives)
-    with at least `REPORT_COLUMNS`. `active`: imo → active model (as `fleet_store.active_models`
-    returns); `versions`: imo → version of the new rows (1 if absent). Returns (perf_models rows,
-    one summary per vessel in IMO order).
+    with `fit.INPUT_COLUMNS` and "imo" ("ts_utc" if there, else row order is time). `active`:
+    imo → active model (`fleet_store.active_models`); `versions`: imo → version of new rows (1 if
+    absent); `fitted`: imo → {data_hash: (version, active)} of stored models (`fitted_from_rows`).
+    `form`: one of `FORMS`, or "best" for every form in `gate.candidates`; `robust`: Huber
+    re-weighting, None for each form's default. Returns (perf_models rows to insert, one summary
+    per vessel in IMO order); a summary's "reactivate" names a stored version to make active again,
+    its "flag" a contradiction between new reports and the active model.
     """
+    check_form(form)
+    forms = tuple(gate.candidates) if form == BEST else (form,)
     imo = np.asarray(reports["imo"], dtype=np.int64)
     if imo.size == 0:
         return [], []
     inp = fit.inputs_from_reports(reports)
+    ts = _timestamps(reports, imo.size)
     if (np.diff(imo) < 0).any():
         order = np.argsort(imo, kind="stable")  # keeps each vessel's time order
-        imo, inp = imo[order], {c: v[order] for c, v in inp.items()}
+        imo, ts, inp = imo[order], ts[order], {c: v[order] for c, v in inp.items()}
     first = np.flatnonzero(np.r_[True, imo[1:] != imo[:-1]])
-    return _refit(imo[first], np.r_[first, imo.size], inp, active, versions, form, robust)
+    return _refit(imo[first], np.r_[first, imo.size], inp, ts, active, versions, forms, robust, gate, fitted or {})
 
 
-def _refit(imos: np.ndarray, bounds: np.ndarray, inp: dict[str, np.ndarray], active: dict, versions: dict, form: str,
-           robust: bool) -> tuple[list[dict], list[dict]]:
+def storage_actions(summaries: list[dict]) -> tuple[dict[int, tuple[int, str]], dict[int, str]]:
+    """(imo → (version to re-activate, reason), imo → flag on its active model) from refit summaries,
+    as `fleet_store.save_fits` takes them beside the new rows."""
+    return ({s["imo"]: (s["reactivate"], s["reason"]) for s in summaries if s.get("reactivate")},
+            {s["imo"]: s["flag"] for s in summaries if s.get("flag")})
+
+
+def fitted_from_rows(rows) -> dict[int, dict]:
+    """imo → {data_hash: (version, active)} from stored (imo, version, data_hash, active) rows."""
+    out: dict[int, dict] = {}
+    for imo, version, data_hash, active in rows:
+        if data_hash:
+            out.setdefault(int(imo), {})[data_hash] = (int(version), bool(active))
+    return out
+
+
+def _timestamps(reports, n: int) -> np.ndarray:
+    try:
+        ts = reports["ts_utc"]
+    except KeyError:
+        return np.arange(n).astype("datetime64[us]")  # row order is time order
+    ts = np.asarray(ts)
+    if ts.dtype.kind != "M":
+        ts = pd.to_datetime(pd.Series(ts), utc=True).dt.tz_localize(None).to_numpy()
+    return ts.astype("datetime64[us]")
+
+
+def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """Concatenated aranges start[g]:stop[g]."""
+    size = stop - start
+    total = int(size.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    offs = np.cumsum(size) - size
+    return np.repeat(start - offs, size) + np.arange(total)
+
+
+def _group_mean(v: np.ndarray, which: np.ndarray, G: int) -> np.ndarray:
+    cnt = np.bincount(which, minlength=G)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.bincount(which, weights=v, minlength=G) / cnt
+
+
+def _rmse_by_group(y, pred, which, G):
+    """RMSE of y − pred per group (non-finite pairs left out; NaN for a group with none)."""
+    sq = (y - pred) ** 2
+    ok = np.isfinite(sq)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(np.bincount(which, weights=np.where(ok, sq, 0.0), minlength=G) / np.bincount(which, weights=ok, minlength=G))
+
+
+def _predict(form: str, target: str, coefs: np.ndarray, starts: np.ndarray, ends: np.ndarray, inp) -> np.ndarray:
+    """Predictions, as routing computes them, of group g's model (coefs[g]) at rows starts[g]:ends[g], concatenated."""
+    starts, ends = np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)
+    out = np.empty(int((ends - starts).sum()))
+    cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in features.MODEL_INPUTS]
+    features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
+                               starts, ends, *cols, out)
+    return out
+
+
+def _usable(model: dict | None) -> bool:
+    """An active model whose coefficients are those of a form as defined now (older definitions are not)."""
+    if not model or model.get("form") not in FORMS:
+        return False
+    fid = features.FORM_IDS[model["form"]]
+    return all(t in model and tuple(model[t]) == names
+               for t, names in (("speed", features.SPEED_REGRESSORS[fid]), ("fuel", features.FUEL_REGRESSORS[fid])))
+
+
+def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]]:
+    """form → per vessel, a digest of its rows (every value and timestamp), the form and the fit settings."""
+    # one array type for all (contiguous, writable: a read-only one is copied) so numba takes them as one tuple type
+    cols = tuple(np.require(inp[c], np.float64, ("C", "W")).view(np.uint64) for c in _HASHED)
+    cols += (np.require(ts.astype("datetime64[us]"), None, ("C", "W")).view(np.uint64),)
+    h = np.empty((bounds.size - 1, 2), dtype=np.uint64)
+    _row_hashes_nb(cols, np.ascontiguousarray(bounds, dtype=np.int64), h)
+    digests = [f"{a:016x}{b:016x}" for a, b in h.tolist()]
+    out = {}
+    for f in forms:
+        tag = hashlib.blake2b(f"{f}|robust={robust_of[f]}|holdout={gate.holdout_frac}".encode(), digest_size=4).hexdigest()
+        out[f] = [d + tag for d in digests]
+    return out
+
+
+@numba.njit(cache=True)
+def _row_hashes_nb(bits, bounds, out):
+    """Two independent 64-bit FNV-1a-style hashes per group of the bit patterns of rows bounds[g]:bounds[g+1] of
+    the columns `bits` (a tuple of uint64 views), row by row: a change to any value or timestamp changes them."""
+    for g in range(bounds.size - 1):
+        h1 = np.uint64(14695981039346656037)
+        h2 = np.uint64(0x9E3779B97F4A7C15)
+        for i in range(bounds[g], bounds[g + 1]):
+            for j in range(len(bits)):
+                v = bits[j][i]
+                h1 = (h1 ^ v) * np.uint64(1099511628211)
+                h2 = (h2 ^ (v >> np.uint64(7))) * np.uint64(0x100000001B3) + np.uint64(0x632BE59BD9B4E019)
+        out[g, 0] = h1
+        out[g, 1] = h2
+
+
+@dataclass
+class _Candidate:
+    form: str
+    robust: bool
+    X: dict
+    train: dict  # target → list[FitResult] fitted on the training rows
+    hold_rmse: dict = field(default_factory=dict)  # target → per vessel
+    hold_pred: dict = field(default_factory=dict)  # target → prediction at each held-out row (hold_rows order)
+
+
+def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, fitted) -> tuple[list[dict], list[dict]]:
     """Vessel g is rows bounds[g]:bounds[g+1] of the model inputs `inp`."""
+    G = imos.size
     n = np.diff(bounds)
+    hold_from = _split(imos, bounds, ts, active, gate)
+    hold_rows = _ranges(hold_from, bounds[1:])
+    n_train, n_hold = hold_from - bounds[:-1], bounds[1:] - hold_from
+    hold_which = np.repeat(np.arange(G), n_hold)
     y = {"speed": inp["stw_kn"], "fuel": inp["fuel_tph"]}
-    X = fit.designs(form, inp)
-    results = {t: fit.fit_targets(form, t, X[t], y[t], bounds, robust=robust) for t in TARGETS}
-    hold_from = bounds[:-1] + fit.holdout_start(n)
-    compared = {t: _compare_with_active(t, imos, bounds, hold_from, X[t], y[t], results[t], active, form) for t in TARGETS}
-    coef_json = {t: _coefficients_json(results[t]) for t in TARGETS}
-    rows, summaries = [], []
-    for g, imo in enumerate(map(int, imos)):
-        res = {t: results[t][g] for t in TARGETS}
-        act = active.get(imo)
-        decisions, unchanged = [], []
+    hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
+
+    robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
+    cands = {}
+    for form in forms:
+        X = _designs(form, inp)
+        # no k-fold CV (the candidate is scored on the held-out rows instead); re-weighting stops at TRAIN_RTOL:
+        # the candidate is only scored and, if accepted, the start of the refit on all rows
+        c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, bounds[:-1], hold_from, robust_of[form], gate,
+                                                           k_folds=0, rtol=TRAIN_RTOL))
         for t in TARGETS:
-            same, old_hold, new_hold = compared[t].get(g, (False, None, None))
-            if same:
-                unchanged.append(t)
-            decisions.append(fit.decide(res[t], old_hold, new_hold))
-        scores = {"speed_r2": res["speed"].r2, "speed_rmse": res["speed"].rmse, "speed_cv_rmse": res["speed"].cv_rmse,
-                  "fuel_r2": res["fuel"].r2, "fuel_rmse": res["fuel"].rmse, "fuel_cv_rmse": res["fuel"].cv_rmse}
-        if len(unchanged) == 2:  # same data, same fit: nothing new to store
-            summaries.append({"imo": imo, "n": int(n[g]), **scores, "changed": False, "reason": "same as the active model",
-                              "why": "same as the active model", "version": act.get("version")})
-            continue
-        activate = all(d.activate for d in decisions)
-        version = versions.get(imo, 1)
-        months = float(inp["months_dd"][bounds[g + 1] - 1]) if n[g] else 0.0
-        reason = "; ".join(f"{t}: {d.reason}" for t, d in zip(TARGETS, decisions))
-        dropped = sorted({c for r in res.values() for c in r.dropped})
+            coefs = np.array([r.coef for r in c.train[t]])
+            c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
+            c.hold_rmse[t] = _rmse_by_group(y[t][hold_rows], c.hold_pred[t], hold_which, G)
+        cands[form] = c
+    hashes = _data_hashes(inp, ts, bounds, forms, robust_of, gate)
+    hold_bounds = np.r_[0, np.cumsum(n_hold)]
+    act_hold, act_flag = _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate)
+
+    # per-vessel values as Python numbers: the loop below reads them one by one
+    scores_of = {f: (c.hold_rmse["speed"] / hold_mean["speed"] + c.hold_rmse["fuel"] / hold_mean["fuel"]).tolist()
+                 for f, c in cands.items()}
+    rmse_of = {f: {t: c.hold_rmse[t].tolist() for t in TARGETS} for f, c in cands.items()}
+    mean_of = {t: hold_mean[t].tolist() for t in TARGETS}
+    n_list, n_hold_list = n.tolist(), n_hold.tolist()
+    plans, summaries = [], []
+    for g, imo in enumerate(imos.tolist()):
+        verdicts = {f: _gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for f, c in cands.items()}
+        score = {f: scores_of[f][g] for f in forms}
+        passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
+        pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
+        best = min(pool, key=lambda f: (score[f] if np.isfinite(score[f]) else np.inf, forms.index(f)))
+        c = cands[best]
+        act = active.get(imo)
+        why = act_flag.get(g) or verdicts[best]  # a contradiction with the active model is the first thing to fix
+        if why is None and g in act_hold:
+            unseen, old_pred = act_hold[g]  # held-out rows the active model was not fitted on (all if too few)
+            sl = slice(hold_bounds[g], hold_bounds[g + 1])
+            worse = []
+            for t in TARGETS:
+                obs = y[t][hold_rows[sl]][unseen]
+                new_rm, old_rm, sig = _paired(obs, c.hold_pred[t][sl][unseen], old_pred[t][unseen], gate.worse_sigmas)
+                if not new_rm <= gate.not_worse * old_rm and sig:
+                    worse.append(f"{t} {new_rm:.4g} vs active {old_rm:.4g}")
+            if worse:
+                why = f"worse than the active model on the {unseen.sum()} held-out rows it was not fitted on: RMSE " + ", ".join(worse)
+        activate = why is None
+        scores = "; ".join(f"{f} speed {rmse_of[f]['speed'][g]:.3f} kn, fuel {rmse_of[f]['fuel'][g]:.4f} t/h" for f in forms)
+        if activate:
+            why = (f"passes the gate and is not worse on held-out rows than the active v{act['version']} ({act['form']})"
+                   if g in act_hold
+                   else "first model" if not act else "passes the gate (active model not comparable)")
+        reason = f"{best}: {why}; held-out ({n_hold_list[g]} newest rows): {scores}"
+        dropped = sorted({d for t in TARGETS for d in c.train[t][g].dropped})
         if dropped:
-            reason += f"; dropped constant regressors: {', '.join(dropped)}"
-        for t, r in res.items():
-            rows.append({"imo": imo, "version": version, "form": form, "target": t,
-                         "coefficients": coef_json[t][g], "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
-                         "cv_rmse": r.cv_rmse, "status": "active" if activate else "rejected", "reason": reason,
-                         "active": activate, "months_dd": months})
-        summaries.append({"imo": imo, "n": int(n[g]), **scores, "changed": activate, "reason": reason, "version": version,
-                          "why": next((d.reason for d in decisions if not d.activate), decisions[0].reason)})
-    return rows, summaries
+            reason += f"; left out (constant, or weather that came out as a gain): {', '.join(dropped)}"
+        summary = {"imo": imo, "n": n_list[g], "n_holdout": n_hold_list[g], "form": best, "changed": False,
+                   "why": why, "reason": reason, "version": act.get("version") if act else None,
+                   "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
+                   "fuel_holdout_rmse": rmse_of[best]["fuel"][g]}
+        summary.update(_scores(c.train, g))
+        seen = fitted.get(imo, {}).get(hashes[best][g])
+        if seen is not None:  # these rows were fitted with this form before: the same model
+            version, is_active = seen
+            if is_active:
+                summary.update(why="same as the active model", reason=f"same rows and form as the active v{version}: nothing new")
+            elif activate:
+                summary.update(changed=True, version=version, reactivate=version,
+                               reason=f"re-activates v{version} (same rows and form); {reason}")
+            else:
+                summary.update(reason=f"same rows and form as v{version}, not stored again; {reason}")
+            summaries.append(summary)
+            continue
+        summary.update(changed=activate, version=versions.get(imo, 1))
+        plans.append((g, imo, best, activate, summary, hashes[best][g]))
+        summaries.append(summary)
+    return _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate), summaries
 
 
-def _coefficients_json(results: list[fit.FitResult]) -> list[str]:
-    """`json.dumps(r.coefficients())` of every result, formatted from one template."""
-    coef = np.array([r.coef for r in results], dtype=np.float64)
-    if not results or not np.isfinite(coef).all():  # json spells non-finite numbers its own way
-        return [json.dumps(r.coefficients()) for r in results]
-    template = "{" + ", ".join(json.dumps(name) + ": %r" for name in results[0].names) + "}"
-    return [template % row for row in map(tuple, coef.tolist())]
+def _designs(form: str, inp) -> dict[str, np.ndarray]:
+    """target → the form's regressors (least-squares forms) or the network's inputs (MLP, both targets)."""
+    if form == "mlp":
+        X = mlp.inputs(*(inp[c] for c in features.MODEL_INPUTS[:-1]))
+        return {t: X for t in TARGETS}
+    return fit.designs(form, inp)
 
 
-def _compare_with_active(target: str, imos, bounds, hold_from, X, y, results, active: dict, form: str) -> dict:
-    """vessel index → (new coefficients equal to the active ones, active RMSE, new RMSE on the held-out rows),
-    for vessels whose active model has the same form and a `target` part of the same length."""
-    groups, old = [], []
+def _fit_form(form, X, y, starts, ends, robust, gate: Gate, *, k_folds=fit.K_FOLDS, start=None, max_solves=None,
+              rtol=fit.ROBUST_RTOL) -> dict:
+    """target → one `fit.FitResult` per group: group g is rows starts[g]:ends[g] of X and y."""
+    if form != "mlp":
+        return {t: fit.fit_targets(form, t, X[t], y[t], starts, ends=ends, robust=robust, k_folds=k_folds,
+                                   start=None if start is None else start[t], max_solves=max_solves, rtol=rtol) for t in TARGETS}
+    Y = np.column_stack([y["speed"], y["fuel"]])
+    out = {t: [] for t in TARGETS}
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        p, _ = mlp.train(X["speed"][a:b], Y[a:b], seed=gate.mlp_seed)
+        pred = mlp.forward(p, X["speed"][a:b])
+        for j, t in enumerate(TARGETS):
+            out[t].append(_result("mlp", t, p, Y[a:b, j], np.maximum(pred[:, j], 0.0)))
+    return out
+
+
+def _result(form: str, target: str, coef: np.ndarray, y: np.ndarray, pred: np.ndarray) -> fit.FitResult:
+    ok = np.isfinite(y) & np.isfinite(pred)
+    r = y[ok] - pred[ok]
+    n = int(ok.sum())
+    sst = float(((y[ok] - y[ok].mean()) ** 2).sum()) if n else 0.0
+    return fit.FitResult(form, target, mlp.PARAM_NAMES, coef, n, 1.0 - float(r @ r) / sst if sst > 0 else float("nan"),
+                         float(np.sqrt(np.mean(r * r))) if n else float("nan"), float("nan"))
+
+
+def _split(imos, bounds, ts, active, gate: Gate) -> np.ndarray:
+    """First held-out row of each vessel: the newest `holdout_frac` of its rows; but where the active
+    model was fitted on rows beyond that point and at least `min_holdout_rows` are newer than it, the
+    first of those, so that a candidate learns from at least what the active model learnt from and
+    both are judged on reports neither was fitted on."""
+    n = np.diff(bounds)
+    hold_from = bounds[:-1] + np.minimum(fit.holdout_start(n, gate.holdout_frac), np.maximum(n - 1, 0))
     for g, imo in enumerate(map(int, imos)):
-        a = active.get(imo)
-        if a and a.get("form") == form and target in a and hold_from[g] < bounds[g + 1]:
-            coef = np.array(list(a[target].values()), dtype=np.float64)
-            if coef.shape == results[g].coef.shape:
-                groups.append(g)
-                old.append(coef)
-    if not groups:
-        return {}
-    g = np.array(groups)
-    old = np.stack(old)
-    new = np.stack([results[i].coef for i in groups])
-    same = (np.abs(old - new) <= 1e-12 + 1e-9 * np.abs(new)).all(axis=1)  # np.allclose(old, new, rtol=1e-9, atol=1e-12)
-    size = bounds[g + 1] - hold_from[g]
-    which = np.repeat(np.arange(g.size), size)
-    row = np.repeat(hold_from[g], size) + np.arange(which.size) - np.repeat(np.cumsum(size) - size, size)
-    Xh, yh = X[row], y[row]
-    rmse = {}
-    for key, coef in (("old", old), ("new", new)):
-        sq = (yh - np.einsum("nk,nk->n", Xh, coef[which])) ** 2
-        rmse[key] = np.sqrt(np.bincount(which, weights=sq, minlength=g.size) / size)
-    return {int(gi): (bool(same[j]), float(rmse["old"][j]), float(rmse["new"][j])) for j, gi in enumerate(g)}
+        since = (active.get(imo) or {}).get("data_to_utc")
+        if since is None:
+            continue
+        a, b = bounds[g], bounds[g + 1]
+        first_new = a + int(np.searchsorted(ts[a:b], np.datetime64(pd.Timestamp(since).to_datetime64(), "us"), side="right"))
+        if b - first_new >= gate.min_holdout_rows:
+            hold_from[g] = max(hold_from[g], first_new)
+    return hold_from
+
+
+def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, gate: Gate) -> str | None:
+    """Why candidate c fails the absolute gate for vessel g, or None."""
+    for t in TARGETS:
+        r = c.train[t][g]
+        if c.form == "mlp":  # regularised by early stopping rather than counted per parameter
+            if r.n < gate.mlp_min_rows:
+                return f"too few reports for the network: {r.n} training rows (need ≥ {gate.mlp_min_rows})"
+            continue
+        n_coef = len(r.names) - len(r.dropped)
+        if r.n < gate.min_rows_per_coef * max(n_coef, 1):
+            return f"under-determined: {r.n} training rows for {n_coef} {t} coefficients (need ≥ {gate.min_rows_per_coef * n_coef})"
+    if n_hold == 0:
+        return "no held-out rows to validate on"
+    for t in TARGETS:
+        r2 = c.train[t][g].r2
+        if not (r2 >= gate.min_r2):
+            return f"{t} R² {r2:.3f} below {gate.min_r2:g}"
+    for t, share in (("speed", gate.max_speed_rmse_share), ("fuel", gate.max_fuel_rmse_share)):
+        rmse, mean = hold_rmse[t][g], hold_mean[t][g]
+        if not (rmse <= share * mean):
+            return f"held-out {t} RMSE {rmse:.4g} above {100 * share:g} % of its mean {mean:.4g}"
+    return None
+
+
+def _paired(y, new, old, sigmas: float) -> tuple[float, float, bool]:
+    """(RMSE of new, RMSE of old, whether new is worse by more than `sigmas` standard errors of the mean
+    paired difference of squared errors) over the rows where both are finite."""
+    a, b = (y - new) ** 2, (y - old) ** 2
+    ok = np.isfinite(a) & np.isfinite(b)
+    if not ok.any():
+        return float("nan"), float("nan"), False
+    d = a[ok] - b[ok]
+    se = float(np.std(d, ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0
+    return float(np.sqrt(a[ok].mean())), float(np.sqrt(b[ok].mean())), bool(d.mean() > sigmas * se)
+
+
+def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tuple[dict, dict]:
+    """For vessels whose active model has a form as defined now: ({g: (mask over the vessel's held-out rows of
+    those the active model was not fitted on — all of them if fewer than `min_new_rows` —, {target: its
+    predictions on the held-out rows})}, {g: flag text}).
+
+    The flag: the mean residual of the active model on the reports newer than it moved, against the
+    reports it was fitted on, by more than `step_sigmas` of their standard deviation.
+    """
+    by_form: dict[str, list[int]] = {}
+    for g, imo in enumerate(map(int, imos)):
+        if _usable(active.get(imo)):
+            by_form.setdefault(active[imo]["form"], []).append(g)
+    hold, flags = {}, {}
+    for form, groups in by_form.items():
+        gi = np.array(groups)
+        rows = _ranges(bounds[gi], bounds[gi + 1])
+        which = np.repeat(np.arange(gi.size), bounds[gi + 1] - bounds[gi])
+        pred = {t: _predict(form, t, np.array([list(active[int(imos[g])][t].values()) for g in groups], dtype=np.float64),
+                            bounds[gi], bounds[gi + 1], inp) for t in TARGETS}
+        starts = np.r_[0, np.cumsum(bounds[gi + 1] - bounds[gi])]
+        for j, g in enumerate(groups):
+            a = active[int(imos[g])]
+            since = a.get("data_to_utc")
+            sl = slice(starts[j], starts[j + 1])
+            r_ts = ts[rows[sl]]
+            new = (r_ts > np.datetime64(pd.Timestamp(since).to_datetime64(), "us")) if since is not None else np.ones(r_ts.size, bool)
+            h = slice(hold_from[g] - bounds[g], None)
+            unseen = new[h] if new[h].sum() >= gate.min_new_rows else np.ones(new[h].size, bool)
+            hold[g] = (unseen, {t: pred[t][sl][h] for t in TARGETS})
+            if since is None or new.sum() < gate.min_new_rows or (~new).sum() < gate.min_new_rows:
+                continue
+            for t in TARGETS:
+                r = y[t][rows[sl]] - pred[t][sl]
+                old_r, new_r = r[~new][np.isfinite(r[~new])], r[new][np.isfinite(r[new])]
+                if old_r.size < gate.min_new_rows or new_r.size < gate.min_new_rows:
+                    continue
+                sd = float(np.std(old_r)) or 1e-12
+                shift = float(np.mean(new_r) - np.mean(old_r))
+                if abs(shift) > gate.step_sigmas * sd:
+                    unit = "kn" if t == "speed" else "t/h"
+                    flags[g] = (f"new reports contradict the active model: {t} residuals stepped by {shift:+.3g} {unit} "
+                                f"({shift / sd:+.1f} σ) over {new_r.size} reports since {pd.Timestamp(since)}; check the "
+                                f"{'speed log' if t == 'speed' else 'fuel meters'} before these reports are used")
+                    break
+    return hold, flags
+
+
+def _coefficients_json(r: fit.FitResult) -> str:
+    """`json.dumps(r.coefficients())`, formatted from a template where every value is finite (cheaper)."""
+    values = r.coef.tolist()
+    if not all(map(math.isfinite, values)):
+        return json.dumps(r.coefficients())
+    template = _TEMPLATES.get(r.names)
+    if template is None:
+        template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
+    return template % tuple(values)
+
+
+_TEMPLATES: dict[tuple, str] = {}
+
+
+def _scores(results: dict, g: int) -> dict:
+    return {f"{t}_{k}": float(getattr(results[t][g], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")}
+
+
+def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> list[dict]:
+    """perf_models rows: an accepted model refitted on all its vessel's rows, a refused one as fitted on the training rows."""
+    full = {}
+    for form in {p[2] for p in plans if p[3]}:
+        gs = np.array([p[0] for p in plans if p[3] and p[2] == form])
+        c = cands[form]
+        # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
+        # all rows (the Huber weights of the rows it was fitted on hardly change)
+        res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
+                        start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
+        for j, g in enumerate(gs):
+            full[int(g)] = {t: res[t][j] for t in TARGETS}
+    out = []
+    first, end, hold, n_hold = bounds[:-1].tolist(), bounds[1:].tolist(), hold_from.tolist(), n_hold.tolist()
+    for g, imo, form, activate, summary, data_hash in plans:
+        res = full[g] if activate else {t: cands[form].train[t][g] for t in TARGETS}
+        last = end[g] - 1 if activate else hold[g] - 1
+        used = last >= first[g]
+        summary.update({f"{t}_{k}": float(getattr(res[t], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")})
+        months, data_to = (float(inp["months_dd"][last]), ts[last].item()) if used else (0.0, None)  # .item(): a datetime
+        for t in TARGETS:
+            r = res[t]
+            out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,
+                        "coefficients": _coefficients_json(r), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
+                        "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": n_hold[g],
+                        "status": "active" if activate else "rejected", "reason": summary["reason"], "active": activate,
+                        "months_dd": months, "data_hash": data_hash, "data_to_utc": data_to})
+    return out

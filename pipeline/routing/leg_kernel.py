@@ -18,6 +18,8 @@ import math
 import numba
 import numpy as np
 
+# numba caches this module by its own source only: a change to the performance functions it compiles
+# in (features.stw_kn_nb, fuel_tph_nb) needs a change here, or cleared __pycache__, to be seen.
 from pipeline.performance.features import fuel_tph_nb, stw_kn_nb
 from pipeline.routing import geodesy as geo
 from pipeline.routing.weather_field import N_VARS, SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, sample_nb

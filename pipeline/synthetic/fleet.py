@@ -46,7 +46,7 @@ class DemoFleet:
 def true_model(design_speed_kn: float, rpm_max: float, design_fuel_tph: float, rng: np.random.Generator) -> PerformanceModel:
     """Physical-form truth: speed ∝ rpm with draft/trim/fouling losses; fuel ∝ rpm³ with draft and fouling."""
     a_rpm = design_speed_kn / rpm_max * rng.uniform(1.02, 1.08)
-    speed = np.array([0.6, a_rpm, -0.06, -0.05, -1.0 / 700.0, -0.09, -0.012])
+    speed = np.array([0.6, a_rpm, -0.06, -0.05, 1.0 / 700.0, 0.09, -0.012])
     r3 = (rpm_max / 100.0) ** 3
     fuel = np.array([0.05, design_fuel_tph / r3 * 0.8, design_fuel_tph / r3 * 0.02, design_fuel_tph / r3 * 0.002, 0.0003, 0.012])
     return PerformanceModel(form="physical", speed_coef=speed, fuel_coef=fuel)

@@ -1,0 +1,141 @@
+"""The MLP form: one 5-30-2 network (the A*/MLP paper's structure, the thesis appendix's neural model)
+giving speed through water (kn) and fuel rate (t/h) from the same five inputs.
+
+Inputs: rpm, draft (m), trim (m), wind Vw·w(θw) (kn) and waves Hs·w(θs) (m), where w is the physical
+form's direction shape (`features.direction_weight`: 1 head-on, 0.45 beam, 0.14 following). Wind
+and waves enter as amounts already weighted by direction, so calm water (Vw = Hs = 0) has no
+direction and cannot depend on the heading. One hidden layer of 30 tanh units, two linear outputs;
+inputs and outputs are standardised with the training rows' means and standard deviations.
+
+Training: full-batch Adam on the mean squared error of the standardised outputs with a small L2
+penalty, early stopping on a time-ordered split (the newest `VAL_FRAC` of the training rows are
+the validation rows; the parameters of the best validation epoch are kept), weights initialised
+from an explicit seeded generator: the same rows and seed give the same network, bit for bit.
+Plain numpy (a 256-parameter network on a few hundred reports needs no framework); the forward
+pass is also a numba function so routing kernels evaluate it like the linear forms.
+
+A network is one flat parameter vector (`N_PARAMS` values, layout in `_unpack`), stored as the
+model's speed and its fuel coefficients alike.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+N_IN, N_HIDDEN, N_OUT = 5, 30, 2
+N_PARAMS = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT
+PARAM_NAMES = tuple(f"p{i:03d}" for i in range(N_PARAMS))
+VAL_FRAC = 0.2
+MAX_EPOCHS = 1500
+PATIENCE = 100
+LEARNING_RATE = 0.01
+L2 = 1e-4
+DEFAULT_SEED = 1
+
+# offsets of the parts of a parameter vector
+_XM, _XS = 0, N_IN
+_W1 = 2 * N_IN
+_B1 = _W1 + N_IN * N_HIDDEN
+_W2 = _B1 + N_HIDDEN
+_B2 = _W2 + N_HIDDEN * N_OUT
+_YM = _B2 + N_OUT
+_YS = _YM + N_OUT
+
+
+def _unpack(p: np.ndarray):
+    """(x_mean, x_std, W1 (5×30), b1, W2 (30×2), b2, y_mean, y_std) views of a parameter vector."""
+    return (p[_XM:_XS], p[_XS:_W1], p[_W1:_B1].reshape(N_IN, N_HIDDEN), p[_B1:_W2], p[_W2:_B2].reshape(N_HIDDEN, N_OUT),
+            p[_B2:_YM], p[_YM:_YS], p[_YS:])
+
+
+def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> np.ndarray:
+    """The network's input matrix (n × 5) from broadcastable model inputs (see the module docstring)."""
+    from pipeline.performance.features import direction_weight_array
+
+    cols = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m,
+                                                                            wave_rel_deg)))
+    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg = (c.ravel() for c in cols)
+    return np.column_stack([rpm, draft_m, trim_m, wind_kn * direction_weight_array(wind_rel_deg),
+                            hs_m * direction_weight_array(wave_rel_deg)])
+
+
+def forward(p: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """(n × 2) outputs — speed (kn), fuel rate (t/h) — of the network p at the rows of X (n × 5)."""
+    xm, xs, W1, b1, W2, b2, ym, ys = _unpack(np.asarray(p, dtype=np.float64))
+    return (np.tanh(((X - xm) / xs) @ W1 + b1) @ W2 + b2) * ys + ym
+
+
+@numba.njit(cache=True)
+def forward_nb(p, x0, x1, x2, x3, x4, out_index):
+    """Output `out_index` (0 speed, 1 fuel) of the network p for one input row (as `forward`)."""
+    x = (x0, x1, x2, x3, x4)
+    z = np.empty(N_IN)
+    for i in range(N_IN):
+        z[i] = (x[i] - p[_XM + i]) / p[_XS + i]
+    o = p[_B2 + out_index]
+    for j in range(N_HIDDEN):
+        a = p[_B1 + j]
+        for i in range(N_IN):
+            a += z[i] * p[_W1 + i * N_HIDDEN + j]
+        o += math.tanh(a) * p[_W2 + j * N_OUT + out_index]
+    return o * p[_YS + out_index] + p[_YM + out_index]
+
+
+def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: float = VAL_FRAC, max_epochs: int = MAX_EPOCHS,
+          patience: int = PATIENCE, lr: float = LEARNING_RATE, l2: float = L2) -> tuple[np.ndarray, dict]:
+    """(parameter vector, info) of a network fitted to time-ordered rows X (n × 5) → Y (n × 2), non-finite rows left out.
+
+    The newest `val_frac` of the rows (at least one, if there are two or more) are the validation rows
+    of early stopping; info: n_train, n_val, best_epoch, epochs, val_mse (standardised units).
+    """
+    ok = np.isfinite(X).all(axis=1) & np.isfinite(Y).all(axis=1)
+    X, Y = X[ok], Y[ok]
+    n = len(X)
+    p = np.zeros(N_PARAMS)
+    xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
+    if n == 0:
+        xs[:], ys[:] = 1.0, 1.0
+        return p, {"n_train": 0, "n_val": 0, "best_epoch": 0, "epochs": 0, "val_mse": float("nan")}
+    n_val = min(max(int(round(n * val_frac)), 1), n - 1) if n >= 2 else 0
+    n_fit = n - n_val
+    xm[:], ym[:] = X[:n_fit].mean(axis=0), Y[:n_fit].mean(axis=0)
+    xs[:] = np.where(X[:n_fit].std(axis=0) > 1e-12, X[:n_fit].std(axis=0), 1.0)
+    ys[:] = np.where(Y[:n_fit].std(axis=0) > 1e-12, Y[:n_fit].std(axis=0), 1.0)
+    Z, T = (X - xm) / xs, (Y - ym) / ys
+    Zf, Tf, Zv, Tv = Z[:n_fit], T[:n_fit], Z[n_fit:], T[n_fit:]
+    rng = np.random.default_rng(seed)
+    W1[:] = rng.normal(0.0, 1.0 / math.sqrt(N_IN), W1.shape)
+    W2[:] = rng.normal(0.0, 1.0 / math.sqrt(N_HIDDEN), W2.shape)
+    params = (W1, b1, W2, b2)
+    m = [np.zeros_like(a) for a in params]
+    v = [np.zeros_like(a) for a in params]
+    b_1, b_2, eps = 0.9, 0.999, 1e-8
+    best, best_p, best_epoch, since = np.inf, p.copy(), 0, 0
+    epoch = 0
+    for epoch in range(1, max_epochs + 1):
+        H = np.tanh(Zf @ W1 + b1)
+        E = H @ W2 + b2 - Tf
+        dO = E * (2.0 / E.size)
+        dH = (dO @ W2.T) * (1.0 - H * H)
+        grads = (Zf.T @ dH + 2 * l2 * W1, dH.sum(axis=0), H.T @ dO + 2 * l2 * W2, dO.sum(axis=0))
+        for a, g, mi, vi in zip(params, grads, m, v):
+            mi *= b_1
+            mi += (1 - b_1) * g
+            vi *= b_2
+            vi += (1 - b_2) * g * g
+            a -= lr * (mi / (1 - b_1 ** epoch)) / (np.sqrt(vi / (1 - b_2 ** epoch)) + eps)
+        if n_val:
+            val = float(np.mean((np.tanh(Zv @ W1 + b1) @ W2 + b2 - Tv) ** 2))
+        else:
+            val = float(np.mean(E * E))
+        if val < best - 1e-12:
+            best, best_epoch, since = val, epoch, 0
+            best_p[:] = p
+        else:
+            since += 1
+            if since >= patience:
+                break
+    return best_p, {"n_train": n_fit, "n_val": n_val, "best_epoch": best_epoch, "epochs": epoch, "val_mse": best}
