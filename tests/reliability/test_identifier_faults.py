@@ -206,7 +206,7 @@ def test_vessel_validation_never_raises_and_keeps_only_valid_imos(rows):
 def test_fuzzed_voyage_ids_through_a_csv_file_and_the_warehouse(tmp_path_factory, vids):
     """Arbitrary IDs written to a real CSV, read back as the import reads it, validated and stored: the good
     ones are stored as they are, the others are refused with their raw text; nothing is lost."""
-    from flows.refit import read_table
+    from flows.jobs.refit import read_table
     from storage import fleet_store
 
     folder = tmp_path_factory.mktemp("fuzz")
@@ -242,7 +242,7 @@ def test_fuzzed_noon_and_vessel_csv_files_through_the_warehouse(tmp_path_factory
     """Arbitrary noon-report and vessel rows in real CSV files, read, validated and stored as the imports do:
     every row read is stored, already present or refused with a reason; nothing non-finite, ambiguous or with a
     bad IMO gets in."""
-    from flows.refit import read_table
+    from flows.jobs.refit import read_table
     from pipeline.performance.validate import validate_noon
     from storage import fleet_store
 
