@@ -224,8 +224,12 @@ def ingest_cycle(cycle: str | None = None, data_root: str | None = None, rish_ur
 
 def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: bool, run) -> dict:
     if not force and c in cube.complete_cycles(layout.weather_cube) and _recorded_complete(layout.warehouse, c):
-        LOG.info("cycle %s is already complete; skipping", label)
-        return CycleReport(label, True, 0, 0, skipped=True).__dict__
+        bad = cube.corrupt_chunks(layout.weather_cube, [c])  # "complete" must also mean readable
+        if not bad:
+            LOG.info("cycle %s is already complete; skipping", label)
+            return CycleReport(label, True, 0, 0, skipped=True).__dict__
+        LOG.warning("cycle %s is recorded complete but %d cube chunk(s) are corrupt (first: %s); ingesting it again",
+                    label, len(bad), bad[0].chunk)
     token = earthdata_token(s, blocks=run.prefect)
     opts = {source: _opts(s, source, token) for source in ("GSM", "GWM", "OSCAR")}
     steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)

@@ -54,7 +54,7 @@ def route_one(job: RouteJob, cube_path: str | None) -> dict:
     try:
         weather = cycle_field(cube_path, job.cycle) if cube_path is not None else None
         plan, weather = plan_voyage(job, weather)
-    except (RoutingInputError, VoyageGeometryError, KeyError) as exc:
+    except (RoutingInputError, VoyageGeometryError, KeyError, cube.CubeError) as exc:  # the message says what to do
         return failed_result(job, str(exc).strip("'\""))
     except Exception as exc:  # a bug or bad data: record it, keep the rest of the fleet going
         return failed_result(job, f"unexpected error: {type(exc).__name__}: {exc}",

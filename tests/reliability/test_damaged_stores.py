@@ -156,3 +156,30 @@ def test_latest_routes_keeps_the_last_good_plan_and_flags_a_later_failure(tmp_pa
         "V2": ("r1", "ok", 80.0, True, "r2", "failed", "no weather: cycle missing"),
         "V3": ("r3", "failed", None, False, None, None, None),  # never planned: its newest attempt, not flagged
     }
+
+
+def test_a_plain_ingest_re_ingests_a_complete_cycle_whose_chunk_is_corrupt(root, small_mirror, ingest, clean_cube):
+    store = DataLayout(root).weather_cube
+    _spoil_chunk(store, "v10", "0/0/0/2")
+    report = ingest(root, *file_urls(small_mirror))  # no --force: "complete" is not taken on trust
+    assert report["complete"] and not report.get("skipped"), report
+    assert_same_cube(store, clean_cube)
+    assert ingest(root, *file_urls(small_mirror))["skipped"]  # whole again: the next run skips it
+
+
+def test_routing_on_a_corrupt_chunk_fails_the_voyage_with_the_chunk_and_the_fix(root):
+    from flows.jobs.route_worker import cycle_field, route_one
+    from pipeline.routing.job import RouteJob, RoutingOptions
+
+    store = DataLayout(root).weather_cube
+    _spoil_chunk(store)
+    cycle_field.cache_clear()
+    voyage = {"voyage_id": "VCHUNK", "imo": 1, "dep_lat": 34.0, "dep_lon": 140.0, "arr_lat": 30.0, "arr_lon": 145.0,
+              "depart_utc": np.datetime64("2020-12-01T02"), "rta_utc": np.datetime64("2020-12-02T12"), "rpm_options": [70, 80]}
+    from tests.reliability.test_routing_faults import MODEL
+
+    res = route_one(RouteJob(voyage=voyage, vessel={"rpm_max": 100}, model=MODEL.to_json(), run_id="r1",
+                             cycle=str(C)[:19], exports=False, options=RoutingOptions(n_lines=6, n_points=7)), str(store))
+    row = res["route"]
+    assert row["status"] == "failed" and "unexpected" not in row["reason"], row["reason"]
+    assert f"of cycle {CYCLE} is corrupt" in row["reason"] and f"jitroute ingest --cycle {CYCLE} --force" in row["reason"]
