@@ -6,6 +6,12 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings as hypothesis_settings
+
+# CI runs every property test on the same examples (reproducible); elsewhere hypothesis explores anew each run.
+hypothesis_settings.register_profile("ci", derandomize=True, print_blob=True)
+if os.environ.get("CI"):
+    hypothesis_settings.load_profile("ci")
 
 JMA_FIXTURES = Path(__file__).resolve().parent / "fixtures" / "jma"
 
