@@ -7,8 +7,6 @@ Faults are keyed by file name (or path suffix):
   "stall" / "stallxN"   accept the request and never answer (the client's timeout fires); xN: first N only
   "reset" / "resetxN"   close the connection with a TCP reset before any response; xN: first N only
   "redirect:<url>"      302 to <url>
-  "barrier2"            send headers and half the body, wait until a second request for the same
-                        file has got that far too, then send the rest (forces two downloads to overlap)
   "drip" / "drip:<s>"   announce the full length, then send one byte every <s> seconds (default 0.05)
                         until the client goes away or the server stops; `handler.dripping` is set when
                         the first byte has gone out
@@ -103,11 +101,6 @@ class FaultyHandler(SimpleHTTPRequestHandler):
         elif fault == "truncate":  # announce the full length, send half, drop the connection
             self._send_first_half()
             self.close_connection = True
-        elif fault == "barrier2":
-            data = self._send_first_half()
-            self.barrier.wait(STALL_LIMIT_S)
-            self.wfile.write(data[len(data) // 2:])
-            self.wfile.flush()
         elif fault == "drip" or fault.startswith("drip:"):
             self._drip(float(fault.split(":", 1)[1]) if ":" in fault else 0.05)
         elif fault in ("endless", "huge"):
@@ -133,7 +126,7 @@ class FaultyHandler(SimpleHTTPRequestHandler):
 def serve(folder: Path, faults: dict[str, str] | None = None):
     """Serve `folder`; yields (the base URL 'http://127.0.0.1:PORT/', the handler class with hits/requests)."""
     handler = type("Handler", (FaultyHandler,), {"faults": dict(faults or {}), "hits": {}, "requests": [],
-                                                 "stop": threading.Event(), "barrier": threading.Barrier(2),
+                                                 "stop": threading.Event(),
                                                  "dripping": threading.Event()})
     server = ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(handler, directory=str(folder)))
     thread = threading.Thread(target=server.serve_forever, daemon=True)
@@ -142,6 +135,5 @@ def serve(folder: Path, faults: dict[str, str] | None = None):
         yield f"http://127.0.0.1:{server.server_address[1]}/", handler
     finally:
         handler.stop.set()
-        handler.barrier.abort()
         server.shutdown()
         server.server_close()
