@@ -35,7 +35,6 @@ class FaultyHandler(SimpleHTTPRequestHandler):
     hits: dict[str, int] = {}
     requests: list[tuple[str, dict[str, str]]] = []
     stop: threading.Event = threading.Event()
-    barrier: threading.Barrier = threading.Barrier(2)
     dripping: threading.Event = threading.Event()
 
     def log_message(self, *args):  # keep test output clean
