@@ -1,0 +1,74 @@
+"""Plans pinned bit for bit: the same instance and seed must give the same plan, cost and work count.
+
+The values were recorded with the code before the solver interfaces were restructured (named kernel
+structures, solver registry), so a refactor that changes any of them changed an algorithm. Change a pin only
+in a commit that changes the algorithm (or its random stream) on purpose and says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from routing_cases import FAST, field, moving_storm, problem, wavy
+from pipeline.routing.solve import solve
+
+# name → (status, cost as float.hex, n_evals, node offset per inner line (None: not on this graph), rpm per leg)
+PINS = {
+    "wavy-bfoa-1": ('ok', '0x1.011629d54b140p+6', 453, [0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 85, 85, 85, 70]),
+    "wavy-bfoa-2": ('ok', '0x1.011629d54b140p+6', 433, [0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 85, 85, 85, 70]),
+    "wavy-dp": ('ok', '0x1.f0af4047b88c8p+5', 9606, [0, 0, 0, 0, 0, 0, 0, 0], [70, 70, 85, 85, 85, 85, 85, 85, 85]),
+    "wavy-astar": ('ok', '0x1.6d35cebf1009ap+6', 0, [0, 0, 0, 0, 0, 0, 0, 0], [100, 100, 100, 100, 100, 100, 100, 100, 100]),
+    "wavy-gc": ('ok', '0x1.09c247bc679e0p+6', 0, [0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 85, 85, 85, 85]),
+    "wavy-rhumb": ('ok', '0x1.0921a14e3de86p+6', 0, None, [85, 85, 85, 85, 85, 85, 85, 85, 85]),
+    "thesis-bfoa-3": ('ok', '0x1.baf8a41c8f726p+1', 499, [0, 0, 0, 0, 0, 0], [80, 80, 80, 100, 100, 100, 80]),
+    "storm-gc": ('ok', '0x1.0b53cc1975294p+7', 0, [0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 85, 85, 85, 85, 85, 85]),
+    "storm-bfoa-4": ('ok', '0x1.bd950de92d68dp+6', 446, [1, 2, 2, 2, 2, 2, 2, 2, 1, 0], [70, 85, 85, 70, 70, 85, 85, 85, 70, 70, 85]),
+    "storm-dp": ('ok', '0x1.ab1af6f568f89p+6', 35691, [1, 2, 2, 2, 3, 3, 3, 3, 2, 1], [85, 85, 85, 85, 70, 70, 70, 70, 70, 70, 85]),
+    "storm-astar": ('ok', '0x1.aeb15bbaee982p+6', 0, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [85, 85, 85, 70, 70, 70, 70, 70, 70, 85, 85]),
+}
+
+
+def _offsets(plan, space):
+    out = []
+    for i, (la, lo) in enumerate(plan.waypoints[1:-1], start=1):
+        d = (space.lat[i] - la) ** 2 + (space.lon[i] - lo) ** 2
+        j = int(np.argmin(d))
+        assert d[j] < 1e-18, f"waypoint {i} is not a node of line {i}"
+        out.append(j - space.centre)
+    return out
+
+
+def _plans():
+    fld = field(wavy(2))
+    pr = problem((30.0, -160.0), (33.0, -145.0), 72, n_lines=8, n_points=9)
+    sp = pr.search_space()
+    yield "wavy-bfoa-1", solve(pr, fld, solver="bfoa", seed=1, params=FAST, space=sp), sp
+    yield "wavy-bfoa-2", solve(pr, fld, solver="bfoa", seed=2, params=FAST, space=sp), sp
+    for name in ("dp", "astar", "gc"):
+        yield f"wavy-{name}", solve(pr, fld, solver=name, space=sp), sp
+    yield "wavy-rhumb", solve(pr, fld, solver="rhumb"), None
+    prt = problem((35.0, -140.0), (28.0, -132.0), 52, rpm_options=(80, 100), objective="thesis", n_lines=6, n_points=9)
+    spt = prt.search_space()
+    yield "thesis-bfoa-3", solve(prt, field(wavy(3)), solver="bfoa", seed=3, params=FAST, space=spt), spt
+    storm = field(moving_storm(5, 33.0, 225.0, drift_kn=(-10.0, 0.0), hs_peak=6.0), step_h=6, hours=240)
+    prs = problem((30.0, -160.0), (35.0, -130.0), 150, max_hs_m=7.0, n_lines=10, n_points=11)
+    sps = prs.search_space()
+    yield "storm-gc", solve(prs, storm, solver="gc", space=sps), sps
+    yield "storm-bfoa-4", solve(prs, storm, solver="bfoa", seed=4, params=FAST, space=sps), sps
+    yield "storm-dp", solve(prs, storm, solver="dp", space=sps), sps
+    yield "storm-astar", solve(prs, storm, solver="astar", space=sps), sps
+
+
+@pytest.fixture(scope="module")
+def plans():
+    return {name: (plan, space) for name, plan, space in _plans()}
+
+
+@pytest.mark.parametrize("name", sorted(PINS))
+def test_plan_is_pinned(plans, name):
+    plan, space = plans[name]
+    status, cost_hex, n_evals, offsets, rpm = PINS[name]
+    got = (plan.status, float(plan.cost).hex(), plan.n_evals, _offsets(plan, space) if space is not None else None,
+           [int(g["rpm"]) for g in plan.legs])
+    assert got == (status, cost_hex, n_evals, offsets, rpm)
