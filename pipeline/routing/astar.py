@@ -12,10 +12,12 @@ time-only to fuel-only gives a family of routes; the one with the best objective
 from __future__ import annotations
 
 import heapq
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.routing import geodesy as geo
+from pipeline.routing.baseline import evaluate
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 
 ALPHAS = (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
@@ -36,7 +38,7 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
     label = {start: (inst.t_dep_h, 0.0, None, -1)}  # time, fuel, parent, rpm index
     heap = [(h[0, c], 0.0, 0, c)]
     done = set()
-    W = inst.numba_weather()
+    ves, wx, rpm_options = inst.vessel, inst.wx, inst.rpm_options
     while heap:
         _, g, i, a = heapq.heappop(heap)
         if (i, a) in done:
@@ -49,8 +51,7 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
             if not edge_ok[i, a, a2] or (i + 1, a2) in done:
                 continue
             for r in rpm_order:
-                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, inst.rpm_options[r], inst.vp,
-                            inst.speed_coef, inst.fuel_coef, *W, out)
+                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], ves, wx, out)
                 if out[CODE] != OK or t0 + out[H] - inst.t_dep_h > inst.max_hours:
                     continue
                 g2 = g + alpha * out[FUEL] / f_ref + (1 - alpha) * out[H] / t_ref_h
@@ -71,3 +72,29 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
         rpm_idx[i - 1] = label[key][3]
         key = label[key][2]
     return nodes, rpm_idx
+
+
+@dataclass(frozen=True)
+class AstarOptions:
+    alphas: tuple[float, ...] = ALPHAS  # fuel weights swept, 0 = time only, 1 = fuel only
+
+
+def search(inst, baseline, *, seed: int, options: AstarOptions):
+    """The solver contract (see solvers.py): one A* per α, the plan with the best objective value wins."""
+    from pipeline.routing.solvers import Found
+
+    m, p = inst.problem.model, inst.problem
+    rpm = np.asarray(p.rpm_options)
+    stw = m.stw_kn(rpm, p.draft_m, p.trim_m)
+    fuel = m.fuel_tph(rpm, p.draft_m, p.trim_m)
+    fuel_per_nm_lb = float(np.min(0.7 * fuel / (stw + 3.0)))
+    speed_ub = float(np.max(stw) * 1.1 + 3.0)
+    best = None
+    for alpha in options.alphas:
+        found = astar_route(inst, alpha, np.arange(len(rpm)), fuel_per_nm_lb, speed_ub, inst.f_target, p.t_req_h)
+        if found is None:
+            continue
+        cost = evaluate(inst, *found)[0]
+        if best is None or cost < best[0]:
+            best = (cost, found)
+    return Found(None, None) if best is None else Found(*best[1])

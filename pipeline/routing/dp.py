@@ -11,6 +11,9 @@ arrival no later and no dearer.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 
@@ -19,8 +22,10 @@ from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
 
 
 @numba.njit(cache=True)
-def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj, t_req_h,
-          window_h, f_target, early, late, max_shift):
+def dp_bucket_nb(bucket_h, g, v, w, o):
+    """(nodes, rpm indexes, cost, legs sailed) of the best plan found with labels merged per time bucket."""
+    lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
+    t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
     R = rpm_options.shape[0]
     nb = int(max_hours / bucket_h) + 1
@@ -34,7 +39,7 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
     tarr[0, c, 0] = t_dep_h
     out = np.empty(N_LEG_OUT)
     n_legs = 0
-    dom_early = early if obj == OBJ_JIT else 0.0
+    dom_early = o.early_t_per_h if o.kind == OBJ_JIT else 0.0
     for i in range(L2 - 1):
         for a in range(P):
             front = np.inf
@@ -51,8 +56,8 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
                     if not edge_ok[i, a, a2]:
                         continue
                     for r in range(R):
-                        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], vp, sc, fc,
-                                    wx, times_h, grid, out)
+                        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w,
+                                    out)
                         n_legs += 1
                         if out[CODE] != OK:
                             continue
@@ -70,8 +75,7 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
     best, best_b = np.inf, -1
     for b in range(nb):
         if fuel[L2 - 1, c, b] < np.inf:
-            q = route_cost_nb(obj, tarr[L2 - 1, c, b] - t_dep_h, fuel[L2 - 1, c, b], t_req_h, window_h, f_target, early,
-                              late)
+            q = route_cost_nb(o, tarr[L2 - 1, c, b] - t_dep_h, fuel[L2 - 1, c, b])
             if q < best:
                 best, best_b = q, b
     nodes = np.full(L2, c, np.int64)
@@ -85,3 +89,19 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
         a, b = par_a[i, a, b], par_b[i, a, b]
     nodes[0] = c
     return nodes, rpm_idx, best, n_legs
+
+
+@dataclass(frozen=True)
+class DpOptions:
+    bucket_h: float = 0.5  # arrival-time bucket (h) inside which labels are merged
+
+
+def search(inst, baseline, *, seed: int, options: DpOptions):
+    """The solver contract (see solvers.py); `seed` is not used."""
+    from pipeline.routing.solvers import Found
+
+    nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
+                                                inst.objective)
+    if not math.isfinite(cost):
+        return Found(None, None, n_legs)
+    return Found(nodes, rpm_idx, n_legs)

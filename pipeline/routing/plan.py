@@ -119,8 +119,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
         if not inst.space.edge_ok[i, a, b]:
             return legs, lk.NO_EDGE, i
         rpm = float(inst.rpm_options[rpm_idx[i]])
-        o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vp, inst.speed_coef,
-                        inst.fuel_coef, inst.weather)
+        o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vessel, inst.weather)
         if o[lk.CODE] != lk.OK:
             return legs, int(o[lk.CODE]), i
         etd = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")

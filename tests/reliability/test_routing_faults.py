@@ -87,10 +87,10 @@ def test_voyage_beyond_the_forecast_horizon_is_flagged():
 
 
 def test_a_bad_voyage_does_not_stop_the_others():
-    from flows.fleet import route_one
+    from flows.jobs.route_worker import route_one
+    from pipeline.routing.job import RouteJob, RoutingOptions
 
-    routing = {"solver": "bfoa", "objective": "jit", "arrival_window_h": 6.0, "seed": 1, "n_lines": 8, "n_points": 11,
-               "d_point_nm": None}
+    options = RoutingOptions(solver="bfoa", objective="jit", arrival_window_h=6.0, seed=1, n_lines=8, n_points=11)
     good = {"voyage_id": "VOK", "imo": 1, "dep_lat": DEP[0], "dep_lon": DEP[1], "arr_lat": ARR[0], "arr_lon": ARR[1],
             "depart_utc": np.datetime64("2020-12-01T06"), "rta_utc": np.datetime64("2020-12-03T06"), "rpm_options": [70, 85, 100]}
     jobs = [
@@ -103,8 +103,9 @@ def test_a_bad_voyage_does_not_stop_the_others():
     out = {}
     for v in jobs:
         model = None if v["voyage_id"] == "VNOMODEL" else MODEL.to_json()
-        res = route_one({"voyage": v, "vessel": {"rpm_max": 100}, "model": model, "run_id": "r1", "cycle": "2020-12-01T00",
-                         "cube": None, "routing": routing, "exports_dir": None})
+        job = RouteJob(voyage=v, vessel={"rpm_max": 100}, model=model, run_id="r1", cycle="2020-12-01T00",
+                       exports=False, options=options)
+        res = route_one(job, None)
         out[v["voyage_id"]] = res["route"]
     assert out["VOK"]["status"] == "ok" and out["VOK"]["n_legs"] == 9
     assert out["VLAND"]["status"] == "failed" and "on land" in out["VLAND"]["reason"]
