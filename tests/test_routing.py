@@ -10,7 +10,6 @@ from __future__ import annotations
 import itertools
 import math
 
-import numba
 import numpy as np
 import pytest
 from global_land_mask import globe
@@ -424,11 +423,6 @@ def test_dateline_crossing_routes_like_the_great_circle():
         assert plan.hours <= pr.t_req_h
 
 
-@numba.njit
-def seed_numba(seed):
-    np.random.seed(seed)  # numba's generator is separate from numpy's
-
-
 def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     """The RTA-aimed engine settings and the engine re-set after a route move (calm water: leg hours are exactly
     distance / STW, so hand formulas check them)."""
@@ -448,8 +442,7 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     rpm = np.empty(L2 - 1, np.int64)
     gc = space.base_route()
     for seed in range(1, 6):
-        seed_numba(seed)
-        q = engine_timing.aim_engine_nb(gc.copy(), rpm, *voyage, s)
+        q = engine_timing.aim_engine_nb(gc.copy(), rpm, *voyage, s, np.random.default_rng(seed))
         t_arr = ct[-1] - inst.t_dep_h
         assert pr.t_req_h - pr.window_h <= t_arr <= pr.t_req_h + 1e-9, (seed, t_arr)
         assert {0, 1} <= set(rpm.tolist())  # a mix of the two settings that bracket the RTA
@@ -461,17 +454,16 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     late_cost, late_h, _, _ = _evaluate(inst, detour, rpm)
     assert late_h > pr.t_req_h and late_cost > LATE_STEP_T
     s2 = engine_timing.scratch(L2)
-    seed_numba(1)
     lk.sail_route_nb(detour, rpm, 0, *voyage, s2.ct, s2.cf)
     rpm2 = rpm.copy()
-    q2 = engine_timing.retime_nb(detour, rpm2, 0, late_cost, np.inf, *voyage, s2)
+    q2 = engine_timing.retime_nb(detour, rpm2, 0, late_cost, np.inf, *voyage, s2, np.random.default_rng(1))
     assert s2.ct[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
     assert q2 < LATE_STEP_T and q2 == pytest.approx(_evaluate(inst, detour, rpm2)[0], rel=1e-12)
     assert np.all(rpm2 >= rpm) and rpm2.sum() > rpm.sum()  # legs only sped up
     # with a bar below any on-time plan the re-set gives up instead of sailing (jit objective)
     rpm3 = rpm.copy()
     lk.sail_route_nb(detour, rpm3, 0, *voyage, s2.ct, s2.cf)
-    assert engine_timing.retime_nb(detour, rpm3, 0, late_cost, 1.0, *voyage, s2) == math.inf
+    assert engine_timing.retime_nb(detour, rpm3, 0, late_cost, 1.0, *voyage, s2, np.random.default_rng(1)) == math.inf
 
 
 def test_bfoa_is_reproducible_by_seed():

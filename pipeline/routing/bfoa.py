@@ -44,7 +44,9 @@ The kernel is split as the method is: `init_swarm_nb` (random initialisation), `
 bacterium's tumbles and swims, with `swim_nb` the swim of one tumble), `reproduce_nb` and `disperse_nb`;
 `bfoa_nb` runs the cycles. They take the voyage as named structures (graph, vessel, weather, objective;
 see engine_timing), the settings as `Knobs`, the bacteria as a `Swarm` and work arrays as `Work` + `Scratch`.
-Everything random comes from numba's generator seeded with `seed`: same seed, same plan.
+Everything random comes from one explicit generator, numpy's default_rng(seed) (PCG64), passed down to every
+kernel that draws: same seed, same plan, and the interpreted kernels (NUMBA_DISABLE_JIT=1) draw the same
+numbers as the compiled ones.
 """
 
 from __future__ import annotations
@@ -167,15 +169,15 @@ def work(n_lines_total: int) -> Work:
 
 
 @numba.njit(cache=True)
-def _new_bacterium(nodes, rpm_idx, g, v, w, o, s, k):
+def _new_bacterium(nodes, rpm_idx, g, v, w, o, s, k, rng):
     """A random bacterium: a safe random walk with engine settings aimed at the RTA. A route that cannot be
     sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
     q = np.inf
     for attempt in range(4):
         if not random_walk_nb(nodes, g.edge_ok, g.max_shift, k.r_max, k.k_max, k.backup, k.sigma * 2.0 ** attempt,
-                              k.p_new, k.p_step):
+                              k.p_new, k.p_step, rng):
             return False, np.inf
-        q = aim_engine_nb(nodes, rpm_idx, g, v, w, o, s)
+        q = aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng)
         if q < np.inf:
             break
     return True, q
@@ -213,7 +215,7 @@ def _beats_neighbours(pos, cost, i, cand, q_cand, d_max):
 
 
 @numba.njit(cache=True)
-def _bend(x, base, top):
+def _bend(x, base, top, rng):
     """A random index in base..top where x changes next to it (a bend of the route or of the engine plan); -1 if none."""
     m = 0
     for j in range(base, top + 1):
@@ -221,7 +223,7 @@ def _bend(x, base, top):
             m += 1
     if m == 0:
         return -1
-    r = np.random.randint(0, m)
+    r = rng.integers(0, m)
     for j in range(base, top + 1):
         if (j > 0 and x[j] != x[j - 1]) or (j + 1 < x.shape[0] and x[j] != x[j + 1]):
             if r == 0:
@@ -231,29 +233,29 @@ def _bend(x, base, top):
 
 
 @numba.njit(cache=True)
-def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine):
+def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine, rng):
     """Fill vec (length L+2 for nodes or L+1 for legs) with a direction; return the first changed index (engine? in
     on_engine). With probability p_bend the vector is placed at a bend (a line where the route, or a leg where the
     engine plan, changes): there a move shifts the bend instead of adding two."""
     for j in range(vec.shape[0]):
         vec[j] = 0
-    engine = np.random.random() < p_engine
+    engine = rng.random() < p_engine
     if engine:
         n = n_legs
         base = 0
     else:
         n = L
         base = 1
-    u = np.random.random()
-    sign = 1 if np.random.random() < 0.5 else -1
+    u = rng.random()
+    sign = 1 if rng.random() < 0.5 else -1
     top = base + n - 1
     k = -1
-    if np.random.random() < p_bend:
-        k = _bend(rpm_idx if engine else nodes, base, top)
-        if k >= 0 and u >= 0.5 and u < 0.92 and np.random.random() < 0.5:
+    if rng.random() < p_bend:
+        k = _bend(rpm_idx if engine else nodes, base, top, rng)
+        if k >= 0 and u >= 0.5 and u < 0.92 and rng.random() < 0.5:
             k = max(base, k - (1 if u < 0.8 else 2))  # a block ending at the bend rather than starting there
     if k < 0:
-        k = base + np.random.randint(0, n)
+        k = base + rng.integers(0, n)
     if u < 0.5:
         vec[k] = sign
         first = k
@@ -267,7 +269,7 @@ def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine):
             vec[j] = sign
         first = k
     else:
-        k2 = base + np.random.randint(0, n)
+        k2 = base + rng.integers(0, n)
         if k2 == k:
             k2 = base + (k - base + 1) % n
         vec[k] = 1
@@ -287,7 +289,7 @@ def _adopt(sw, i, cand, cand_r, ct, cf, q):
 
 
 @numba.njit(cache=True)
-def init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk):
+def init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk, rng):
     """Random initial bacteria; bacterium 0 (and any whose random walk fails) starts on the baseline route, with
     its constant rpm or engine settings aimed at the RTA, whichever is cheaper. Returns the best one's index."""
     cand, cand_r = wk.cand, wk.cand_r
@@ -295,14 +297,14 @@ def init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk):
     for i in range(k.n_bacteria):
         placed = False
         if i > 0:
-            placed, q = _new_bacterium(cand, cand_r, g, v, w, o, s, k)
+            placed, q = _new_bacterium(cand, cand_r, g, v, w, o, s, k, rng)
         if not placed:
             sw.pos[i, :] = base_nodes
             sw.rpm[i, :] = base_rpm
             sw.cost[i] = cost_from_nb(sw.pos[i], sw.rpm[i], 0, g, v, w, o, sw.cum_t[i], sw.cum_f[i])
             s.cnt[0] += 1
             cand[:] = base_nodes
-            q = aim_engine_nb(cand, cand_r, g, v, w, o, s)
+            q = aim_engine_nb(cand, cand_r, g, v, w, o, s, rng)
         if placed or q < sw.cost[i]:
             _adopt(sw, i, cand, cand_r, s.ct, s.cf, q)
     sw.best_pos[:] = sw.pos[0]
@@ -319,7 +321,7 @@ def init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk):
 
 
 @numba.njit(cache=True)
-def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk):
+def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
     """Swim bacterium i along the tumbled direction (wk.vec, or wk.vec_r for engine moves) in steps of `d`, while
     the judged cost keeps falling (at most `swim_max` steps). Returns True when at least one step was taken."""
     pos, rpm, cum_t, cum_f, cost = sw.pos, sw.rpm, sw.cum_t, sw.cum_f, sw.cost
@@ -391,11 +393,11 @@ def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, 
                         f_est += (cum_f[i, j + 1] - cum_f[i, j]) * (k_r * k_r - 1.0)
                 lo_flip = last + 1
             if plan_flips_nb(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], v.rpm_options,
-                             o) < 0:
+                             o, rng) < 0:
                 break
         q = cost_from_nb(cand, cand_r, resume, g, v, w, o, ct, cf)
         # re-set the engine so the moved route still arrives just inside the RTA
-        q = retime_nb(cand, cand_r, start, q, cost[i] + dq_old, g, v, w, o, s)
+        q = retime_nb(cand, cand_r, start, q, cost[i] + dq_old, g, v, w, o, s, rng)
         if q == np.inf:
             break
         # judged on Q(S') + dQ(S') − dQ(S), or on Q alone when S' beats S and every neighbour
@@ -413,13 +415,13 @@ def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, 
 
 
 @numba.njit(cache=True)
-def chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk):
+def chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
     """Bacterium i's `n_chemo` chemotactic moves: tumble, swim; the swim length adapts after `n_fail` failed route
     moves at each size (large → medium → small → large)."""
     L2 = g.lat.shape[0]
     for _m in range(k.n_chemo):
         sw.moves[i] += 1
-        first = _tumble(L2 - 2, L2 - 1, k.p_engine, k.p_bend, sw.pos[i], sw.rpm[i], wk.vec, wk.on_engine)
+        first = _tumble(L2 - 2, L2 - 1, k.p_engine, k.p_bend, sw.pos[i], sw.rpm[i], wk.vec, wk.on_engine, rng)
         engine = wk.on_engine[0]
         if engine:
             for j in range(L2 - 1):
@@ -430,7 +432,7 @@ def chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk):
             d = k.step_large
         else:
             d = 3 - sw.level[i]
-        improved_any = swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk)
+        improved_any = swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng)
         if not engine:
             if improved_any:
                 sw.fails[i] = 0
@@ -464,25 +466,24 @@ def reproduce_nb(sw, order, k):
 
 
 @numba.njit(cache=True)
-def disperse_nb(sw, best_i, g, v, w, o, s, k, wk):
+def disperse_nb(sw, best_i, g, v, w, o, s, k, wk, rng):
     """Elimination and dispersal: `n_disperse` random bacteria, never the current best, start again at random."""
     for _d in range(k.n_disperse):
-        j = np.random.randint(0, k.n_bacteria)
+        j = rng.integers(0, k.n_bacteria)
         if j == best_i:
             continue
         # walk in scratch space: a failed walk must not leave bacterium j half-overwritten with stale sums
-        placed, q = _new_bacterium(wk.cand, wk.cand_r, g, v, w, o, s, k)
+        placed, q = _new_bacterium(wk.cand, wk.cand_r, g, v, w, o, s, k, rng)
         if placed:
             _adopt(sw, j, wk.cand, wk.cand_r, s.ct, s.cf, q)
             _reborn(sw, j)
 
 
 @numba.njit(cache=True)
-def bfoa_nb(seed, k, base_nodes, base_rpm, g, v, w, o, sw, s, wk, history):
-    """Run the improved BFOA; the best plan ends in sw.best_pos / best_rpm / best_cost, the best cost after each
-    cycle in `history`. Returns the routes (or route tails) sailed."""
-    np.random.seed(seed)
-    best_i = init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk)
+def bfoa_nb(rng, k, base_nodes, base_rpm, g, v, w, o, sw, s, wk, history):
+    """Run the improved BFOA drawing from the generator `rng`; the best plan ends in sw.best_pos / best_rpm /
+    best_cost, the best cost after each cycle in `history`. Returns the routes (or route tails) sailed."""
+    best_i = init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk, rng)
     # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
     lam = (time_price_nb(sw.rpm[best_i], sw.cum_t[best_i], sw.cum_f[best_i], v.rpm_options)
            if sw.best_cost[0] < np.inf else 0.0)
@@ -490,11 +491,11 @@ def bfoa_nb(seed, k, base_nodes, base_rpm, g, v, w, o, sw, s, wk, history):
     do_plan = k.plan_engine and v.rpm_options.shape[0] > 1
     for cyc in range(k.n_cycles):
         for i in range(k.n_bacteria):
-            chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk)
+            chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng)
         order = np.argsort(sw.cost)
         reproduce_nb(sw, order, k)
         if (cyc + 1) % k.ed_every == 0:
-            disperse_nb(sw, order[0], g, v, w, o, s, k, wk)
+            disperse_nb(sw, order[0], g, v, w, o, s, k, wk, rng)
         history[cyc] = sw.best_cost[0]
     return s.cnt[0]
 
@@ -505,6 +506,7 @@ def run_bfoa(seed: int, params: BfoaParams, base_nodes, base_rpm, g, v, w, o):
     k = params.knobs(n - 2, g.lat.shape[1], g.max_shift)
     sw, s, wk = swarm(k.n_bacteria, n), scratch(n), work(n)
     history = np.empty(k.n_cycles)
-    n_evals = bfoa_nb(int(seed), k, np.asarray(base_nodes, np.int64), np.asarray(base_rpm, np.int64), g, v, w, o, sw,
+    rng = np.random.default_rng(int(seed))
+    n_evals = bfoa_nb(rng, k, np.asarray(base_nodes, np.int64), np.asarray(base_rpm, np.int64), g, v, w, o, sw,
                       s, wk, history)
     return sw.best_pos, sw.best_rpm, float(sw.best_cost[0]), history, int(n_evals)

@@ -11,7 +11,8 @@ aim_engine_nb   a new route's settings: of the constant settings, the two whose 
 
 Kernels take the voyage as named structures: `g` the graph (search_space.Graph), `v` the vessel
 (leg_kernel.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective),
-and `s` a `Scratch` of work arrays.
+`s` a `Scratch` of work arrays, and `rng` the random generator (a numpy Generator; numba draws from it the
+same numbers numpy would, so the interpreted kernels reproduce the compiled ones).
 """
 
 from __future__ import annotations
@@ -89,7 +90,7 @@ def time_price_nb(rpm_idx, ct, cf, rpm_options):
 
 
 @numba.njit(cache=True)
-def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
+def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options, rng):
     """Raise the rpm of random legs ≥ lo (the slower of two draws) one step at a time until the estimated hours
     saved cover `need_h` (a leg of h hours at rpm r takes h·r/r' at r', burns (r'/r)² its fuel), with the legs'
     hours and fuel from ct/cf. Returns (first leg changed, n when none; `fuel` plus the estimated extra fuel)."""
@@ -99,8 +100,8 @@ def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
     for _t in range(4 * (n - lo)):
         if need_h <= 0.0:
             break
-        j = lo + np.random.randint(0, n - lo)
-        j2 = lo + np.random.randint(0, n - lo)
+        j = lo + rng.integers(0, n - lo)
+        j2 = lo + rng.integers(0, n - lo)
         if rpm_idx[j2] < rpm_idx[j]:
             j = j2
         r = rpm_idx[j]
@@ -115,7 +116,7 @@ def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
 
 
 @numba.njit(cache=True)
-def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
+def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent, rng):
     """Lower the rpm of random legs ≥ lo (the faster of two draws) one step at a time while the estimated extra
     hours fit in `slack_h`; `stop_when_spent` ends the draws once the slack is used up (otherwise all 2·(n − lo)
     draws are made). Returns the first leg changed (n when none)."""
@@ -124,8 +125,8 @@ def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
     for _t in range(2 * (n - lo)):
         if stop_when_spent and slack_h <= 0.0:
             break
-        j = lo + np.random.randint(0, n - lo)
-        j2 = lo + np.random.randint(0, n - lo)
+        j = lo + rng.integers(0, n - lo)
+        j2 = lo + rng.integers(0, n - lo)
         if rpm_idx[j2] > rpm_idx[j]:
             j = j2
         r = rpm_idx[j]
@@ -141,7 +142,7 @@ def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
 
 
 @numba.njit(cache=True)
-def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, o):
+def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, o, rng):
     """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
     the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
     the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
@@ -152,15 +153,15 @@ def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, o
     t_req_h = o.t_req_h
     margin = 0.05 * t_req_h / n
     if T_est > t_req_h:
-        first, F_est = speed_up_nb(rpm_idx, lo, T_est - t_req_h + margin, F_est, ct_ref, cf_ref, rpm_options)
+        first, F_est = speed_up_nb(rpm_idx, lo, T_est - t_req_h + margin, F_est, ct_ref, cf_ref, rpm_options, rng)
         if o.kind == OBJ_JIT and F_est >= bar:
             return -1
         return first
-    return slow_down_nb(rpm_idx, lo, t_req_h - T_est - margin, ct_ref, rpm_options, True)
+    return slow_down_nb(rpm_idx, lo, t_req_h - T_est - margin, ct_ref, rpm_options, True, rng)
 
 
 @numba.njit(cache=True)
-def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s):
+def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s, rng):
     """Engine re-adjustment after a move, so the arrival stays just inside the RTA; returns the new cost.
 
     `nodes`/`rpm_idx` were sailed whole into s.ct/s.cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
@@ -180,7 +181,7 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s):
         T = ct[n] - t_dep_h
         if T <= t_req_h + 1e-9:
             break
-        first, extra_f = speed_up_nb(rpm_idx, lo, T - t_req_h + margin, 0.0, ct, cf, rpm_options)
+        first, extra_f = speed_up_nb(rpm_idx, lo, T - t_req_h + margin, 0.0, ct, cf, rpm_options, rng)
         if first == n:
             return q
         if o.kind == OBJ_JIT and cf[n] + extra_f >= bar:
@@ -195,7 +196,7 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s):
         if T > t_req_h + 1e-9 or slack <= 0.0:
             return q
         s.keep_r[:] = rpm_idx
-        first = slow_down_nb(rpm_idx, lo, slack, ct, rpm_options, False)
+        first = slow_down_nb(rpm_idx, lo, slack, ct, rpm_options, False, rng)
         if first == n:
             return q
         s.keep_t[:] = ct
@@ -212,7 +213,7 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s):
 
 
 @numba.njit(cache=True)
-def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s):
+def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng):
     """Engine settings aimed at the RTA for a route: sail it at every constant setting, take the two settings
     whose arrivals bracket the RTA and put the share of legs on the faster one that should arrive just in
     time (random legs), then re-time. The sailed route is left in s.ct/s.cf. Returns the cost."""
@@ -241,11 +242,11 @@ def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s):
         rpm_idx[:] = fast
         if hours[slow] < np.inf:
             share = (hours[slow] - t_req_h) / (hours[slow] - hours[fast])
-            k = int(share * n + np.random.random())
+            k = int(share * n + rng.random())
             rpm_idx[:] = slow
-            perm = np.random.permutation(n)
+            perm = rng.permutation(n)
             for j in range(min(k, n)):
                 rpm_idx[perm[j]] = fast
     q = cost_from_nb(nodes, rpm_idx, 0, g, v, w, o, ct, cf)
     s.cnt[0] += 1
-    return retime_nb(nodes, rpm_idx, 0, q, np.inf, g, v, w, o, s)
+    return retime_nb(nodes, rpm_idx, 0, q, np.inf, g, v, w, o, s, rng)
