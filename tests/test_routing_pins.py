@@ -2,7 +2,9 @@
 
 The values were recorded with the code before the solver interfaces were restructured (named kernel
 structures, solver registry) and held through it; the BFOA pins were re-recorded once when its random stream
-moved from numba's global generator to an explicit numpy Generator. A refactor that changes any of them
+moved from numba's global generator to an explicit numpy Generator. The DP pins were recorded with the
+time-bucket DP, which is now `bucket_h=0.5` (the `-bucket` pins); the exact DP finds the same plans here, and
+only its count of legs sailed is its own. A refactor that changes any of them
 changed an algorithm: change a pin only in a commit that changes the algorithm (or its random stream) on
 purpose and says so.
 """
@@ -19,14 +21,16 @@ from pipeline.routing.solve import solve
 PINS = {
     "wavy-bfoa-1": ('ok', '0x1.f0af4047b88c8p+5', 432, [0, 0, 0, 0, 0, 0, 0, 0], [70, 70, 85, 85, 85, 85, 85, 85, 85]),
     "wavy-bfoa-2": ('ok', '0x1.f0efd35198336p+5', 415, [0, 0, 0, 0, 0, 0, 0, 0], [85, 70, 85, 70, 85, 85, 85, 85, 85]),
-    "wavy-dp": ('ok', '0x1.f0af4047b88c8p+5', 9606, [0, 0, 0, 0, 0, 0, 0, 0], [70, 70, 85, 85, 85, 85, 85, 85, 85]),
+    "wavy-dp": ('ok', '0x1.f0af4047b88c8p+5', 11403, [0, 0, 0, 0, 0, 0, 0, 0], [70, 70, 85, 85, 85, 85, 85, 85, 85]),
+    "wavy-dp-bucket": ('ok', '0x1.f0af4047b88c8p+5', 9606, [0, 0, 0, 0, 0, 0, 0, 0], [70, 70, 85, 85, 85, 85, 85, 85, 85]),
     "wavy-astar": ('ok', '0x1.6d35cebf1009ap+6', 0, [0, 0, 0, 0, 0, 0, 0, 0], [100, 100, 100, 100, 100, 100, 100, 100, 100]),
     "wavy-gc": ('ok', '0x1.09c247bc679e0p+6', 0, [0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 85, 85, 85, 85]),
     "wavy-rhumb": ('ok', '0x1.0921a14e3de86p+6', 0, None, [85, 85, 85, 85, 85, 85, 85, 85, 85]),
     "thesis-bfoa-3": ('ok', '0x1.baf8a41c8f726p+1', 500, [0, 0, 0, 0, 0, 0], [80, 80, 80, 100, 100, 100, 80]),
     "storm-gc": ('ok', '0x1.0b53cc1975294p+7', 0, [0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 85, 85, 85, 85, 85, 85]),
     "storm-bfoa-4": ('ok', '0x1.e7c220120c5a0p+6', 435, [0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [85, 85, 85, 85, 85, 70, 85, 70, 85, 70, 85]),
-    "storm-dp": ('ok', '0x1.ab1af6f568f89p+6', 35691, [1, 2, 2, 2, 3, 3, 3, 3, 2, 1], [85, 85, 85, 85, 70, 70, 70, 70, 70, 70, 85]),
+    "storm-dp": ('ok', '0x1.ab1af6f568f89p+6', 53799, [1, 2, 2, 2, 3, 3, 3, 3, 2, 1], [85, 85, 85, 85, 70, 70, 70, 70, 70, 70, 85]),
+    "storm-dp-bucket": ('ok', '0x1.ab1af6f568f89p+6', 35691, [1, 2, 2, 2, 3, 3, 3, 3, 2, 1], [85, 85, 85, 85, 70, 70, 70, 70, 70, 70, 85]),
     "storm-astar": ('ok', '0x1.aeb15bbaee982p+6', 0, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [85, 85, 85, 70, 70, 70, 70, 70, 70, 85, 85]),
 }
 
@@ -49,6 +53,7 @@ def _plans():
     yield "wavy-bfoa-2", solve(pr, fld, solver="bfoa", seed=2, params=FAST, space=sp), sp
     for name in ("dp", "astar", "gc"):
         yield f"wavy-{name}", solve(pr, fld, solver=name, space=sp), sp
+    yield "wavy-dp-bucket", solve(pr, fld, solver="dp", bucket_h=0.5, space=sp), sp
     yield "wavy-rhumb", solve(pr, fld, solver="rhumb"), None
     prt = problem((35.0, -140.0), (28.0, -132.0), 52, rpm_options=(80, 100), objective="thesis", n_lines=6, n_points=9)
     spt = prt.search_space()
@@ -59,6 +64,7 @@ def _plans():
     yield "storm-gc", solve(prs, storm, solver="gc", space=sps), sps
     yield "storm-bfoa-4", solve(prs, storm, solver="bfoa", seed=4, params=FAST, space=sps), sps
     yield "storm-dp", solve(prs, storm, solver="dp", space=sps), sps
+    yield "storm-dp-bucket", solve(prs, storm, solver="dp", bucket_h=0.5, space=sps), sps
     yield "storm-astar", solve(prs, storm, solver="astar", space=sps), sps
 
 
