@@ -504,6 +504,29 @@ def test_dp_is_never_beaten_and_bfoa_comes_close():
         assert dp.cost <= solve(pr, fld, solver="gc", space=space).cost * (1 + 1e-3)
 
 
+def test_astar_arrives_by_the_rta_on_the_least_fuel_it_can():
+    """A* alone arrives early at high rpm; with the engine plan per swept route it meets the RTA inside the window,
+    never beats the exact DP, and is far cheaper than the fastest plan on its route."""
+    from pipeline.routing.astar import AstarOptions
+
+    fld = field(wavy(2))
+    pr = problem((30.0, -160.0), (33.0, -145.0), 72, n_lines=8, n_points=9)
+    space = pr.search_space()
+    dp = solve(pr, fld, solver="dp", space=space)
+    time_only = solve(pr, fld, solver="astar", space=space, options=AstarOptions(alphas=(0.0,)))
+    full = solve(pr, fld, solver="astar", space=space)
+    for plan in (time_only, full):
+        assert plan.status == "ok" and plan.reason is None, plan.reason  # no "arrives … before the window"
+        assert pr.t_req_h - pr.window_h <= plan.hours <= pr.t_req_h + 1e-9
+        assert plan.cost >= dp.cost - 1e-9
+        assert len({g["rpm"] for g in plan.legs}) > 1  # slowed where it can, not 100 rpm throughout
+    assert full.cost <= time_only.cost
+    # every leg at full speed on the same route: what the α = 0 search alone used to sail
+    fastest = _evaluate(Instance.build(pr, space, fld), np.array([space.centre] * 10),
+                        np.full(9, 2))
+    assert fastest[1] < pr.t_req_h - pr.window_h and time_only.fuel_t < 0.8 * fastest[2]
+
+
 def test_dp_equals_exhaustive_search_on_a_tiny_graph():
     for wseed, obj, rpms in ((7, "jit", (70, 85, 100)), (8, "thesis", (75, 100))):
         fld = field(wavy(wseed))

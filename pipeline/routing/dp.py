@@ -139,12 +139,14 @@ def fuel_to_finish_lb(m_lam, lams, t_min, hours):
 
 
 @numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld):
+def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
     tables of `finish_bounds` for the prices lams (K,); ld (L+2, P) the latest departures that can still make the
-    RTA (`latest_departure_nb`), used when `upper` is on time."""
+    RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
+    earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
+    the optimum (one such drop per leg at most along the optimal plan)."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
@@ -209,7 +211,7 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld):
                 prev = cnode[k]
                 gmin = np.inf
             gk = cf[k] - e * ct[k]
-            if gk < gmin:
+            if gk < gmin - eps:
                 gmin = gk
                 if n_kept >= kt.shape[0]:
                     kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
@@ -417,6 +419,8 @@ class DpOptions:
     bucket_h: float | None = None  # None: exact labels; a number: merge labels per arrival-time bucket (h), approximate
     upper_bound: float | None = None  # a known plan's cost, to prune with (the baseline's is always used)
     incumbent: str | None = "bfoa"  # also prune with this solver's plan (seed 1, default options); None: no
+    gap: float = 0.0  # > 0: drop labels within gap × (incumbent cost) / legs of dominance; the plan is then within
+    #                   that share of the optimum (certified under the same assumption as the dominance)
 
 
 
@@ -441,8 +445,11 @@ def search(inst, baseline, *, seed: int, options: DpOptions):
                 upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
         lams, m_lam, t_min = finish_bounds(inst)
         ld = latest_departures(inst)
+        eps = 0.0
+        if options.gap > 0.0 and math.isfinite(upper):
+            eps = options.gap * upper / (inst.space.lat.shape[0] - 1)
         nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
-                                                      m_lam, t_min, ld)
+                                                      m_lam, t_min, ld, eps)
     if not math.isfinite(cost):
         return Found(None, None, n_legs)
     return Found(nodes, rpm_idx, n_legs)
