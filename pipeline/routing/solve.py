@@ -46,8 +46,15 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                 plan.status = "ok"
                 early_h = p.t_req_h - p.window_h - plan.hours
                 plan.reason = f"arrives {early_h:.1f} h before the arrival window" if early_h > 1e-6 else None
-            if plan.n_beyond_forecast:
-                note = f"{plan.n_beyond_forecast} legs beyond the forecast horizon (last step persisted)"
+            notes = []
+            if plan.hours_beyond_forecast > 1e-9:
+                notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({plan.n_beyond_forecast} legs) beyond "
+                             f"the forecast horizon {inst.weather.horizon_utc} (its last step persisted)")
+            if plan.hours_before_cycle > 1e-9:
+                notes.append(f"{plan.hours_before_cycle:.1f} h of the voyage before the forecast cycle "
+                             f"{inst.weather.cycle} (its first step used)")
+            if notes:
+                note = "; ".join(notes)
                 plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
         else:
             plan.reason = f"leg {bad_leg}: {lk.REASONS[code]}"
@@ -59,6 +66,16 @@ def _infeasible_reason(base: Baseline | None) -> str:
     if base is None or base.nodes is None:
         return "no route at sea between the ports inside the search corridor and limits"
     return f"every route is blocked; the shortest sea route fails: {lk.REASONS.get(base.code, 'unknown')}"
+
+
+def _check_forecast(problem: RoutingProblem, weather: WeatherField) -> None:
+    """Refuse a departure after the forecast's last valid time: every leg would sail on persisted weather."""
+    if problem.depart_utc > weather.horizon_utc:
+        cycle = weather.cycle if weather.cycle is not None else weather.t_ref
+        late_h = float((problem.depart_utc - weather.horizon_utc) / np.timedelta64(1, "s")) / 3600.0
+        raise RoutingInputError(
+            f"voyage {problem.voyage_id}: departs {problem.depart_utc}, {late_h:.1f} h after the last valid time "
+            f"{weather.horizon_utc} of the forecast cycle {cycle}; route it with a later cycle")
 
 
 def _options(solver: str, options, params: BfoaParams | None, bucket_h: float | None):
@@ -86,6 +103,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
     spec = REGISTRY[solver]
     opts = _options(solver, options, params, bucket_h)
+    _check_forecast(problem, weather)
     t0 = time.perf_counter()
     if space is None:
         space = (replace(problem, base=spec.space_base) if spec.space_base else problem).search_space()
