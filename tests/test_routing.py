@@ -589,3 +589,28 @@ def test_jit_objective_ranks_on_time_before_late_and_penalises_early_mildly():
     assert q(50.0, 42.0) == pytest.approx(42.0 + 0.2 * 44.0)
     assert q(90.0, 40.0) < q(94.0, 42.0)  # arriving early still pays when it saves more fuel than the penalty
     assert q(90.0, 41.5) > q(94.0, 41.0)
+
+
+def test_honest_baseline_and_savings_split_in_calm_water():
+    """In calm water the honest baseline holds rpm = distance / (0.14 · hours to the RTA) and burns
+    1.5·(rpm/100)³ t/h for exactly those hours; a constant speed is then the cheapest way to arrive on time
+    (fuel per mile grows with speed), so the discrete-rpm plans save nothing against it and the route adds
+    nothing either (the great circle is shortest)."""
+    from pipeline.routing.savings import savings_split
+
+    dep, arr = (30.0, -160.0), (35.0, -130.0)
+    dist = haversine_nm(*dep, *arr)
+    hours = dist / (0.14 * 77.5)
+    pr = problem(dep, arr, hours, n_lines=10, n_points=11)
+    space = pr.search_space()
+    calm = wf.uniform("2020-12-01T00", 400)
+    plan = solve(pr, calm, solver="dp", space=space)
+    split = savings_split(pr, calm, plan, space)
+    rpm = dist / (0.14 * pr.t_req_h)  # ≈ 77.5 (the RTA is whole minutes)
+    assert split.baseline_rpm == pytest.approx(rpm, rel=1e-5)
+    assert split.baseline_hours == pytest.approx(pr.t_req_h, abs=2e-3) and split.baseline_hours <= pr.t_req_h
+    assert split.baseline_fuel_t == pytest.approx(1.5 * (rpm / 100) ** 3 * pr.t_req_h, rel=1e-4)
+    assert split.speed_profile_pct < 0.0  # two discrete settings cost more than the one exact speed
+    assert split.route_pct == pytest.approx(0.0, abs=1e-9)  # the DP's plan is on the great circle
+    assert split.total_pct == pytest.approx(split.speed_profile_pct + split.route_pct)
+    assert plan.savings_pct > 5.0  # what the discrete-rpm baseline used to credit to routing
