@@ -20,7 +20,7 @@ CASES = r'''
 import json, sys
 sys.path.insert(0, sys.argv[1])
 from routing_cases import field, problem, wavy, moving_storm
-from pipeline.routing.solve import BfoaParams, solve
+from pipeline.routing.solve import BfoaParams, DpOptions, solve
 
 tiny = BfoaParams(n_bacteria=5, n_chemo=3, n_cycles=4, ed_every=2, steps_to_die=6)
 out = {}
@@ -33,8 +33,8 @@ for seed in (1, 2):
 storm = field(moving_storm(5, 33.0, 225.0, drift_kn=(-10.0, 0.0), hs_peak=6.0), step_h=6, hours=240)
 prs = problem((30.0, -160.0), (35.0, -130.0), 150, max_hs_m=7.0, n_lines=5, n_points=7, objective="thesis")
 sps = prs.search_space()
-for solver in ("bfoa", "dp"):
-    p = solve(prs, storm, solver=solver, seed=3, params=tiny if solver == "bfoa" else None, space=sps)
+for solver, opts in (("bfoa", tiny), ("dp", DpOptions(incumbent=None)), ("astar", None)):
+    p = solve(prs, storm, solver=solver, seed=3, options=opts, space=sps)
     out[f"storm-{solver}"] = [p.status, float(p.cost).hex(), p.n_evals, p.waypoints, [g["rpm"] for g in p.legs]]
 print(json.dumps(out))
 '''
