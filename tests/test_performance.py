@@ -409,9 +409,9 @@ def test_calm_water_speed_and_fuel_do_not_depend_on_heading():
             assert np.ptp(stw) == 0.0 and np.ptp(fuel) == 0.0 and stw[0] > 5.0, (m.form, stw)
     calm = wf.uniform(np.datetime64("2020-12-01T00"), 240.0)
     for m in (thesis, reference_model()):
-        vp = lk.vessel_params(m.form_id, 6.0, 2.0, 0.0, None, None, 1.0)
-        north = lk.sail_leg(0.0, 150.0, 3.0, 150.0, 0.0, 120.0, vp, m.speed_coef, m.fuel_coef, calm)
-        south = lk.sail_leg(3.0, 150.0, 0.0, 150.0, 0.0, 120.0, vp, m.speed_coef, m.fuel_coef, calm)
+        ves = lk.vessel(m, draft_m=6.0, trim_m=2.0, rpm_options=(120.0,))
+        north = lk.sail_leg(0.0, 150.0, 3.0, 150.0, 0.0, 120.0, ves, calm)
+        south = lk.sail_leg(3.0, 150.0, 0.0, 150.0, 0.0, 120.0, ves, calm)
         assert north[lk.CODE] == south[lk.CODE] == lk.OK
         assert north[lk.H] == pytest.approx(south[lk.H], rel=1e-12) and north[lk.FUEL] == pytest.approx(south[lk.FUEL], rel=1e-12)
 

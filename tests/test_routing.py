@@ -10,7 +10,6 @@ from __future__ import annotations
 import itertools
 import math
 
-import numba
 import numpy as np
 import pytest
 from global_land_mask import globe
@@ -19,7 +18,7 @@ from pipeline.performance.model import reference_model
 from pipeline.routing import geodesy as geo
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing import weather_field as wf
-from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, OBJ_THESIS, route_cost_nb
+from pipeline.routing.objectives import LATE_STEP_T, objective, route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.search_space import build_search_space
 from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solve
@@ -92,7 +91,7 @@ def node_offsets(plan, space):
 
 
 def vp(max_hs=None, max_wind=None, step_h=1.0):
-    return lk.vessel_params(MODEL.form_id, 10.0, 0.0, MODEL.months_dd, max_hs, max_wind, step_h)
+    return lk.vessel(MODEL, draft_m=10.0, trim_m=0.0, max_hs_m=max_hs, max_wind_kn=max_wind, max_step_h=step_h)
 
 
 # ---------------------------------------------------------------------------------------------- geodesy
@@ -189,7 +188,7 @@ def test_calm_leg_takes_distance_over_stw_and_burns_rate_times_hours():
         assert float(MODEL.fuel_tph(rpm, 10.0, 0.0)) == pytest.approx(rate)
         for (a, b) in (((0.0, 150.0), (0.0, 152.5)), ((30.0, -160.0), (33.0, -150.0)), ((40.0, 178.0), (41.0, -177.0))):
             dist = haversine_nm(*a, *b)
-            out = lk.sail_leg(*a, *b, 6.0, rpm, vp(), MODEL.speed_coef, MODEL.fuel_coef, calm)
+            out = lk.sail_leg(*a, *b, 6.0, rpm, vp(), calm)
             assert out[lk.CODE] == lk.OK and out[lk.BEYOND] == 0
             assert out[lk.H] == pytest.approx(dist / stw, rel=1e-9)
             assert out[lk.FUEL] == pytest.approx(rate * dist / stw, rel=1e-9)
@@ -203,7 +202,7 @@ def test_currents_wind_and_waves_act_along_the_course():
     for c in (0.5, 1.0, 2.0):
         for sign in (1.0, -1.0):  # +: following (setting east), −: head current
             f = wf.uniform("2020-12-01T00", 200, current_ms=(sign * c, 0.0))
-            out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+            out = lk.sail_leg(*leg, 0.0, 85.0, vp(), f)
             sog = stw + sign * c * KN_PER_MS
             assert out[lk.SOG_KN] == pytest.approx(sog, rel=1e-9)
             assert out[lk.STW_KN] == pytest.approx(stw, rel=1e-9)
@@ -212,29 +211,29 @@ def test_currents_wind_and_waves_act_along_the_course():
             assert out[lk.CUR_ALONG_KN] == pytest.approx(sign * c * KN_PER_MS, rel=1e-9)
     # a cross current (setting north) adds nothing along an eastward course
     f = wf.uniform("2020-12-01T00", 200, current_ms=(0.0, 1.5))
-    assert lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.SOG_KN] == pytest.approx(stw)
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(), f)[lk.SOG_KN] == pytest.approx(stw)
     # 30 kn head wind (blowing towards the west, so coming FROM ahead) costs 1 kn and 0.0002·900 t/h
     f = wf.uniform("2020-12-01T00", 200, wind_ms=(-30.0 / KN_PER_MS, 0.0))
-    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), f)
     assert out[lk.STW_KN] == pytest.approx(stw - 1.0, rel=1e-6)  # the field stores float32
     assert out[lk.FUEL] == pytest.approx((rate + 0.18) * dist / (stw - 1.0), rel=1e-6)
     assert out[lk.WIND_KN] == pytest.approx(30.0, rel=1e-6)
     # 4 m head seas (coming from 090°) cost 1.5 kn and 0.01·16 t/h; following seas 0.14 of that (Kwon's shape)
     f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=90.0)
-    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), f)
     assert out[lk.STW_KN] == pytest.approx(stw - 1.5, rel=1e-6)
     assert out[lk.FUEL] == pytest.approx((rate + 0.16) * dist / (stw - 1.5), rel=1e-6)
     f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=270.0)
-    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    out = lk.sail_leg(*leg, 0.0, 85.0, vp(), f)
     assert out[lk.STW_KN] == pytest.approx(stw - 0.14 * 1.5, rel=1e-6)
     assert out[lk.FUEL] == pytest.approx((rate + 0.14 * 0.16) * dist / (stw - 0.14 * 1.5), rel=1e-6)
     # limits: Hs 4 m against a 3.5 m limit, 30 kn wind against 25 kn, a head current the ship cannot stem
     f = wf.uniform("2020-12-01T00", 200, swh_m=4.0, wave_from_deg=90.0)
-    assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_hs=3.5), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.WAVE_LIMIT
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_hs=3.5), f)[lk.CODE] == lk.WAVE_LIMIT
     f = wf.uniform("2020-12-01T00", 200, wind_ms=(-30.0 / KN_PER_MS, 0.0))
-    assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_wind=25.0), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.WIND_LIMIT
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(max_wind=25.0), f)[lk.CODE] == lk.WIND_LIMIT
     f = wf.uniform("2020-12-01T00", 200, current_ms=(-6.0, 0.0))  # 11.66 kn against 11.9 kn: SOG 0.24 < 0.5
-    assert lk.sail_leg(*leg, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)[lk.CODE] == lk.NO_HEADWAY
+    assert lk.sail_leg(*leg, 0.0, 85.0, vp(), f)[lk.CODE] == lk.NO_HEADWAY
 
 
 def test_weather_sampling_interpolates_time_space_and_direction():
@@ -249,12 +248,12 @@ def test_weather_sampling_interpolates_time_space_and_direction():
     f = wf.from_arrays(lat, lon, times, u10=u10, v10=np.zeros((3, 2, 2)), swh=ramp, mwd_deg=mwd, uo=ramp, vo=ramp)
     out = np.empty(wf.N_VARS)
     for t_h, want in ((0.0, 0.0), (5.0, 0.5), (10.0, 1.0), (20.0, 2.0), (27.0, 2.7)):
-        assert not wf.sample_nb(f.values, f.times_h, f.grid, t_h, 12.5, 155.0, out)
+        assert not wf.sample_nb(f.kernel, t_h, 12.5, 155.0, out)
         assert out[wf.UO] == pytest.approx(want, abs=1e-6) and out[wf.SWH] == pytest.approx(want, abs=1e-6)
         assert out[wf.U10] == pytest.approx(12.5, abs=1e-5)
-    wf.sample_nb(f.values, f.times_h, f.grid, 5.0, 15.0, 151.0, out)
+    wf.sample_nb(f.kernel, 5.0, 15.0, 151.0, out)
     assert math.degrees(math.atan2(out[wf.WAVE_X], out[wf.WAVE_Y])) == pytest.approx(0.0, abs=1e-4)
-    assert wf.sample_nb(f.values, f.times_h, f.grid, 40.0, 15.0, 151.0, out)  # past the horizon: flagged, persisted
+    assert wf.sample_nb(f.kernel, 40.0, 15.0, 151.0, out)  # past the horizon: flagged, persisted
     assert out[wf.UO] == pytest.approx(3.0)
 
 
@@ -266,8 +265,8 @@ def test_compiled_leg_equals_the_pure_python_twin():
         lat1, lon1 = geo.destination(lat0, lon0, rng.uniform(0, 360), rng.uniform(20, 200))
         rpm, t0 = rng.uniform(60, 100), rng.uniform(0, 300)
         v = vp(step_h=rng.choice([0.25, 1.0]))
-        fast = lk.sail_leg(lat0, lon0, lat1, lon1, t0, rpm, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
-        slow = lk.sail_leg_python(lat0, lon0, lat1, lon1, t0, rpm, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+        fast = lk.sail_leg(lat0, lon0, lat1, lon1, t0, rpm, v, fld)
+        slow = lk.sail_leg_python(lat0, lon0, lat1, lon1, t0, rpm, v, fld)
         assert fast[lk.CODE] == lk.OK and fast[lk.H] > 0
         np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-12)
 
@@ -275,9 +274,9 @@ def test_compiled_leg_equals_the_pure_python_twin():
 def test_splitting_a_leg_does_not_change_its_hours():
     # constant course (equator) in a static uniform field with wind, waves and current: exact
     f = wf.uniform("2020-12-01T00", 200, wind_ms=(4.0, -3.0), swh_m=3.0, wave_from_deg=60.0, current_ms=(-0.7, 0.3))
-    whole = lk.sail_leg(0.0, 150.0, 0.0, 153.0, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
-    a = lk.sail_leg(0.0, 150.0, 0.0, 151.1, 0.0, 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
-    b = lk.sail_leg(0.0, 151.1, 0.0, 153.0, a[lk.H], 85.0, vp(), MODEL.speed_coef, MODEL.fuel_coef, f)
+    whole = lk.sail_leg(0.0, 150.0, 0.0, 153.0, 0.0, 85.0, vp(), f)
+    a = lk.sail_leg(0.0, 150.0, 0.0, 151.1, 0.0, 85.0, vp(), f)
+    b = lk.sail_leg(0.0, 151.1, 0.0, 153.0, a[lk.H], 85.0, vp(), f)
     assert a[lk.H] + b[lk.H] == pytest.approx(whole[lk.H], rel=1e-12)
     assert a[lk.FUEL] + b[lk.FUEL] == pytest.approx(whole[lk.FUEL], rel=1e-12)
     # an oblique leg in a static non-uniform field, with fine steps: equal up to the step discretisation
@@ -285,9 +284,9 @@ def test_splitting_a_leg_does_not_change_its_hours():
     p, q = (25.0, -170.0), (31.0, -160.0)
     m = geo.gc_interpolate(*p, *q, 0.4)
     v = vp(step_h=0.05)
-    whole = lk.sail_leg(*p, *q, 0.0, 85.0, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
-    a = lk.sail_leg(*p, *m, 0.0, 85.0, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
-    b = lk.sail_leg(*m, *q, a[lk.H], 85.0, v, MODEL.speed_coef, MODEL.fuel_coef, fld)
+    whole = lk.sail_leg(*p, *q, 0.0, 85.0, v, fld)
+    a = lk.sail_leg(*p, *m, 0.0, 85.0, v, fld)
+    b = lk.sail_leg(*m, *q, a[lk.H], 85.0, v, fld)
     assert a[lk.H] + b[lk.H] == pytest.approx(whole[lk.H], rel=1e-5)
     assert a[lk.FUEL] + b[lk.FUEL] == pytest.approx(whole[lk.FUEL], rel=1e-5)
 
@@ -425,11 +424,6 @@ def test_dateline_crossing_routes_like_the_great_circle():
         assert plan.hours <= pr.t_req_h
 
 
-@numba.njit
-def seed_numba(seed):
-    np.random.seed(seed)  # numba's generator is separate from numpy's
-
-
 def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     """The RTA-aimed engine settings and the engine re-set after a route move (calm water: leg hours are exactly
     distance / STW, so hand formulas check them)."""
@@ -442,15 +436,14 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     space = pr.search_space()
     calm = wf.uniform("2020-12-01T00", 400)
     inst = Instance.build(pr, space, calm)
-    args = inst.numba_args()
+    voyage = (inst.graph, inst.vessel, inst.wx, inst.objective)
     L2 = space.lat.shape[0]
-    ct, cf, kt, kf = (np.empty(L2) for _ in range(4))
-    kr, rpm = np.empty(L2 - 1, np.int64), np.empty(L2 - 1, np.int64)
-    cnt = np.zeros(1, np.int64)
+    s = engine_timing.scratch(L2)
+    ct = s.ct
+    rpm = np.empty(L2 - 1, np.int64)
     gc = space.base_route()
     for seed in range(1, 6):
-        seed_numba(seed)
-        q = engine_timing.aim_engine_nb(gc.copy(), rpm, *args, ct, cf, kr, kt, kf, cnt)
+        q = engine_timing.aim_engine_nb(gc.copy(), rpm, *voyage, s, np.random.default_rng(seed))
         t_arr = ct[-1] - inst.t_dep_h
         assert pr.t_req_h - pr.window_h <= t_arr <= pr.t_req_h + 1e-9, (seed, t_arr)
         assert {0, 1} <= set(rpm.tolist())  # a mix of the two settings that bracket the RTA
@@ -461,18 +454,17 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     detour[3:9] += np.array([1, 2, 2, 2, 2, 1])
     late_cost, late_h, _, _ = _evaluate(inst, detour, rpm)
     assert late_h > pr.t_req_h and late_cost > LATE_STEP_T
-    ct2, cf2 = np.empty(L2), np.empty(L2)
-    seed_numba(1)
-    lk.sail_route_nb(detour, rpm, 0, *args[:12], ct2, cf2)
+    s2 = engine_timing.scratch(L2)
+    lk.sail_route_nb(detour, rpm, 0, *voyage, s2.ct, s2.cf)
     rpm2 = rpm.copy()
-    q2 = engine_timing.retime_nb(detour, rpm2, 0, late_cost, np.inf, *args, ct2, cf2, kr, kt, kf, cnt)
-    assert ct2[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
+    q2 = engine_timing.retime_nb(detour, rpm2, 0, late_cost, np.inf, *voyage, s2, np.random.default_rng(1))
+    assert s2.ct[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
     assert q2 < LATE_STEP_T and q2 == pytest.approx(_evaluate(inst, detour, rpm2)[0], rel=1e-12)
     assert np.all(rpm2 >= rpm) and rpm2.sum() > rpm.sum()  # legs only sped up
     # with a bar below any on-time plan the re-set gives up instead of sailing (jit objective)
     rpm3 = rpm.copy()
-    lk.sail_route_nb(detour, rpm3, 0, *args[:12], ct2, cf2)
-    assert engine_timing.retime_nb(detour, rpm3, 0, late_cost, 1.0, *args, ct2, cf2, kr, kt, kf, cnt) == math.inf
+    lk.sail_route_nb(detour, rpm3, 0, *voyage, s2.ct, s2.cf)
+    assert engine_timing.retime_nb(detour, rpm3, 0, late_cost, 1.0, *voyage, s2, np.random.default_rng(1)) == math.inf
 
 
 def test_bfoa_is_reproducible_by_seed():
@@ -513,6 +505,29 @@ def test_dp_is_never_beaten_and_bfoa_comes_close():
         assert dp.cost <= solve(pr, fld, solver="gc", space=space).cost * (1 + 1e-3)
 
 
+def test_astar_arrives_by_the_rta_on_the_least_fuel_it_can():
+    """A* alone arrives early at high rpm; with the engine plan per swept route it meets the RTA inside the window,
+    never beats the exact DP, and is far cheaper than the fastest plan on its route."""
+    from pipeline.routing.astar import AstarOptions
+
+    fld = field(wavy(2))
+    pr = problem((30.0, -160.0), (33.0, -145.0), 72, n_lines=8, n_points=9)
+    space = pr.search_space()
+    dp = solve(pr, fld, solver="dp", space=space)
+    time_only = solve(pr, fld, solver="astar", space=space, options=AstarOptions(alphas=(0.0,)))
+    full = solve(pr, fld, solver="astar", space=space)
+    for plan in (time_only, full):
+        assert plan.status == "ok" and plan.reason is None, plan.reason  # no "arrives … before the window"
+        assert pr.t_req_h - pr.window_h <= plan.hours <= pr.t_req_h + 1e-9
+        assert plan.cost >= dp.cost - 1e-9
+        assert len({g["rpm"] for g in plan.legs}) > 1  # slowed where it can, not 100 rpm throughout
+    assert full.cost <= time_only.cost
+    # every leg at full speed on the same route: what the α = 0 search alone used to sail
+    fastest = _evaluate(Instance.build(pr, space, fld), np.array([space.centre] * 10),
+                        np.full(9, 2))
+    assert fastest[1] < pr.t_req_h - pr.window_h and time_only.fuel_t < 0.8 * fastest[2]
+
+
 def test_dp_equals_exhaustive_search_on_a_tiny_graph():
     for wseed, obj, rpms in ((7, "jit", (70, 85, 100)), (8, "thesis", (75, 100))):
         fld = field(wavy(wseed))
@@ -539,7 +554,8 @@ def test_thesis_quality_function_as_published():
     T_req, F_t = 100.0, 50.0
 
     def q(hours, fuel):
-        return route_cost_nb(OBJ_THESIS, hours, fuel, T_req, 6.0, F_t, 0.2, 1.0e4)
+        o = objective("thesis", t_dep_h=0.0, max_hours=1e3, t_req_h=T_req, window_h=6.0, f_target=F_t)
+        return route_cost_nb(o, hours, fuel)
 
     assert q(100.0, 40.0) == pytest.approx(1.0 + 9999.9)  # T = T_req counts as late
     assert q(120.0, 10.0) == pytest.approx(1.2 + 9999.9)  # late: fuel ignored
@@ -555,7 +571,9 @@ def test_jit_objective_ranks_on_time_before_late_and_penalises_early_mildly():
     T_req, W, early, late = 100.0, 6.0, 0.2, 1.0e4
 
     def q(hours, fuel):
-        return route_cost_nb(OBJ_JIT, hours, fuel, T_req, W, 1.0, early, late)
+        o = objective("jit", t_dep_h=0.0, max_hours=1e3, t_req_h=T_req, window_h=W, early_t_per_h=early,
+                      late_t_per_h=late)
+        return route_cost_nb(o, hours, fuel)
 
     # inside the window [RTA − 6 h, RTA]: just the fuel
     for h in (94.0, 97.0, 100.0):
@@ -572,3 +590,28 @@ def test_jit_objective_ranks_on_time_before_late_and_penalises_early_mildly():
     assert q(50.0, 42.0) == pytest.approx(42.0 + 0.2 * 44.0)
     assert q(90.0, 40.0) < q(94.0, 42.0)  # arriving early still pays when it saves more fuel than the penalty
     assert q(90.0, 41.5) > q(94.0, 41.0)
+
+
+def test_honest_baseline_and_savings_split_in_calm_water():
+    """In calm water the honest baseline holds rpm = distance / (0.14 · hours to the RTA) and burns
+    1.5·(rpm/100)³ t/h for exactly those hours; a constant speed is then the cheapest way to arrive on time
+    (fuel per mile grows with speed), so the discrete-rpm plans save nothing against it and the route adds
+    nothing either (the great circle is shortest)."""
+    from pipeline.routing.savings import savings_split
+
+    dep, arr = (30.0, -160.0), (35.0, -130.0)
+    dist = haversine_nm(*dep, *arr)
+    hours = dist / (0.14 * 77.5)
+    pr = problem(dep, arr, hours, n_lines=10, n_points=11)
+    space = pr.search_space()
+    calm = wf.uniform("2020-12-01T00", 400)
+    plan = solve(pr, calm, solver="dp", space=space)
+    split = savings_split(pr, calm, plan, space)
+    rpm = dist / (0.14 * pr.t_req_h)  # ≈ 77.5 (the RTA is whole minutes)
+    assert split.baseline_rpm == pytest.approx(rpm, rel=1e-5)
+    assert split.baseline_hours == pytest.approx(pr.t_req_h, abs=2e-3) and split.baseline_hours <= pr.t_req_h
+    assert split.baseline_fuel_t == pytest.approx(1.5 * (rpm / 100) ** 3 * pr.t_req_h, rel=1e-4)
+    assert split.speed_profile_pct < 0.0  # two discrete settings cost more than the one exact speed
+    assert split.route_pct == pytest.approx(0.0, abs=1e-9)  # the DP's plan is on the great circle
+    assert split.total_pct == pytest.approx(split.speed_profile_pct + split.route_pct)
+    assert plan.savings_pct > 5.0  # what the discrete-rpm baseline used to credit to routing

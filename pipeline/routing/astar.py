@@ -5,13 +5,16 @@ time-dependently from the label's arrival time); every (line, node) is settled o
 first-out assumption). The heuristic is the remaining great-circle distance priced at a lower
 bound of fuel per mile and an upper bound of speed, so it never overestimates under the stated
 bounds (weather lowers the fuel rate by at most 30 % and adds at most 3 kn + 10 %). Sweeping α from
-time-only to fuel-only gives a family of routes; the one with the best objective value wins
-(least fuel on time, else least late).
+time-only to fuel-only gives a family of routes. A* alone ignores the RTA (a time-heavy α arrives days early
+at high rpm), so each route of the sweep then gets the engine plan that meets the RTA on the least fuel: the
+exact DP restricted to that route (`best_engine_plan`), which keeps only plans arriving by the RTA when one
+can, else the least-late one. The route and plan with the best objective value win.
 """
 
 from __future__ import annotations
 
 import heapq
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,7 +39,7 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
     label = {start: (inst.t_dep_h, 0.0, None, -1)}  # time, fuel, parent, rpm index
     heap = [(h[0, c], 0.0, 0, c)]
     done = set()
-    W = inst.numba_weather()
+    ves, wx, rpm_options = inst.vessel, inst.wx, inst.rpm_options
     while heap:
         _, g, i, a = heapq.heappop(heap)
         if (i, a) in done:
@@ -49,8 +52,7 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
             if not edge_ok[i, a, a2] or (i + 1, a2) in done:
                 continue
             for r in rpm_order:
-                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, inst.rpm_options[r], inst.vp,
-                            inst.speed_coef, inst.fuel_coef, *W, out)
+                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], ves, wx, out)
                 if out[CODE] != OK or t0 + out[H] - inst.t_dep_h > inst.max_hours:
                     continue
                 g2 = g + alpha * out[FUEL] / f_ref + (1 - alpha) * out[H] / t_ref_h
@@ -71,3 +73,48 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
         rpm_idx[i - 1] = label[key][3]
         key = label[key][2]
     return nodes, rpm_idx
+
+
+@dataclass(frozen=True)
+class AstarOptions:
+    alphas: tuple[float, ...] = ALPHAS  # fuel weights swept, 0 = time only, 1 = fuel only
+
+
+def search(inst, baseline, *, seed: int, options: AstarOptions):
+    """The solver contract (see solvers.py): one A* per α, the plan with the best objective value wins."""
+    from pipeline.routing.solvers import Found
+
+    m, p = inst.problem.model, inst.problem
+    rpm = np.asarray(p.rpm_options)
+    stw = m.stw_kn(rpm, p.draft_m, p.trim_m)
+    fuel = m.fuel_tph(rpm, p.draft_m, p.trim_m)
+    fuel_per_nm_lb = float(np.min(0.7 * fuel / (stw + 3.0)))
+    speed_ub = float(np.max(stw) * 1.1 + 3.0)
+    best, n_legs = None, 0
+    for alpha in options.alphas:
+        found = astar_route(inst, alpha, np.arange(len(rpm)), fuel_per_nm_lb, speed_ub, inst.f_target, p.t_req_h)
+        if found is None:
+            continue
+        nodes = found[0]
+        rpm_idx, cost, n = best_engine_plan(inst, nodes)
+        n_legs += n
+        if np.isfinite(cost) and (best is None or cost < best[0]):
+            best = (cost, (nodes, rpm_idx))
+    return Found(None, None, n_legs) if best is None else Found(*best[1], n_legs)
+
+
+def best_engine_plan(inst, nodes: np.ndarray) -> tuple[np.ndarray, float, int]:
+    """(rpm index per leg, cost, legs sailed) of the best engine plan on a fixed route under the objective: on time
+    at the least fuel when the RTA can be met, else the least late (the exact DP on the route's edges only)."""
+    from pipeline.routing.dp import dp_exact_nb
+
+    g = inst.graph
+    L2, P = g.lat.shape
+    edge_ok = np.zeros_like(g.edge_ok)
+    for i in range(L2 - 1):
+        edge_ok[i, nodes[i], nodes[i + 1]] = g.edge_ok[i, nodes[i], nodes[i + 1]]
+    path = g._replace(edge_ok=edge_ok)
+    no_bound = np.zeros((0, L2, P))
+    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(path, inst.vessel, inst.wx, inst.objective, np.inf, np.zeros(0), no_bound,
+                                              np.zeros((L2, P)), np.full((L2, P), np.inf), 0.0)
+    return rpm_idx, cost, n_legs

@@ -40,21 +40,55 @@ arrivals bracket the RTA are mixed over random legs in the share that should arr
 then re-set as above. Bacterium 0 starts on the baseline route (with its constant rpm, or the aimed
 settings where cheaper) so the result is never worse than it.
 
-Everything random comes from numba's generator seeded with `seed`: same seed, same plan.
+The kernel is split as the method is: `init_swarm_nb` (random initialisation), `chemotaxis_nb` (one
+bacterium's tumbles and swims, with `swim_nb` the swim of one tumble), `reproduce_nb` and `disperse_nb`;
+`bfoa_nb` runs the cycles. They take the voyage as named structures (graph, vessel, weather, objective;
+see engine_timing), the settings as `Knobs`, the bacteria as a `Swarm` and work arrays as `Work` + `Scratch`.
+Everything random comes from one explicit generator, numpy's default_rng(seed) (PCG64), passed down to every
+kernel that draws: same seed, same plan, and the interpreted kernels (NUMBA_DISABLE_JIT=1) draw the same
+numbers as the compiled ones.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import N_LEG_OUT
+from pipeline.routing.engine_timing import (Scratch, aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb,
+                                            sail_span_nb, scratch, time_price_nb)
 from pipeline.routing.objectives import OBJ_JIT
-from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
-                                              time_price_nb)
 from pipeline.routing.random_route import random_walk_nb
+
+
+class Knobs(NamedTuple):
+    """`BfoaParams` as the kernel sees them, with the values that depend on the graph worked out."""
+
+    n_bacteria: int
+    n_chemo: int
+    n_cycles: int
+    n_repro: int
+    n_disperse: int
+    ed_every: int
+    n_fail: int
+    steps_to_die: int
+    swim_max: int
+    r_max: int
+    k_max: int
+    backup: int
+    p_engine: float
+    repulsion: float
+    d_max: float
+    sigma: float  # random routes: s.d. of a detour's target offset, in nodes
+    p_new: float  # random routes: chance per line of a new target offset
+    p_step: float  # random routes: chance per line of a step towards the target
+    screen: float
+    screen_engine: float
+    plan_engine: bool
+    p_bend: float
+    step_large: int  # the large swim length in nodes (medium 2, small 1)
 
 
 @dataclass(frozen=True)
@@ -83,28 +117,67 @@ class BfoaParams:
     plan_engine: bool = True  # re-set the engine for a move's estimated arrival before sailing it (else after)
     p_bend: float = 0.5  # chance a tumble is placed at a bend of the route (or engine plan) rather than anywhere
 
-    def arrays(self, n_lines: int) -> tuple[np.ndarray, np.ndarray]:
-        ip = np.array([self.n_bacteria, self.n_chemo, self.n_cycles, self.n_repro, self.n_disperse, self.ed_every,
-                       self.n_fail, self.steps_to_die, self.swim_max, self.r_max, self.k_max, self.backup], dtype=np.int64)
+    def knobs(self, n_lines: int, n_points: int, max_shift: int) -> Knobs:
+        """The settings for a graph of `n_lines` lines (ports excluded) × `n_points` nodes."""
         d_max = self.d_max if self.d_max is not None else 0.5 * np.sqrt(n_lines) + 1.0
-        fp = np.array([self.p_engine, self.repulsion, d_max, self.walk_spread, self.walk_turns / max(n_lines, 1),
-                       self.walk_slope, self.screen, self.p_bend, self.screen_engine,
-                       1.0 if self.plan_engine else 0.0, self.d_large], dtype=np.float64)
-        return ip, fp
+        return Knobs(int(self.n_bacteria), int(self.n_chemo), int(self.n_cycles), int(self.n_repro),
+                     int(self.n_disperse), int(self.ed_every), int(self.n_fail), int(self.steps_to_die),
+                     int(self.swim_max), int(self.r_max), int(self.k_max), int(self.backup), float(self.p_engine),
+                     float(self.repulsion), float(d_max), max(2.0, float(self.walk_spread) * n_points),
+                     float(self.walk_turns / max(n_lines, 1)), float(self.walk_slope), float(self.screen),
+                     float(self.screen_engine), bool(self.plan_engine), float(self.p_bend),
+                     int(max(3, min(max_shift, int(n_points * self.d_large)))))
+
+
+class Swarm(NamedTuple):
+    """The bacteria (Ns of them over L+2 lines) and the best plan met so far."""
+
+    pos: np.ndarray  # (Ns, L+2) int64 node per line
+    rpm: np.ndarray  # (Ns, L+1) int64 engine setting per leg
+    cum_t: np.ndarray  # (Ns, L+2) hours after t_ref on reaching each line
+    cum_f: np.ndarray  # (Ns, L+2) fuel so far on reaching each line
+    cost: np.ndarray  # (Ns,)
+    moves: np.ndarray  # (Ns,) int64 chemotactic moves since birth
+    level: np.ndarray  # (Ns,) int64 swim length: 0 large, 1 medium, 2 small
+    fails: np.ndarray  # (Ns,) int64 consecutive failed route moves at this length
+    best_pos: np.ndarray  # (L+2,) int64
+    best_rpm: np.ndarray  # (L+1,) int64
+    best_cost: np.ndarray  # (1,)
+
+
+class Work(NamedTuple):
+    """A move's candidate position and direction vectors."""
+
+    cand: np.ndarray  # (L+2,) int64
+    cand_r: np.ndarray  # (L+1,) int64
+    vec: np.ndarray  # (L+2,) int64
+    vec_r: np.ndarray  # (L+1,) int64
+    on_engine: np.ndarray  # (1,) bool: the tumble acts on engine settings
+
+
+def swarm(n_bacteria: int, n_lines_total: int) -> Swarm:
+    ns, n = n_bacteria, n_lines_total
+    return Swarm(np.empty((ns, n), np.int64), np.empty((ns, n - 1), np.int64), np.empty((ns, n)), np.empty((ns, n)),
+                 np.empty(ns), np.zeros(ns, np.int64), np.zeros(ns, np.int64), np.zeros(ns, np.int64),
+                 np.empty(n, np.int64), np.empty(n - 1, np.int64), np.full(1, np.inf))
+
+
+def work(n_lines_total: int) -> Work:
+    n = n_lines_total
+    return Work(np.empty(n, np.int64), np.empty(n - 1, np.int64), np.empty(n, np.int64), np.empty(n - 1, np.int64),
+                np.zeros(1, np.bool_))
 
 
 @numba.njit(cache=True)
-def _new_bacterium(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
-                   t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt, max_shift, r_max,
-                   k_max, backup, sigma, p_new, p_step):
+def _new_bacterium(nodes, rpm_idx, g, v, w, o, s, k, rng):
     """A random bacterium: a safe random walk with engine settings aimed at the RTA. A route that cannot be
     sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
     q = np.inf
     for attempt in range(4):
-        if not random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma * 2.0 ** attempt, p_new, p_step):
+        if not random_walk_nb(nodes, g.edge_ok, g.max_shift, k.r_max, k.k_max, k.backup, k.sigma * 2.0 ** attempt,
+                              k.p_new, k.p_step, rng):
             return False, np.inf
-        q = aim_engine_nb(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
-                        grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
+        q = aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng)
         if q < np.inf:
             break
     return True, q
@@ -142,7 +215,7 @@ def _beats_neighbours(pos, cost, i, cand, q_cand, d_max):
 
 
 @numba.njit(cache=True)
-def _bend(x, base, top):
+def _bend(x, base, top, rng):
     """A random index in base..top where x changes next to it (a bend of the route or of the engine plan); -1 if none."""
     m = 0
     for j in range(base, top + 1):
@@ -150,7 +223,7 @@ def _bend(x, base, top):
             m += 1
     if m == 0:
         return -1
-    r = np.random.randint(0, m)
+    r = rng.integers(0, m)
     for j in range(base, top + 1):
         if (j > 0 and x[j] != x[j - 1]) or (j + 1 < x.shape[0] and x[j] != x[j + 1]):
             if r == 0:
@@ -160,29 +233,29 @@ def _bend(x, base, top):
 
 
 @numba.njit(cache=True)
-def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine):
+def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine, rng):
     """Fill vec (length L+2 for nodes or L+1 for legs) with a direction; return the first changed index (engine? in
     on_engine). With probability p_bend the vector is placed at a bend (a line where the route, or a leg where the
     engine plan, changes): there a move shifts the bend instead of adding two."""
     for j in range(vec.shape[0]):
         vec[j] = 0
-    engine = np.random.random() < p_engine
+    engine = rng.random() < p_engine
     if engine:
         n = n_legs
         base = 0
     else:
         n = L
         base = 1
-    u = np.random.random()
-    sign = 1 if np.random.random() < 0.5 else -1
+    u = rng.random()
+    sign = 1 if rng.random() < 0.5 else -1
     top = base + n - 1
     k = -1
-    if np.random.random() < p_bend:
-        k = _bend(rpm_idx if engine else nodes, base, top)
-        if k >= 0 and u >= 0.5 and u < 0.92 and np.random.random() < 0.5:
+    if rng.random() < p_bend:
+        k = _bend(rpm_idx if engine else nodes, base, top, rng)
+        if k >= 0 and u >= 0.5 and u < 0.92 and rng.random() < 0.5:
             k = max(base, k - (1 if u < 0.8 else 2))  # a block ending at the bend rather than starting there
     if k < 0:
-        k = base + np.random.randint(0, n)
+        k = base + rng.integers(0, n)
     if u < 0.5:
         vec[k] = sign
         first = k
@@ -196,7 +269,7 @@ def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine):
             vec[j] = sign
         first = k
     else:
-        k2 = base + np.random.randint(0, n)
+        k2 = base + rng.integers(0, n)
         if k2 == k:
             k2 = base + (k - base + 1) % n
         vec[k] = 1
@@ -207,218 +280,233 @@ def _tumble(L, n_legs, p_engine, p_bend, nodes, rpm_idx, vec, on_engine):
 
 
 @numba.njit(cache=True)
-def bfoa_nb(seed, ip, fp, base_nodes, base_rpm, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-            times_h, grid, obj, t_req_h, window_h, f_target, early, late, max_shift):
-    np.random.seed(seed)
-    ns, n_chemo, n_cycles, n_repro, n_disp, ed_every, n_fail, to_die, swim_max, r_max, k_max, backup = (
-        ip[0], ip[1], ip[2], ip[3], ip[4], ip[5], ip[6], ip[7], ip[8], ip[9], ip[10], ip[11])
-    p_engine, repulsion, d_max = fp[0], fp[1], fp[2]
-    sigma, p_new, p_step, screen, p_bend = max(2.0, fp[3] * lat.shape[1]), fp[4], fp[5], fp[6], fp[7]
-    screen_engine, plan_flips, d_large = fp[8], fp[9], fp[10]
-    L2, P = lat.shape
-    L = L2 - 2
-    n_rpm = rpm_options.shape[0]
-    steps = np.array([max(3, min(max_shift, int(P * d_large))), 2, 1])
-    pos = np.empty((ns, L2), np.int64)
-    rpm = np.empty((ns, L2 - 1), np.int64)
-    cum_t = np.empty((ns, L2))
-    cum_f = np.empty((ns, L2))
-    cost = np.empty(ns)
-    moves = np.zeros(ns, np.int64)
-    level = np.zeros(ns, np.int64)
-    fails = np.zeros(ns, np.int64)
-    history = np.empty(n_cycles)
-    cnt = np.zeros(1, np.int64)  # routes (or route tails) sailed
-    cand = np.empty(L2, np.int64)
-    cand_r = np.empty(L2 - 1, np.int64)
-    vec = np.empty(L2, np.int64)
-    vec_r = np.empty(L2 - 1, np.int64)
-    ct = np.empty(L2)
-    cf = np.empty(L2)
-    keep_r = np.empty(L2 - 1, np.int64)
-    keep_t = np.empty(L2)
-    keep_f = np.empty(L2)
-    on_engine = np.zeros(1, np.bool_)
-    for i in range(ns):
+def _adopt(sw, i, cand, cand_r, ct, cf, q):
+    sw.pos[i, :] = cand
+    sw.rpm[i, :] = cand_r
+    sw.cum_t[i, :] = ct
+    sw.cum_f[i, :] = cf
+    sw.cost[i] = q
+
+
+@numba.njit(cache=True)
+def init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk, rng):
+    """Random initial bacteria; bacterium 0 (and any whose random walk fails) starts on the baseline route, with
+    its constant rpm or engine settings aimed at the RTA, whichever is cheaper. Returns the best one's index."""
+    cand, cand_r = wk.cand, wk.cand_r
+    q = np.inf
+    for i in range(k.n_bacteria):
         placed = False
         if i > 0:
-            placed, q = _new_bacterium(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                                       times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r,
-                                       keep_t, keep_f, cnt, max_shift, r_max, k_max, backup, sigma, p_new, p_step)
+            placed, q = _new_bacterium(cand, cand_r, g, v, w, o, s, k, rng)
         if not placed:
-            # the baseline route, with its constant rpm or engine settings aimed at the RTA, whichever is cheaper
-            pos[i, :] = base_nodes
-            rpm[i, :] = base_rpm
-            cost[i] = cost_from_nb(pos[i], rpm[i], 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                                 times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t[i], cum_f[i])
-            cnt[0] += 1
+            sw.pos[i, :] = base_nodes
+            sw.rpm[i, :] = base_rpm
+            sw.cost[i] = cost_from_nb(sw.pos[i], sw.rpm[i], 0, g, v, w, o, sw.cum_t[i], sw.cum_f[i])
+            s.cnt[0] += 1
             cand[:] = base_nodes
-            q = aim_engine_nb(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
-                            grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
-        if placed or q < cost[i]:
-            pos[i, :] = cand
-            rpm[i, :] = cand_r
-            cum_t[i, :] = ct
-            cum_f[i, :] = cf
-            cost[i] = q
-    best_pos = pos[0].copy()
-    best_rpm = rpm[0].copy()
-    best_cost = cost[0]
+            q = aim_engine_nb(cand, cand_r, g, v, w, o, s, rng)
+        if placed or q < sw.cost[i]:
+            _adopt(sw, i, cand, cand_r, s.ct, s.cf, q)
+    sw.best_pos[:] = sw.pos[0]
+    sw.best_rpm[:] = sw.rpm[0]
+    sw.best_cost[0] = sw.cost[0]
     best_i = 0
-    for i in range(ns):
-        if cost[i] < best_cost:
-            best_cost = cost[i]
-            best_pos[:] = pos[i]
-            best_rpm[:] = rpm[i]
+    for i in range(k.n_bacteria):
+        if sw.cost[i] < sw.best_cost[0]:
+            sw.best_cost[0] = sw.cost[i]
+            sw.best_pos[:] = sw.pos[i]
+            sw.best_rpm[:] = sw.rpm[i]
             best_i = i
-    # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
-    lam = time_price_nb(rpm[best_i], cum_t[best_i], cum_f[best_i], rpm_options) if best_cost < np.inf else 0.0
-    do_screen = obj == OBJ_JIT and lam > 0.0
-    do_plan = plan_flips > 0.0 and rpm_options.shape[0] > 1
-    out = np.empty(N_LEG_OUT)
-    for cyc in range(n_cycles):
-        for i in range(ns):
-            for _m in range(n_chemo):
-                moves[i] += 1
-                first = _tumble(L, L2 - 1, p_engine, p_bend, pos[i], rpm[i], vec, on_engine)
-                engine = on_engine[0]
-                if engine:
-                    for j in range(L2 - 1):
-                        vec_r[j] = vec[j]
-                improved_any = False
-                d = 1 if engine else steps[level[i]]
-                for _s in range(swim_max):
-                    cand[:] = pos[i]
-                    cand_r[:] = rpm[i]
-                    valid = True
-                    last = first
-                    if engine:
-                        for j in range(L2 - 1):
-                            if vec_r[j] != 0:
-                                v = cand_r[j] + vec_r[j] * d
-                                if v < 0 or v >= n_rpm:
-                                    valid = False
-                                    break
-                                cand_r[j] = v
-                                last = j
-                        start = first
-                    else:
-                        for j in range(1, L2 - 1):
-                            if vec[j] != 0:
-                                v = cand[j] + vec[j] * d
-                                if v < 0 or v >= P:
-                                    valid = False
-                                    break
-                                cand[j] = v
-                                last = j
-                        start = first - 1
-                    if not valid:
+    return best_i
+
+
+@numba.njit(cache=True)
+def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
+    """Swim bacterium i along the tumbled direction (wk.vec, or wk.vec_r for engine moves) in steps of `d`, while
+    the judged cost keeps falling (at most `swim_max` steps). Returns True when at least one step was taken."""
+    pos, rpm, cum_t, cum_f, cost = sw.pos, sw.rpm, sw.cum_t, sw.cum_f, sw.cost
+    cand, cand_r, vec, vec_r = wk.cand, wk.cand_r, wk.vec, wk.vec_r
+    ct, cf = s.ct, s.cf
+    L2, P = g.lat.shape
+    n_rpm = v.rpm_options.shape[0]
+    t_dep_h = o.t_dep_h
+    ns = k.n_bacteria
+    improved_any = False
+    for _s in range(k.swim_max):
+        cand[:] = pos[i]
+        cand_r[:] = rpm[i]
+        valid = True
+        last = first
+        if engine:
+            for j in range(L2 - 1):
+                if vec_r[j] != 0:
+                    x = cand_r[j] + vec_r[j] * d
+                    if x < 0 or x >= n_rpm:
+                        valid = False
                         break
-                    if cost[i] == np.inf:
-                        start = 0  # the sums of an infeasible route are only valid up to where it failed
-                    ct[: start + 1] = cum_t[i, : start + 1]
-                    cf[: start + 1] = cum_f[i, : start + 1]
-                    cnt[0] += 1
-                    resume = start
-                    # crowding of the current position: the most a move away from the crowd can be credited
-                    q_exp = repulsion * abs(cost[i]) if cost[i] < np.inf else 0.0
-                    dq_old = _crowding(pos, i, pos[i], ns, d_max, q_exp) if q_exp > 0.0 else 0.0
-                    tol = screen_engine if engine else screen
-                    if do_screen and tol >= 0.0 and cost[i] < np.inf:
-                        # the changed legs only; the rest is sailed when their fuel and time look worth it
-                        resume = last + 1
-                        if not sail_span_nb(cand, cand_r, start, resume, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx,
-                                          times_h, grid, ct, cf, out):
-                            break
-                        est = cf[resume] - cum_f[i, resume] + lam * (ct[resume] - cum_t[i, resume])
-                        if est > tol * cost[i] + dq_old:
-                            break
-                    if do_plan and cost[i] < np.inf:
-                        # re-set the engine on the legs after the move for the estimated arrival, then sail once
-                        if resume > start:  # the changed legs were sailed: the rest keeps its hours and fuel
-                            t_est = ct[resume] + cum_t[i, L2 - 1] - cum_t[i, resume] - t_dep_h
-                            f_est = cf[resume] + cum_f[i, L2 - 1] - cum_f[i, resume]
-                            lo_flip = resume
-                        else:
-                            t_est = cum_t[i, L2 - 1] - t_dep_h
-                            f_est = cum_f[i, L2 - 1]
-                            for j in range(start, last + 1):
-                                if cand_r[j] != rpm[i, j]:
-                                    k_r = rpm_options[cand_r[j]] / rpm_options[rpm[i, j]]
-                                    t_est += (cum_t[i, j + 1] - cum_t[i, j]) * (1.0 / k_r - 1.0)
-                                    f_est += (cum_f[i, j + 1] - cum_f[i, j]) * (k_r * k_r - 1.0)
-                            lo_flip = last + 1
-                        if plan_flips_nb(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], rpm_options,
-                                       t_req_h, obj) < 0:
-                            break
-                    q = cost_from_nb(cand, cand_r, resume, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
-                                   fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
-                    # re-set the engine so the moved route still arrives just inside the RTA
-                    q = retime_nb(cand, cand_r, start, q, cost[i] + dq_old, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp,
-                                sc, fc, wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r,
-                                keep_t, keep_f, cnt)
-                    if q == np.inf:
+                    cand_r[j] = x
+                    last = j
+            start = first
+        else:
+            for j in range(1, L2 - 1):
+                if vec[j] != 0:
+                    x = cand[j] + vec[j] * d
+                    if x < 0 or x >= P:
+                        valid = False
                         break
-                    # judged on Q(S') + dQ(S') − dQ(S), or on Q alone when S' beats S and every neighbour
-                    if not (q < cost[i] and _beats_neighbours(pos, cost, i, cand, q, d_max)):
-                        dq_new = _crowding(pos, i, cand, ns, d_max, q_exp) if q_exp > 0.0 else 0.0
-                        if not (q + dq_new - dq_old < cost[i]):
-                            break
-                    pos[i, :] = cand
-                    rpm[i, :] = cand_r
-                    cum_t[i, :] = ct
-                    cum_f[i, :] = cf
-                    cost[i] = q
-                    improved_any = True
-                    if q < best_cost:
-                        best_cost = q
-                        best_pos[:] = cand
-                        best_rpm[:] = cand_r
-                if not engine:
-                    if improved_any:
-                        fails[i] = 0
-                    else:
-                        fails[i] += 1
-                        if fails[i] >= n_fail:
-                            fails[i] = 0
-                            level[i] = (level[i] + 1) % 3
-        order = np.argsort(cost)
-        best_i = order[0]
-        # reproduction: the worst mature bacteria become copies of the best
-        replaced = 0
-        for r in range(ns - 1, 0, -1):
-            if replaced >= n_repro:
+                    cand[j] = x
+                    last = j
+            start = first - 1
+        if not valid:
+            break
+        if cost[i] == np.inf:
+            start = 0  # the sums of an infeasible route are only valid up to where it failed
+        ct[: start + 1] = cum_t[i, : start + 1]
+        cf[: start + 1] = cum_f[i, : start + 1]
+        s.cnt[0] += 1
+        resume = start
+        # crowding of the current position: the most a move away from the crowd can be credited
+        q_exp = k.repulsion * abs(cost[i]) if cost[i] < np.inf else 0.0
+        dq_old = _crowding(pos, i, pos[i], ns, k.d_max, q_exp) if q_exp > 0.0 else 0.0
+        tol = k.screen_engine if engine else k.screen
+        if do_screen and tol >= 0.0 and cost[i] < np.inf:
+            # the changed legs only; the rest is sailed when their fuel and time look worth it
+            resume = last + 1
+            if not sail_span_nb(cand, cand_r, start, resume, g, v, w, ct, cf, s.out):
                 break
-            k = order[r]
-            if moves[k] >= to_die and k != best_i:
-                pos[k, :] = pos[best_i]
-                rpm[k, :] = rpm[best_i]
-                cum_t[k, :] = cum_t[best_i]
-                cum_f[k, :] = cum_f[best_i]
-                cost[k] = cost[best_i]
-                moves[k] = 0
-                level[k] = 0
-                fails[k] = 0
-                replaced += 1
-        # elimination and dispersal: never the current best
-        if (cyc + 1) % ed_every == 0:
-            for _d in range(n_disp):
-                k = np.random.randint(0, ns)
-                if k == best_i:
-                    continue
-                # walk in scratch space: a failed walk must not leave bacterium k half-overwritten with stale sums
-                placed, q = _new_bacterium(cand, cand_r, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc,
-                                           wx, times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf,
-                                           keep_r, keep_t, keep_f, cnt, max_shift, r_max, k_max, backup, sigma, p_new,
-                                           p_step)
-                if placed:
-                    pos[k, :] = cand
-                    rpm[k, :] = cand_r
-                    cum_t[k, :] = ct
-                    cum_f[k, :] = cf
-                    cost[k] = q
-                    moves[k] = 0
-                    level[k] = 0
-                    fails[k] = 0
-        history[cyc] = best_cost
-    return best_pos, best_rpm, best_cost, history, cnt[0]
+            est = cf[resume] - cum_f[i, resume] + lam * (ct[resume] - cum_t[i, resume])
+            if est > tol * cost[i] + dq_old:
+                break
+        if do_plan and cost[i] < np.inf:
+            # re-set the engine on the legs after the move for the estimated arrival, then sail once
+            if resume > start:  # the changed legs were sailed: the rest keeps its hours and fuel
+                t_est = ct[resume] + cum_t[i, L2 - 1] - cum_t[i, resume] - t_dep_h
+                f_est = cf[resume] + cum_f[i, L2 - 1] - cum_f[i, resume]
+                lo_flip = resume
+            else:
+                t_est = cum_t[i, L2 - 1] - t_dep_h
+                f_est = cum_f[i, L2 - 1]
+                for j in range(start, last + 1):
+                    if cand_r[j] != rpm[i, j]:
+                        k_r = v.rpm_options[cand_r[j]] / v.rpm_options[rpm[i, j]]
+                        t_est += (cum_t[i, j + 1] - cum_t[i, j]) * (1.0 / k_r - 1.0)
+                        f_est += (cum_f[i, j + 1] - cum_f[i, j]) * (k_r * k_r - 1.0)
+                lo_flip = last + 1
+            if plan_flips_nb(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], v.rpm_options,
+                             o, rng) < 0:
+                break
+        q = cost_from_nb(cand, cand_r, resume, g, v, w, o, ct, cf)
+        # re-set the engine so the moved route still arrives just inside the RTA
+        q = retime_nb(cand, cand_r, start, q, cost[i] + dq_old, g, v, w, o, s, rng)
+        if q == np.inf:
+            break
+        # judged on Q(S') + dQ(S') − dQ(S), or on Q alone when S' beats S and every neighbour
+        if not (q < cost[i] and _beats_neighbours(pos, cost, i, cand, q, k.d_max)):
+            dq_new = _crowding(pos, i, cand, ns, k.d_max, q_exp) if q_exp > 0.0 else 0.0
+            if not (q + dq_new - dq_old < cost[i]):
+                break
+        _adopt(sw, i, cand, cand_r, ct, cf, q)
+        improved_any = True
+        if q < sw.best_cost[0]:
+            sw.best_cost[0] = q
+            sw.best_pos[:] = cand
+            sw.best_rpm[:] = cand_r
+    return improved_any
+
+
+@numba.njit(cache=True)
+def chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
+    """Bacterium i's `n_chemo` chemotactic moves: tumble, swim; the swim length adapts after `n_fail` failed route
+    moves at each size (large → medium → small → large)."""
+    L2 = g.lat.shape[0]
+    for _m in range(k.n_chemo):
+        sw.moves[i] += 1
+        first = _tumble(L2 - 2, L2 - 1, k.p_engine, k.p_bend, sw.pos[i], sw.rpm[i], wk.vec, wk.on_engine, rng)
+        engine = wk.on_engine[0]
+        if engine:
+            for j in range(L2 - 1):
+                wk.vec_r[j] = wk.vec[j]
+        if engine:
+            d = 1
+        elif sw.level[i] == 0:
+            d = k.step_large
+        else:
+            d = 3 - sw.level[i]
+        improved_any = swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng)
+        if not engine:
+            if improved_any:
+                sw.fails[i] = 0
+            else:
+                sw.fails[i] += 1
+                if sw.fails[i] >= k.n_fail:
+                    sw.fails[i] = 0
+                    sw.level[i] = (sw.level[i] + 1) % 3
+
+
+@numba.njit(cache=True)
+def _reborn(sw, i):
+    sw.moves[i] = 0
+    sw.level[i] = 0
+    sw.fails[i] = 0
+
+
+@numba.njit(cache=True)
+def reproduce_nb(sw, order, k):
+    """The `n_repro` worst mature bacteria (≥ steps_to_die moves) become copies of the best (order[0])."""
+    best_i = order[0]
+    replaced = 0
+    for r in range(k.n_bacteria - 1, 0, -1):
+        if replaced >= k.n_repro:
+            break
+        j = order[r]
+        if sw.moves[j] >= k.steps_to_die and j != best_i:
+            _adopt(sw, j, sw.pos[best_i], sw.rpm[best_i], sw.cum_t[best_i], sw.cum_f[best_i], sw.cost[best_i])
+            _reborn(sw, j)
+            replaced += 1
+
+
+@numba.njit(cache=True)
+def disperse_nb(sw, best_i, g, v, w, o, s, k, wk, rng):
+    """Elimination and dispersal: `n_disperse` random bacteria, never the current best, start again at random."""
+    for _d in range(k.n_disperse):
+        j = rng.integers(0, k.n_bacteria)
+        if j == best_i:
+            continue
+        # walk in scratch space: a failed walk must not leave bacterium j half-overwritten with stale sums
+        placed, q = _new_bacterium(wk.cand, wk.cand_r, g, v, w, o, s, k, rng)
+        if placed:
+            _adopt(sw, j, wk.cand, wk.cand_r, s.ct, s.cf, q)
+            _reborn(sw, j)
+
+
+@numba.njit(cache=True)
+def bfoa_nb(rng, k, base_nodes, base_rpm, g, v, w, o, sw, s, wk, history):
+    """Run the improved BFOA drawing from the generator `rng`; the best plan ends in sw.best_pos / best_rpm /
+    best_cost, the best cost after each cycle in `history`. Returns the routes (or route tails) sailed."""
+    best_i = init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk, rng)
+    # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
+    lam = (time_price_nb(sw.rpm[best_i], sw.cum_t[best_i], sw.cum_f[best_i], v.rpm_options)
+           if sw.best_cost[0] < np.inf else 0.0)
+    do_screen = o.kind == OBJ_JIT and lam > 0.0
+    do_plan = k.plan_engine and v.rpm_options.shape[0] > 1
+    for cyc in range(k.n_cycles):
+        for i in range(k.n_bacteria):
+            chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng)
+        order = np.argsort(sw.cost)
+        reproduce_nb(sw, order, k)
+        if (cyc + 1) % k.ed_every == 0:
+            disperse_nb(sw, order[0], g, v, w, o, s, k, wk, rng)
+        history[cyc] = sw.best_cost[0]
+    return s.cnt[0]
+
+
+def run_bfoa(seed: int, params: BfoaParams, base_nodes, base_rpm, g, v, w, o):
+    """(best nodes, best rpm indexes, best cost, history of the best cost per cycle, routes sailed)."""
+    n = g.lat.shape[0]
+    k = params.knobs(n - 2, g.lat.shape[1], g.max_shift)
+    sw, s, wk = swarm(k.n_bacteria, n), scratch(n), work(n)
+    history = np.empty(k.n_cycles)
+    rng = np.random.default_rng(int(seed))
+    n_evals = bfoa_nb(rng, k, np.asarray(base_nodes, np.int64), np.asarray(base_rpm, np.int64), g, v, w, o, sw,
+                      s, wk, history)
+    return sw.best_pos, sw.best_rpm, float(sw.best_cost[0]), history, int(n_evals)

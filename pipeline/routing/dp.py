@@ -1,26 +1,56 @@
-"""Exact reference: dynamic programming over (line, node, time bucket) with an engine setting per leg.
+"""Exact reference: dynamic programming over (line, node) with an engine setting per leg.
 
-Labels at (line i, node a) are kept per arrival-time bucket of `bucket_h` hours (the least fuel
-in each bucket, with its exact arrival time); every leg is sailed with the same time-dependent
-kernel from the label's exact time. At the arrival the best label under the objective wins. The
-answer is optimal on the graph up to the merging of labels inside one bucket. A label is not
-expanded when an earlier label at the same node has F_A − e·t_A ≤ F_B − e·t_B (e = the early-
-arrival penalty rate of `jit`, 0 for `thesis`): under first-in-first-out sailing it reaches the
-arrival no later and no dearer.
+Every leg is sailed with the same time-dependent kernel as the other solvers, from the label's exact
+arrival time. A label is a partial plan reaching (line i, node a) at time t with fuel f. At each node the
+labels are sorted by time and a label B is dropped when an earlier label A has
+
+    t_A ≤ t_B  and  f_A − e·t_A ≤ f_B − e·t_B          (e = the early-arrival rate of `jit`, 0 for `thesis`)
+
+Every continuation of A then arrives no later than the same continuation of B (legs are first-in
+first-out), so no later penalty, at most e per hour more early penalty, and no more fuel **as long as the
+rest of the voyage costs the same fuel from either start time**. That holds exactly in weather that does not
+change with time; in time-varying weather it is the one assumption of this solver (a later start through a
+passing storm can be cheaper), which the tests check against exhaustive enumeration on small graphs with
+moving storms. There is no merging of labels into time buckets.
+
+Bounds (certified: they never drop a label of an optimal plan):
+  incumbent   any known plan's cost is an upper bound U on the optimum: the baseline's, and by default a
+              BFOA plan's (`DpOptions.incumbent`); the answer does not depend on it, only the time taken.
+  deadline    when U is on time (jit: below the 1000 t late step; thesis: below 9999.9), a plan arriving after
+              the RTA cannot win, so a label must still be able to arrive by the RTA.
+  fuel        for the legs leaving each node and each engine setting r: the least hours per NM τ (best STW in
+              the weather met near those legs at any time, plus the strongest current there) and the least
+              fuel per NM φ. For any λ ≥ 0 a backward pass gives M_λ = the least Σ d·(φ + λ·τ) to the arrival,
+              and a completion sailed within H hours burns at least max_λ (M_λ − λ·H) (it cannot arrive at all
+              below the least Σ d·τ). A label whose fuel so far plus that bound prices it above U is dropped.
+The bounds on STW and fuel rate come from the performance model at the corners of the local weather's range
+(wind 0..max, Hs 0..max, every relative direction): both model forms are linear in regressors that take their
+extremes there (weather limits cap the range, since a leg beyond them is infeasible anyway).
+
+`dp_bucket_nb` keeps the older, faster approximation (labels merged per arrival-time bucket of
+`bucket_h` hours; optimal only up to that merging), selected by `DpOptions(bucket_h=...)`.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 
+from pipeline.performance.features import FORM_PHYSICAL, FORM_THESIS, stw_kn_nb, fuel_tph_nb
+from pipeline.routing import geodesy as geo
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
-from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
+from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
+from pipeline.routing.weather_field import SWH, U10, UO, V10, VO
 
 
 @numba.njit(cache=True)
-def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj, t_req_h,
-          window_h, f_target, early, late, max_shift):
+def dp_bucket_nb(bucket_h, g, v, w, o):
+    """(nodes, rpm indexes, cost, legs sailed) of the best plan found with labels merged per time bucket."""
+    lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
+    t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
     R = rpm_options.shape[0]
     nb = int(max_hours / bucket_h) + 1
@@ -34,7 +64,7 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
     tarr[0, c, 0] = t_dep_h
     out = np.empty(N_LEG_OUT)
     n_legs = 0
-    dom_early = early if obj == OBJ_JIT else 0.0
+    dom_early = o.early_t_per_h if o.kind == OBJ_JIT else 0.0
     for i in range(L2 - 1):
         for a in range(P):
             front = np.inf
@@ -51,8 +81,8 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
                     if not edge_ok[i, a, a2]:
                         continue
                     for r in range(R):
-                        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], vp, sc, fc,
-                                    wx, times_h, grid, out)
+                        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w,
+                                    out)
                         n_legs += 1
                         if out[CODE] != OK:
                             continue
@@ -70,8 +100,7 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
     best, best_b = np.inf, -1
     for b in range(nb):
         if fuel[L2 - 1, c, b] < np.inf:
-            q = route_cost_nb(obj, tarr[L2 - 1, c, b] - t_dep_h, fuel[L2 - 1, c, b], t_req_h, window_h, f_target, early,
-                              late)
+            q = route_cost_nb(o, tarr[L2 - 1, c, b] - t_dep_h, fuel[L2 - 1, c, b])
             if q < best:
                 best, best_b = q, b
     nodes = np.full(L2, c, np.int64)
@@ -85,3 +114,342 @@ def dp_nb(bucket_h, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, 
         a, b = par_a[i, a, b], par_b[i, a, b]
     nodes[0] = c
     return nodes, rpm_idx, best, n_legs
+
+
+@numba.njit(cache=True)
+def _grow(a, n):
+    """`a` with room for at least n entries (doubling), its contents kept."""
+    if n <= a.shape[0]:
+        return a
+    b = np.empty(max(n, 2 * a.shape[0]), a.dtype)
+    b[: a.shape[0]] = a
+    return b
+
+
+@numba.njit(cache=True)
+def fuel_to_finish_lb(m_lam, lams, t_min, hours):
+    """Least fuel (t) to finish within `hours` from a node whose bound tables are m_lam[k] (least Σ d·(φ + λ_k·τ))
+    and t_min (least Σ d·τ): max over k of m_lam[k] − λ_k·hours; inf when even t_min does not fit."""
+    if hours < t_min:
+        return np.inf
+    best = 0.0
+    for k in range(lams.shape[0]):
+        best = max(best, m_lam[k] - lams[k] * hours)
+    return best
+
+
+@numba.njit(cache=True)
+def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
+    """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
+
+    `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
+    tables of `finish_bounds` for the prices lams (K,); ld (L+2, P) the latest departures that can still make the
+    RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
+    earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
+    the optimum (one such drop per leg at most along the optimal plan)."""
+    lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
+    t_dep_h, max_hours = o.t_dep_h, o.max_hours
+    L2, P = lat.shape
+    R = rpm_options.shape[0]
+    c = P // 2
+    e = o.early_t_per_h if o.kind == OBJ_JIT else 0.0
+    # an on-time incumbent: late plans cannot win, so every label must still be able to arrive by the RTA
+    on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
+    deadline = t_dep_h + (o.t_req_h if on_time else max_hours)
+    tol = 1e-9 * max(1.0, abs(upper))
+    # kept labels of every line, for the way back
+    cap = 1024
+    kt, kf = np.empty(cap), np.empty(cap)
+    kpar, knode, kr = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
+    kt[0], kf[0], kpar[0], knode[0], kr[0] = t_dep_h, 0.0, -1, c, -1
+    n_kept = 1
+    line_lo, line_hi = 0, 1
+    # candidates for the next line
+    ccap = 1024
+    ct, cf = np.empty(ccap), np.empty(ccap)
+    cpar, cnode, cr = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
+    out = np.empty(N_LEG_OUT)
+    n_legs = 0
+    for i in range(L2 - 1):
+        n_c = 0
+        for j in range(line_lo, line_hi):
+            a, t0, f0 = knode[j], kt[j], kf[j]
+            for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                if not edge_ok[i, a, a2]:
+                    continue
+                for r in range(R):
+                    sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
+                    n_legs += 1
+                    if out[CODE] != OK:
+                        continue
+                    t1 = t0 + out[H]
+                    if t1 - t_dep_h > max_hours:
+                        continue
+                    if on_time and t1 > ld[i + 1, a2]:
+                        continue  # cannot reach the arrival by the RTA any more, even at full speed
+                    f1 = f0 + out[FUEL]
+                    lb = f1 + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - t1)
+                    if o.kind == OBJ_JIT:
+                        if lb > upper + tol:  # jit prices a plan at least at its fuel
+                            continue
+                    elif on_time and (lb == np.inf or 0.85 + 3.0 * lb / o.f_target > upper + tol):
+                        continue  # nor does the thesis function price an on-time plan below 0.85 + 3·F/F_target
+                    if n_c >= ct.shape[0]:
+                        ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
+                        cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
+                    ct[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = t1, f1, j, a2, r
+                    n_c += 1
+        # per node, by arrival time: keep a label only when it beats every earlier one on f − e·t
+        order = np.argsort(ct[:n_c], kind="mergesort")
+        by_node = np.argsort(cnode[:n_c][order], kind="mergesort")  # stable: time order kept inside each node
+        line_lo = n_kept
+        gmin = np.inf
+        prev = -1
+        for q in range(n_c):
+            k = order[by_node[q]]
+            if cnode[k] != prev:
+                prev = cnode[k]
+                gmin = np.inf
+            gk = cf[k] - e * ct[k]
+            if gk < gmin - eps:
+                gmin = gk
+                if n_kept >= kt.shape[0]:
+                    kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
+                    kpar, knode, kr = _grow(kpar, n_kept + 1), _grow(knode, n_kept + 1), _grow(kr, n_kept + 1)
+                kt[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = ct[k], cf[k], cpar[k], cnode[k], cr[k]
+                n_kept += 1
+        line_hi = n_kept
+    best, best_j = np.inf, -1
+    for j in range(line_lo, line_hi):
+        if knode[j] == c:
+            q = route_cost_nb(o, kt[j] - t_dep_h, kf[j])
+            if q < best:
+                best, best_j = q, j
+    nodes = np.full(L2, c, np.int64)
+    rpm_idx = np.zeros(L2 - 1, np.int64)
+    if best_j < 0:
+        return nodes, rpm_idx, np.inf, n_legs, n_kept
+    j = best_j
+    for i in range(L2 - 1, 0, -1):
+        nodes[i] = knode[j]
+        rpm_idx[i - 1] = kr[j]
+        j = kpar[j]
+    return nodes, rpm_idx, best, n_legs, n_kept
+
+
+@numba.njit(cache=True)
+def _corner_bounds(v, wind_kn, hs_m, cur_kn, tau, phi):
+    """Per node n and engine setting r: hours per NM ≥ tau[n, r] and fuel per NM ≥ phi[n, r] on legs that meet at
+    most wind_kn[n], hs_m[n] and a current of cur_kn[n] (the model at the corners of that range)."""
+    for n in range(wind_kn.shape[0]):
+        wk_hi = min(wind_kn[n], v.max_wind_kn)
+        h_hi = min(hs_m[n], v.max_hs_m)
+        for r in range(v.rpm_options.shape[0]):
+            rpm = v.rpm_options[r]
+            stw, rate = 0.0, np.inf
+            for wk in (0.0, wk_hi):
+                for wr in (0.0, 180.0):
+                    for h in (0.0, h_hi):
+                        for hr in (0.0, 180.0):
+                            stw = max(stw, stw_kn_nb(v.form_id, v.speed_coef, rpm, v.draft_m, v.trim_m, wk, wr, h, hr,
+                                                     v.months_dd))
+                            rate = min(rate, fuel_tph_nb(v.form_id, v.fuel_coef, rpm, v.draft_m, v.trim_m, wk, wr, h,
+                                                         hr, v.months_dd))
+            sog = stw + cur_kn[n]
+            # a little slack for rounding in the kernels' sums: the bounds must never cut an optimal plan
+            tau[n, r] = (1.0 - 1e-9) / sog if sog > 0.0 else np.inf
+            phi[n, r] = (1.0 - 1e-9) * rate / sog if sog > 0.0 else 0.0
+
+
+@numba.njit(cache=True)
+def _backward_tables(lat, lon, edge_ok, max_shift, tau, phi, lams, m_lam, t_min):
+    """m_lam[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_min[i, a] = least Σ d·min_r τ from (i, a) to the arrival
+    through feasible edges, with τ, φ of the node each leg leaves; inf where the arrival cannot be reached."""
+    L2, P = lat.shape
+    R = tau.shape[2]
+    m_lam[:] = np.inf
+    t_min[:] = np.inf
+    m_lam[:, L2 - 1, P // 2] = 0.0
+    t_min[L2 - 1, P // 2] = 0.0
+    for i in range(L2 - 2, -1, -1):
+        for a in range(P):
+            for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                if not edge_ok[i, a, b] or t_min[i + 1, b] == np.inf:
+                    continue
+                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
+                fastest = np.inf
+                for r in range(R):
+                    fastest = min(fastest, tau[i, a, r])
+                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + d * fastest)
+                for k in range(lams.shape[0]):
+                    best = np.inf
+                    for r in range(R):
+                        best = min(best, phi[i, a, r] + lams[k] * tau[i, a, r])
+                    m_lam[k, i, a] = min(m_lam[k, i, a], m_lam[k, i + 1, b] + d * best)
+
+
+@numba.njit(cache=True)
+def _arrival(lat0, lon0, lat1, lon1, t, v, w, rpms, out):
+    """Earliest arrival at the leg's end leaving at t at any of the settings rpms (inf: no headway at any)."""
+    best = np.inf
+    for r in range(rpms.shape[0]):
+        sail_leg_nb(lat0, lon0, lat1, lon1, t, rpms[r], v, w, out)
+        if out[CODE] == OK:
+            best = min(best, t + out[H])
+    return best
+
+
+@numba.njit(cache=True)
+def latest_departure_nb(g, v, w, rpms, t_lo, deadline, ld):
+    """ld[i, a] ≥ the latest time a ship can leave (i, a) and still reach the arrival by `deadline` (−inf: it
+    cannot from t_lo on). Legs are sailed at the settings `rpms` (the fastest) with `v`'s weather limits lifted
+    by the caller; first-in-first-out legs make the arrival time non-decreasing in the departure time, so the
+    latest departure over a leg is found by iterating t = target − hours(t) and then checked from above."""
+    lat, lon, edge_ok, max_shift = g.lat, g.lon, g.edge_ok, g.max_shift
+    L2, P = lat.shape
+    out = np.empty(N_LEG_OUT)
+    ld[:] = -np.inf
+    ld[L2 - 1, P // 2] = deadline
+    for i in range(L2 - 2, -1, -1):
+        for a in range(P):
+            for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                target = ld[i + 1, b]
+                if not edge_ok[i, a, b] or target == -np.inf:
+                    continue
+                if _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t_lo, v, w, rpms, out) > target:
+                    continue  # cannot make it even leaving at the earliest time
+                t = target
+                for _it in range(6):  # fixed point of t = target − hours(t): hours change slowly with t
+                    arr = _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, v, w, rpms, out)
+                    if arr == np.inf:
+                        break
+                    t = t - (arr - target)
+                # move up until leaving then arrives after the target: by FIFO the latest departure is below
+                step = 1e-3
+                while True:
+                    arr = _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, v, w, rpms, out)
+                    if arr > target or t >= target:
+                        break
+                    t += step
+                    step *= 2.0
+                ld[i, a] = max(ld[i, a], min(t, target))
+
+
+def _cell_index(grid, lat, lon) -> tuple[np.ndarray, np.ndarray]:
+    """Grid row and column of the lower-left corner of the cell `sample_nb` reads at each (lat, lon)."""
+    fy = np.clip((lat - grid.lat0) / grid.dlat, 0.0, grid.nlat - 1.0)
+    iy = np.minimum(fy.astype(np.int64), grid.nlat - 2)
+    if grid.wraps:
+        ix = (((lon - grid.lon0) % 360.0) / grid.dlon).astype(np.int64) % grid.nlon
+    else:
+        x = grid.lon0 + ((lon - grid.lon0) % 360.0)
+        x = np.where(x > grid.lon0 + grid.dlon * (grid.nlon - 1) + 0.5 * (360.0 - grid.dlon * (grid.nlon - 1)), x - 360.0, x)
+        ix = np.minimum(np.clip((x - grid.lon0) / grid.dlon, 0.0, grid.nlon - 1.0).astype(np.int64), grid.nlon - 2)
+    return iy, ix
+
+
+def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per node (L+2, P): the strongest wind (kn), highest Hs (m) and strongest current (kn) at any valid time in
+    the grid cells around the legs leaving it (the cells `sample_nb` reads between the node and every node it
+    can reach on the next line, padded by `pad_cells` for the legs' curvature)."""
+    wf, sp = inst.weather, inst.space
+    grid = wf.grid
+    vals = np.nan_to_num(wf.values.astype(np.float64), nan=0.0)
+    wind = np.hypot(vals[U10], vals[V10]).max(axis=0) * geo.KN_PER_MS
+    hs = vals[SWH].max(axis=0)
+    cur = np.hypot(vals[UO], vals[VO]).max(axis=0) * geo.KN_PER_MS
+    L2, P = sp.lat.shape
+    iy, ix = _cell_index(grid, sp.lat, sp.lon)
+    out = np.zeros((3, L2, P))
+    ms = sp.max_shift
+    for i in range(L2):
+        nxt = min(i + 1, L2 - 1)
+        for a in range(P):
+            lo, hi = max(0, a - ms), min(P, a + ms + 1)
+            ys = np.concatenate(([iy[i, a]], iy[nxt, lo:hi]))
+            xs = np.concatenate(([ix[i, a]], ix[nxt, lo:hi]))
+            y0, y1 = max(0, ys.min() - pad_cells), min(grid.nlat, ys.max() + 2 + pad_cells)
+            if grid.wraps:  # columns as offsets from the node's, so a box across 0° stays one box
+                off = (xs - ix[i, a] + grid.nlon // 2) % grid.nlon - grid.nlon // 2
+                cols = (ix[i, a] + np.arange(off.min() - pad_cells, off.max() + 2 + pad_cells)) % grid.nlon
+            else:
+                cols = np.arange(max(0, xs.min() - pad_cells), min(grid.nlon, xs.max() + 2 + pad_cells))
+            for k, field in enumerate((wind, hs, cur)):
+                out[k, i, a] = field[y0:y1][:, cols].max()
+    return out[0], out[1], out[2]
+
+
+def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P)): the fuel-to-finish bound tables of the exact DP."""
+    v, sp = inst.vessel, inst.space
+    if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
+        raise ValueError(f"no speed and fuel bounds for performance model form {v.form_id}")
+    L2, P = sp.lat.shape
+    R = len(v.rpm_options)
+    wind, hs, cur = local_weather_max(inst)
+    tau, phi = np.empty((L2 * P, R)), np.empty((L2 * P, R))
+    _corner_bounds(v, wind.ravel(), hs.ravel(), cur.ravel(), tau, phi)
+    tau, phi = tau.reshape(L2, P, R), phi.reshape(L2, P, R)
+    # prices of time (t of fuel per hour) around the trade-offs between neighbouring engine settings
+    t_med, f_med = np.median(tau.reshape(-1, R), axis=0), np.median(phi.reshape(-1, R), axis=0)
+    slopes = [(f_med[r + 1] - f_med[r]) / (t_med[r] - t_med[r + 1]) for r in range(R - 1) if t_med[r] > t_med[r + 1]]
+    lams = np.unique(np.array([0.0] + [s * m for s in slopes if np.isfinite(s) and s > 0
+                                       for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
+    m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
+    _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau, phi, lams, m_lam, t_min)
+    return lams, m_lam, t_min
+
+
+def latest_departures(inst) -> np.ndarray:
+    """(L+2, P) latest times (h after t_ref) to leave each node and still arrive by the RTA (see
+    latest_departure_nb). Weather limits are lifted (a relaxation: the bound can only get later); the fastest
+    setting alone is sailed when STW cannot fall with rpm in this model form (its rpm coefficient ≥ 0)."""
+    v, o = inst.vessel, inst.objective
+    rpm_coef = v.speed_coef[1] if v.form_id == FORM_PHYSICAL else v.speed_coef[2]
+    rpms = v.rpm_options[-1:] if rpm_coef >= 0.0 else v.rpm_options
+    free = v._replace(max_hs_m=np.inf, max_wind_kn=np.inf)
+    ld = np.empty(inst.space.lat.shape)
+    latest_departure_nb(inst.graph, free, inst.wx, np.ascontiguousarray(rpms), o.t_dep_h,
+                        o.t_dep_h + o.t_req_h + 1e-9, ld)
+    return ld
+
+
+@dataclass(frozen=True)
+class DpOptions:
+    bucket_h: float | None = None  # None: exact labels; a number: merge labels per arrival-time bucket (h), approximate
+    upper_bound: float | None = None  # a known plan's cost, to prune with (the baseline's is always used)
+    incumbent: str | None = "bfoa"  # also prune with this solver's plan (seed 1, default options); None: no
+    gap: float = 0.0  # > 0: drop labels within gap × (incumbent cost) / legs of dominance; the plan is then within
+    #                   that share of the optimum (certified under the same assumption as the dominance)
+
+
+
+def search(inst, baseline, *, seed: int, options: DpOptions):
+    """The solver contract (see solvers.py); `seed` is not used."""
+    from pipeline.routing.baseline import evaluate
+    from pipeline.routing.solvers import Found
+
+    if options.bucket_h is not None:
+        nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
+                                                    inst.objective)
+    else:
+        upper = math.inf if options.upper_bound is None else float(options.upper_bound)
+        if baseline.ok:
+            upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
+        if options.incumbent is not None:
+            from pipeline.routing.solvers import SOLVERS
+
+            spec = SOLVERS[options.incumbent]
+            found = spec.search(inst, baseline, seed=1, options=spec.options())
+            if found.nodes is not None:
+                upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
+        lams, m_lam, t_min = finish_bounds(inst)
+        ld = latest_departures(inst)
+        eps = 0.0
+        if options.gap > 0.0 and math.isfinite(upper):
+            eps = options.gap * upper / (inst.space.lat.shape[0] - 1)
+        nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
+                                                      m_lam, t_min, ld, eps)
+    if not math.isfinite(cost):
+        return Found(None, None, n_legs)
+    return Found(nodes, rpm_idx, n_legs)

@@ -8,37 +8,61 @@ plan_flips_nb   before sailing: which legs to speed up (late) or slow down (earl
 retime_nb       after sailing: the same flips, judged on the sailed route, until arrival is in the window
 aim_engine_nb   a new route's settings: of the constant settings, the two whose arrivals bracket the RTA
                 mixed over random legs in the share that should arrive just in time, then re-timed
+
+Kernels take the voyage as named structures: `g` the graph (search_space.Graph), `v` the vessel
+(leg_kernel.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective),
+`s` a `Scratch` of work arrays, and `rng` the random generator (a numpy Generator; numba draws from it the
+same numbers numpy would, so the interpreted kernels reproduce the compiled ones).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import CODE, FUEL, H, OK, sail_leg_nb, sail_route_nb
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb, sail_route_nb
 from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
 
 
+class Scratch(NamedTuple):
+    """Work arrays for one route being sailed and re-timed (L+2 lines, L+1 legs) and a counter of sails."""
+
+    ct: np.ndarray  # (L+2,) hours after t_ref on reaching each line
+    cf: np.ndarray  # (L+2,) fuel (t) so far on reaching each line
+    keep_r: np.ndarray  # (L+1,) int64: rpm indexes to restore when a re-time does not pay
+    keep_t: np.ndarray  # (L+2,)
+    keep_f: np.ndarray  # (L+2,)
+    cnt: np.ndarray  # (1,) int64: routes (or route tails) sailed
+    out: np.ndarray  # (N_LEG_OUT,) one leg's results
+
+
+def scratch(n_lines_total: int) -> Scratch:
+    """Scratch for routes over `n_lines_total` lines (L+2, ports included)."""
+    n = n_lines_total
+    return Scratch(np.empty(n), np.empty(n), np.empty(n - 1, np.int64), np.empty(n), np.empty(n),
+                   np.zeros(1, np.int64), np.empty(N_LEG_OUT))
+
+
 @numba.njit(cache=True)
-def cost_from_nb(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-               times_h, grid, obj, t_req_h, window_h, f_target, early, late, cum_t, cum_f):
-    code, _ = sail_route_nb(nodes, rpm_idx, start, inst_lat, inst_lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc,
-                            fc, wx, times_h, grid, cum_t, cum_f)
+def cost_from_nb(nodes, rpm_idx, start, g, v, w, o, cum_t, cum_f):
+    code, _ = sail_route_nb(nodes, rpm_idx, start, g, v, w, o, cum_t, cum_f)
     if code != OK:
         return np.inf
     n = nodes.shape[0] - 1
-    return route_cost_nb(obj, cum_t[n] - t_dep_h, cum_f[n], t_req_h, window_h, f_target, early, late)
+    return route_cost_nb(o, cum_t[n] - o.t_dep_h, cum_f[n])
 
 
 @numba.njit(cache=True)
-def sail_span_nb(nodes, rpm_idx, start, stop, lat, lon, edge_ok, rpm_options, vp, sc, fc, wx, times_h, grid, ct, cf, out):
+def sail_span_nb(nodes, rpm_idx, start, stop, g, v, w, ct, cf, out):
     """Sail legs start..stop-1 only (ct/cf valid at line `start`); False as soon as one is infeasible."""
+    lat, lon, edge_ok, rpm_options = g.lat, g.lon, g.edge_ok, v.rpm_options
     for i in range(start, stop):
         a, b = nodes[i], nodes[i + 1]
         if not edge_ok[i, a, b]:
             return False
-        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], ct[i], rpm_options[rpm_idx[i]], vp, sc, fc, wx,
-                    times_h, grid, out)
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], ct[i], rpm_options[rpm_idx[i]], v, w, out)
         if out[CODE] != OK:
             return False
         ct[i + 1] = ct[i] + out[H]
@@ -66,7 +90,7 @@ def time_price_nb(rpm_idx, ct, cf, rpm_options):
 
 
 @numba.njit(cache=True)
-def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
+def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options, rng):
     """Raise the rpm of random legs ≥ lo (the slower of two draws) one step at a time until the estimated hours
     saved cover `need_h` (a leg of h hours at rpm r takes h·r/r' at r', burns (r'/r)² its fuel), with the legs'
     hours and fuel from ct/cf. Returns (first leg changed, n when none; `fuel` plus the estimated extra fuel)."""
@@ -76,8 +100,8 @@ def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
     for _t in range(4 * (n - lo)):
         if need_h <= 0.0:
             break
-        j = lo + np.random.randint(0, n - lo)
-        j2 = lo + np.random.randint(0, n - lo)
+        j = lo + rng.integers(0, n - lo)
+        j2 = lo + rng.integers(0, n - lo)
         if rpm_idx[j2] < rpm_idx[j]:
             j = j2
         r = rpm_idx[j]
@@ -92,7 +116,7 @@ def speed_up_nb(rpm_idx, lo, need_h, fuel, ct, cf, rpm_options):
 
 
 @numba.njit(cache=True)
-def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
+def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent, rng):
     """Lower the rpm of random legs ≥ lo (the faster of two draws) one step at a time while the estimated extra
     hours fit in `slack_h`; `stop_when_spent` ends the draws once the slack is used up (otherwise all 2·(n − lo)
     draws are made). Returns the first leg changed (n when none)."""
@@ -101,8 +125,8 @@ def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
     for _t in range(2 * (n - lo)):
         if stop_when_spent and slack_h <= 0.0:
             break
-        j = lo + np.random.randint(0, n - lo)
-        j2 = lo + np.random.randint(0, n - lo)
+        j = lo + rng.integers(0, n - lo)
+        j2 = lo + rng.integers(0, n - lo)
         if rpm_idx[j2] > rpm_idx[j]:
             j = j2
         r = rpm_idx[j]
@@ -118,7 +142,7 @@ def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent):
 
 
 @numba.njit(cache=True)
-def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t_req_h, obj):
+def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, o, rng):
     """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
     the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
     the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
@@ -126,21 +150,21 @@ def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, t
     n = rpm_idx.shape[0]
     if lo >= n:
         return n
+    t_req_h = o.t_req_h
     margin = 0.05 * t_req_h / n
     if T_est > t_req_h:
-        first, F_est = speed_up_nb(rpm_idx, lo, T_est - t_req_h + margin, F_est, ct_ref, cf_ref, rpm_options)
-        if obj == OBJ_JIT and F_est >= bar:
+        first, F_est = speed_up_nb(rpm_idx, lo, T_est - t_req_h + margin, F_est, ct_ref, cf_ref, rpm_options, rng)
+        if o.kind == OBJ_JIT and F_est >= bar:
             return -1
         return first
-    return slow_down_nb(rpm_idx, lo, t_req_h - T_est - margin, ct_ref, rpm_options, True)
+    return slow_down_nb(rpm_idx, lo, t_req_h - T_est - margin, ct_ref, rpm_options, True, rng)
 
 
 @numba.njit(cache=True)
-def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h,
-            grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
+def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s, rng):
     """Engine re-adjustment after a move, so the arrival stays just inside the RTA; returns the new cost.
 
-    `nodes`/`rpm_idx` were sailed whole into ct/cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
+    `nodes`/`rpm_idx` were sailed whole into s.ct/s.cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
     at rpm r is estimated to take h·r/r' at r' and burn (r'/r)² times its fuel (fuel rate ∝ rpm³).
       late   raise the rpm of random legs (the slower of two draws) until the estimated saving covers the
              delay, sail again; at most two rounds. With the jit objective the re-sail is skipped (cost +inf)
@@ -151,19 +175,19 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_
     n = rpm_idx.shape[0]
     if q == np.inf or lo >= n:
         return q
+    ct, cf, rpm_options, t_dep_h, t_req_h = s.ct, s.cf, v.rpm_options, o.t_dep_h, o.t_req_h
     margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
     for _round in range(2):
         T = ct[n] - t_dep_h
         if T <= t_req_h + 1e-9:
             break
-        first, extra_f = speed_up_nb(rpm_idx, lo, T - t_req_h + margin, 0.0, ct, cf, rpm_options)
+        first, extra_f = speed_up_nb(rpm_idx, lo, T - t_req_h + margin, 0.0, ct, cf, rpm_options, rng)
         if first == n:
             return q
-        if obj == OBJ_JIT and cf[n] + extra_f >= bar:
+        if o.kind == OBJ_JIT and cf[n] + extra_f >= bar:
             return np.inf
-        q = cost_from_nb(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                       times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
-        cnt[0] += 1
+        q = cost_from_nb(nodes, rpm_idx, first, g, v, w, o, ct, cf)
+        s.cnt[0] += 1
         if q == np.inf:
             return q
     for _round in range(2):
@@ -171,39 +195,37 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, lat, lon, edge_ok, rpm_options, t_dep_
         slack = t_req_h - T - margin
         if T > t_req_h + 1e-9 or slack <= 0.0:
             return q
-        keep_r[:] = rpm_idx
-        first = slow_down_nb(rpm_idx, lo, slack, ct, rpm_options, False)
+        s.keep_r[:] = rpm_idx
+        first = slow_down_nb(rpm_idx, lo, slack, ct, rpm_options, False, rng)
         if first == n:
             return q
-        keep_t[:] = ct
-        keep_f[:] = cf
-        q2 = cost_from_nb(nodes, rpm_idx, first, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                        times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf)
-        cnt[0] += 1
+        s.keep_t[:] = ct
+        s.keep_f[:] = cf
+        q2 = cost_from_nb(nodes, rpm_idx, first, g, v, w, o, ct, cf)
+        s.cnt[0] += 1
         if not (q2 < q and ct[n] - t_dep_h <= t_req_h + 1e-9):
-            rpm_idx[:] = keep_r
-            ct[:] = keep_t
-            cf[:] = keep_f
+            rpm_idx[:] = s.keep_r
+            ct[:] = s.keep_t
+            cf[:] = s.keep_f
             return q
         q = q2
     return q
 
 
 @numba.njit(cache=True)
-def aim_engine_nb(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid, obj,
-                t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt):
+def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng):
     """Engine settings aimed at the RTA for a route: sail it at every constant setting, take the two settings
     whose arrivals bracket the RTA and put the share of legs on the faster one that should arrive just in
-    time (random legs), then re-time. Returns the cost."""
+    time (random legs), then re-time. The sailed route is left in s.ct/s.cf. Returns the cost."""
     n = rpm_idx.shape[0]
-    R = rpm_options.shape[0]
+    R = v.rpm_options.shape[0]
+    ct, cf, t_dep_h, t_req_h = s.ct, s.cf, o.t_dep_h, o.t_req_h
     hours = np.empty(R)
     for r in range(R):
         rpm_idx[:] = r
-        code, _ = sail_route_nb(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                                times_h, grid, ct, cf)
+        code, _ = sail_route_nb(nodes, rpm_idx, 0, g, v, w, o, ct, cf)
         hours[r] = ct[n] - t_dep_h if code == OK else np.inf
-        cnt[0] += 1
+        s.cnt[0] += 1
     fast = -1
     for r in range(R):
         if hours[r] <= t_req_h:
@@ -220,13 +242,11 @@ def aim_engine_nb(nodes, rpm_idx, lat, lon, edge_ok, rpm_options, t_dep_h, max_h
         rpm_idx[:] = fast
         if hours[slow] < np.inf:
             share = (hours[slow] - t_req_h) / (hours[slow] - hours[fast])
-            k = int(share * n + np.random.random())
+            k = int(share * n + rng.random())
             rpm_idx[:] = slow
-            perm = np.random.permutation(n)
+            perm = rng.permutation(n)
             for j in range(min(k, n)):
                 rpm_idx[perm[j]] = fast
-    q = cost_from_nb(nodes, rpm_idx, 0, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times_h, grid,
-                   obj, t_req_h, window_h, f_target, early, late, ct, cf)
-    cnt[0] += 1
-    return retime_nb(nodes, rpm_idx, 0, q, np.inf, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx,
-                   times_h, grid, obj, t_req_h, window_h, f_target, early, late, ct, cf, keep_r, keep_t, keep_f, cnt)
+    q = cost_from_nb(nodes, rpm_idx, 0, g, v, w, o, ct, cf)
+    s.cnt[0] += 1
+    return retime_nb(nodes, rpm_idx, 0, q, np.inf, g, v, w, o, s, rng)

@@ -7,13 +7,14 @@ from its performance model at the leg's rpm, adds the current along course (SOG 
 along course), and advances. Hours and fuel (rate × time) accumulate; weather limits (Hs, wind)
 make the leg infeasible with a code.
 
-Vessel parameters come as one float array `vp`:
-  [form_id, draft_m, trim_m, months_dd, max_hs_m, max_wind_kn, max_step_h]
+The ship comes as a `Vessel` (its performance model at the voyage's draft and trim, weather limits,
+the allowed engine settings and the integration step), the weather as a `weather_field.Weather`.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -39,18 +40,43 @@ H, FUEL, CODE, BEYOND, WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALON
 MIN_SOG_KN = 0.5
 
 
-def vessel_params(form_id: int, draft_m: float, trim_m: float, months_dd: float, max_hs_m: float | None,
-                  max_wind_kn: float | None, max_step_h: float = 1.0) -> np.ndarray:
-    return np.array([form_id, draft_m, trim_m, months_dd, np.inf if max_hs_m is None or np.isnan(max_hs_m) else max_hs_m,
-                     np.inf if max_wind_kn is None or np.isnan(max_wind_kn) else max_wind_kn, max_step_h], dtype=np.float64)
+class Vessel(NamedTuple):
+    """The ship as the kernels see it: performance model (form and coefficients, see pipeline.performance), the
+    voyage's draft and trim (m), months since dry dock, weather limits (inf: none), the allowed engine settings
+    (rpm, increasing) and the longest integration step along a leg (h)."""
+
+    form_id: int
+    draft_m: float
+    trim_m: float
+    months_dd: float
+    max_hs_m: float
+    max_wind_kn: float
+    max_step_h: float
+    speed_coef: np.ndarray
+    fuel_coef: np.ndarray
+    rpm_options: np.ndarray
+
+
+def _limit(x: float | None) -> float:
+    return math.inf if x is None or math.isnan(x) else float(x)
+
+
+def vessel(model, *, draft_m: float = 10.0, trim_m: float = 0.0, max_hs_m: float | None = None,
+           max_wind_kn: float | None = None, max_step_h: float = 1.0, rpm_options=(100.0,)) -> Vessel:
+    """A `Vessel` from a `PerformanceModel` and the voyage's loading, limits and allowed rpm settings."""
+    return Vessel(int(model.form_id), float(draft_m), float(trim_m), float(model.months_dd), _limit(max_hs_m),
+                  _limit(max_wind_kn), float(max_step_h), np.ascontiguousarray(model.speed_coef, dtype=np.float64),
+                  np.ascontiguousarray(model.fuel_coef, dtype=np.float64),
+                  np.ascontiguousarray(np.sort(np.asarray(rpm_options, dtype=np.float64))))
 
 
 @numba.njit(cache=True)
-def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, wx, times_h, grid, out):
-    """Sail one leg starting at t0_h (hours after the weather's t_ref); results in out[0:N_LEG_OUT]."""
+def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
+    """Sail one leg starting at t0_h (hours after the weather's t_ref) at `rpm`; results in out[0:N_LEG_OUT]."""
     for k in range(N_LEG_OUT):
         out[k] = 0.0
-    form = int(vp[0])
+    form = ves.form_id
+    speed_coef, fuel_coef = ves.speed_coef, ves.fuel_coef
     dist = geo.gc_distance_nm(lat0, lon0, lat1, lon1)
     if dist < 1e-6:
         return
@@ -59,7 +85,7 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, wx
     while done < dist - 1e-9:
         lat, lon = geo.gc_interpolate(lat0, lon0, lat1, lon1, done / dist)
         hdg = geo.gc_bearing_deg(lat, lon, lat1, lon1)
-        if sample_nb(wx, times_h, grid, t, lat, lon, w):
+        if sample_nb(wx, t, lat, lon, w):
             out[BEYOND] = 1.0
         u = 0.0 if math.isnan(w[U10]) else w[U10]
         v = 0.0 if math.isnan(w[V10]) else w[V10]
@@ -69,25 +95,26 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, wx
         uo = 0.0 if math.isnan(w[UO]) else w[UO]
         vo = 0.0 if math.isnan(w[VO]) else w[VO]
         wind_kn = math.sqrt(u * u + v * v) * geo.KN_PER_MS
-        if hs > vp[4]:
+        if hs > ves.max_hs_m:
             out[CODE] = WAVE_LIMIT
             return
-        if wind_kn > vp[5]:
+        if wind_kn > ves.max_wind_kn:
             out[CODE] = WIND_LIMIT
             return
         wind_from = math.degrees(math.atan2(-u, -v))
         wave_from = math.degrees(math.atan2(wave_x, wave_y))
         wind_rel = wind_from - hdg
         wave_rel = wave_from - hdg
-        stw = stw_kn_nb(form, speed_coef, rpm, vp[1], vp[2], wind_kn, wind_rel, hs, wave_rel, vp[3])
+        stw = stw_kn_nb(form, speed_coef, rpm, ves.draft_m, ves.trim_m, wind_kn, wind_rel, hs, wave_rel, ves.months_dd)
         cur = geo.along_course(uo, vo, hdg) * geo.KN_PER_MS
         sog = stw + cur
         if sog < MIN_SOG_KN:
             out[CODE] = NO_HEADWAY
             return
-        ds = min(dist - done, sog * vp[6])
+        ds = min(dist - done, sog * ves.max_step_h)
         dt = ds / sog
-        fuel += fuel_tph_nb(form, fuel_coef, rpm, vp[1], vp[2], wind_kn, wind_rel, hs, wave_rel, vp[3]) * dt
+        fuel += fuel_tph_nb(form, fuel_coef, rpm, ves.draft_m, ves.trim_m, wind_kn, wind_rel, hs, wave_rel,
+                            ves.months_dd) * dt
         out[WIND_KN] += wind_kn * dt
         out[WIND_FX] += math.sin(math.radians(wind_from)) * dt
         out[WIND_FY] += math.cos(math.radians(wind_from)) * dt
@@ -110,43 +137,42 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, wx
 
 
 @numba.njit(cache=True)
-def sail_route_nb(nodes, rpm_idx, start_line, lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, speed_coef,
-                  fuel_coef, wx, times_h, grid, cum_t, cum_f):
-    """Sail a route (node per line, rpm index per leg) from line `start_line`, reusing cum_t/cum_f before it.
+def sail_route_nb(nodes, rpm_idx, start_line, g, ves, wx, obj, cum_t, cum_f):
+    """Sail a route (node per line, rpm index per leg) over the graph `g` from line `start_line`, reusing
+    cum_t/cum_f before it; `obj` (an `objectives.Objective`) gives the departure time and the planning horizon.
 
-    cum_t[i], cum_f[i]: hours after t_ref and fuel so far on reaching line i (cum_t[0] = t_dep_h).
+    cum_t[i], cum_f[i]: hours after t_ref and fuel so far on reaching line i (cum_t[0] = obj.t_dep_h).
     Returns (code, failing leg); code 0 when the whole route was sailed.
     """
     out = np.empty(N_LEG_OUT)
+    lat, lon, edge_ok, rpm_options = g.lat, g.lon, g.edge_ok, ves.rpm_options
     if start_line == 0:
-        cum_t[0] = t_dep_h
+        cum_t[0] = obj.t_dep_h
         cum_f[0] = 0.0
     for i in range(start_line, nodes.shape[0] - 1):
         a, b = nodes[i], nodes[i + 1]
         if not edge_ok[i, a, b]:
             return NO_EDGE, i
-        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], cum_t[i], rpm_options[rpm_idx[i]], vp,
-                    speed_coef, fuel_coef, wx, times_h, grid, out)
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], cum_t[i], rpm_options[rpm_idx[i]], ves, wx, out)
         if out[CODE] != OK:
             return int(out[CODE]), i
         cum_t[i + 1] = cum_t[i] + out[H]
         cum_f[i + 1] = cum_f[i] + out[FUEL]
-        if cum_t[i + 1] - t_dep_h > max_hours:
+        if cum_t[i + 1] - obj.t_dep_h > obj.max_hours:
             return TOO_LONG, i
     return OK, -1
 
 
-def sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, field) -> np.ndarray:
+def sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves: Vessel, field) -> np.ndarray:
     """Python entry: one leg in a `WeatherField`; returns the N_LEG_OUT array."""
     out = np.empty(N_LEG_OUT)
-    sail_leg_nb(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), vp, speed_coef, fuel_coef,
-                field.values, field.times_h, field.grid, out)
+    sail_leg_nb(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves, field.kernel, out)
     return out
 
 
-def sail_leg_python(lat0, lon0, lat1, lon1, t0_h, rpm, vp, speed_coef, fuel_coef, field) -> np.ndarray:
+def sail_leg_python(lat0, lon0, lat1, lon1, t0_h, rpm, ves: Vessel, field) -> np.ndarray:
     """The same leg through the interpreted (non-compiled) code path, for verification."""
     out = np.empty(N_LEG_OUT)
-    sail_leg_nb.py_func(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), vp, speed_coef,
-                        fuel_coef, field.values, field.times_h, field.grid, out)
+    sail_leg_nb.py_func(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves,
+                        field.kernel, out)
     return out

@@ -59,6 +59,23 @@ class Plan:
         return int(sum(bool(leg["beyond_forecast"]) for leg in self.legs))
 
     @property
+    def hours_beyond_forecast(self) -> float:
+        """Hours of the voyage sailed after the weather's last valid time (its last step persisted)."""
+        return float(sum(leg.get("hours_beyond_forecast", 0.0) for leg in self.legs))
+
+    @property
+    def hours_before_cycle(self) -> float:
+        """Hours of the voyage sailed before the forecast cycle's analysis time (weather of the cycle's first step)."""
+        return float(sum(leg.get("hours_before_cycle", 0.0) for leg in self.legs))
+
+    @property
+    def forecast_flag(self) -> str | None:
+        """'beyond horizon', 'before cycle', both, or None when the whole voyage lies inside the forecast."""
+        flags = [name for name, h in (("beyond horizon", self.hours_beyond_forecast),
+                                      ("before cycle", self.hours_before_cycle)) if h > 1e-9]
+        return ", ".join(flags) or None
+
+    @property
     def savings_pct(self) -> float:
         b = self.baseline
         if b is None or not b.legs or not self.legs or not (b.fuel_t > 0):
@@ -83,7 +100,8 @@ class Plan:
             "savings_pct": self.savings_pct, "distance_nm": self.distance_nm,
             "cost": self.cost if math.isfinite(self.cost) else None, "model_version": self.model_version,
             "cycle": _utc(self.cycle), "seed": self.seed, "runtime_s": self.runtime_s, "n_legs": len(self.legs),
-            "beyond_forecast": self.n_beyond_forecast,
+            "beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
+            "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
         }
 
     def leg_rows(self, run_id: str | None = None) -> list[dict]:
@@ -103,7 +121,8 @@ class Plan:
             return v
         row = self.route_row()
         keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
-                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "beyond_forecast")
+                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "beyond_forecast",
+                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle")
         out = {k: clean(row[k]) for k in keys}
         out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
         return out
@@ -113,14 +132,15 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
     """Sail the route leg by leg and describe each leg; returns (legs, failure code, failing leg)."""
     lat, lon = inst.space.lat, inst.space.lon
     t = inst.t_dep_h
+    horizon_h = float(inst.weather.times_h[-1])  # hours after t_ref of the last valid time
+    cycle_h = inst.weather.hours_after_ref(inst.weather.cycle) if inst.weather.cycle is not None else 0.0
     legs = []
     for i in range(len(nodes) - 1):
         a, b = int(nodes[i]), int(nodes[i + 1])
         if not inst.space.edge_ok[i, a, b]:
             return legs, lk.NO_EDGE, i
         rpm = float(inst.rpm_options[rpm_idx[i]])
-        o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vp, inst.speed_coef,
-                        inst.fuel_coef, inst.weather)
+        o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vessel, inst.weather)
         if o[lk.CODE] != lk.OK:
             return legs, int(o[lk.CODE]), i
         etd = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
@@ -138,5 +158,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
             "hs_m": float(o[lk.HS]),
             "wave_dir_deg": float(np.degrees(np.arctan2(o[lk.WAVE_FX], o[lk.WAVE_FY])) % 360.0),
             "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
+            "hours_beyond_forecast": max(0.0, t - max(t - o[lk.H], horizon_h)),
+            "hours_before_cycle": max(0.0, min(t, cycle_h) - (t - o[lk.H])),
         })
     return legs, lk.OK, -1

@@ -1,4 +1,5 @@
-"""What a routing solve takes (`RoutingProblem`) and what the numba solvers see (`Instance`)."""
+"""What a routing solve takes (`RoutingProblem`) and what the numba solvers see (`Instance`: the graph, vessel,
+weather and objective as named structures)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.performance.model import PerformanceModel
-from pipeline.routing.leg_kernel import vessel_params
-from pipeline.routing.objectives import OBJECTIVES
-from pipeline.routing.search_space import SearchSpace, build_search_space
-from pipeline.routing.weather_field import WeatherField
+from pipeline.routing.leg_kernel import Vessel, vessel
+from pipeline.routing.objectives import OBJECTIVES, Objective, objective
+from pipeline.routing.search_space import Graph, SearchSpace, build_search_space
+from pipeline.routing.weather_field import Weather, WeatherField
 
 
 class RoutingInputError(ValueError):
@@ -89,25 +90,20 @@ class RoutingProblem:
 
 @dataclass
 class Instance:
-    """Plain arrays for the compiled solvers: graph, vessel, weather and objective."""
+    """A voyage ready for the compiled solvers: the problem, its search space and weather, and the named
+    structures the kernels take (`graph`, `vessel`, `wx` the weather, `objective`)."""
 
     problem: RoutingProblem
     space: SearchSpace
     weather: WeatherField
-    rpm_options: np.ndarray
-    vp: np.ndarray
-    speed_coef: np.ndarray
-    fuel_coef: np.ndarray
-    t_dep_h: float
-    max_hours: float
-    obj: int
-    f_target: float = 1.0
+    graph: Graph
+    vessel: Vessel
+    wx: Weather
+    objective: Objective
 
     @classmethod
     def build(cls, problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> "Instance":
         m = problem.model
-        vp = vessel_params(m.form_id, problem.draft_m, problem.trim_m, m.months_dd, problem.max_hs_m,
-                           problem.max_wind_kn, problem.max_step_h)
         slow = float(m.stw_kn(problem.rpm_options[0], problem.draft_m, problem.trim_m))
         if slow < 1.0:
             raise RoutingInputError(
@@ -115,20 +111,34 @@ class Instance:
                 f"{problem.rpm_options[0]:g} rpm in calm water; refit the model or check the allowed rpm settings")
         _check_coverage(problem, space, weather)
         max_hours = max(1.6 * problem.t_req_h, 1.6 * space.base_distance_nm / slow)
-        return cls(problem=problem, space=space, weather=weather, rpm_options=np.array(problem.rpm_options),
-                   vp=vp, speed_coef=m.speed_coef, fuel_coef=m.fuel_coef,
-                   t_dep_h=weather.hours_after_ref(problem.depart_utc), max_hours=float(max_hours),
-                   obj=OBJECTIVES[problem.objective])
+        ves = vessel(m, draft_m=problem.draft_m, trim_m=problem.trim_m, max_hs_m=problem.max_hs_m,
+                     max_wind_kn=problem.max_wind_kn, max_step_h=problem.max_step_h, rpm_options=problem.rpm_options)
+        obj = objective(problem.objective, t_dep_h=weather.hours_after_ref(problem.depart_utc), max_hours=max_hours,
+                        t_req_h=problem.t_req_h, window_h=problem.window_h, early_t_per_h=problem.early_t_per_h,
+                        late_t_per_h=problem.late_t_per_h)
+        return cls(problem=problem, space=space, weather=weather, graph=space.graph, vessel=ves, wx=weather.kernel,
+                   objective=obj)
 
-    def numba_weather(self) -> tuple:
-        return self.weather.values, self.weather.times_h, self.weather.grid
+    @property
+    def rpm_options(self) -> np.ndarray:
+        return self.vessel.rpm_options
 
-    def numba_args(self) -> tuple:
-        """(lat, lon, edge_ok, rpm_options, t_dep_h, max_hours, vp, sc, fc, wx, times, grid, obj, t_req, window, f_target, early, late)."""
-        p = self.problem
-        return (self.space.lat, self.space.lon, self.space.edge_ok, self.rpm_options, self.t_dep_h, self.max_hours,
-                self.vp, self.speed_coef, self.fuel_coef, *self.numba_weather(), self.obj, p.t_req_h, p.window_h,
-                self.f_target, p.early_t_per_h, p.late_t_per_h)
+    @property
+    def t_dep_h(self) -> float:
+        return self.objective.t_dep_h
+
+    @property
+    def max_hours(self) -> float:
+        return self.objective.max_hours
+
+    @property
+    def f_target(self) -> float:
+        return self.objective.f_target
+
+    @f_target.setter
+    def f_target(self, value: float) -> None:
+        """The thesis objective's fuel scale (t): the baseline's fuel, once it is known."""
+        self.objective = self.objective._replace(f_target=float(value))
 
 
 def _check_coverage(problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> None:
@@ -136,13 +146,13 @@ def _check_coverage(problem: RoutingProblem, space: SearchSpace, weather: Weathe
     lat = space.lat[space.node_ok]
     lon = space.lon[space.node_ok]
     lo, hi = weather.lat_range_deg
-    tol = weather.grid[1]
+    tol = weather.grid.dlat
     if lat.min() < lo - tol or lat.max() > hi + tol:
         raise RoutingInputError(
             f"voyage {problem.voyage_id}: its search area spans latitudes {lat.min():.1f}..{lat.max():.1f} but the "
             f"weather covers only {lo:.1f}..{hi:.1f}")
-    if weather.grid[6] < 0.5:
-        lon0, dlon, nlon = weather.grid[3], weather.grid[4], int(weather.grid[5])
+    if not weather.grid.wraps:
+        lon0, dlon, nlon = weather.grid.lon0, weather.grid.dlon, weather.grid.nlon
         rel = (lon - lon0) % 360.0
         if np.any(rel > dlon * (nlon - 1) + dlon):
             raise RoutingInputError(

@@ -8,7 +8,7 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step):
+def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step, rng):
     """Safe random route: a walk line by line whose step heads, one node at a time, for a target offset that
     is redrawn now and then (so random routes are smooth detours of every size, not zig-zags) and bends back
     to the destination in time. Each node: the preferred one first, then nodes ever farther from it (random
@@ -21,19 +21,19 @@ def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new
     L = L2 - 2
     nodes[0] = c
     nodes[L2 - 1] = c
-    target = c + int(np.round(np.random.normal() * sigma))
+    target = c + int(np.round(rng.normal() * sigma))
     i, tries = 1, 0
     while i <= L:
         a = nodes[i - 1]
         left = L + 1 - i  # legs still to go after line i
         lo = max(0, a - max_shift, c - max_shift * left)
         hi = min(P - 1, a + max_shift, c + max_shift * left)
-        if np.random.random() < p_new:
-            target = c + int(np.round(np.random.normal() * sigma))
+        if rng.random() < p_new:
+            target = c + int(np.round(rng.normal() * sigma))
         tgt = min(max(target, c - (left - 1)), c + (left - 1))  # in reach of the destination, one node a line
         homing = abs(a - c) >= left - 1
         step = 0
-        if tgt != a and (homing or np.random.random() < p_step):
+        if tgt != a and (homing or rng.random() < p_step):
             step = 1 if tgt > a else -1
             if abs(a - c) > left:  # behind on the way back: larger steps
                 step *= (abs(a - c) + left - 1) // left
@@ -42,9 +42,9 @@ def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new
         if lo <= hi:
             for t in range(r_max):
                 off = (t + 1) // 2
-                b = pref + (off if np.random.random() < 0.5 else -off)
+                b = pref + (off if rng.random() < 0.5 else -off)
                 if b < lo or b > hi:
-                    b = np.random.randint(lo, hi + 1)
+                    b = rng.integers(lo, hi + 1)
                 if edge_ok[i - 1, a, b] and (i < L or edge_ok[L, b, c]):
                     nodes[i] = b
                     placed = True

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -24,6 +25,16 @@ class VoyageGeometryError(ValueError):
     """The voyage cannot be laid out (a port on land, no way through)."""
 
 
+class Graph(NamedTuple):
+    """The node graph as the kernels see it: node positions (L+2, P) in degrees, feasible edges (L+1, P, P) and the
+    widest node shift of a leg."""
+
+    lat: np.ndarray
+    lon: np.ndarray
+    edge_ok: np.ndarray
+    max_shift: int
+
+
 @dataclass(frozen=True)
 class SearchSpace:
     lat: np.ndarray  # (L+2, P) degrees
@@ -34,6 +45,10 @@ class SearchSpace:
     base: str
     max_shift: int
     base_distance_nm: float
+
+    @property
+    def graph(self) -> Graph:
+        return Graph(self.lat, self.lon, self.edge_ok, int(self.max_shift))
 
     @property
     def n_lines(self) -> int:
@@ -200,5 +215,5 @@ def limit_lines_from_geojson(obj: dict) -> list[list[tuple[float, float]]]:
     return lines
 
 
-__all__ = ["SearchSpace", "VoyageGeometryError", "build_search_space", "reachable", "default_n_lines",
+__all__ = ["SearchSpace", "Graph", "VoyageGeometryError", "build_search_space", "reachable", "default_n_lines",
            "default_d_point_nm", "limit_lines_from_geojson"]

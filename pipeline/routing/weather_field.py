@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -27,13 +28,44 @@ N_VARS = 7
 U10, V10, SWH, WAVE_X, WAVE_Y, UO, VO = range(N_VARS)
 
 
+class Grid(NamedTuple):
+    """A regular lat/lon grid (degrees): latitudes lat0 + k·dlat increasing, longitudes lon0 + k·dlon; `wraps` when
+    the longitudes go round the globe (lon0 then in 0..360)."""
+
+    lat0: float
+    dlat: float
+    nlat: int
+    lon0: float
+    dlon: float
+    nlon: int
+    wraps: bool
+
+
+class Weather(NamedTuple):
+    """What the compiled kernels see of a `WeatherField`: its values, valid times and grid."""
+
+    values: np.ndarray  # (7, nt, nlat, nlon) float32
+    times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
+    lat0: float
+    dlat: float
+    nlat: int
+    lon0: float
+    dlon: float
+    nlon: int
+    wraps: bool
+
+
 @dataclass(frozen=True)
 class WeatherField:
     values: np.ndarray  # (7, nt, nlat, nlon) float32
     times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
-    grid: np.ndarray  # float64 [lat0, dlat, nlat, lon0, dlon, nlon, wraps]
+    grid: Grid
     t_ref: np.datetime64  # UTC
     cycle: np.datetime64 | None = None
+
+    @property
+    def kernel(self) -> Weather:
+        return Weather(self.values, self.times_h, *self.grid)
 
     @property
     def horizon_utc(self) -> np.datetime64:
@@ -44,11 +76,11 @@ class WeatherField:
 
     @property
     def lat_range_deg(self) -> tuple[float, float]:
-        lat0, dlat, nlat = self.grid[0], self.grid[1], self.grid[2]
-        return float(lat0), float(lat0 + dlat * (nlat - 1))
+        g = self.grid
+        return float(g.lat0), float(g.lat0 + g.dlat * (g.nlat - 1))
 
 
-def _grid(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+def _grid(lat: np.ndarray, lon: np.ndarray) -> Grid:
     lat = np.asarray(lat, dtype=np.float64)
     lon = np.asarray(lon, dtype=np.float64)
     if lat.size < 2 or lon.size < 2:
@@ -56,8 +88,9 @@ def _grid(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     dlat, dlon = lat[1] - lat[0], lon[1] - lon[0]
     if not (np.allclose(np.diff(lat), dlat) and np.allclose(np.diff(lon), dlon)) or dlat <= 0 or dlon <= 0:
         raise ValueError("weather grid must be regular with increasing latitude and longitude")
-    wraps = 1.0 if abs(lon.size * dlon - 360.0) < 1e-6 else 0.0
-    return np.array([lat[0], dlat, lat.size, lon[0] % 360.0 if wraps else lon[0], dlon, lon.size, wraps])
+    wraps = bool(abs(lon.size * dlon - 360.0) < 1e-6)
+    return Grid(float(lat[0]), float(dlat), int(lat.size), float(lon[0] % 360.0 if wraps else lon[0]), float(dlon),
+                int(lon.size), wraps)
 
 
 def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=None) -> WeatherField:
@@ -114,8 +147,10 @@ def _bilinear(a, it, iy, ix0, ix1, wy, wx):
 
 
 @numba.njit(cache=True)
-def sample_nb(values, times_h, grid, t_h, lat, lon, out):
-    """Fill out[0:7] with the weather at (t_h, lat, lon); return True when t_h is past the last valid time."""
+def sample_nb(w, t_h, lat, lon, out):
+    """Fill out[0:7] with the weather `w` (a `Weather`) at (t_h, lat, lon); return True when t_h is past the last
+    valid time."""
+    times_h = w.times_h
     nt = times_h.shape[0]
     beyond = t_h > times_h[nt - 1] + 1e-9
     if nt == 1 or t_h <= times_h[0]:
@@ -127,12 +162,13 @@ def sample_nb(values, times_h, grid, t_h, lat, lon, out):
         i0 = np.searchsorted(times_h, t_h, side="right") - 1
         i1 = i0 + 1
         wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
-    lat0, dlat, nlat, lon0, dlon, nlon, wraps = grid[0], grid[1], int(grid[2]), grid[3], grid[4], int(grid[5]), grid[6]
+    lat0, dlat, nlat, lon0, dlon, nlon = w.lat0, w.dlat, w.nlat, w.lon0, w.dlon, w.nlon
+    values = w.values
     fy = (lat - lat0) / dlat
     fy = min(max(fy, 0.0), nlat - 1.0)
     iy = min(int(fy), nlat - 2)
     wy = fy - iy
-    if wraps > 0.5:
+    if w.wraps:
         fx = ((lon - lon0) % 360.0) / dlon
         ix0 = int(fx) % nlon
         ix1 = (ix0 + 1) % nlon
@@ -159,9 +195,9 @@ def sample_nb(values, times_h, grid, t_h, lat, lon, out):
 
 def snapshot(field: WeatherField, when, lat_range: tuple[float, float], lon_range: tuple[float, float]) -> dict:
     """Hs and wind on the field's own grid inside a box at the valid time nearest `when` (for maps)."""
-    lat0, dlat, nlat, lon0, dlon, nlon = field.grid[:6]
-    lat = lat0 + dlat * np.arange(int(nlat))
-    lon = lon0 + dlon * np.arange(int(nlon))
+    g = field.grid
+    lat = g.lat0 + g.dlat * np.arange(g.nlat)
+    lon = g.lon0 + g.dlon * np.arange(g.nlon)
     it = int(np.argmin(np.abs(field.times_h - field.hours_after_ref(when))))
     iy = np.flatnonzero((lat >= lat_range[0] - 2) & (lat <= lat_range[1] + 2))
     lon_e = ((lon + 180.0) % 360.0) - 180.0

@@ -78,12 +78,37 @@ def test_voyage_outside_the_weather_area_is_refused():
         solve(problem(), field)
 
 
-def test_voyage_beyond_the_forecast_horizon_is_flagged():
-    short = wf.uniform("2020-11-28T00", 24)  # forecast ends long before departure
-    plan = solve(problem(), short, seed=1, params=FAST)
-    assert plan.status == "ok"
-    assert plan.n_beyond_forecast == len(plan.legs) and "beyond the forecast horizon" in plan.reason
-    assert plan.route_row()["beyond_forecast"] == len(plan.legs)
+def test_departure_after_the_forecast_horizon_is_refused():
+    short = wf.uniform("2020-11-28T00", 24)  # forecast ends long before departure (2020-12-01T06)
+    with pytest.raises(RoutingInputError, match=r"VTEST: departs 2020-12-01T06:00:00, 54.0 h after the last valid "
+                                                r"time .* later cycle"):
+        solve(problem(), short, seed=1, params=FAST)
+
+
+def test_voyage_running_past_the_forecast_horizon_is_flagged_with_its_hours():
+    # the forecast (cycle 2020-12-01T00) ends 12 h after departure at 06:00: the rest of the passage is not
+    fld = wf.uniform("2020-12-01T00", 18)
+    fld = wf.WeatherField(fld.values, fld.times_h, fld.grid, fld.t_ref, cycle=np.datetime64("2020-12-01T00"))
+    plan = solve(problem(), fld, seed=1, params=FAST)
+    assert plan.status == "ok" and plan.forecast_flag == "beyond horizon"
+    eta_h = (plan.eta_utc - np.datetime64("2020-12-01T00")) / np.timedelta64(1, "h")
+    assert plan.hours_beyond_forecast == pytest.approx(eta_h - 18.0, abs=1e-3)  # ETA rounded to the second
+    assert f"{plan.hours_beyond_forecast:.1f} h of the voyage" in plan.reason and "beyond the forecast horizon" in plan.reason
+    row = plan.route_row()
+    assert row["forecast_flag"] == "beyond horizon" and row["hours_beyond_forecast"] == pytest.approx(eta_h - 18.0, abs=1e-3)
+    assert row["beyond_forecast"] == plan.n_beyond_forecast > 0
+
+
+def test_departure_before_the_cycle_is_flagged_with_its_hours():
+    # cycle 2020-12-01T12, weather from 2020-12-01T00 (an analysis-time field padded backwards): departure at 06:00
+    fld = wf.uniform("2020-12-01T00", 200)
+    fld = wf.WeatherField(fld.values, fld.times_h, fld.grid, fld.t_ref, cycle=np.datetime64("2020-12-01T12"))
+    plan = solve(problem(), fld, seed=1, params=FAST)
+    assert plan.status == "ok" and plan.forecast_flag == "before cycle"
+    assert plan.hours_before_cycle == pytest.approx(6.0, abs=1e-6)
+    assert "6.0 h of the voyage before the forecast cycle" in plan.reason
+    inside = solve(problem(), wf.uniform("2020-12-01T00", 200), seed=1, params=FAST)
+    assert inside.forecast_flag is None and inside.reason is None
 
 
 def test_a_bad_voyage_does_not_stop_the_others():

@@ -1,0 +1,145 @@
+"""The exact DP against exhaustive enumeration of every route × engine plan on small graphs.
+
+Each case is small enough to sail every route (one node per line) with every rpm per leg; the best of them
+under the objective must be what the DP returns, to rounding. Cases cross static and moving storms, weather
+limits that close parts of the graph, strong currents, loose, tight and impossible RTAs, both objectives and
+two to five engine settings."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from routing_cases import MODEL, field, moving_storm, problem, wavy
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing.dp import finish_bounds, fuel_to_finish_lb
+from pipeline.routing.objectives import route_cost_nb
+from pipeline.routing.problem import Instance
+from pipeline.routing.solve import solve
+
+DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm (9.8 kn) ≈ 57 h, 100 rpm (14 kn) ≈ 40 h in calm water
+
+
+def _weather(kind: str, seed: int):
+    if kind == "static":
+        return field(wavy(seed))
+    if kind == "storm":  # a storm drifting west across the route while the ship sails east: time matters
+        return field(moving_storm(seed, 31.5, 206.0, drift_kn=(-12.0, 2.0), hs_peak=7.0), step_h=3, hours=200)
+    if kind == "storm-limit":  # a smaller storm along the north of the corridor, against a 4.5 m limit
+        return field(moving_storm(seed, 32.8, 209.0, drift_kn=(-12.0, 0.0), radius_nm=60.0, hs_peak=6.0), step_h=3,
+                     hours=200)
+    if kind == "current":
+        return field(lambda LA, LO: dict(uo=1.2 * np.sin(np.radians(40 * (LA - 30))), vo=0.8 * np.cos(np.radians(30 * LO)),
+                                         swh=2.0 + np.cos(np.radians(20 * LO)), mwd_deg=np.full(LA.shape, 250.0)))
+    raise ValueError(kind)
+
+
+CASES = []
+for n, (kind, rta, obj) in enumerate(itertools.product(("static", "storm", "current", "storm-limit"),
+                                                        ("loose", "tight", "impossible"), ("jit", "thesis"))):
+    rpms = [(70, 85, 100), (75, 100), (60, 70, 80, 90, 100)][n % 3]
+    CASES.append((kind, rta, obj, rpms, n))
+
+
+def _enumerate(inst) -> float:
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    L2, P = g.lat.shape
+    R = len(v.rpm_options)
+    ct, cf = np.empty(L2), np.empty(L2)
+    best = math.inf
+    for mid in itertools.product(range(P), repeat=L2 - 2):
+        nodes = np.array((P // 2, *mid, P // 2), np.int64)
+        if not all(g.edge_ok[i, nodes[i], nodes[i + 1]] for i in range(L2 - 1)):
+            continue
+        for plan in itertools.product(range(R), repeat=L2 - 1):
+            code, _ = lk.sail_route_nb(nodes, np.array(plan, np.int64), 0, g, v, w, o, ct, cf)
+            if code == lk.OK:
+                best = min(best, route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1]))
+    return best
+
+
+@pytest.mark.parametrize("kind, rta, obj, rpms, n", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}-{len(c[3])}rpm" for c in CASES])
+def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
+    fld = _weather(kind, n)
+    n_lines = 2 if len(rpms) == 5 else 3
+    calm_h = {"loose": 75.0, "tight": 48.0, "impossible": 30.0}[rta]  # 100 rpm needs ≈ 40 h in calm water
+    pr = problem(DEP, ARR, calm_h, rpm_options=rpms, objective=obj, n_lines=n_lines, n_points=5, max_shift=2,
+                 d_point_nm=25.0, max_hs_m=4.5 if kind == "storm-limit" else None)
+    space = pr.search_space()
+    plan = solve(pr, fld, solver="dp", space=space)
+    inst = Instance.build(pr, space, fld)
+    if plan.baseline.legs:
+        inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it
+    best = _enumerate(inst)
+    if not math.isfinite(best):
+        assert plan.status == "infeasible"
+        return
+    assert plan.status in ("ok", "late"), plan.reason
+    assert plan.cost == pytest.approx(best, rel=1e-12, abs=1e-12), (plan.cost, best)
+    if rta == "impossible":
+        assert plan.status == "late"
+
+
+def _case(kind, rta, obj, rpms, n):
+    pr = problem(DEP, ARR, {"loose": 75.0, "tight": 48.0, "impossible": 30.0}[rta], rpm_options=rpms, objective=obj,
+                 n_lines=2 if len(rpms) == 5 else 3, n_points=5, max_shift=2, d_point_nm=25.0,
+                 max_hs_m=4.5 if kind == "storm-limit" else None)
+    return solve(pr, _weather(kind, n), solver="dp")
+
+
+def test_the_cases_are_not_trivial():
+    """The enumeration cases exercise what they claim: time-varying weather, mixed engine plans, a DP cheaper than
+    the baseline, a weather limit that closes the baseline route but not every route."""
+    storm = _weather("storm", 1)
+    leg = (30.0, -160.0, 31.0, -155.0)
+    h6 = lk.sail_leg(*leg, 6.0, 85.0, lk.vessel(MODEL), storm)[lk.H]
+    h30 = lk.sail_leg(*leg, 30.0, 85.0, lk.vessel(MODEL), storm)[lk.H]
+    assert abs(h6 - h30) > 0.05  # the same leg takes different hours at different times
+    tight = _case("storm", "tight", "jit", (60, 70, 80, 90, 100), 8)
+    assert tight.status == "ok" and tight.cost < tight.baseline.cost - 1.0
+    assert len({g["rpm"] for g in tight.legs}) > 1
+    closed = _case("storm-limit", "loose", "thesis", (75, 100), 19)
+    assert closed.baseline.status == "infeasible" and "wave height" in closed.baseline.reason
+    assert closed.status == "ok" and max(g["hs_m"] for g in closed.legs) <= 4.5
+    assert all(_case(*c).status == "late" for c in CASES if c[1] == "impossible")
+
+
+def test_fuel_to_finish_bound_by_hand():
+    lams = np.array([0.0, 1.0])
+    m_lam = np.array([5.0, 12.0])  # least Σ d·φ = 5 t, least Σ d·(φ + 1·τ) = 12
+    assert fuel_to_finish_lb(m_lam, lams, 6.0, 10.0) == 5.0  # max(5, 12 − 10)
+    assert fuel_to_finish_lb(m_lam, lams, 6.0, 6.5) == 5.5  # 12 − 6.5: little time costs fuel
+    assert fuel_to_finish_lb(m_lam, lams, 6.0, 5.9) == math.inf  # below the least hours at full speed
+
+
+@pytest.mark.parametrize("kind, n", [("storm", 1), ("storm-limit", 4), ("current", 2), ("static", 3)])
+def test_fuel_to_finish_bound_holds_for_every_completion(kind, n):
+    """The DP's pruning bound is below the fuel of every way to finish from every node of line 1, for the hours
+    that way takes (the bound may be loose, never above)."""
+    pr = problem(DEP, ARR, 48.0, rpm_options=(70, 85, 100), n_lines=3, n_points=5, max_shift=2, d_point_nm=25.0,
+                 max_hs_m=4.5 if kind == "storm-limit" else None)
+    space = pr.search_space()
+    inst = Instance.build(pr, space, _weather(kind, n))
+    lams, m_lam, t_min = finish_bounds(inst)
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    ct, cf = np.empty(5), np.empty(5)
+    n_checked = 0
+    for a in range(5):
+        for start_h in (0.0, 9.0, 21.0):
+            for rest in itertools.product(range(5), repeat=2):
+                nodes = np.array((2, a, *rest, 2), np.int64)
+                for plan in itertools.product(range(3), repeat=3):
+                    rpm = np.array((0, *plan), np.int64)
+                    ct[1], cf[1] = o.t_dep_h + start_h, 0.0
+                    code, _ = lk.sail_route_nb(nodes, rpm, 1, g, v, w, o, ct, cf)
+                    if code != lk.OK:
+                        continue
+                    hours = ct[-1] - ct[1]
+                    assert hours >= t_min[1, a]
+                    assert cf[-1] >= fuel_to_finish_lb(m_lam[:, 1, a], lams, t_min[1, a], hours) - 1e-12
+                    n_checked += 1
+    assert n_checked > 500
+    assert np.isfinite(m_lam[:, 1]).any() and lams.size > 3
