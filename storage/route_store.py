@@ -19,7 +19,8 @@ from storage import warehouse
 ROUTE_COLUMNS = [
     "run_id", "voyage_id", "imo", "solver", "objective", "status", "reason", "depart_utc", "eta_utc",
     "rta_utc", "hours", "fuel_t", "baseline_fuel_t", "baseline_hours", "savings_pct", "distance_nm",
-    "cost", "model_version", "cycle", "seed", "runtime_s", "n_legs", "beyond_forecast",
+    "cost", "model_version", "cycle", "seed", "runtime_s", "n_legs", "beyond_forecast", "forecast_flag",
+    "hours_beyond_forecast", "hours_before_cycle",
 ]
 LEG_COLUMNS = [
     "run_id", "voyage_id", "leg", "lat0", "lon0", "lat1", "lon1", "course_deg", "dist_nm", "rpm",
@@ -148,7 +149,8 @@ def run_summary(db_path: Path, run_id: str) -> dict:
             [run_id],
         ).fetchdf()
         problems = con.execute(
-            "SELECT voyage_id, imo, status, reason FROM routes WHERE run_id = ? AND status <> 'ok' ORDER BY voyage_id",
+            "SELECT voyage_id, imo, CASE WHEN status = 'ok' THEN 'ok, ' || forecast_flag ELSE status END AS status, reason "
+            "FROM routes WHERE run_id = ? AND (status <> 'ok' OR forecast_flag IS NOT NULL) ORDER BY voyage_id",
             [run_id],
         ).fetchdf()
     out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}

@@ -217,4 +217,14 @@ MIGRATIONS: list[Migration] = [
         LEFT JOIN sailed a USING (voyage_id);
         """,
     ),
+    Migration(
+        "routes_005_forecast_horizon",
+        """
+        -- a plan that sails past the cycle's last forecast step (the last step persisted) or departs before the
+        -- cycle is not silently ok: which of the two, and for how many hours
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS forecast_flag VARCHAR;         -- 'beyond horizon' | 'before cycle' | both
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS hours_beyond_forecast DOUBLE;  -- hours sailed past the last forecast step
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS hours_before_cycle DOUBLE;     -- hours sailed before the cycle's init time
+        """,
+    ),
 ]

@@ -38,3 +38,16 @@ def test_run_results_written_once_in_a_transaction(tmp_path):
     con = duckdb.connect(str(tmp_path / "w.snapshot.duckdb"), read_only=True)
     assert con.execute("SELECT count(*) FROM routes").fetchone()[0] == 2
     assert con.execute("SELECT eta_utc FROM route_legs WHERE leg = 1").fetchone()[0].hour == 11
+
+
+def test_a_plan_past_the_forecast_horizon_is_stored_flagged_and_needs_attention(tmp_path):
+    db = tmp_path / "w.duckdb"
+    route_store.begin_run(db, "r2", cycle="2020-12-01T00", solver="bfoa", trigger="manual", n_voyages=2)
+    past = dict(_route("V3", "ok", 90.0, 100.0), forecast_flag="beyond horizon", hours_beyond_forecast=14.5,
+                hours_before_cycle=0.0, beyond_forecast=3)
+    route_store.write_run_results(db, tmp_path / "exports", "r2", [dict(_route("V1", "ok", 90.0, 100.0), beyond_forecast=0), past], [])
+    with duckdb.connect(str(db), read_only=True) as con:
+        flags = con.execute("SELECT voyage_id, forecast_flag, hours_beyond_forecast FROM routes ORDER BY 1").fetchall()
+    assert flags == [("V1", None, None), ("V3", "beyond horizon", 14.5)]
+    problems = route_store.run_summary(db, "r2")["problems"]
+    assert [(p["voyage_id"], p["status"]) for p in problems] == [("V3", "ok, beyond horizon")]
