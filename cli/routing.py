@@ -87,7 +87,6 @@ def register(app: typer.Typer) -> None:
 
         from flows.jobs.route_worker import cycle_field
         from flows.settings import load_settings
-        from pipeline.export import bundle
         from pipeline.performance.model import model_from_stored
         from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
         from pipeline.sources.cycles import parse_cycle
@@ -153,6 +152,8 @@ def register(app: typer.Typer) -> None:
                           f"weather {'calm water' if calm else 'cycle ' + c}")
         wanted = {"png": png, "convergence": convergence, "rtz": rtz}
         if plan.legs and any(wanted.values()):
+            from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for
+
             made = bundle.export_plan(plan, weather, vessel, v, kinds=[k for k, path in wanted.items() if path])
             for kind, data in made.files.items():
                 path = Path(wanted[kind])
