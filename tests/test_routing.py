@@ -22,6 +22,7 @@ from pipeline.routing.objectives import LATE_STEP_T, objective, route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.search_space import build_search_space
 from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solve
+from routing_cases import wavy
 
 MODEL = reference_model(14.0, 100.0, 1.5)  # STW = 0.14·rpm kn, fuel = 1.5·(rpm/100)³ t/h in calm water
 FAST = BfoaParams(n_bacteria=8, n_chemo=6, n_cycles=8)
@@ -62,21 +63,6 @@ def field(fn, lat=(10.0, 50.0), lon=(180.0, 250.0), step=0.5, hours=400):
     for k, v in fn(LA, LO).items():
         kw[k] = np.broadcast_to(v, shape).copy()
     return wf.from_arrays(la, lo, times, **kw)
-
-
-def wavy(seed):
-    """Smooth, non-uniform wind, waves and currents (different for every seed)."""
-    rng = np.random.default_rng(seed)
-    k = rng.uniform(0.1, 0.4, 4)
-    ph = rng.uniform(0.0, 2 * np.pi, 4)
-
-    def fn(LA, LO):
-        u = 8 * np.sin(k[2] * LO + ph[2])
-        v = 6 * np.cos(k[3] * LA + ph[3])
-        return dict(swh=2.5 + 2.0 * np.sin(k[0] * LA + ph[0]) * np.cos(k[1] * LO + ph[1]), u10=u, v10=v,
-                    uo=0.6 * np.sin(2 * k[1] * LA + ph[0]), vo=0.4 * np.cos(2 * k[0] * LO + ph[2]),
-                    mwd_deg=(np.degrees(np.arctan2(-u, -v)) + 20.0) % 360.0)
-    return fn
 
 
 def node_offsets(plan, space):
