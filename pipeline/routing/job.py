@@ -7,7 +7,7 @@ science: problem → search space → solve in the given weather.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -54,9 +54,6 @@ class RouteJob:
     @property
     def voyage_id(self) -> str:
         return str(self.voyage.get("voyage_id"))
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def routing_problem(job: RouteJob) -> RoutingProblem:
