@@ -29,7 +29,7 @@ from pipeline.export.paths import ExportPathError, export_path
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
-from storage import cube, export_store, fleet_store, route_store, warehouse
+from storage import cube, export_store, fleet_store, route_store
 from storage.run_lock import job_lock
 
 LOG = logging.getLogger("jitroute.fleet")
@@ -211,7 +211,6 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
     run.publish(key="nightly-summary", markdown=nightly_markdown(summary),
                 table=summary_table(summary["routing"]) if summary["routing"] else None,
                 description=f"jitroute nightly {summary['date']}")
-    warehouse.publish_snapshot(layout.warehouse)
     return summary
 
 
