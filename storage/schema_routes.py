@@ -227,4 +227,69 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS hours_before_cycle DOUBLE;     -- hours sailed before the cycle's init time
         """,
     ),
+    Migration(
+        "routes_006_status_checks",
+        # statuses limited to the values the code writes (DuckDB adds a CHECK only with CREATE TABLE, so the two
+        # tables are rebuilt); the route's count of legs past the horizon gets its own name, n_legs_beyond_forecast,
+        # apart from the legs' boolean beyond_forecast
+        """
+        CREATE TABLE route_runs_new (
+            run_id VARCHAR PRIMARY KEY,
+            started_at TIMESTAMP NOT NULL,
+            finished_at TIMESTAMP,
+            cycle TIMESTAMP,
+            n_voyages INTEGER,
+            n_ok INTEGER,
+            n_failed INTEGER,
+            status VARCHAR NOT NULL CHECK (status IN ('running', 'ok', 'partial', 'failed')),
+            solver VARCHAR,
+            trigger VARCHAR,
+            host VARCHAR,
+            pid INTEGER,
+            pid_started VARCHAR,
+            reason VARCHAR,
+            n_export_failed INTEGER,
+            export_errors VARCHAR
+        );
+        INSERT INTO route_runs_new SELECT run_id, started_at, finished_at, cycle, n_voyages, n_ok, n_failed, status, solver,
+            trigger, host, pid, pid_started, reason, n_export_failed, export_errors FROM route_runs;
+        DROP TABLE route_runs;
+        ALTER TABLE route_runs_new RENAME TO route_runs;
+
+        CREATE TABLE routes_new (
+            run_id VARCHAR NOT NULL,
+            voyage_id VARCHAR NOT NULL,
+            imo BIGINT,
+            solver VARCHAR,
+            objective VARCHAR,
+            status VARCHAR NOT NULL CHECK (status IN ('ok', 'late', 'infeasible', 'failed')),
+            reason VARCHAR,
+            depart_utc TIMESTAMP,
+            eta_utc TIMESTAMP,
+            rta_utc TIMESTAMP,
+            hours DOUBLE,
+            fuel_t DOUBLE,
+            baseline_fuel_t DOUBLE,
+            baseline_hours DOUBLE,
+            savings_pct DOUBLE,
+            distance_nm DOUBLE,
+            cost DOUBLE,
+            model_version INTEGER,
+            cycle TIMESTAMP,
+            seed INTEGER,
+            runtime_s DOUBLE,
+            n_legs INTEGER,
+            n_legs_beyond_forecast INTEGER,
+            forecast_flag VARCHAR,
+            hours_beyond_forecast DOUBLE,
+            hours_before_cycle DOUBLE,
+            PRIMARY KEY (run_id, voyage_id)
+        );
+        INSERT INTO routes_new SELECT run_id, voyage_id, imo, solver, objective, status, reason, depart_utc, eta_utc, rta_utc,
+            hours, fuel_t, baseline_fuel_t, baseline_hours, savings_pct, distance_nm, cost, model_version, cycle, seed,
+            runtime_s, n_legs, beyond_forecast, forecast_flag, hours_beyond_forecast, hours_before_cycle FROM routes;
+        DROP TABLE routes;
+        ALTER TABLE routes_new RENAME TO routes;
+        """,
+    ),
 ]

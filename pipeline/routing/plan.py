@@ -100,7 +100,7 @@ class Plan:
             "savings_pct": self.savings_pct, "distance_nm": self.distance_nm,
             "cost": self.cost if math.isfinite(self.cost) else None, "model_version": self.model_version,
             "cycle": _utc(self.cycle), "seed": self.seed, "runtime_s": self.runtime_s, "n_legs": len(self.legs),
-            "beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
+            "n_legs_beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
             "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
         }
 
@@ -121,7 +121,7 @@ class Plan:
             return v
         row = self.route_row()
         keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
-                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "beyond_forecast",
+                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "n_legs_beyond_forecast",
                 "forecast_flag", "hours_beyond_forecast", "hours_before_cycle")
         out = {k: clean(row[k]) for k in keys}
         out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
