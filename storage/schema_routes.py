@@ -231,7 +231,7 @@ MIGRATIONS: list[Migration] = [
         "routes_006_status_checks",
         # statuses limited to the values the code writes (DuckDB adds a CHECK only with CREATE TABLE, so the two
         # tables are rebuilt); the route's count of legs past the horizon gets its own name, n_legs_beyond_forecast,
-        # apart from the legs' boolean beyond_forecast
+        # apart from the legs' boolean beyond_forecast; latest_routes is made again so its columns follow
         """
         CREATE TABLE route_runs_new (
             run_id VARCHAR PRIMARY KEY,
@@ -290,6 +290,29 @@ MIGRATIONS: list[Migration] = [
             runtime_s, n_legs, beyond_forecast, forecast_flag, hours_beyond_forecast, hours_before_cycle FROM routes;
         DROP TABLE routes;
         ALTER TABLE routes_new RENAME TO routes;
+
+        -- the view's listed columns were fixed when it was made: made again, it lists the routes columns of today
+        CREATE OR REPLACE VIEW latest_routes AS
+        WITH attempts AS (
+            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
+                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
+            FROM routes r JOIN route_runs u USING (run_id)
+        ),
+        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
+        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
+            SELECT * FROM attempts
+            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
+        )
+        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
+               n.run_id <> s.run_id AS newer_attempt_failed,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
+               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
+               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at
+        FROM shown s
+        JOIN newest n USING (voyage_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels x ON x.imo = s.imo;
         """,
     ),
 ]
