@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import struct
 import time
 from collections.abc import Iterator
@@ -74,7 +75,9 @@ def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnecti
     delay = 0.05
     while True:
         try:
-            return duckdb.connect(str(path), read_only=read_only)
+            # a new warehouse is created in the snapshot's storage format, so the snapshot is a byte copy
+            return duckdb.connect(str(path), read_only=read_only,
+                                  config={"storage_compatibility_version": SNAPSHOT_STORAGE_VERSION})
         except duckdb.Error as exc:
             if _is_corrupt(exc):
                 raise _corrupt(path, exc) from exc
@@ -146,27 +149,37 @@ def snapshot_path(path: Path) -> Path:
 
 def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
     """Copy the warehouse `path` open on `con` to `<name>.snapshot.duckdb` atomically for analysts, in storage
-    format `SNAPSHOT_STORAGE_VERSION` (tables with their rows, constraints and comments; views).
+    format `SNAPSHOT_STORAGE_VERSION`: a byte copy when the warehouse is in that format (every warehouse created
+    since), else written table by table (`COPY FROM DATABASE`: rows, constraints, comments, views), which is
+    slower (seconds for tens of MB) — replace such a warehouse by its snapshot once to get the fast copy.
 
-    Call it on the write connection (as `connect` does), so no other writer changes the warehouse during the
-    copy and a newer snapshot is never replaced by an older one.
+    Call it on a checkpointed write connection (as `connect` does), so no other writer changes the warehouse
+    during the copy and a newer snapshot is never replaced by an older one.
     """
+    path = Path(path)
     snap = snapshot_path(path)
     tmp = snap.with_name(snap.name + f".tmp{os.getpid()}")
-    source = con.execute("SELECT current_database()").fetchone()[0]
     tmp.unlink(missing_ok=True)
     try:
-        quoted = str(tmp).replace("'", "''")
-        con.execute(f"ATTACH '{quoted}' AS snapshot_out (STORAGE_VERSION '{SNAPSHOT_STORAGE_VERSION}')")
-        try:
-            con.execute(f'COPY FROM DATABASE "{source}" TO snapshot_out')
-        finally:
-            con.execute("DETACH snapshot_out")
+        if storage_version_number(path) == SNAPSHOT_STORAGE_NUMBER:
+            shutil.copyfile(path, tmp)
+        else:
+            _copy_in_snapshot_format(con, tmp)
         os.replace(tmp, snap)
     finally:
         tmp.unlink(missing_ok=True)
         tmp.with_name(tmp.name + ".wal").unlink(missing_ok=True)
     return snap
+
+
+def _copy_in_snapshot_format(con: duckdb.DuckDBPyConnection, target: Path) -> None:
+    source = con.execute("SELECT current_database()").fetchone()[0]
+    quoted = str(target).replace("'", "''")
+    con.execute(f"ATTACH '{quoted}' AS snapshot_out (STORAGE_VERSION '{SNAPSHOT_STORAGE_VERSION}')")
+    try:
+        con.execute(f'COPY FROM DATABASE "{source}" TO snapshot_out')
+    finally:
+        con.execute("DETACH snapshot_out")
 
 
 def storage_version_number(path: Path) -> int:

@@ -68,8 +68,12 @@ def test_an_existing_warehouse_upgrades_keeping_its_rows(tmp_path, monkeypatch):
         assert con.execute("SELECT n_legs_beyond_forecast FROM latest_routes").fetchall() == [(3,)]
 
 
-def test_the_snapshot_is_written_in_the_declared_storage_version_and_opens_read_only(tmp_path):
+@pytest.mark.parametrize("created_by", ["warehouse", "duckdb 2 default format"])
+def test_the_snapshot_is_written_in_the_declared_storage_version_and_opens_read_only(tmp_path, created_by):
     db = tmp_path / "w.duckdb"
+    if created_by != "warehouse":  # a warehouse made before it was created in the snapshot's format
+        duckdb.connect(str(db)).close()
+        assert warehouse.storage_version_number(db) != warehouse.SNAPSHOT_STORAGE_NUMBER
     with warehouse.connect(db) as con:
         con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', now(), 'ok')")
         con.execute("INSERT INTO routes (run_id, voyage_id, status, fuel_t) VALUES ('r1', 'V1', 'ok', 5.0)")
