@@ -10,6 +10,7 @@ both tables has the same type in both, so pyarrow, polars and DuckDB read each f
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 from datetime import datetime, timezone
@@ -104,7 +105,8 @@ def migrate_old_parquet_layout(exports_dir: Path) -> list[str]:
         _publish_run_parquet(exports_dir, run_id, tables)
         for table in PARQUET_TABLES:
             (old / f"{table}.parquet").unlink(missing_ok=True)
-        old.rmdir()
+        with contextlib.suppress(OSError):  # a folder holding anything else is left as it is
+            old.rmdir()
         moved.append(run_id)
     return moved
 
