@@ -75,9 +75,10 @@ def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnecti
     delay = 0.05
     while True:
         try:
-            # a new warehouse is created in the snapshot's storage format, so the snapshot is a byte copy
-            return duckdb.connect(str(path), read_only=read_only,
-                                  config={"storage_compatibility_version": SNAPSHOT_STORAGE_VERSION})
+            # a writer creates a new warehouse in the snapshot's storage format, so the snapshot is a byte copy
+            # (readers pass no setting: a reader in the same process as another plain connection can share it)
+            config = {} if read_only else {"storage_compatibility_version": SNAPSHOT_STORAGE_VERSION}
+            return duckdb.connect(str(path), read_only=read_only, config=config)
         except duckdb.Error as exc:
             if _is_corrupt(exc):
                 raise _corrupt(path, exc) from exc
