@@ -20,7 +20,7 @@ ROUTE_COLUMNS = [
     "run_id", "voyage_id", "imo", "solver", "objective", "status", "reason", "depart_utc", "eta_utc",
     "rta_utc", "hours", "fuel_t", "baseline_fuel_t", "baseline_hours", "savings_pct", "distance_nm",
     "cost", "model_version", "cycle", "seed", "runtime_s", "n_legs", "beyond_forecast", "forecast_flag",
-    "hours_beyond_forecast", "hours_before_cycle",
+    "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm",
 ]
 LEG_COLUMNS = [
     "run_id", "voyage_id", "leg", "lat0", "lon0", "lat1", "lon1", "course_deg", "dist_nm", "rpm",

@@ -227,4 +227,12 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS hours_before_cycle DOUBLE;     -- hours sailed before the cycle's init time
         """,
     ),
+    Migration(
+        "routes_008_land_clearance",
+        """
+        -- least distance to land (NM) along the plan outside its port approaches, sampled at 0.1 NM
+        -- (25 means at least 25 NM); empty when there is no plan
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_land_clearance_nm DOUBLE;
+        """,
+    ),
 ]
