@@ -145,26 +145,26 @@ _CACHE_NAME = "land_grid_v1.npz"
 
 def land_grid(cache_dir: Path | None = None) -> LandGrid:
     """The process's LandGrid, built on first use. With `cache_dir` (a folder under the data root or a temporary
-    folder) it is read from / written to `land_grid_v1.npz` there, keyed by the package's mask file size."""
+    folder) it is read from `land_grid_v1.npz` there when that matches the package's mask (by file size), and
+    written there when missing."""
     global _GRID
-    if _GRID is not None:
+    if _GRID is not None and cache_dir is None:
         return _GRID
     mask_path = _mask_path()
     key = np.int64(mask_path.stat().st_size)
     cached = Path(cache_dir) / _CACHE_NAME if cache_dir is not None else None
-    if cached is not None and cached.exists():
+    if _GRID is None and cached is not None and cached.exists():
         with np.load(cached) as z:
             if int(z["key"]) == int(key):
                 _GRID = LandGrid(**{k: z[k] for k in LandGrid._fields})
-                return _GRID
-    grid = build_land_grid(mask_path)
-    if cached is not None:
+    if _GRID is None:
+        _GRID = build_land_grid(mask_path)
+    if cached is not None and not cached.exists():
         cached.parent.mkdir(parents=True, exist_ok=True)
         tmp = cached.with_suffix(".tmp.npz")
-        np.savez_compressed(tmp, key=key, **grid._asdict())
+        np.savez_compressed(tmp, key=key, **_GRID._asdict())
         tmp.replace(cached)
-    _GRID = grid
-    return grid
+    return _GRID
 
 
 @numba.njit(cache=True)
