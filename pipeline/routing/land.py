@@ -206,6 +206,26 @@ def _bound_nm(grid, i, j):
 
 
 @numba.njit(cache=True)
+def _row_distance_nm(grid, ii, jx, x, gy, ew_nm, nj, best):
+    """Least distance to a land cell of row `ii`, scanning outwards from column `jx` while it can beat `best`."""
+    for side in (1, -1):
+        dj = 0 if side == 1 else 1
+        while dj <= nj:
+            jj = jx + side * dj
+            gx = max(0.0, jj - x, x - (jj + 1)) * ew_nm
+            if gx >= best:
+                break  # farther out only gets farther
+            jw = jj % N_COLS
+            if grid.slot[ii // TILE, jw // TILE] == SEA_TILE:  # on to the next tile
+                dj += TILE - jw % TILE if side == 1 else jw % TILE + 1
+                continue
+            if not cell_is_sea_nb(grid, ii, jw):
+                best = min(best, math.sqrt(gx * gx + gy * gy))
+            dj += 1
+    return best
+
+
+@numba.njit(cache=True)
 def distance_to_land_nb(grid, lat, lon, limit_nm):
     """Distance (NM) from (lat, lon) to the nearest land cell: exact below `limit_nm`, else a lower bound ≥ it."""
     i, j = cell_of_nb(lat, lon)
@@ -214,27 +234,17 @@ def distance_to_land_nb(grid, lat, lon, limit_nm):
         return bound
     y = (90.0 - lat) * 120.0  # in cells, continuous
     x = (((lon + 180.0) % 360.0)) * 120.0
-    jx = int(x)
-    coslat = max(math.cos(math.radians(lat)), 1e-3)
+    ew_nm = CELL_NM * max(math.cos(math.radians(lat)), 1e-3)  # east–west size of a cell here
     ni = int(limit_nm / CELL_NM) + 1
-    nj = min(int(limit_nm / (CELL_NM * coslat)) + 1, N_COLS // 2)
+    nj = min(int(limit_nm / ew_nm) + 1, N_COLS // 2)
     best = limit_nm
-    for di in range(-ni, ni + 1):
-        ii = i + di
+    for k in range(2 * ni + 1):  # rows 0, +1, -1, +2, … away, so near land cuts the scan short
+        ii = i + ((k + 1) // 2 if k % 2 else -(k // 2))
         if ii < 0 or ii >= N_ROWS:
             continue
         gy = max(0.0, ii - y, y - (ii + 1)) * CELL_NM
-        if gy >= best:
-            continue
-        for dj in range(-nj, nj + 1):
-            jj = jx + dj
-            gx = max(0.0, jj - x, x - (jj + 1)) * CELL_NM * coslat
-            if gx >= best:
-                continue
-            if not cell_is_sea_nb(grid, ii, jj % N_COLS):
-                d = math.sqrt(gx * gx + gy * gy)
-                if d < best:
-                    best = d
+        if gy < best:
+            best = _row_distance_nm(grid, ii, int(x), x, gy, ew_nm, nj, best)
     return best
 
 
