@@ -19,8 +19,10 @@ over land: from a point at distance d, every point within d − c of it is at le
 
 from __future__ import annotations
 
+import importlib.metadata
 import importlib.util
 import math
+import threading
 import zipfile
 from pathlib import Path
 from typing import NamedTuple
@@ -140,22 +142,28 @@ def build_land_grid(path: Path | None = None) -> LandGrid:
 
 
 _GRID: LandGrid | None = None
+_GRID_LOCK = threading.Lock()  # a worker's threads build it once between them
 _CACHE_NAME = "land_grid_v1.npz"
 
 
 def land_grid(cache_dir: Path | None = None) -> LandGrid:
     """The process's LandGrid, built on first use. With `cache_dir` (a folder under the data root or a temporary
-    folder) it is read from `land_grid_v1.npz` there when that matches the package's mask (by file size), and
-    written there when missing."""
-    global _GRID
+    folder) it is read from `land_grid_v1.npz` there when that was made from the same package version and mask
+    file, and written there when missing."""
     if _GRID is not None and cache_dir is None:
         return _GRID
+    with _GRID_LOCK:
+        return _load_or_build(cache_dir)
+
+
+def _load_or_build(cache_dir: Path | None) -> LandGrid:
+    global _GRID
     mask_path = _mask_path()
-    key = np.int64(mask_path.stat().st_size)
+    key = f"global-land-mask {importlib.metadata.version('global-land-mask')}, {mask_path.stat().st_size} bytes"
     cached = Path(cache_dir) / _CACHE_NAME if cache_dir is not None else None
     if _GRID is None and cached is not None and cached.exists():
         with np.load(cached) as z:
-            if int(z["key"]) == int(key):
+            if str(z["key"]) == key:
                 _GRID = LandGrid(**{k: z[k] for k in LandGrid._fields})
     if _GRID is None:
         _GRID = build_land_grid(mask_path)
