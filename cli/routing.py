@@ -146,10 +146,11 @@ def register(app: typer.Typer) -> None:
         else:
             console.print(plan_table(plan))
             console.print(comparison_table(plan))
-            sav = plan.savings_pct
+            sav, land_nm = plan.savings_pct, plan.min_land_clearance_nm
             console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
                           f"savings vs baseline {'n/a' if sav != sav else f'{sav:.1f} %'}; runtime {plan.runtime_s:.2f} s; "
-                          f"weather {'calm water' if calm else 'cycle ' + c}")
+                          f"weather {'calm water' if calm else 'cycle ' + c}"
+                          f"{'' if land_nm != land_nm else f'; least distance to land {land_nm:.1f} NM (outside the port approaches)'}")
         wanted = {"png": png, "convergence": convergence, "rtz": rtz}
         if plan.legs and any(wanted.values()):
             from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for

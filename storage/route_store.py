@@ -32,7 +32,7 @@ ROUTE_ARROW = pa.schema([
     ("fuel_t", _F64), ("baseline_fuel_t", _F64), ("baseline_hours", _F64), ("savings_pct", _F64),
     ("distance_nm", _F64), ("cost", _F64), ("model_version", _I32), ("cycle", _UTC), ("seed", _I32),
     ("runtime_s", _F64), ("n_legs", _I32), ("n_legs_beyond_forecast", _I32), ("forecast_flag", _STR),
-    ("hours_beyond_forecast", _F64), ("hours_before_cycle", _F64),
+    ("hours_beyond_forecast", _F64), ("hours_before_cycle", _F64), ("min_land_clearance_nm", _F64),
 ])
 LEG_ARROW = pa.schema([
     ("voyage_id", _STR), ("leg", _I32), ("lat0", _F64), ("lon0", _F64), ("lat1", _F64), ("lon1", _F64),

@@ -68,6 +68,7 @@ _ROUTES = {
     "forecast_flag": "'beyond horizon', 'before cycle', both (comma separated) or empty when the voyage lies in the forecast",
     "hours_beyond_forecast": "hours sailed past the last forecast step",
     "hours_before_cycle": "hours sailed before the forecast cycle's init time",
+    "min_land_clearance_nm": "least distance to land along the plan outside its port approaches, nautical miles (0.1 NM sampling; 25 means at least 25)",
 }
 _LEGS = {
     "run_id": _ROUTES["run_id"], "voyage_id": _ROUTES["voyage_id"],

@@ -4,7 +4,36 @@ Times are UTC TIMESTAMPs; fuel in tonnes, distances in NM, speeds in knots, dire
 degrees (wind/waves coming-from).
 """
 
+import hashlib
+
 from storage.warehouse import Migration
+
+# The view of the plan to sail per voyage. A view made with `r.*` keeps the columns routes had when it was made,
+# so it is made again after every migration (views_migration) and always lists the routes columns of today.
+LATEST_ROUTES_VIEW = """
+        CREATE OR REPLACE VIEW latest_routes AS
+        WITH attempts AS (
+            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
+                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
+            FROM routes r JOIN route_runs u USING (run_id)
+        ),
+        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
+        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
+            SELECT * FROM attempts
+            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
+        )
+        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
+               n.run_id <> s.run_id AS newer_attempt_failed,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
+               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
+               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at
+        FROM shown s
+        JOIN newest n USING (voyage_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels x ON x.imo = s.imo;
+"""
+
 
 MIGRATIONS: list[Migration] = [
     Migration(
@@ -291,28 +320,21 @@ MIGRATIONS: list[Migration] = [
         DROP TABLE routes;
         ALTER TABLE routes_new RENAME TO routes;
 
-        -- the view's listed columns were fixed when it was made: made again, it lists the routes columns of today
-        CREATE OR REPLACE VIEW latest_routes AS
-        WITH attempts AS (
-            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
-                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
-            FROM routes r JOIN route_runs u USING (run_id)
-        ),
-        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
-        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
-            SELECT * FROM attempts
-            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
-        )
-        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
-               n.run_id <> s.run_id AS newer_attempt_failed,
-               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
-               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
-               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
-               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at
-        FROM shown s
-        JOIN newest n USING (voyage_id)
-        LEFT JOIN voyages v USING (voyage_id)
-        LEFT JOIN vessels x ON x.imo = s.imo;
+        """ + LATEST_ROUTES_VIEW + """
+        """,
+    ),
+    Migration(
+        "routes_008_land_clearance",
+        """
+        -- least distance to land (NM) along the plan outside its port approaches, sampled at 0.1 NM
+        -- (25 means at least 25 NM); empty when there is no plan
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_land_clearance_nm DOUBLE;
         """,
     ),
 ]
+
+
+def views_migration(after: list[str]) -> Migration:
+    """The migration making `latest_routes` again, named anew whenever its text or the migrations `after` change."""
+    digest = hashlib.sha256("\n".join([LATEST_ROUTES_VIEW, *after]).encode()).hexdigest()[:12]
+    return Migration(f"routes_views_{digest}", LATEST_ROUTES_VIEW)

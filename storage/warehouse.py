@@ -67,6 +67,7 @@ def _all_migrations() -> list[Migration]:
     from storage import schema_docs, schema_fleet, schema_ingest, schema_routes
 
     schema = [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS]
+    schema.append(schema_routes.views_migration(after=[m.name for m in schema]))
     return [*schema, schema_docs.comments_migration(after=[m.name for m in schema])]
 
 

@@ -30,6 +30,8 @@ class RoutingOptions:
     n_lines: int | None = None
     n_points: int = 21
     d_point_nm: float | None = None
+    land_clearance_nm: float = 2.0
+    port_approach_nm: float = 10.0
 
     @classmethod
     def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
@@ -65,7 +67,8 @@ def routing_problem(job: RouteJob) -> RoutingProblem:
     model = PerformanceModel.from_json(job.model)
     return problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
                                window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
-                               d_point_nm=o.d_point_nm)
+                               d_point_nm=o.d_point_nm, land_clearance_nm=o.land_clearance_nm,
+                               port_approach_nm=o.port_approach_nm)
 
 
 def calm_weather(problem: RoutingProblem) -> wf.WeatherField:

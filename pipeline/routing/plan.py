@@ -37,6 +37,7 @@ class Plan:
     n_evals: int = 0
     model_version: int | None = None
     cycle: np.datetime64 | None = None
+    min_land_clearance_nm: float = math.nan  # least distance to land outside the port approaches (0.1 NM sampling)
 
     @property
     def hours(self) -> float:
@@ -102,6 +103,7 @@ class Plan:
             "cycle": _utc(self.cycle), "seed": self.seed, "runtime_s": self.runtime_s, "n_legs": len(self.legs),
             "n_legs_beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
             "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
+            "min_land_clearance_nm": self.min_land_clearance_nm,
         }
 
     def leg_rows(self, run_id: str | None = None) -> list[dict]:
@@ -122,7 +124,7 @@ class Plan:
         row = self.route_row()
         keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
                 "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "n_legs_beyond_forecast",
-                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle")
+                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm")
         out = {k: clean(row[k]) for k in keys}
         out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
         return out

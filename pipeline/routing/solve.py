@@ -16,6 +16,7 @@ import numpy as np
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
+from pipeline.routing.clearance import least_clearance_nm
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
@@ -37,6 +38,8 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
         legs, code, bad_leg = legs_of_route(inst, nodes, rpm_idx)
         if code == lk.OK:
             plan.legs = legs
+            if inst.space.clearance is not None:
+                plan.min_land_clearance_nm = least_clearance_nm(plan.waypoints, inst.space.clearance)
             plan.cost, _, _, _ = evaluate(inst, nodes, rpm_idx)
             late_h = plan.hours - p.t_req_h
             if late_h > 1e-6:
