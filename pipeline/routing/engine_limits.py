@@ -1,0 +1,205 @@
+"""Engine plans a master can sail: each rpm setting held for a minimum time, a small cost per change.
+
+The solvers choose an rpm per leg freely, so their plans may switch setting every few hours. `limited_plan` is
+an exact post-pass on a fixed route (the solver's): a dynamic programme over the route's legs choosing one rpm
+setting per leg, each leg sailed with the same time-dependent kernel (`leg_kernel.sail_leg_nb`) from the
+label's exact time. A label is a partial plan at line i: its setting r, arrival time t, fuel f, number of
+changes n and hours held since its last change (or since departure). The rules:
+
+- a change of setting is allowed only after the current one has been held `min_hold_h` hours;
+- the last setting must be held `min_hold_h` hours too (no exemption at the ends: every setting of the plan
+  is held at least that long), except in a plan of one setting, which may be shorter than the hold;
+- a plan costs its objective value (objectives.route_cost_nb) plus `change_cost_t` per change.
+
+Per (line, setting) the labels are taken by arrival time and a label B is dropped when an earlier kept label A
+has  f_A + c·n_A − e·t_A ≤ f_B + c·n_B − e·t_B  and held_A ≥ held_B (hours held capped at the hold), e being
+the early rate of `jit` as in dp.py. Every continuation of B is then open to A at no greater cost, exactly in
+weather that does not change with time (a continuation's legs take the same hours from either start); in
+time-varying weather this is the same one assumption as the exact DP's (dp.py). A plan of one setting
+throughout is always kept (it alone may end with less than the hold). When the route can arrive by the RTA at
+its fastest setting, labels that can no longer make the RTA even at that setting are dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from pipeline.routing.dp import _grow
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.objectives import route_cost_nb
+
+
+@dataclass(frozen=True)
+class EngineLimits:
+    """How often the engine setting may change: the least hours a setting is held, and a cost (t of fuel) per
+    change that the plan's objective adds. Both zero: no limits."""
+
+    min_hold_h: float = 12.0
+    change_cost_t: float = 0.05
+
+    @property
+    def active(self) -> bool:
+        return self.min_hold_h > 0.0 or self.change_cost_t > 0.0
+
+
+@numba.njit(cache=True)
+def _route_latest_departures(lat, lon, nodes, v, w, fast_rpm, deadline, ld):
+    """ld[i] ≥ the latest time the ship can leave line i on the route and still arrive by `deadline` at the
+    fastest setting (first-in-first-out legs: fixed point of t = target − hours(t), then checked from above)."""
+    out = np.empty(N_LEG_OUT)
+    L2 = nodes.shape[0]
+    ld[L2 - 1] = deadline
+    for i in range(L2 - 2, -1, -1):
+        a, b = nodes[i], nodes[i + 1]
+        target = ld[i + 1]
+        t = target
+        ok = False
+        for _it in range(8):
+            sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, fast_rpm, v, w, out)
+            if out[CODE] != OK:
+                break
+            ok = True
+            t = target - out[H]
+        if not ok:
+            ld[i] = target  # a leg that cannot be sailed at full speed: no pruning before it
+            continue
+        step = 1e-3
+        while t < target:  # move up until leaving then arrives after the target
+            sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, fast_rpm, v, w, out)
+            if out[CODE] != OK or t + out[H] > target:
+                break
+            t += step
+            step *= 2.0
+        ld[i] = min(t, target)
+
+
+@numba.njit(cache=True)
+def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune):
+    """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
+    (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`."""
+    rpm_options = v.rpm_options
+    R = rpm_options.shape[0]
+    L2 = nodes.shape[0]
+    t_dep_h, max_hours = o.t_dep_h, o.max_hours
+    e = o.early_t_per_h if o.kind == 1 else 0.0
+    cap = 1024
+    kt, kf, kh = np.empty(cap), np.empty(cap), np.empty(cap)
+    kn, kr, kpar = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
+    n_kept = 0
+    line_lo = 0
+    ccap = 1024
+    ct, cf, ch = np.empty(ccap), np.empty(ccap), np.empty(ccap)
+    cn, cr, cpar = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
+    out = np.empty(N_LEG_OUT)
+    n_legs = 0
+    for i in range(L2 - 1):
+        a, b = nodes[i], nodes[i + 1]
+        n_c = 0
+        n_src = 1 if i == 0 else n_kept - line_lo
+        for q in range(n_src):
+            j = -1 if i == 0 else line_lo + q
+            t0 = t_dep_h if j < 0 else kt[j]
+            f0 = 0.0 if j < 0 else kf[j]
+            h0 = 0.0 if j < 0 else kh[j]
+            n0 = 0 if j < 0 else kn[j]
+            r0 = -1 if j < 0 else kr[j]
+            for r in range(R):
+                change = r0 >= 0 and r != r0
+                if change and h0 < min_hold_h - 1e-9:
+                    continue
+                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t0, rpm_options[r], v, w, out)
+                n_legs += 1
+                if out[CODE] != OK:
+                    continue
+                t1 = t0 + out[H]
+                if t1 - t_dep_h > max_hours or (prune and t1 > ld[i + 1]):
+                    continue
+                if n_c >= ct.shape[0]:
+                    ct, cf, ch = _grow(ct, n_c + 1), _grow(cf, n_c + 1), _grow(ch, n_c + 1)
+                    cn, cr, cpar = _grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1)
+                held = out[H] if change else h0 + out[H]
+                ct[n_c], cf[n_c], ch[n_c] = t1, f0 + out[FUEL], min(held, min_hold_h)
+                cn[n_c], cr[n_c], cpar[n_c] = n0 + (1 if change else 0), r, j
+                n_c += 1
+        # per setting, by arrival time: keep a label unless an earlier kept one dominates it
+        order = np.argsort(ct[:n_c], kind="mergesort")
+        line_lo = n_kept
+        for r in range(R):
+            start = n_kept
+            for q in range(n_c):
+                k = order[q]
+                if cr[k] != r:
+                    continue
+                gk = cf[k] + change_cost_t * cn[k] - e * ct[k]
+                dominated = False
+                if cn[k] > 0:  # a plan of one setting is always kept
+                    for m in range(start, n_kept):
+                        if kf[m] + change_cost_t * kn[m] - e * kt[m] <= gk and kh[m] >= ch[k]:
+                            dominated = True
+                            break
+                if dominated:
+                    continue
+                if n_kept >= kt.shape[0]:
+                    kt, kf, kh = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1), _grow(kh, n_kept + 1)
+                    kn, kr, kpar = _grow(kn, n_kept + 1), _grow(kr, n_kept + 1), _grow(kpar, n_kept + 1)
+                kt[n_kept], kf[n_kept], kh[n_kept] = ct[k], cf[k], ch[k]
+                kn[n_kept], kr[n_kept], kpar[n_kept] = cn[k], cr[k], cpar[k]
+                n_kept += 1
+    rpm_idx = np.zeros(L2 - 1, np.int64)
+    best, best_j = np.inf, -1
+    for j in range(line_lo, n_kept):
+        if kn[j] > 0 and kh[j] < min_hold_h - 1e-9:
+            continue  # the last setting was not held long enough
+        q = route_cost_nb(o, kt[j] - t_dep_h, kf[j]) + change_cost_t * kn[j]
+        if q < best:
+            best, best_j = q, j
+    if best_j < 0:
+        return rpm_idx, np.inf, np.nan, 0, n_legs
+    j = best_j
+    fuel, changes = kf[j], kn[j]
+    for i in range(L2 - 2, -1, -1):
+        rpm_idx[i] = kr[j]
+        j = kpar[j]
+    return rpm_idx, best, fuel, changes, n_legs
+
+
+@dataclass(frozen=True)
+class LimitedPlan:
+    rpm_idx: np.ndarray  # per leg
+    cost: float  # objective plus the change costs (inf: no plan under the limits)
+    fuel_t: float
+    n_changes: int
+    legs_sailed: int
+
+
+def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits) -> LimitedPlan:
+    """The best engine plan on the fixed route `nodes` under `limits` (see the module docstring)."""
+    nodes = np.ascontiguousarray(nodes, np.int64)
+    g, v, o = inst.graph, inst.vessel, inst.objective
+    ld = np.full(len(nodes), np.inf)
+    _route_latest_departures(g.lat, g.lon, nodes, v, inst.wx, float(v.rpm_options[-1]), o.t_dep_h + o.t_req_h + 1e-9,
+                             ld)
+    prune = bool(ld[0] >= o.t_dep_h)  # the RTA can be met at full speed: late labels cannot win
+    rpm_idx, cost, fuel, changes, n_legs = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, float(limits.min_hold_h),
+                                                           float(limits.change_cost_t), ld, prune)
+    if prune and not math.isfinite(cost):  # the hold makes the RTA unreachable: the least-late plan instead
+        rpm_idx, cost, fuel, changes, n_legs2 = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o,
+                                                                float(limits.min_hold_h), float(limits.change_cost_t),
+                                                                ld, False)
+        n_legs += n_legs2
+    return LimitedPlan(rpm_idx, float(cost), float(fuel), int(changes), int(n_legs))
+
+
+def settings_held_h(legs: list[dict]) -> list[tuple[float, float]]:
+    """(rpm, hours held) of each run of equal settings along a plan's legs, in order."""
+    runs: list[tuple[float, float]] = []
+    for leg in legs:
+        if runs and runs[-1][0] == leg["rpm"]:
+            runs[-1] = (leg["rpm"], runs[-1][1] + leg["hours"])
+        else:
+            runs.append((leg["rpm"], leg["hours"]))
+    return runs
