@@ -13,6 +13,7 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing import weather_field as wf
+from pipeline.routing.engine_limits import EngineLimits
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 from pipeline.routing.solve import solve
@@ -30,6 +31,12 @@ class RoutingOptions:
     n_lines: int | None = None
     n_points: int = 21
     d_point_nm: float | None = None
+    min_engine_hold_h: float = 12.0  # engine-change limits (pipeline.routing.engine_limits)
+    engine_change_cost_t: float = 0.05
+
+    @property
+    def limits(self) -> EngineLimits:
+        return EngineLimits(min_hold_h=float(self.min_engine_hold_h), change_cost_t=float(self.engine_change_cost_t))
 
     @classmethod
     def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
@@ -83,4 +90,4 @@ def plan_voyage(job: RouteJob, weather: wf.WeatherField | None) -> tuple[Plan, w
     if weather is None:
         weather = calm_weather(problem)
     o = job.options
-    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space), weather
+    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space, limits=o.limits), weather
