@@ -241,8 +241,8 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_total_pct DOUBLE;
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_speed_profile_pct DOUBLE;
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_route_pct DOUBLE;
-        -- engine-change limits the plan obeys, and what they cost: fuel_t − unlimited_fuel_t (the best plan on the
-        -- same route without them)
+        -- engine-change limits the plan obeys, and what they cost: fuel_t − unlimited_fuel_t (the solver's plan on
+        -- the same route without them)
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_engine_hold_h DOUBLE;
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS engine_change_cost_t DOUBLE;
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS n_engine_changes INTEGER;

@@ -85,7 +85,7 @@ def test_honest_baseline_arrives_at_the_rta_and_the_split_adds_up():
     """RTA between two settings: the discrete baseline must take the faster one and arrives hours early, which
     the old figure credited to routing; against the constant speed that arrives at the RTA little is left."""
     pr = _voyage(72.0)
-    plan = solve(pr, WEATHER, solver="dp")
+    plan = solve(pr, WEATHER, solver="dp", savings=True)
     sp = plan.savings
     assert pr.t_req_h - plan.baseline.hours > 5.0  # the discrete-rpm baseline arrives hours early
     assert 70.0 < sp.baseline_rpm < 100.0 and sp.baseline_rpm not in pr.rpm_options

@@ -16,21 +16,27 @@ has  f_A + c·n_A − e·t_A ≤ f_B + c·n_B − e·t_B  and held_A ≥ held_B 
 the early rate of `jit` as in dp.py. Every continuation of B is then open to A at no greater cost, exactly in
 weather that does not change with time (a continuation's legs take the same hours from either start); in
 time-varying weather this is the same one assumption as the exact DP's (dp.py). A plan of one setting
-throughout is always kept (it alone may end with less than the hold). When the route can arrive by the RTA at
-its fastest setting, labels that can no longer make the RTA even at that setting are dropped.
+throughout is always kept (it alone may end with less than the hold).
+
+Bounds (as in dp.py; they never drop a label of an optimal plan): when the route can arrive by the RTA at its
+fastest setting, labels that can no longer make it are dropped; under `jit`, a label whose fuel and change
+costs so far plus the least fuel to finish in the time left (dp.finish_bounds, on the route alone) exceed a
+known plan's cost is dropped. The known plan: the best of one setting throughout and one change between two
+settings at any line, among those obeying the limits.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
 
-from pipeline.routing.dp import _grow
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing.dp import _grow, finish_bounds, fuel_to_finish_lb
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
-from pipeline.routing.objectives import route_cost_nb
+from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 
 @dataclass(frozen=True)
@@ -78,14 +84,19 @@ def _route_latest_departures(lat, lon, nodes, v, w, fast_rpm, deadline, ld):
 
 
 @numba.njit(cache=True)
-def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune):
+def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune, upper, lams, m_route, t_min, eps):
     """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
-    (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`."""
+    (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`;
+    under `jit`, labels whose fuel and change costs so far plus the least fuel to finish (dp.fuel_to_finish_lb
+    with the route's tables m_route (K, lines), t_min (lines)) exceed `upper`, a known plan's cost, too. With
+    eps > 0 (t) a label is also dropped when an earlier one comes within eps of dominating it."""
     rpm_options = v.rpm_options
     R = rpm_options.shape[0]
     L2 = nodes.shape[0]
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
-    e = o.early_t_per_h if o.kind == 1 else 0.0
+    e = o.early_t_per_h if o.kind == OBJ_JIT else 0.0
+    deadline = t_dep_h + (o.t_req_h if upper < LATE_STEP_T else max_hours)
+    tol = 1e-9 * max(1.0, abs(upper))
     cap = 1024
     kt, kf, kh = np.empty(cap), np.empty(cap), np.empty(cap)
     kn, kr, kpar = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
@@ -118,12 +129,18 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                 t1 = t0 + out[H]
                 if t1 - t_dep_h > max_hours or (prune and t1 > ld[i + 1]):
                     continue
+                f1 = f0 + out[FUEL]
+                n1 = n0 + (1 if change else 0)
+                if o.kind == OBJ_JIT and upper < np.inf:
+                    lb = f1 + change_cost_t * n1 + fuel_to_finish_lb(m_route[:, i + 1], lams, t_min[i + 1], deadline - t1)
+                    if lb > upper + tol:
+                        continue
                 if n_c >= ct.shape[0]:
                     ct, cf, ch = _grow(ct, n_c + 1), _grow(cf, n_c + 1), _grow(ch, n_c + 1)
                     cn, cr, cpar = _grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1)
                 held = out[H] if change else h0 + out[H]
-                ct[n_c], cf[n_c], ch[n_c] = t1, f0 + out[FUEL], min(held, min_hold_h)
-                cn[n_c], cr[n_c], cpar[n_c] = n0 + (1 if change else 0), r, j
+                ct[n_c], cf[n_c], ch[n_c] = t1, f1, min(held, min_hold_h)
+                cn[n_c], cr[n_c], cpar[n_c] = n1, r, j
                 n_c += 1
         # per setting, by arrival time: keep a label unless an earlier kept one dominates it
         order = np.argsort(ct[:n_c], kind="mergesort")
@@ -138,7 +155,7 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                 dominated = False
                 if cn[k] > 0:  # a plan of one setting is always kept
                     for m in range(start, n_kept):
-                        if kf[m] + change_cost_t * kn[m] - e * kt[m] <= gk and kh[m] >= ch[k]:
+                        if kf[m] + change_cost_t * kn[m] - e * kt[m] <= gk + eps and kh[m] >= ch[k]:
                             dominated = True
                             break
                 if dominated:
@@ -176,20 +193,63 @@ class LimitedPlan:
     legs_sailed: int
 
 
-def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits) -> LimitedPlan:
-    """The best engine plan on the fixed route `nodes` under `limits` (see the module docstring)."""
+def _runs_held(hours: np.ndarray, rpm_idx: np.ndarray, min_hold_h: float) -> bool:
+    """Every setting of the plan (legs' hours, setting per leg) held at least min_hold_h, unless it has one."""
+    cuts = np.flatnonzero(np.diff(rpm_idx)) + 1
+    if len(cuts) == 0:
+        return True
+    return bool(min(float(np.sum(x)) for x in np.split(hours, cuts)) >= min_hold_h - 1e-9)
+
+
+def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits) -> float:
+    """The cost of a plan obeying the limits, for pruning: the best of each setting held throughout and of one
+    change from one setting to another at any line (inf when none can be sailed)."""
+    L = len(nodes) - 1
+    R = len(inst.rpm_options)
+    ct, cf = np.empty(L + 1), np.empty(L + 1)
+    best = np.inf
+    plans = [np.full(L, r, np.int64) for r in range(R)]
+    plans += [np.where(np.arange(L) < k, r0, r1) for r0 in range(R) for r1 in range(R) if r0 != r1 for k in range(1, L)]
+    for rpm_idx in plans:
+        code, _ = lk.sail_route_nb(nodes, rpm_idx.astype(np.int64), 0, inst.graph, inst.vessel, inst.wx, inst.objective,
+                                   ct, cf)
+        if code != lk.OK or not _runs_held(np.diff(ct), rpm_idx, limits.min_hold_h):
+            continue
+        changes = int(np.count_nonzero(np.diff(rpm_idx)))
+        best = min(best, route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1]) + limits.change_cost_t * changes)
+    return best
+
+
+def _route_finish_tables(inst, nodes: np.ndarray):
+    """dp.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
+    sp = inst.space
+    on_route = np.zeros_like(sp.edge_ok)
+    idx = np.arange(len(nodes) - 1)
+    on_route[idx, nodes[:-1], nodes[1:]] = sp.edge_ok[idx, nodes[:-1], nodes[1:]]
+    lams, m_lam, t_min = finish_bounds(replace(inst, space=replace(sp, edge_ok=on_route)))
+    lines = np.arange(len(nodes))
+    return lams, np.ascontiguousarray(m_lam[:, lines, nodes]), np.ascontiguousarray(t_min[lines, nodes])
+
+
+def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:
+    """The best engine plan on the fixed route `nodes` under `limits` (see the module docstring); with gap > 0
+    within that share of a known plan's cost of the optimum (faster). The hold itself keeps the labels few:
+    without limits (EngineLimits(0, 0)) a long route takes far longer."""
     nodes = np.ascontiguousarray(nodes, np.int64)
     g, v, o = inst.graph, inst.vessel, inst.objective
     ld = np.full(len(nodes), np.inf)
     _route_latest_departures(g.lat, g.lon, nodes, v, inst.wx, float(v.rpm_options[-1]), o.t_dep_h + o.t_req_h + 1e-9,
                              ld)
     prune = bool(ld[0] >= o.t_dep_h)  # the RTA can be met at full speed: late labels cannot win
-    rpm_idx, cost, fuel, changes, n_legs = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, float(limits.min_hold_h),
-                                                           float(limits.change_cost_t), ld, prune)
-    if prune and not math.isfinite(cost):  # the hold makes the RTA unreachable: the least-late plan instead
-        rpm_idx, cost, fuel, changes, n_legs2 = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o,
-                                                                float(limits.min_hold_h), float(limits.change_cost_t),
-                                                                ld, False)
+    upper = incumbent_cost(inst, nodes, limits)
+    lams, m_route, t_min = _route_finish_tables(inst, nodes)
+    hold, cost_t = float(limits.min_hold_h), float(limits.change_cost_t)
+    eps = gap * upper / (len(nodes) - 1) if gap > 0.0 and math.isfinite(upper) else 0.0
+    rpm_idx, cost, fuel, changes, n_legs = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, hold, cost_t, ld, prune,
+                                                           upper, lams, m_route, t_min, eps)
+    if not math.isfinite(cost):  # the hold makes the RTA unreachable: the least-late plan, without the bounds
+        rpm_idx, cost, fuel, changes, n_legs2 = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, hold, cost_t, ld,
+                                                                False, np.inf, lams, m_route, t_min, 0.0)
         n_legs += n_legs2
     return LimitedPlan(rpm_idx, float(cost), float(fuel), int(changes), int(n_legs))
 

@@ -90,4 +90,4 @@ def plan_voyage(job: RouteJob, weather: wf.WeatherField | None) -> tuple[Plan, w
     if weather is None:
         weather = calm_weather(problem)
     o = job.options
-    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space, limits=o.limits), weather
+    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space, limits=o.limits, savings=True), weather

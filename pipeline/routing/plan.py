@@ -45,8 +45,8 @@ class Plan:
     n_evals: int = 0
     model_version: int | None = None
     cycle: np.datetime64 | None = None
-    # engine-change limits (engine_limits.py): the limits the legs obey (None: none), and the best plan on the
-    # same route without them (its fuel, t) for what the limits cost
+    # engine-change limits (engine_limits.py): the limits the legs obey (None: none), and the fuel (t) of the
+    # solver's plan without them, for what the limits cost
     limits: "EngineLimits | None" = None
     unlimited_fuel_t: float = math.nan
     # the savings against the honest constant-rpm baseline, split (savings.py; None: not computed)
@@ -95,7 +95,8 @@ class Plan:
 
     @property
     def limits_fuel_t(self) -> float:
-        """Fuel the engine-change limits cost on this route: this plan's minus the best plan's without them."""
+        """Fuel the engine-change limits cost: this plan's minus the solver's plan without them (negative when the
+        exact post-pass finds a better engine plan than a heuristic solver did, despite the limits)."""
         return self.fuel_t - self.unlimited_fuel_t if self.limits is not None and self.legs else math.nan
 
     @property

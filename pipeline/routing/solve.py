@@ -5,7 +5,8 @@ same graph), `astar` (A* with the α sweep), `gc` and `rhumb` (baselines: the sh
 great circle / rhumb-line graph at the slowest constant rpm that meets the RTA, else the fastest). Every
 plan carries that discrete-rpm baseline, and its savings against the honest constant-rpm baseline split into
 speed profile and route (savings.py). With engine-change limits the solver's route is re-planned so every
-engine setting is held (engine_limits.py); the plan keeps the fuel without the limits for what they cost.
+engine setting is held (engine_limits.py); the plan keeps the solver's fuel without the limits for what
+they cost.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ from dataclasses import replace
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.astar import best_engine_plan
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.dp import DpOptions
@@ -97,36 +97,32 @@ def _options(solver: str, options, params: BfoaParams | None, bucket_h: float | 
     return options
 
 
-def _with_limits(inst: Instance, plan: Plan, nodes, rpm_idx, limits: EngineLimits) -> Plan:
-    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan), keeping
-    the fuel of the best plan on the route without limits (the solver's, or the exact one when cheaper)."""
-    free_idx, free_cost, _ = best_engine_plan(inst, nodes)
-    if not (free_cost < plan.cost):
-        free_idx = rpm_idx
-    _, free_hours, free_fuel, _ = evaluate(inst, nodes, free_idx)
+def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
+    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan); the
+    solver's plan, without limits, is kept as `unlimited_fuel_t` for what the limits cost."""
     held = limited_plan(inst, nodes, limits)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed)
     limited.cost = held.cost
-    limited.limits, limited.unlimited_fuel_t = limits, free_fuel
-    if limited.status == "late" and free_hours <= inst.problem.t_req_h + 1e-6:
+    limited.limits, limited.unlimited_fuel_t = limits, plan.fuel_t
+    if limited.status == "late" and plan.status == "ok":
         limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
                           f"{limited.hours - inst.problem.t_req_h:.1f} h late (without the limits on time, "
-                          f"{free_fuel:.1f} t)")
+                          f"{plan.fuel_t:.1f} t)")
     return limited
 
 
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa", seed: int = 1, options=None,
           params: BfoaParams | None = None, space: SearchSpace | None = None, bucket_h: float | None = None,
-          limits: EngineLimits | None = None, savings: bool = True) -> Plan:
+          limits: EngineLimits | None = None, savings: bool = False) -> Plan:
     """Route one voyage. Never raises for a voyage that simply cannot be sailed: the plan says why.
 
     `options` are the solver's own (solvers.SOLVERS[solver].options); `params` (BfoaParams, for bfoa) and
     `bucket_h` (for dp) are shorthands for them. With `limits` (engine_limits.EngineLimits) the solver's route
     gets the best engine plan holding each setting; `savings` adds the split against the honest baseline
-    (savings.py) to the plan.
+    (savings.py) to the plan (fleet and CLI plans always have both, see job.plan_voyage).
     """
     if solver not in REGISTRY:
         raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
@@ -154,7 +150,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if solver == "bfoa" else None, t0=t0,
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=_infeasible_reason(base))
         if limits is not None and limits.active and plan.legs:
-            plan = _with_limits(inst, plan, found.nodes, found.rpm_idx, limits)
+            plan = _with_limits(inst, plan, found.nodes, limits)
     plan.baseline = baseline
     if savings and plan.legs and base.ok:
         plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits)
