@@ -33,6 +33,10 @@ ROUTE_ARROW = pa.schema([
     ("distance_nm", _F64), ("cost", _F64), ("model_version", _I32), ("cycle", _UTC), ("seed", _I32),
     ("runtime_s", _F64), ("n_legs", _I32), ("n_legs_beyond_forecast", _I32), ("forecast_flag", _STR),
     ("hours_beyond_forecast", _F64), ("hours_before_cycle", _F64), ("min_land_clearance_nm", _F64),
+    ("honest_baseline_rpm", _F64), ("honest_baseline_fuel_t", _F64), ("honest_baseline_hours", _F64),
+    ("profile_fuel_t", _F64), ("savings_total_pct", _F64), ("savings_speed_profile_pct", _F64),
+    ("savings_route_pct", _F64), ("min_engine_hold_h", _F64), ("engine_change_cost_t", _F64),
+    ("n_engine_changes", _I32), ("unlimited_fuel_t", _F64), ("limits_fuel_t", _F64),
 ])
 LEG_ARROW = pa.schema([
     ("voyage_id", _STR), ("leg", _I32), ("lat0", _F64), ("lon0", _F64), ("lat1", _F64), ("lon1", _F64),
@@ -203,16 +207,21 @@ def fail_run(db_path: Path, run_id: str, reason: str) -> None:
 
 
 def run_summary(db_path: Path, run_id: str) -> dict:
+    """The run's row, counts and fuel-weighted savings (as the fleet_savings view), and the voyages needing attention."""
     with warehouse.connect(db_path, write=False) as con:
         run = con.execute("SELECT * FROM route_runs WHERE run_id = ?", [run_id]).fetchdf()
         totals = con.execute(
             """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
                       count(*) FILTER (WHERE status = 'late') AS n_late,
                       count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
-                      sum(fuel_t) AS fuel_t,
-                      sum(fuel_t) FILTER (WHERE baseline_fuel_t IS NOT NULL) AS compared_fuel_t,
-                      sum(baseline_fuel_t) FILTER (WHERE fuel_t IS NOT NULL) AS baseline_fuel_t
+                      sum(fuel_t) AS fuel_t
                FROM routes WHERE run_id = ?""",
+            [run_id],
+        ).fetchdf()
+        savings = con.execute(
+            "SELECT n_compared, honest_baseline_fuel_t, profile_fuel_t, savings_total_pct, savings_speed_profile_pct, "
+            "savings_route_pct, limits_fuel_t, unlimited_fuel_t, discrete_baseline_fuel_t, savings_vs_discrete_pct "
+            "FROM fleet_savings WHERE run_id = ?",
             [run_id],
         ).fetchdf()
         problems = con.execute(
@@ -222,8 +231,9 @@ def run_summary(db_path: Path, run_id: str) -> dict:
         ).fetchdf()
     out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}
     out.update({k: (int(v) if k.startswith("n") and v == v else v) for k, v in totals.iloc[0].to_dict().items()})
-    base = out.get("baseline_fuel_t") or 0.0
-    out["savings_pct"] = 100.0 * (base - (out.get("compared_fuel_t") or 0.0)) / base if base else None
+    if len(savings):
+        out.update({k: (None if v is None or v != v else (int(v) if k.startswith("n_") else float(v)))
+                    for k, v in savings.iloc[0].to_dict().items()})
     out["problems"] = problems.to_dict("records")
     errors = out.get("export_errors")
     out["export_failures"] = errors.splitlines() if isinstance(errors, str) and errors else []

@@ -324,6 +324,61 @@ MIGRATIONS: list[Migration] = [
         """,
     ),
     Migration(
+        "routes_007_honest_savings_and_engine_limits",
+        """
+        -- savings against the honest baseline: the base route at the one constant rpm (between the vessel's
+        -- limits) that arrives at the RTA, in the same weather and model; split into what the best engine plan on
+        -- the base route saves (speed profile) and what the route adds (route); total = speed profile + route.
+        -- baseline_fuel_t / savings_pct stay the discrete-rpm baseline, which usually arrives hours early.
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS honest_baseline_rpm DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS honest_baseline_fuel_t DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS honest_baseline_hours DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS profile_fuel_t DOUBLE;            -- best engine plan on the base route
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_total_pct DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_speed_profile_pct DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_route_pct DOUBLE;
+        -- engine-change limits the plan obeys, and what they cost: fuel_t − unlimited_fuel_t (the solver's plan on
+        -- the same route without them)
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_engine_hold_h DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS engine_change_cost_t DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS n_engine_changes INTEGER;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS unlimited_fuel_t DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS limits_fuel_t DOUBLE;
+
+        -- per run: the honest savings are fuel-weighted over the voyages that have them (sums, not an average of
+        -- percentages); the discrete-rpm figure is kept as savings_vs_discrete_pct
+        CREATE OR REPLACE VIEW fleet_savings AS
+        SELECT u.run_id, u.started_at, u.cycle, u.trigger, u.status AS run_status, count(*) AS n_voyages,
+               count(*) FILTER (WHERE r.status = 'ok') AS n_on_time,
+               count(*) FILTER (WHERE r.status = 'late') AS n_late,
+               count(*) FILTER (WHERE r.status = 'infeasible') AS n_infeasible,
+               count(*) FILTER (WHERE r.status = 'failed') AS n_failed,
+               count(*) FILTER (WHERE r.status IN ('infeasible', 'failed')) AS n_not_routed,
+               coalesce(u.n_export_failed, 0) AS n_export_failed,
+               count(*) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS n_compared,
+               sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS fuel_t,
+               sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS honest_baseline_fuel_t,
+               sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS profile_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_total_pct,
+               100 * (1 - sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_speed_profile_pct,
+               100 * (sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                      - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0)
+                   AS savings_route_pct,
+               sum(r.limits_fuel_t) AS limits_fuel_t,
+               sum(r.unlimited_fuel_t) FILTER (WHERE r.limits_fuel_t IS NOT NULL) AS unlimited_fuel_t,
+               sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL) AS discrete_baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL)
+                        / nullif(sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL), 0)) AS savings_vs_discrete_pct
+        FROM route_runs u JOIN routes r USING (run_id)
+        GROUP BY ALL;
+        """,
+    ),
+    Migration(
         "routes_008_land_clearance",
         """
         -- least distance to land (NM) along the plan outside its port approaches, sampled at 0.1 NM

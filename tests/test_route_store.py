@@ -32,7 +32,8 @@ def test_run_results_written_once_in_a_transaction(tmp_path):
     assert (n_ok, n_failed) == (1, 1)
     s = route_store.run_summary(db, "r1")
     assert s["status"] == "partial" and s["n"] == 2 and s["n_failed"] == 1
-    assert s["savings_pct"] == pytest.approx(10.0)
+    assert s["savings_vs_discrete_pct"] == pytest.approx(10.0)
+    assert s["savings_total_pct"] is None and s["n_compared"] == 0  # no honest baseline on these rows
     assert [p["voyage_id"] for p in s["problems"]] == ["V2"]
     legs = pd.read_parquet(route_store.parquet_dir(tmp_path / "exports", "route_legs") / "run_id=r1" / "part-0.parquet")
     assert list(legs["leg"]) == [0, 1]
@@ -120,3 +121,41 @@ def test_runs_in_the_old_parquet_layout_move_to_the_per_table_folders_on_the_nex
     assert r0["eta_utc"] == pd.Timestamp("2020-12-03T06:00Z")  # the old naive time read as UTC
     legs = ds.dataset(route_store.parquet_dir(exports, "route_legs"), partitioning="hive").to_table()
     assert legs.num_rows == 6 and legs.schema.field("etd_utc").type == pa.timestamp("us", tz="UTC")
+
+
+def test_run_savings_are_fuel_weighted_over_the_honest_baseline_and_make_the_headline(tmp_path):
+    from flows.jobs.fleet import run_markdown
+
+    db = tmp_path / "w.duckdb"
+    route_store.begin_run(db, "r3", cycle="2020-12-01T00", solver="bfoa", trigger="manual", n_voyages=3)
+
+    def honest(row, base, profile, limits):
+        fuel = row["fuel_t"]
+        return dict(row, honest_baseline_rpm=75.4, honest_baseline_fuel_t=base, honest_baseline_hours=48.0,
+                    profile_fuel_t=profile, savings_total_pct=100 * (base - fuel) / base,
+                    savings_speed_profile_pct=100 * (base - profile) / base, savings_route_pct=100 * (profile - fuel) / base,
+                    min_engine_hold_h=12.0, engine_change_cost_t=0.05, n_engine_changes=2,
+                    unlimited_fuel_t=fuel - limits, limits_fuel_t=limits)
+
+    rows = [honest(_route("V1", "ok", 90.0, 120.0), 100.0, 98.0, 0.5),  # 10 % saved on a small voyage
+            honest(_route("V2", "ok", 380.0, 450.0), 400.0, 390.0, 1.25),  # 5 % on a large one
+            _route("V3", "infeasible", None, None)]
+    route_store.write_run_results(db, tmp_path / "exports", "r3", rows, [])
+    with duckdb.connect(str(db), read_only=True) as con:
+        cols = {r[0] for r in con.execute("DESCRIBE routes").fetchall()}
+        view = con.execute("SELECT savings_total_pct, savings_speed_profile_pct, savings_route_pct, limits_fuel_t, "
+                           "savings_vs_discrete_pct FROM fleet_savings WHERE run_id = 'r3'").fetchone()
+    assert {"honest_baseline_rpm", "honest_baseline_fuel_t", "honest_baseline_hours", "savings_total_pct",
+            "savings_speed_profile_pct", "savings_route_pct", "unlimited_fuel_t", "limits_fuel_t",
+            "n_engine_changes", "min_engine_hold_h"} <= cols
+    # sums over the fleet, not the mean of the voyages' percentages (which would be 7.5 %)
+    assert view[0] == pytest.approx(100 * (1 - 470 / 500))
+    assert view[1] == pytest.approx(100 * (1 - 488 / 500)) and view[2] == pytest.approx(100 * 18 / 500)
+    assert view[3] == pytest.approx(1.75) and view[4] == pytest.approx(100 * (1 - 470 / 570))
+    s = route_store.run_summary(db, "r3")
+    assert s["savings_total_pct"] == pytest.approx(view[0]) and s["n_compared"] == 2
+    md = run_markdown(s)
+    headline = md.splitlines()[2]
+    assert headline.startswith("Savings 6.0 % against sailing the base route at the one constant speed")
+    assert "speed profile 2.4 %, route 3.6 %" in headline and "limits cost 1.75 t" in headline
+    assert "17.5" not in headline  # the discrete-rpm figure is no headline

@@ -13,6 +13,7 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing import weather_field as wf
+from pipeline.routing.engine_limits import EngineLimits
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 from pipeline.routing.solve import solve
@@ -32,6 +33,12 @@ class RoutingOptions:
     d_point_nm: float | None = None
     land_clearance_nm: float = 2.0
     port_approach_nm: float = 10.0
+    min_engine_hold_h: float = 12.0  # engine-change limits (pipeline.routing.engine_limits)
+    engine_change_cost_t: float = 0.05
+
+    @property
+    def limits(self) -> EngineLimits:
+        return EngineLimits(min_hold_h=float(self.min_engine_hold_h), change_cost_t=float(self.engine_change_cost_t))
 
     @classmethod
     def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
@@ -86,4 +93,4 @@ def plan_voyage(job: RouteJob, weather: wf.WeatherField | None) -> tuple[Plan, w
     if weather is None:
         weather = calm_weather(problem)
     o = job.options
-    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space), weather
+    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space, limits=o.limits, savings=True), weather
