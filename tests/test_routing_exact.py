@@ -123,7 +123,7 @@ def test_fuel_to_finish_bound_holds_for_every_completion(kind, n):
                  max_hs_m=4.5 if kind == "storm-limit" else None)
     space = pr.search_space()
     inst = Instance.build(pr, space, _weather(kind, n))
-    lams, m_lam, t_min = finish_bounds(inst)
+    lams, m_lam, t_min, _, _ = finish_bounds(inst)
     g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
     ct, cf = np.empty(5), np.empty(5)
     n_checked = 0

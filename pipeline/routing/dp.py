@@ -139,11 +139,22 @@ def fuel_to_finish_lb(m_lam, lams, t_min, hours):
 
 
 @numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
+def _priced_out(o, fuel_lb, upper, tol, on_time):
+    """Whether every plan burning at least fuel_lb (t) costs more than `upper` under the objective `o`."""
+    if o.kind == OBJ_JIT:
+        return fuel_lb > upper + tol  # jit prices a plan at least at its fuel
+    # nor does the thesis function price an on-time plan below 0.85 + 3·F/F_target
+    return on_time and (fuel_lb == np.inf or 0.85 + 3.0 * fuel_lb / o.f_target > upper + tol)
+
+
+@numba.njit(cache=True)
+def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
-    tables of `finish_bounds` for the prices lams (K,); ld (L+2, P) the latest departures that can still make the
+    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, R) its least hours and fuel per NM on
+    the legs leaving each node (a leg is priced at them before it is sailed, and not sailed when even that
+    cannot beat `upper` or make the RTA); ld (L+2, P) the latest departures that can still make the
     RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
     the optimum (one such drop per leg at most along the optimal plan)."""
@@ -177,7 +188,16 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
             for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, a2]:
                     continue
+                d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
                 for r in range(R):
+                    # the leg at its least hours and fuel first: no sailing when even that prices the label out
+                    t1 = t0 + d_nm * tau[i, a, r]
+                    if on_time and t1 > ld[i + 1, a2]:
+                        continue
+                    lb = f0 + d_nm * phi[i, a, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                                                                      deadline - t1)
+                    if _priced_out(o, lb, upper, tol, on_time):
+                        continue
                     sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
                     n_legs += 1
                     if out[CODE] != OK:
@@ -189,11 +209,8 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
                         continue  # cannot reach the arrival by the RTA any more, even at full speed
                     f1 = f0 + out[FUEL]
                     lb = f1 + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - t1)
-                    if o.kind == OBJ_JIT:
-                        if lb > upper + tol:  # jit prices a plan at least at its fuel
-                            continue
-                    elif on_time and (lb == np.inf or 0.85 + 3.0 * lb / o.f_target > upper + tol):
-                        continue  # nor does the thesis function price an on-time plan below 0.85 + 3·F/F_target
+                    if _priced_out(o, lb, upper, tol, on_time):
+                        continue
                     if n_c >= ct.shape[0]:
                         ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
                         cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
@@ -379,8 +396,9 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     return out[0], out[1], out[2]
 
 
-def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P)): the fuel-to-finish bound tables of the exact DP."""
+def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P), tau, phi (L+2, P, R)): the fuel-to-finish bound tables of the
+    exact DP and the least hours and fuel per NM they are built from."""
     v, sp = inst.vessel, inst.space
     if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
         raise ValueError(f"no speed and fuel bounds for performance model form {v.form_id}")
@@ -397,7 +415,7 @@ def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                                        for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
     m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
     _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau, phi, lams, m_lam, t_min)
-    return lams, m_lam, t_min
+    return lams, m_lam, t_min, tau, phi
 
 
 def latest_departures(inst) -> np.ndarray:
@@ -443,13 +461,13 @@ def search(inst, baseline, *, seed: int, options: DpOptions):
             found = spec.search(inst, baseline, seed=1, options=spec.options())
             if found.nodes is not None:
                 upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
-        lams, m_lam, t_min = finish_bounds(inst)
+        lams, m_lam, t_min, tau, phi = finish_bounds(inst)
         ld = latest_departures(inst)
         eps = 0.0
         if options.gap > 0.0 and math.isfinite(upper):
             eps = options.gap * upper / (inst.space.lat.shape[0] - 1)
         nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
-                                                      m_lam, t_min, ld, eps)
+                                                      m_lam, t_min, tau, phi, ld, eps)
     if not math.isfinite(cost):
         return Found(None, None, n_legs)
     return Found(nodes, rpm_idx, n_legs)
