@@ -1,7 +1,8 @@
 """The exact DP against exhaustive enumeration of every route × engine plan on small graphs.
 
 Each case is small enough to sail every route (one node per line) with every rpm per leg; the best of them
-under the objective must be what the DP returns, to rounding. Cases cross static and moving storms, weather
+under the objective must be what the DP keeping every label returns, to rounding, and the ε-trimmed DP must be within the
+gap it certifies. Cases cross static and moving storms, weather
 limits that close parts of the graph, strong currents, loose, tight and impossible RTAs, both objectives and
 two to five engine settings."""
 
@@ -15,11 +16,12 @@ import pytest
 
 from routing_cases import MODEL, field, moving_storm, problem, wavy
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.dp import finish_bounds, fuel_to_finish_lb
+from pipeline.routing.dp import DpOptions, finish_bounds, fuel_to_finish_lb
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solve
 
+GAP = 0.02  # ε-trimming coarse enough to trim labels on graphs this small
 DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm (9.8 kn) ≈ 57 h, 100 rpm (14 kn) ≈ 40 h in calm water
 
 
@@ -70,6 +72,7 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
                  d_point_nm=25.0, max_hs_m=4.5 if kind == "storm-limit" else None)
     space = pr.search_space()
     plan = solve(pr, fld, solver="dp", space=space)
+    trimmed = solve(pr, fld, solver="dp", space=space, options=DpOptions(gap=GAP))
     inst = Instance.build(pr, space, fld)
     if plan.baseline.legs:
         inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it
@@ -79,6 +82,7 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
         return
     assert plan.status in ("ok", "late"), plan.reason
     assert plan.cost == pytest.approx(best, rel=1e-12, abs=1e-12), (plan.cost, best)
+    assert best - 1e-9 <= trimmed.cost <= best * (1.0 + GAP) + 1e-9, (trimmed.cost, best)
     if rta == "impossible":
         assert plan.status == "late"
 
