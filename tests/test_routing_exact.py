@@ -147,3 +147,39 @@ def test_fuel_to_finish_bound_holds_for_every_completion(kind, n):
                     n_checked += 1
     assert n_checked > 500
     assert np.isfinite(m_lam[:, 1]).any() and lams.size > 3
+
+
+@pytest.mark.parametrize("kind, obj, n", [("storm", "jit", 5), ("current", "thesis", 6)])
+def test_bfoa_polish_finds_the_best_plan_in_its_corridor(kind, obj, n):
+    """With a window wide enough to hold every plan and no trimming, BFOA's polish returns the best of every route
+    within ±1 node of the given one × every engine plan (enumerated), and never a dearer plan than it was given."""
+    from dataclasses import replace
+
+    from pipeline.routing.bfoa import BfoaParams, polish
+
+    pr = problem(DEP, ARR, 48.0, rpm_options=(70, 85, 100), objective=obj, n_lines=3, n_points=5, max_shift=2,
+                 d_point_nm=25.0)
+    space = pr.search_space()
+    inst = Instance.build(pr, space, _weather(kind, n))
+    base = solve(pr, _weather(kind, n), solver="gc", space=space)
+    inst.f_target = max(base.fuel_t, 1e-6)  # as solve() sets it
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    nodes, rpm = np.array([2, 1, 0, 1, 2], np.int64), np.zeros(4, np.int64)
+    ct, cf = np.empty(5), np.empty(5)
+    assert lk.sail_route_nb(nodes, rpm, 0, g, v, w, o, ct, cf)[0] == lk.OK
+    cost = route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1])
+    wide = BfoaParams(polish_width=1, polish_window_h=1e6, polish_fuel=1e6, polish_gap=0.0)
+    got_nodes, got_rpm, got, _ = polish(nodes, rpm, cost, wide, g, v, w, o)
+    best = cost
+    for mid in itertools.product(*[range(max(0, a - 1), min(5, a + 2)) for a in nodes[1:-1]]):
+        route = np.array((2, *mid, 2), np.int64)
+        if not all(g.edge_ok[i, route[i], route[i + 1]] for i in range(4)):
+            continue
+        for plan in itertools.product(range(3), repeat=4):
+            if lk.sail_route_nb(route, np.array(plan, np.int64), 0, g, v, w, o, ct, cf)[0] == lk.OK:
+                best = min(best, route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1]))
+    assert got == pytest.approx(best, rel=1e-12) and got < cost
+    assert lk.sail_route_nb(got_nodes, got_rpm, 0, g, v, w, o, ct, cf)[0] == lk.OK
+    assert route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1]) == pytest.approx(got, rel=1e-12)
+    narrow = polish(nodes, rpm, cost, replace(wide, polish_window_h=0.0, polish_fuel=0.0), g, v, w, o)[2]
+    assert narrow <= cost
