@@ -1,7 +1,8 @@
 """The exact DP against exhaustive enumeration of every route × engine plan on small graphs.
 
 Each case is small enough to sail every route (one node per line) with every rpm per leg; the best of them
-under the objective must be what the DP returns, to rounding. Cases cross static and moving storms, weather
+under the objective must be what the DP keeping every label returns, to rounding, and the ε-trimmed DP must be within the
+gap it certifies. Cases cross static and moving storms, weather
 limits that close parts of the graph, strong currents, loose, tight and impossible RTAs, both objectives and
 two to five engine settings."""
 
@@ -15,11 +16,12 @@ import pytest
 
 from routing_cases import MODEL, field, moving_storm, problem, wavy
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.dp import finish_bounds, fuel_to_finish_lb
+from pipeline.routing.dp import DpOptions, finish_bounds, fuel_to_finish_lb
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solve
 
+GAP = 0.02  # ε-trimming coarse enough to trim labels on graphs this small
 DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm (9.8 kn) ≈ 57 h, 100 rpm (14 kn) ≈ 40 h in calm water
 
 
@@ -70,6 +72,7 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
                  d_point_nm=25.0, max_hs_m=4.5 if kind == "storm-limit" else None)
     space = pr.search_space()
     plan = solve(pr, fld, solver="dp", space=space)
+    trimmed = solve(pr, fld, solver="dp", space=space, options=DpOptions(gap=GAP))
     inst = Instance.build(pr, space, fld)
     if plan.baseline.legs:
         inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it
@@ -79,6 +82,7 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
         return
     assert plan.status in ("ok", "late"), plan.reason
     assert plan.cost == pytest.approx(best, rel=1e-12, abs=1e-12), (plan.cost, best)
+    assert best - 1e-9 <= trimmed.cost <= best * (1.0 + GAP) + 1e-9, (trimmed.cost, best)
     if rta == "impossible":
         assert plan.status == "late"
 
@@ -123,7 +127,7 @@ def test_fuel_to_finish_bound_holds_for_every_completion(kind, n):
                  max_hs_m=4.5 if kind == "storm-limit" else None)
     space = pr.search_space()
     inst = Instance.build(pr, space, _weather(kind, n))
-    lams, m_lam, t_min = finish_bounds(inst)
+    lams, m_lam, t_min, _, _ = finish_bounds(inst)
     g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
     ct, cf = np.empty(5), np.empty(5)
     n_checked = 0
@@ -143,3 +147,39 @@ def test_fuel_to_finish_bound_holds_for_every_completion(kind, n):
                     n_checked += 1
     assert n_checked > 500
     assert np.isfinite(m_lam[:, 1]).any() and lams.size > 3
+
+
+@pytest.mark.parametrize("kind, obj, n", [("storm", "jit", 5), ("current", "thesis", 6)])
+def test_bfoa_polish_finds_the_best_plan_in_its_corridor(kind, obj, n):
+    """With a window wide enough to hold every plan and no trimming, BFOA's polish returns the best of every route
+    within ±1 node of the given one × every engine plan (enumerated), and never a dearer plan than it was given."""
+    from dataclasses import replace
+
+    from pipeline.routing.bfoa import BfoaParams, polish
+
+    pr = problem(DEP, ARR, 48.0, rpm_options=(70, 85, 100), objective=obj, n_lines=3, n_points=5, max_shift=2,
+                 d_point_nm=25.0)
+    space = pr.search_space()
+    inst = Instance.build(pr, space, _weather(kind, n))
+    base = solve(pr, _weather(kind, n), solver="gc", space=space)
+    inst.f_target = max(base.fuel_t, 1e-6)  # as solve() sets it
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    nodes, rpm = np.array([2, 1, 0, 1, 2], np.int64), np.zeros(4, np.int64)
+    ct, cf = np.empty(5), np.empty(5)
+    assert lk.sail_route_nb(nodes, rpm, 0, g, v, w, o, ct, cf)[0] == lk.OK
+    cost = route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1])
+    wide = BfoaParams(polish_width=1, polish_window_h=1e6, polish_fuel=1e6, polish_gap=0.0)
+    got_nodes, got_rpm, got, _ = polish(nodes, rpm, cost, wide, g, v, w, o)
+    best = cost
+    for mid in itertools.product(*[range(max(0, a - 1), min(5, a + 2)) for a in nodes[1:-1]]):
+        route = np.array((2, *mid, 2), np.int64)
+        if not all(g.edge_ok[i, route[i], route[i + 1]] for i in range(4)):
+            continue
+        for plan in itertools.product(range(3), repeat=4):
+            if lk.sail_route_nb(route, np.array(plan, np.int64), 0, g, v, w, o, ct, cf)[0] == lk.OK:
+                best = min(best, route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1]))
+    assert got == pytest.approx(best, rel=1e-12) and got < cost
+    assert lk.sail_route_nb(got_nodes, got_rpm, 0, g, v, w, o, ct, cf)[0] == lk.OK
+    assert route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1]) == pytest.approx(got, rel=1e-12)
+    narrow = polish(nodes, rpm, cost, replace(wide, polish_window_h=0.0, polish_fuel=0.0), g, v, w, o)[2]
+    assert narrow <= cost

@@ -115,6 +115,7 @@ def best_engine_plan(inst, nodes: np.ndarray) -> tuple[np.ndarray, float, int]:
         edge_ok[i, nodes[i], nodes[i + 1]] = g.edge_ok[i, nodes[i], nodes[i + 1]]
     path = g._replace(edge_ok=edge_ok)
     no_bound = np.zeros((0, L2, P))
+    no_rate = np.zeros((L2, P, len(inst.vessel.rpm_options)))
     _, rpm_idx, cost, n_legs, _ = dp_exact_nb(path, inst.vessel, inst.wx, inst.objective, np.inf, np.zeros(0), no_bound,
-                                              np.zeros((L2, P)), np.full((L2, P), np.inf), 0.0)
+                                              np.zeros((L2, P)), no_rate, no_rate, np.full((L2, P), np.inf), 0.0)
     return rpm_idx, cost, n_legs

@@ -13,6 +13,11 @@ change with time; in time-varying weather it is the one assumption of this solve
 passing storm can be cheaper), which the tests check against exhaustive enumeration on small graphs with
 moving storms. There is no merging of labels into time buckets.
 
+ε-trimming (`DpOptions.gap` > 0): sorted by time, a label is kept only when its f − e·t is more than ε below
+every earlier kept one's at its node, with ε = gap·LB / (lines − 1) and LB a certified lower bound on the
+optimum's cost (`cost_lower_bound`); the plan returned then costs at most (1 + gap) × the optimum (proof in
+`trim_eps`). This is what makes the 5,000 NM instance tractable: most labels at a node differ by grams.
+
 Bounds (certified: they never drop a label of an optimal plan):
   incumbent   any known plan's cost is an upper bound U on the optimum: the baseline's, and by default a
               BFOA plan's (`DpOptions.incumbent`); the answer does not depend on it, only the time taken.
@@ -22,7 +27,9 @@ Bounds (certified: they never drop a label of an optimal plan):
               the weather met near those legs at any time, plus the strongest current there) and the least
               fuel per NM φ. For any λ ≥ 0 a backward pass gives M_λ = the least Σ d·(φ + λ·τ) to the arrival,
               and a completion sailed within H hours burns at least max_λ (M_λ − λ·H) (it cannot arrive at all
-              below the least Σ d·τ). A label whose fuel so far plus that bound prices it above U is dropped.
+              below the least Σ d·τ). A label whose fuel so far plus that bound prices it above U is dropped;
+              each leg is first priced at its own least hours and fuel (d·τ, d·φ) and sailed only when that
+              label could survive.
 The bounds on STW and fuel rate come from the performance model at the corners of the local weather's range
 (wind 0..max, Hs 0..max, every relative direction): both model forms are linear in regressors that take their
 extremes there (weather limits cap the range, since a leg beyond them is infeasible anyway).
@@ -139,14 +146,25 @@ def fuel_to_finish_lb(m_lam, lams, t_min, hours):
 
 
 @numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
+def _priced_out(o, fuel_lb, upper, tol, on_time):
+    """Whether every plan burning at least fuel_lb (t) costs more than `upper` under the objective `o`."""
+    if o.kind == OBJ_JIT:
+        return fuel_lb > upper + tol  # jit prices a plan at least at its fuel
+    # nor does the thesis function price an on-time plan below 0.85 + 3·F/F_target
+    return on_time and (fuel_lb == np.inf or 0.85 + 3.0 * fuel_lb / o.f_target > upper + tol)
+
+
+@numba.njit(cache=True)
+def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
-    tables of `finish_bounds` for the prices lams (K,); ld (L+2, P) the latest departures that can still make the
+    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, R) its least hours and fuel per NM on
+    the legs leaving each node (a leg is priced at them before it is sailed, and not sailed when even that
+    cannot beat `upper` or make the RTA); ld (L+2, P) the latest departures that can still make the
     RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
-    the optimum (one such drop per leg at most along the optimal plan)."""
+    the optimum (see `trim_eps`; the incumbent bound is widened by as much, so that plan is not cut)."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
@@ -157,6 +175,8 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
     on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
     deadline = t_dep_h + (o.t_req_h if on_time else max_hours)
     tol = 1e-9 * max(1.0, abs(upper))
+    # with eps, the label that stands for the optimal plan may cost up to (lines − 1)·eps more: keep it
+    tol += (L2 - 1) * eps * (1.0 if o.kind == OBJ_JIT else 3.0 / o.f_target)
     # kept labels of every line, for the way back
     cap = 1024
     kt, kf = np.empty(cap), np.empty(cap)
@@ -177,7 +197,16 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
             for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, a2]:
                     continue
+                d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
                 for r in range(R):
+                    # the leg at its least hours and fuel first: no sailing when even that prices the label out
+                    t1 = t0 + d_nm * tau[i, a, r]
+                    if on_time and t1 > ld[i + 1, a2]:
+                        continue
+                    lb = f0 + d_nm * phi[i, a, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                                                                      deadline - t1)
+                    if _priced_out(o, lb, upper, tol, on_time):
+                        continue
                     sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
                     n_legs += 1
                     if out[CODE] != OK:
@@ -189,11 +218,8 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, ld, eps):
                         continue  # cannot reach the arrival by the RTA any more, even at full speed
                     f1 = f0 + out[FUEL]
                     lb = f1 + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - t1)
-                    if o.kind == OBJ_JIT:
-                        if lb > upper + tol:  # jit prices a plan at least at its fuel
-                            continue
-                    elif on_time and (lb == np.inf or 0.85 + 3.0 * lb / o.f_target > upper + tol):
-                        continue  # nor does the thesis function price an on-time plan below 0.85 + 3·F/F_target
+                    if _priced_out(o, lb, upper, tol, on_time):
+                        continue
                     if n_c >= ct.shape[0]:
                         ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
                         cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
@@ -379,8 +405,9 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     return out[0], out[1], out[2]
 
 
-def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P)): the fuel-to-finish bound tables of the exact DP."""
+def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P), tau, phi (L+2, P, R)): the fuel-to-finish bound tables of the
+    exact DP and the least hours and fuel per NM they are built from."""
     v, sp = inst.vessel, inst.space
     if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
         raise ValueError(f"no speed and fuel bounds for performance model form {v.form_id}")
@@ -397,7 +424,7 @@ def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                                        for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
     m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
     _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau, phi, lams, m_lam, t_min)
-    return lams, m_lam, t_min
+    return lams, m_lam, t_min, tau, phi
 
 
 def latest_departures(inst) -> np.ndarray:
@@ -414,13 +441,45 @@ def latest_departures(inst) -> np.ndarray:
     return ld
 
 
+def cost_lower_bound(inst, upper: float, lams, m_lam, t_min) -> float:
+    """A certified lower bound on the optimum's cost: the least fuel to sail the whole voyage within the hours it
+    may take (the RTA when `upper` is on time, else the planning horizon), priced by the objective."""
+    o, sp = inst.objective, inst.space
+    on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
+    hours = o.t_req_h if on_time else o.max_hours
+    c = sp.lat.shape[1] // 2
+    fuel_lb = float(fuel_to_finish_lb(m_lam[:, 0, c], lams, t_min[0, c], hours))
+    if o.kind == OBJ_JIT:
+        return fuel_lb  # jit prices a plan at least at its fuel
+    return 0.85 + 3.0 * fuel_lb / o.f_target  # thesis: no plan below that (a late one costs over 9999.9)
+
+
+def trim_eps(inst, gap: float, upper: float, lams, m_lam, t_min) -> float:
+    """The fuel tolerance ε (t) of `dp_exact_nb` for a plan within `gap` of the optimum.
+
+    Proof: let B_i be the optimal plan's label at line i. By induction some kept label A_i at B_i's node has
+    t(A_i) ≤ t(B_i) and g(A_i) ≤ g(B_i) + i·ε (g = f − e·t): a label is dropped only when an earlier kept one
+    has g at most ε above it, and sailing the optimum's next leg from A_i (not later, FIFO) keeps both relations.
+    At the arrival A costs at most (lines − 1)·ε more fuel-equivalent than the optimum: that many t under jit,
+    3·(lines − 1)·ε / F_target under thesis (late plans: none, an earlier arrival never costs more). With
+    LB ≤ optimum (`cost_lower_bound`) and ε = gap·LB / (lines − 1) (jit; × F_target / 3 for thesis) the plan
+    returned costs at most optimum + gap·LB ≤ (1 + gap)·optimum."""
+    if gap <= 0.0:
+        return 0.0
+    lb = cost_lower_bound(inst, upper, lams, m_lam, t_min)
+    if not math.isfinite(lb) or lb <= 0.0:
+        return 0.0
+    eps = gap * lb / (inst.space.lat.shape[0] - 1)
+    return eps if inst.objective.kind == OBJ_JIT else eps * inst.objective.f_target / 3.0
+
+
 @dataclass(frozen=True)
 class DpOptions:
     bucket_h: float | None = None  # None: exact labels; a number: merge labels per arrival-time bucket (h), approximate
     upper_bound: float | None = None  # a known plan's cost, to prune with (the baseline's is always used)
     incumbent: str | None = "bfoa"  # also prune with this solver's plan (seed 1, default options); None: no
-    gap: float = 0.0  # > 0: drop labels within gap × (incumbent cost) / legs of dominance; the plan is then within
-    #                   that share of the optimum (certified under the same assumption as the dominance)
+    gap: float = 0.0  # > 0: ε-trimming of the labels (see `trim_eps`): the plan costs at most (1 + gap) × the
+    #                   optimum (certified under the same assumption as the dominance); 0: every label kept
 
 
 
@@ -443,13 +502,11 @@ def search(inst, baseline, *, seed: int, options: DpOptions):
             found = spec.search(inst, baseline, seed=1, options=spec.options())
             if found.nodes is not None:
                 upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
-        lams, m_lam, t_min = finish_bounds(inst)
+        lams, m_lam, t_min, tau, phi = finish_bounds(inst)
         ld = latest_departures(inst)
-        eps = 0.0
-        if options.gap > 0.0 and math.isfinite(upper):
-            eps = options.gap * upper / (inst.space.lat.shape[0] - 1)
+        eps = trim_eps(inst, options.gap, upper, lams, m_lam, t_min)
         nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
-                                                      m_lam, t_min, ld, eps)
+                                                      m_lam, t_min, tau, phi, ld, eps)
     if not math.isfinite(cost):
         return Found(None, None, n_legs)
     return Found(nodes, rpm_idx, n_legs)
