@@ -226,7 +226,7 @@ def _route_finish_tables(inst, nodes: np.ndarray):
     on_route = np.zeros_like(sp.edge_ok)
     idx = np.arange(len(nodes) - 1)
     on_route[idx, nodes[:-1], nodes[1:]] = sp.edge_ok[idx, nodes[:-1], nodes[1:]]
-    lams, m_lam, t_min = finish_bounds(replace(inst, space=replace(sp, edge_ok=on_route)))
+    lams, m_lam, t_min, _, _ = finish_bounds(replace(inst, space=replace(sp, edge_ok=on_route)))
     lines = np.arange(len(nodes))
     return lams, np.ascontiguousarray(m_lam[:, lines, nodes]), np.ascontiguousarray(t_min[lines, nodes])
 
