@@ -130,17 +130,17 @@ def register(app: typer.Typer) -> None:
             fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
         cube_path, c, version = None, None, None
         if not calm:
-            c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(lay.weather_cube)
+            c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(lay.cube_store)
             if c is None:
-                fail(f"no complete forecast cycle in {lay.weather_cube}: run `jitroute ingest --cycle …` (or use --calm)")
-            version = cube.cycle_versions(lay.weather_cube).get(c)
-            cube_path, c = str(lay.weather_cube), str(np.datetime_as_string(np.datetime64(c, "s")))
+                fail(f"no complete forecast cycle in {lay.weather_cube_url}: run `jitroute ingest --cycle …` (or use --calm)")
+            version = cube.cycle_versions(lay.cube_store).get(c)
+            cube_path, c = lay.weather_cube_url, str(np.datetime_as_string(np.datetime64(c, "s")))
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed),
                        cycle_version=version)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
-                plan, weather = plan_voyage(job, cube_weather(cube_path, job))
+                plan, weather = plan_voyage(job, cube_weather(cube_path, job, lay.storage_options))
         except KeyError as exc:
             fail(str(exc).strip("'\""))
         if as_json:

@@ -98,7 +98,7 @@ class Settings:
 
     @property
     def layout(self) -> DataLayout:
-        return DataLayout(Path(self.data_root), self.object_root)
+        return DataLayout(Path(self.data_root), self.object_root, dict(self.storage_options))
 
     def with_overrides(self, **overrides) -> "Settings":
         """Return a copy with top-level or `section.name` overrides; None values are ignored."""

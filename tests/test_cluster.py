@@ -1,7 +1,7 @@
-"""The fleet on a real cluster: an S3 server on loopback (moto), a `dask scheduler` and two `dask worker` processes
-started in another folder without the data root, `jitroute route-fleet` with its exports in the bucket, and one
-worker SIGKILLed mid-run. Nothing may be lost: every voyage has its row, every routed voyage its files in the
-bucket under a published run (manifest written last)."""
+"""The fleet on a real cluster: an S3 server on loopback (moto) holding the weather cube and the exports, a
+`dask scheduler` and two `dask worker` processes started in another folder without the data root, `jitroute
+route-fleet`, and one worker SIGKILLed mid-run. Nothing may be lost: every voyage has its row, every routed voyage
+its files in the bucket under a published run (manifest written last)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ OBJECT_ROOT = "s3://jitroute/fleet"
 
 
 def test_a_killed_worker_loses_no_voyage_and_the_exports_land_in_the_bucket(tmp_path, demo_mirror, s3_endpoint,
-                                                                             dask_cluster):
+                                                                             dask_cluster, monkeypatch):
     import s3fs
     from distributed import Client
 
@@ -37,9 +37,15 @@ def test_a_killed_worker_loses_no_voyage_and_the_exports_land_in_the_bucket(tmp_
                 "workers": len(dask_scheduler.workers)}
 
     address, procs = dask_cluster
+    for k, v in {"JITROUTE_OBJECT_ROOT": OBJECT_ROOT, **s3_endpoint}.items():
+        monkeypatch.setenv(k, v)
     root = fleet_data_root(tmp_path, demo_mirror, n_vessels=N_VESSELS, days=60, seed=11, refit=True)
+    s3 = s3fs.S3FileSystem(endpoint_url=s3_endpoint["AWS_ENDPOINT_URL"], key="testing", secret="testing")
+    bucket_root = OBJECT_ROOT.removeprefix("s3://")
+    assert s3.exists(f"{bucket_root}/cubes/weather.zarr/zarr.json")  # the ingest wrote the cube to the bucket
+    assert not (root / "cubes" / "weather.zarr").exists()  # and nothing of it to the data root
     tag = new_tag()
-    env = tagged_env(tag, JITROUTE_DASK_ADDRESS=address, JITROUTE_OBJECT_ROOT=OBJECT_ROOT, **s3_endpoint)
+    env = tagged_env(tag, JITROUTE_DASK_ADDRESS=address)  # the object root and S3 endpoint from monkeypatch
     with Client(address, timeout="30s") as client:
         client.wait_for_workers(2, timeout=60)
         pids = {procs[name].pid for name in ("worker1", "worker2")}
@@ -78,8 +84,8 @@ def test_a_killed_worker_loses_no_voyage_and_the_exports_land_in_the_bucket(tmp_
     assert {s for _v, s, _r in rows} <= {"ok", "late"}, rows  # none "failed: routing task lost"
     assert sum(s == "ok" for _v, s, _r in rows) >= N_VESSELS - 1, rows
 
-    s3 = s3fs.S3FileSystem(endpoint_url=s3_endpoint["AWS_ENDPOINT_URL"], key="testing", secret="testing")
-    run_prefix = f"{OBJECT_ROOT.removeprefix('s3://')}/exports/runs/{run_id}"
+    s3.invalidate_cache()
+    run_prefix = f"{bucket_root}/exports/runs/{run_id}"
     objects = {p.rsplit("/", 1)[1]: info["size"] for p, info in s3.find(run_prefix, detail=True).items()}
     manifest = json.loads(s3.cat_file(f"{run_prefix}/_SUCCESS"))
     assert {f["name"]: f["bytes"] for f in manifest["files"]} == {n: b for n, b in objects.items() if n != "_SUCCESS"}
@@ -87,6 +93,6 @@ def test_a_killed_worker_loses_no_voyage_and_the_exports_land_in_the_bucket(tmp_
         for ending in (".rtz", ".geojson", ".png"):
             assert objects.get(f"{voyage_id}{ending}", 0) > 0, (voyage_id, ending, sorted(objects))
     assert objects.get("fleet_map.png", 0) > 0
-    assert not s3.find(f"{OBJECT_ROOT.removeprefix('s3://')}/exports/runs/.staging-{run_id}")
+    assert not s3.find(f"{bucket_root}/exports/runs/.staging-{run_id}")
     assert not (root / "exports" / "runs").exists()  # nothing of the run's exports on the local data root
     assert f"exports: {OBJECT_ROOT}/exports/runs/{run_id}" in out

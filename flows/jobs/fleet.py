@@ -79,9 +79,10 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     return jobs
 
 
-def route_voyages(jobs: list[RouteJob], cube_path: str, run_exports: export_store.RunExports | None,
+def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None) -> dict:
-    """Route every job on dask; stage export files as results arrive. Returns rows, legs and export errors."""
+    """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves); stage export
+    files as results arrive. Returns rows, legs and export errors."""
     rows, legs, export_errors = [], [], []
     done = 0
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
@@ -112,8 +113,8 @@ def route_voyages(jobs: list[RouteJob], cube_path: str, run_exports: export_stor
     if jobs:
         with dask_pool.dask_client(dask_address, n_workers) as client:
             per = dask_pool.voyages_per_batch(len(jobs), dask_pool.worker_slots(client), per_batch)
-            dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_path,
-                                  on_done=on_done)
+            dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_store.url,
+                                  cube_store.options, on_done=on_done)
     return {"rows": rows, "legs": legs, "export_errors": export_errors}
 
 
@@ -124,22 +125,22 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     s = load_settings(data_root=Path(data_root) if data_root else None,
                       **{"routing.solver": solver, "routing.seed": seed, "routing.voyages_per_task": batch_size})
     layout = s.layout.ensure()
-    c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(layout.weather_cube)
+    c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(layout.cube_store)
     if c is None:
-        raise FleetRunError(f"no complete forecast cycle in {layout.weather_cube}: run `jitroute ingest --cycle …` first")
-    if c not in cube.cycle_states(layout.weather_cube):
-        raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube}: ingest it first")
+        raise FleetRunError(f"no complete forecast cycle in {layout.weather_cube_url}: run `jitroute ingest --cycle …` first")
+    if c not in cube.cycle_states(layout.cube_store, layout.cube_lock_dir):
+        raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube_url}: ingest it first")
     run_id = f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:6]}"
     options = RoutingOptions.from_settings(s.routing)
     jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports,
-                      cube.cycle_versions(layout.weather_cube).get(c))
+                      cube.cycle_versions(layout.cube_store).get(c))
     route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger, n_voyages=len(jobs))
     run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
     run_exports.discard_stale(route_store.running_run_ids(layout.warehouse))
     LOG.info("run %s: routing %d voyages on cycle %s (%s)", run_id, len(jobs), cycle_label(c),
              f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
-        out = run.step(route_voyages, jobs, str(layout.weather_cube), run_exports if exports else None,
+        out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
                        s.dask_address, s.dask_workers,
                        s.routing.voyages_per_task, name="route-voyages", timeout_s=s.routing.task_timeout_s)
         if exports and out["rows"]:
@@ -154,7 +155,7 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
             for var in ("waves", "wind"):  # the weather of the cycle at its start, for people to look at
                 try:
                     run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png",
-                                      weather_maps.step_png(layout.weather_cube, c, 0, var))
+                                      weather_maps.step_png(layout.cube_store, c, 0, var))
                 except Exception as exc:  # a picture; the run's data does not depend on it
                     out["export_errors"].append(f"fleet: weather map {var}: {type(exc).__name__}: {exc}")
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
@@ -202,7 +203,7 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
                                        oscar_url=oscar_url))
         LOG.info("[nightly 2/3] refit: speed and fuel models from noon reports")
         fits = run.subflow("refit-performance", refit_job, data_root=data_root)
-        c = cube.latest_complete_cycle(layout.weather_cube, at_or_before=max(targets))
+        c = cube.latest_complete_cycle(layout.cube_store, at_or_before=max(targets))
         summary = {"date": date or str(np.datetime64(utcnow_h(), "D")), "cycles_targeted": labels, "ingest": ingests,
                    "models_changed": sum(bool(f.get("changed")) for f in fits), "vessels": len(fits),
                    "cycle_used": cycle_label(c) if c is not None else None}
