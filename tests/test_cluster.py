@@ -28,13 +28,12 @@ def test_a_killed_worker_loses_no_voyage_and_the_exports_land_in_the_bucket(tmp_
     from distributed import Client
 
     def batch_progress(dask_scheduler):  # runs on the scheduler (defined here so it is pickled by value)
-        """Routing tasks finished so far (and started, counting restarts), workers busy with one (address → pid)."""
+        """Routing tasks finished so far, and the workers busy with one now (address → pid)."""
         prefix = dask_scheduler.task_prefixes.get("route_batch")
         counts = prefix.state_counts if prefix else {}
         busy = {ws.address: ws.pid for ws in dask_scheduler.workers.values()
                 if any(ts.prefix.name == "route_batch" for ts in ws.processing)}
-        return {"done": counts.get("memory", 0), "runs": counts.get("processing", 0), "busy": busy,
-                "workers": len(dask_scheduler.workers)}
+        return {"done": counts.get("memory", 0), "busy": busy, "workers": len(dask_scheduler.workers)}
 
     address, procs = dask_cluster
     for k, v in {"JITROUTE_OBJECT_ROOT": OBJECT_ROOT, **s3_endpoint}.items():
