@@ -25,8 +25,12 @@ def run_table(summary: dict) -> Table:
     t.add_row("on time / late / not routed", f"{summary.get('n_ok')} / {summary.get('n_late')} / {summary.get('n_failed')}")
     t.add_row("exports failed", str(len(summary.get("export_failures") or [])))
     t.add_row("fuel (t)", _f(summary.get("fuel_t")))
-    t.add_row("baseline fuel (t), same voyages", _f(summary.get("baseline_fuel_t")))
-    t.add_row("savings vs baseline", _f(summary.get("savings_pct"), "{:.1f} %"))
+    t.add_row("savings vs constant speed arriving at the RTA", _f(summary.get("savings_total_pct"), "{:.1f} %"))
+    t.add_row("  of which speed profile / route", f"{_f(summary.get('savings_speed_profile_pct'), '{:.1f} %')} / "
+              f"{_f(summary.get('savings_route_pct'), '{:.1f} %')}")
+    t.add_row("constant-speed baseline fuel (t), same voyages", _f(summary.get("honest_baseline_fuel_t")))
+    t.add_row("engine-change limits cost (t)", _f(summary.get("limits_fuel_t"), "{:.2f}"))
+    t.add_row("savings vs discrete-rpm baseline (arrives early)", _f(summary.get("savings_vs_discrete_pct"), "{:.1f} %"))
     return t
 
 

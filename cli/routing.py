@@ -148,10 +148,15 @@ def register(app: typer.Typer) -> None:
         else:
             console.print(plan_table(plan))
             console.print(comparison_table(plan))
-            sav = plan.savings_pct
+            sp = plan.savings
+            sav = ("n/a" if sp is None else f"{sp.total_pct:.1f} % (speed profile {sp.speed_profile_pct:.1f} %, route "
+                   f"{sp.route_pct:.1f} %) vs constant {sp.baseline_rpm:.1f} rpm arriving at the RTA")
+            lim, land_nm = plan.limits_fuel_t, plan.min_land_clearance_nm
             console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
-                          f"savings vs baseline {'n/a' if sav != sav else f'{sav:.1f} %'}; runtime {plan.runtime_s:.2f} s; "
-                          f"weather {'calm water' if calm else 'cycle ' + c}")
+                          f"savings {sav}; engine changes {plan.n_engine_changes}"
+                          f"{'' if lim != lim else f' (limits cost {lim:.2f} t)'}; runtime {plan.runtime_s:.2f} s; "
+                          f"weather {'calm water' if calm else 'cycle ' + c}"
+                          f"{'' if land_nm != land_nm else f'; least distance to land {land_nm:.1f} NM (outside the port approaches)'}")
         wanted = {"png": png, "convergence": convergence, "rtz": rtz}
         if plan.legs and any(wanted.values()):
             from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for

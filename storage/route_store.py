@@ -1,32 +1,52 @@
-"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, `route_legs` and
-Parquet partitions `exports/routes/run_id=<id>/{routes,route_legs}.parquet`.
+"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, `route_legs` and one
+Parquet dataset per table, hive-partitioned by run: `exports/routes/<table>/run_id=<id>/part-0.parquet`.
 
 One writer: the flow collects every voyage's rows and calls `write_run_results` once, inside
-one transaction, so a killed run leaves either all of a run's rows or none.
+one transaction, so a killed run leaves either all of a run's rows or none. The Parquet files follow
+the commit; each appears whole (written under a hidden name, then renamed). Their column types are
+fixed here (`ROUTE_ARROW`, `LEG_ARROW`): times `timestamp[us, tz=UTC]`, and a column name shared by
+both tables has the same type in both, so pyarrow, polars and DuckDB read each folder as one table.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 from datetime import datetime, timezone
 from pathlib import Path
 
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from storage import warehouse
 
-ROUTE_COLUMNS = [
-    "run_id", "voyage_id", "imo", "solver", "objective", "status", "reason", "depart_utc", "eta_utc",
-    "rta_utc", "hours", "fuel_t", "baseline_fuel_t", "baseline_hours", "savings_pct", "distance_nm",
-    "cost", "model_version", "cycle", "seed", "runtime_s", "n_legs", "beyond_forecast", "forecast_flag",
-    "hours_beyond_forecast", "hours_before_cycle",
-]
-LEG_COLUMNS = [
-    "run_id", "voyage_id", "leg", "lat0", "lon0", "lat1", "lon1", "course_deg", "dist_nm", "rpm",
-    "stw_kn", "sog_kn", "hours", "fuel_t", "etd_utc", "eta_utc", "wind_kn", "wind_dir_deg", "hs_m",
-    "wave_dir_deg", "current_kn", "beyond_forecast",
-]
+_UTC = pa.timestamp("us", tz="UTC")
+_F64, _I32, _STR = pa.float64(), pa.int32(), pa.string()
+
+# The Parquet columns of each table (the partition column run_id is the folder name, not in the file).
+ROUTE_ARROW = pa.schema([
+    ("voyage_id", _STR), ("imo", pa.int64()), ("solver", _STR), ("objective", _STR), ("status", _STR),
+    ("reason", _STR), ("depart_utc", _UTC), ("eta_utc", _UTC), ("rta_utc", _UTC), ("hours", _F64),
+    ("fuel_t", _F64), ("baseline_fuel_t", _F64), ("baseline_hours", _F64), ("savings_pct", _F64),
+    ("distance_nm", _F64), ("cost", _F64), ("model_version", _I32), ("cycle", _UTC), ("seed", _I32),
+    ("runtime_s", _F64), ("n_legs", _I32), ("n_legs_beyond_forecast", _I32), ("forecast_flag", _STR),
+    ("hours_beyond_forecast", _F64), ("hours_before_cycle", _F64), ("min_land_clearance_nm", _F64),
+    ("honest_baseline_rpm", _F64), ("honest_baseline_fuel_t", _F64), ("honest_baseline_hours", _F64),
+    ("profile_fuel_t", _F64), ("savings_total_pct", _F64), ("savings_speed_profile_pct", _F64),
+    ("savings_route_pct", _F64), ("min_engine_hold_h", _F64), ("engine_change_cost_t", _F64),
+    ("n_engine_changes", _I32), ("unlimited_fuel_t", _F64), ("limits_fuel_t", _F64),
+])
+LEG_ARROW = pa.schema([
+    ("voyage_id", _STR), ("leg", _I32), ("lat0", _F64), ("lon0", _F64), ("lat1", _F64), ("lon1", _F64),
+    ("course_deg", _F64), ("dist_nm", _F64), ("rpm", _F64), ("stw_kn", _F64), ("sog_kn", _F64), ("hours", _F64),
+    ("fuel_t", _F64), ("etd_utc", _UTC), ("eta_utc", _UTC), ("wind_kn", _F64), ("wind_dir_deg", _F64),
+    ("hs_m", _F64), ("wave_dir_deg", _F64), ("current_kn", _F64), ("beyond_forecast", pa.bool_()),
+])
+ROUTE_COLUMNS = ["run_id", *ROUTE_ARROW.names]
+LEG_COLUMNS = ["run_id", *LEG_ARROW.names]
+PARQUET_TABLES = {"routes": ROUTE_ARROW, "route_legs": LEG_ARROW}
 
 
 def _utcnow() -> datetime:
@@ -34,12 +54,65 @@ def _utcnow() -> datetime:
 
 
 def _frame(rows: list[dict], columns: list[str], run_id: str) -> pd.DataFrame:
+    """The rows as the warehouse takes them: times UTC, tz-aware, to the microsecond (DuckDB TIMESTAMP's resolution)."""
     df = pd.DataFrame.from_records(rows, columns=columns)
     df["run_id"] = run_id
     for c in columns:
         if c.endswith("_utc") or c == "cycle":
-            df[c] = pd.to_datetime(df[c], utc=True).dt.tz_localize(None)
+            df[c] = pd.to_datetime(df[c], utc=True).dt.floor("us")
     return df
+
+
+def _naive_utc(df: pd.DataFrame) -> pd.DataFrame:
+    """The frame with its tz-aware columns as naive UTC, as the warehouse's TIMESTAMP columns hold them."""
+    return df.assign(**{c: df[c].dt.tz_localize(None) for c in df.columns if isinstance(df[c].dtype, pd.DatetimeTZDtype)})
+
+
+def parquet_dir(exports_dir: Path, table: str) -> Path:
+    """The dataset folder of `table` ("routes" or "route_legs"): one `run_id=<id>/part-0.parquet` per run."""
+    return Path(exports_dir) / "routes" / table
+
+
+def _publish_parquet(df: pd.DataFrame, schema: pa.Schema, folder: Path) -> Path:
+    """Write `df` as `folder/part-0.parquet`, whole or not at all (a hidden temp name, then a rename)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    final = folder / "part-0.parquet"
+    tmp = folder / f".part-0.parquet.tmp{os.getpid()}"
+    try:
+        pq.write_table(pa.Table.from_pandas(df[schema.names], schema=schema, preserve_index=False), tmp)
+        os.replace(tmp, final)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return final
+
+
+def _publish_run_parquet(exports_dir: Path, run_id: str, tables: dict[str, pd.DataFrame]) -> None:
+    for table, df in tables.items():
+        _publish_parquet(df, PARQUET_TABLES[table], parquet_dir(exports_dir, table) / f"run_id={run_id}")
+
+
+def migrate_old_parquet_layout(exports_dir: Path) -> list[str]:
+    """Move runs written as `exports/routes/run_id=<id>/{routes,route_legs}.parquet` (both tables in one folder,
+    naive times, `beyond_forecast` counting legs in routes) into the per-table datasets; returns the run ids moved."""
+    moved = []
+    for old in sorted((Path(exports_dir) / "routes").glob("run_id=*")):
+        run_id = old.name.removeprefix("run_id=")
+        tables = {}
+        for table in PARQUET_TABLES:
+            f = old / f"{table}.parquet"
+            if f.exists():
+                df = pd.read_parquet(f)
+                if table == "routes":
+                    df = df.rename(columns={"beyond_forecast": "n_legs_beyond_forecast"})
+                tables[table] = _frame(df.reindex(columns=PARQUET_TABLES[table].names).to_dict("records"),
+                                       PARQUET_TABLES[table].names, run_id)
+        _publish_run_parquet(exports_dir, run_id, tables)
+        for table in PARQUET_TABLES:
+            (old / f"{table}.parquet").unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # a folder holding anything else is left as it is
+            old.rmdir()
+        moved.append(run_id)
+    return moved
 
 
 def process_started(pid: int) -> str | None:
@@ -96,7 +169,7 @@ def running_run_ids(db_path: Path) -> set[str]:
 
 def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows: list[dict],
                       leg_rows: list[dict], export_errors: list[str] | None = None) -> tuple[int, int]:
-    """Write all rows of a run in one transaction, then the Parquet partition; returns (n_ok, n_failed).
+    """Write all rows of a run in one transaction, then its Parquet files; returns (n_ok, n_failed).
 
     `export_errors`: one line per export that failed (voyage, kind, error), kept with the run."""
     routes = _frame(route_rows, ROUTE_COLUMNS, run_id)
@@ -107,8 +180,8 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
     with warehouse.connect(db_path) as con:
         con.execute("BEGIN TRANSACTION")
         try:
-            con.register("routes_df", routes)
-            con.register("legs_df", legs)
+            con.register("routes_df", _naive_utc(routes))
+            con.register("legs_df", _naive_utc(legs))
             con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
             con.execute(f"INSERT INTO route_legs ({', '.join(LEG_COLUMNS)}) SELECT {', '.join(LEG_COLUMNS)} FROM legs_df")
             con.execute(
@@ -121,10 +194,8 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
         except Exception:
             con.execute("ROLLBACK")
             raise
-    part = Path(exports_dir) / "routes" / f"run_id={run_id}"
-    part.mkdir(parents=True, exist_ok=True)
-    routes.drop(columns=["run_id"]).to_parquet(part / "routes.parquet", index=False)
-    legs.drop(columns=["run_id"]).to_parquet(part / "route_legs.parquet", index=False)
+    migrate_old_parquet_layout(exports_dir)
+    _publish_run_parquet(exports_dir, run_id, {"routes": routes, "route_legs": legs})
     return n_ok, n_failed
 
 
@@ -136,16 +207,21 @@ def fail_run(db_path: Path, run_id: str, reason: str) -> None:
 
 
 def run_summary(db_path: Path, run_id: str) -> dict:
+    """The run's row, counts and fuel-weighted savings (as the fleet_savings view), and the voyages needing attention."""
     with warehouse.connect(db_path, write=False) as con:
         run = con.execute("SELECT * FROM route_runs WHERE run_id = ?", [run_id]).fetchdf()
         totals = con.execute(
             """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
                       count(*) FILTER (WHERE status = 'late') AS n_late,
                       count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
-                      sum(fuel_t) AS fuel_t,
-                      sum(fuel_t) FILTER (WHERE baseline_fuel_t IS NOT NULL) AS compared_fuel_t,
-                      sum(baseline_fuel_t) FILTER (WHERE fuel_t IS NOT NULL) AS baseline_fuel_t
+                      sum(fuel_t) AS fuel_t
                FROM routes WHERE run_id = ?""",
+            [run_id],
+        ).fetchdf()
+        savings = con.execute(
+            "SELECT n_compared, honest_baseline_fuel_t, profile_fuel_t, savings_total_pct, savings_speed_profile_pct, "
+            "savings_route_pct, limits_fuel_t, unlimited_fuel_t, discrete_baseline_fuel_t, savings_vs_discrete_pct "
+            "FROM fleet_savings WHERE run_id = ?",
             [run_id],
         ).fetchdf()
         problems = con.execute(
@@ -155,8 +231,9 @@ def run_summary(db_path: Path, run_id: str) -> dict:
         ).fetchdf()
     out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}
     out.update({k: (int(v) if k.startswith("n") and v == v else v) for k, v in totals.iloc[0].to_dict().items()})
-    base = out.get("baseline_fuel_t") or 0.0
-    out["savings_pct"] = 100.0 * (base - (out.get("compared_fuel_t") or 0.0)) / base if base else None
+    if len(savings):
+        out.update({k: (None if v is None or v != v else (int(v) if k.startswith("n_") else float(v)))
+                    for k, v in savings.iloc[0].to_dict().items()})
     out["problems"] = problems.to_dict("records")
     errors = out.get("export_errors")
     out["export_failures"] = errors.splitlines() if isinstance(errors, str) and errors else []

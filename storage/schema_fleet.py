@@ -116,4 +116,36 @@ MIGRATIONS: list[Migration] = [
         );
         """,
     ),
+    Migration(
+        "fleet_005_status_checks",
+        # a model's status limited to the values the code writes (DuckDB adds a CHECK only with CREATE TABLE: rebuilt)
+        """
+        CREATE TABLE perf_models_new (
+            imo BIGINT NOT NULL,
+            version INTEGER NOT NULL,
+            fitted_at TIMESTAMP NOT NULL,
+            form VARCHAR NOT NULL,
+            target VARCHAR NOT NULL,
+            coefficients VARCHAR,
+            n_rows INTEGER,
+            r2 DOUBLE,
+            rmse DOUBLE,
+            cv_rmse DOUBLE,
+            status VARCHAR NOT NULL CHECK (status IN ('active', 'rejected', 'superseded')),
+            reason VARCHAR,
+            active BOOLEAN NOT NULL,
+            months_dd DOUBLE,
+            holdout_rmse DOUBLE,
+            n_holdout INTEGER,
+            data_hash VARCHAR,
+            data_to_utc TIMESTAMP,
+            flag VARCHAR,
+            PRIMARY KEY (imo, version, target)
+        );
+        INSERT INTO perf_models_new SELECT imo, version, fitted_at, form, target, coefficients, n_rows, r2, rmse, cv_rmse,
+            status, reason, active, months_dd, holdout_rmse, n_holdout, data_hash, data_to_utc, flag FROM perf_models;
+        DROP TABLE perf_models;
+        ALTER TABLE perf_models_new RENAME TO perf_models;
+        """,
+    ),
 ]

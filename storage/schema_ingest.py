@@ -29,4 +29,28 @@ MIGRATIONS: list[Migration] = [
         );
         """,
     ),
+    Migration(
+        "ingest_002_status_checks",
+        # a file's status limited to the values the code writes: ok | skipped (already had) | missing | corrupt |
+        # error (refused, e.g. no permission); DuckDB adds a CHECK only with CREATE TABLE, so the log is rebuilt
+        """
+        CREATE TABLE ingest_log_new (
+            run_id VARCHAR,
+            source VARCHAR NOT NULL,
+            cycle TIMESTAMP,
+            file_name VARCHAR NOT NULL,
+            url VARCHAR,
+            bytes BIGINT,
+            sha256 VARCHAR,
+            status VARCHAR NOT NULL CHECK (status IN ('ok', 'skipped', 'missing', 'corrupt', 'error')),
+            error VARCHAR,
+            started_at TIMESTAMP,
+            finished_at TIMESTAMP
+        );
+        INSERT INTO ingest_log_new SELECT run_id, source, cycle, file_name, url, bytes, sha256, status, error, started_at,
+            finished_at FROM ingest_log;
+        DROP TABLE ingest_log;
+        ALTER TABLE ingest_log_new RENAME TO ingest_log;
+        """,
+    ),
 ]

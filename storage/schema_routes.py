@@ -4,7 +4,36 @@ Times are UTC TIMESTAMPs; fuel in tonnes, distances in NM, speeds in knots, dire
 degrees (wind/waves coming-from).
 """
 
+import hashlib
+
 from storage.warehouse import Migration
+
+# The view of the plan to sail per voyage. A view made with `r.*` keeps the columns routes had when it was made,
+# so it is made again after every migration (views_migration) and always lists the routes columns of today.
+LATEST_ROUTES_VIEW = """
+        CREATE OR REPLACE VIEW latest_routes AS
+        WITH attempts AS (
+            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
+                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
+            FROM routes r JOIN route_runs u USING (run_id)
+        ),
+        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
+        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
+            SELECT * FROM attempts
+            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
+        )
+        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
+               n.run_id <> s.run_id AS newer_attempt_failed,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
+               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
+               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at
+        FROM shown s
+        JOIN newest n USING (voyage_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels x ON x.imo = s.imo;
+"""
+
 
 MIGRATIONS: list[Migration] = [
     Migration(
@@ -227,4 +256,140 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS hours_before_cycle DOUBLE;     -- hours sailed before the cycle's init time
         """,
     ),
+    Migration(
+        "routes_006_status_checks",
+        # statuses limited to the values the code writes (DuckDB adds a CHECK only with CREATE TABLE, so the two
+        # tables are rebuilt); the route's count of legs past the horizon gets its own name, n_legs_beyond_forecast,
+        # apart from the legs' boolean beyond_forecast; latest_routes is made again so its columns follow
+        """
+        CREATE TABLE route_runs_new (
+            run_id VARCHAR PRIMARY KEY,
+            started_at TIMESTAMP NOT NULL,
+            finished_at TIMESTAMP,
+            cycle TIMESTAMP,
+            n_voyages INTEGER,
+            n_ok INTEGER,
+            n_failed INTEGER,
+            status VARCHAR NOT NULL CHECK (status IN ('running', 'ok', 'partial', 'failed')),
+            solver VARCHAR,
+            trigger VARCHAR,
+            host VARCHAR,
+            pid INTEGER,
+            pid_started VARCHAR,
+            reason VARCHAR,
+            n_export_failed INTEGER,
+            export_errors VARCHAR
+        );
+        INSERT INTO route_runs_new SELECT run_id, started_at, finished_at, cycle, n_voyages, n_ok, n_failed, status, solver,
+            trigger, host, pid, pid_started, reason, n_export_failed, export_errors FROM route_runs;
+        DROP TABLE route_runs;
+        ALTER TABLE route_runs_new RENAME TO route_runs;
+
+        CREATE TABLE routes_new (
+            run_id VARCHAR NOT NULL,
+            voyage_id VARCHAR NOT NULL,
+            imo BIGINT,
+            solver VARCHAR,
+            objective VARCHAR,
+            status VARCHAR NOT NULL CHECK (status IN ('ok', 'late', 'infeasible', 'failed')),
+            reason VARCHAR,
+            depart_utc TIMESTAMP,
+            eta_utc TIMESTAMP,
+            rta_utc TIMESTAMP,
+            hours DOUBLE,
+            fuel_t DOUBLE,
+            baseline_fuel_t DOUBLE,
+            baseline_hours DOUBLE,
+            savings_pct DOUBLE,
+            distance_nm DOUBLE,
+            cost DOUBLE,
+            model_version INTEGER,
+            cycle TIMESTAMP,
+            seed INTEGER,
+            runtime_s DOUBLE,
+            n_legs INTEGER,
+            n_legs_beyond_forecast INTEGER,
+            forecast_flag VARCHAR,
+            hours_beyond_forecast DOUBLE,
+            hours_before_cycle DOUBLE,
+            PRIMARY KEY (run_id, voyage_id)
+        );
+        INSERT INTO routes_new SELECT run_id, voyage_id, imo, solver, objective, status, reason, depart_utc, eta_utc, rta_utc,
+            hours, fuel_t, baseline_fuel_t, baseline_hours, savings_pct, distance_nm, cost, model_version, cycle, seed,
+            runtime_s, n_legs, beyond_forecast, forecast_flag, hours_beyond_forecast, hours_before_cycle FROM routes;
+        DROP TABLE routes;
+        ALTER TABLE routes_new RENAME TO routes;
+
+        """ + LATEST_ROUTES_VIEW + """
+        """,
+    ),
+    Migration(
+        "routes_007_honest_savings_and_engine_limits",
+        """
+        -- savings against the honest baseline: the base route at the one constant rpm (between the vessel's
+        -- limits) that arrives at the RTA, in the same weather and model; split into what the best engine plan on
+        -- the base route saves (speed profile) and what the route adds (route); total = speed profile + route.
+        -- baseline_fuel_t / savings_pct stay the discrete-rpm baseline, which usually arrives hours early.
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS honest_baseline_rpm DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS honest_baseline_fuel_t DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS honest_baseline_hours DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS profile_fuel_t DOUBLE;            -- best engine plan on the base route
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_total_pct DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_speed_profile_pct DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS savings_route_pct DOUBLE;
+        -- engine-change limits the plan obeys, and what they cost: fuel_t − unlimited_fuel_t (the solver's plan on
+        -- the same route without them)
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_engine_hold_h DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS engine_change_cost_t DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS n_engine_changes INTEGER;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS unlimited_fuel_t DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS limits_fuel_t DOUBLE;
+
+        -- per run: the honest savings are fuel-weighted over the voyages that have them (sums, not an average of
+        -- percentages); the discrete-rpm figure is kept as savings_vs_discrete_pct
+        CREATE OR REPLACE VIEW fleet_savings AS
+        SELECT u.run_id, u.started_at, u.cycle, u.trigger, u.status AS run_status, count(*) AS n_voyages,
+               count(*) FILTER (WHERE r.status = 'ok') AS n_on_time,
+               count(*) FILTER (WHERE r.status = 'late') AS n_late,
+               count(*) FILTER (WHERE r.status = 'infeasible') AS n_infeasible,
+               count(*) FILTER (WHERE r.status = 'failed') AS n_failed,
+               count(*) FILTER (WHERE r.status IN ('infeasible', 'failed')) AS n_not_routed,
+               coalesce(u.n_export_failed, 0) AS n_export_failed,
+               count(*) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS n_compared,
+               sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS fuel_t,
+               sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS honest_baseline_fuel_t,
+               sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS profile_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_total_pct,
+               100 * (1 - sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_speed_profile_pct,
+               100 * (sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                      - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0)
+                   AS savings_route_pct,
+               sum(r.limits_fuel_t) AS limits_fuel_t,
+               sum(r.unlimited_fuel_t) FILTER (WHERE r.limits_fuel_t IS NOT NULL) AS unlimited_fuel_t,
+               sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL) AS discrete_baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL)
+                        / nullif(sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL), 0)) AS savings_vs_discrete_pct
+        FROM route_runs u JOIN routes r USING (run_id)
+        GROUP BY ALL;
+        """,
+    ),
+    Migration(
+        "routes_008_land_clearance",
+        """
+        -- least distance to land (NM) along the plan outside its port approaches, sampled at 0.1 NM
+        -- (25 means at least 25 NM); empty when there is no plan
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_land_clearance_nm DOUBLE;
+        """,
+    ),
 ]
+
+
+def views_migration(after: list[str]) -> Migration:
+    """The migration making `latest_routes` again, named anew whenever its text or the migrations `after` change."""
+    digest = hashlib.sha256("\n".join([LATEST_ROUTES_VIEW, *after]).encode()).hexdigest()[:12]
+    return Migration(f"routes_views_{digest}", LATEST_ROUTES_VIEW)

@@ -5,7 +5,9 @@ blocks the writer. So the pipeline keeps connections short (open, write in a tra
 close) and retries while another process holds the file; analysts read the snapshot copy
 (`warehouse.snapshot.duckdb`, replaced atomically after every write, copied while the writer still
 holds the file so it is never torn or older than the last write) or the main file when the
-pipeline is idle.
+pipeline is idle. The snapshot is written in DuckDB storage format `SNAPSHOT_STORAGE_VERSION`, so
+DuckDB readers from that release on (BI drivers bundle older DuckDBs) open it, whatever DuckDB
+the pipeline runs.
 
 Schema lives in `storage/schema_*.py` modules as ordered lists of named migrations; each
 name is applied once and recorded in `schema_migrations`.
@@ -16,12 +18,19 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import struct
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import duckdb
+
+
+# The oldest DuckDB release whose readers open the analysts' snapshot (its storage format number is
+# SNAPSHOT_STORAGE_NUMBER, in the file header).
+SNAPSHOT_STORAGE_VERSION = "v1.1.0"
+SNAPSHOT_STORAGE_NUMBER = 64
 
 
 @dataclass(frozen=True)
@@ -42,7 +51,7 @@ _CORRUPT_SIGNS = ("not a valid duckdb database", "corrupt database file", "check
 
 
 def _corrupt(path: Path, exc: Exception) -> WarehouseCorruptError:
-    snap = path.with_name(path.stem + ".snapshot.duckdb")
+    snap = snapshot_path(path)
     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     return WarehouseCorruptError(
         f"warehouse {path} is damaged ({first}); recover it from the snapshot: "
@@ -55,9 +64,11 @@ def _is_corrupt(exc: Exception) -> bool:
 
 def _all_migrations() -> list[Migration]:
     # Imported here so each schema module can be edited on its own.
-    from storage import schema_fleet, schema_ingest, schema_routes
+    from storage import schema_docs, schema_fleet, schema_ingest, schema_routes
 
-    return [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS]
+    schema = [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS]
+    schema.append(schema_routes.views_migration(after=[m.name for m in schema]))
+    return [*schema, schema_docs.comments_migration(after=[m.name for m in schema])]
 
 
 def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnection:
@@ -65,7 +76,10 @@ def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnecti
     delay = 0.05
     while True:
         try:
-            return duckdb.connect(str(path), read_only=read_only)
+            # a writer creates a new warehouse in the snapshot's storage format, so the snapshot is a byte copy
+            # (readers pass no setting: a reader in the same process as another plain connection can share it)
+            config = {} if read_only else {"storage_compatibility_version": SNAPSHOT_STORAGE_VERSION}
+            return duckdb.connect(str(path), read_only=read_only, config=config)
         except duckdb.Error as exc:
             if _is_corrupt(exc):
                 raise _corrupt(path, exc) from exc
@@ -121,7 +135,7 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
         yield con
         if write:  # while we still hold the file, so no other writer changes it during the copy
             con.execute("CHECKPOINT")
-            publish_snapshot(path)
+            publish_snapshot(con, path)
     except duckdb.Error as exc:
         if _is_corrupt(exc):  # a damaged block met while reading or writing
             raise _corrupt(path, exc) from exc
@@ -130,18 +144,50 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
         con.close()
 
 
-def publish_snapshot(path: Path) -> Path:
-    """Copy the warehouse to `<name>.snapshot.duckdb` atomically for analysts.
+def snapshot_path(path: Path) -> Path:
+    path = Path(path)
+    return path.with_name(path.stem + ".snapshot.duckdb")
 
-    Call it with the file closed or held by a checkpointed write connection (as `connect` does), so
-    the copy is never torn by another writer and never replaces a newer snapshot with an older one.
+
+def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
+    """Copy the warehouse `path` open on `con` to `<name>.snapshot.duckdb` atomically for analysts, in storage
+    format `SNAPSHOT_STORAGE_VERSION`: a byte copy when the warehouse is in that format (every warehouse created
+    since), else written table by table (`COPY FROM DATABASE`: rows, constraints, comments, views), which is
+    slower (seconds for tens of MB) — replace such a warehouse by its snapshot once to get the fast copy.
+
+    Call it on a checkpointed write connection (as `connect` does), so no other writer changes the warehouse
+    during the copy and a newer snapshot is never replaced by an older one.
     """
     path = Path(path)
-    snap = path.with_name(path.stem + ".snapshot.duckdb")
+    snap = snapshot_path(path)
     tmp = snap.with_name(snap.name + f".tmp{os.getpid()}")
+    tmp.unlink(missing_ok=True)
     try:
-        shutil.copyfile(path, tmp)
+        if storage_version_number(path) == SNAPSHOT_STORAGE_NUMBER:
+            shutil.copyfile(path, tmp)
+        else:
+            _copy_in_snapshot_format(con, tmp)
         os.replace(tmp, snap)
     finally:
         tmp.unlink(missing_ok=True)
+        tmp.with_name(tmp.name + ".wal").unlink(missing_ok=True)
     return snap
+
+
+def _copy_in_snapshot_format(con: duckdb.DuckDBPyConnection, target: Path) -> None:
+    source = con.execute("SELECT current_database()").fetchone()[0]
+    quoted = str(target).replace("'", "''")
+    con.execute(f"ATTACH '{quoted}' AS snapshot_out (STORAGE_VERSION '{SNAPSHOT_STORAGE_VERSION}')")
+    try:
+        con.execute(f'COPY FROM DATABASE "{source}" TO snapshot_out')
+    finally:
+        con.execute("DETACH snapshot_out")
+
+
+def storage_version_number(path: Path) -> int:
+    """The storage format number in a DuckDB file's header (bytes 8-11 "DUCK", then a little-endian uint64)."""
+    with open(path, "rb") as fh:
+        magic, number = struct.unpack("<8x4sQ", fh.read(20))
+    if magic != b"DUCK":
+        raise ValueError(f"{path} is not a DuckDB file")
+    return number

@@ -103,6 +103,23 @@ def test_rtz_schedule_has_the_legs_times_speeds_and_rpm(voyage):
     assert els[3].get("windDirection") == "0.0"  # 360° folds to 0
 
 
+@pytest.mark.parametrize("version", ["1.0", "1.1", "1.2"])
+def test_rtz_legs_carry_their_planned_speed(voyage, version):
+    route, legs = voyage
+    route = dict(route, savings_total_pct=3.4567, savings_speed_profile_pct=-0.88, savings_route_pct=4.3367,
+                 min_engine_hold_h=12.0, limits_fuel_t=0.1396)
+    xml = route_to_rtz(route, legs, version=version)
+    validate_rtz(xml, version=version)
+    doc, ns = _parse(xml, version)
+    wps = doc.findall("r:waypoints/r:waypoint", ns)
+    for wp, leg in zip(wps[1:], legs):  # the leg leading to each waypoint after the first
+        el = wp.find("r:leg", ns)
+        assert float(el.get("speedMin")) == float(el.get("speedMax")) == pytest.approx(leg["sog_kn"], abs=0.005)
+    ext = doc.find(".//jr:voyage", ns)
+    assert ext.get("savingsTotalPct") == "3.46" and ext.get("savingsRoutePct") == "4.34"
+    assert ext.get("minEngineHoldH") == "12.00" and ext.get("limitsFuelT") == "0.140"
+
+
 def test_rtz_1_0_wind_is_in_metres_per_second(voyage):
     doc, ns = _parse(route_to_rtz(*voyage, version="1.0"), "1.0")
     el = doc.findall("r:schedules/r:schedule/r:calculated/r:sheduleElement", ns)[1]

@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 from pipeline.synthetic.fleet import generate_fleet, write_fleet
+from storage import route_store
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,8 @@ def test_nightly_fills_the_tables_and_records_the_unroutable_voyage(fleet_root):
     for vid in ok.index:
         assert legs.loc[vid, "n"] == routes.loc[vid, "n_legs"]
         assert legs.loc[vid, "f"] == pytest.approx(routes.loc[vid, "fuel_t"], rel=1e-9)
-    assert (root / "exports" / "routes" / f"run_id={r['run_id']}").exists()
+    for table in ("routes", "route_legs"):
+        assert (route_store.parquet_dir(root / "exports", table) / f"run_id={r['run_id']}" / "part-0.parquet").exists()
     assert Path(r["fleet_map"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     views = {v: len(_q(root, f"SELECT * FROM {v}")) for v in ("latest_routes", "fleet_savings", "model_quality", "ingest_health")}
     assert views["latest_routes"] == len(routes) and views["fleet_savings"] == 1 and views["model_quality"] == 8

@@ -370,9 +370,11 @@ def test_impossible_rta_gives_the_least_late_plan():
 
 @pytest.mark.parametrize("name, dep, arr, kw", [
     # Nojima-zaki → Kii Channel: the great circle crosses the Izu islands and the Kii peninsula
-    ("japan", (34.85, 139.85), (33.9, 135.0), dict(n_lines=12, n_points=15, d_point_nm=12.0)),
-    # Singapore Strait, east entrance → west of Sentosa, among the southern islands
-    ("singapore", (1.25, 104.5), (1.15, 103.55), dict(n_lines=12, n_points=15, d_point_nm=1.0)),
+    # (16 lines: with 12, no node of the last line is both 2 NM clear of the Kii coast and in reach of the arrival)
+    ("japan", (34.85, 139.85), (33.9, 135.0), dict(n_lines=16, n_points=15, d_point_nm=12.0)),
+    # Singapore Strait, east entrance → west of Sentosa, among the southern islands (the fairway passes them
+    # closer than the default 2 NM clearance)
+    ("singapore", (1.25, 104.5), (1.15, 103.55), dict(n_lines=12, n_points=15, d_point_nm=1.0, land_clearance_nm=0.5)),
 ])
 def test_routes_stay_at_sea_along_real_coasts(name, dep, arr, kw):
     def at_sea_everywhere(lat0, lon0, lat1, lon1, step_nm):

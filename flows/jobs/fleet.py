@@ -230,8 +230,14 @@ def summary_table(r: dict) -> list[dict]:
             {"what": "voyages", "value": r.get("n")}, {"what": "on time", "value": r.get("n_ok")},
             {"what": "late", "value": r.get("n_late")}, {"what": "not routed", "value": r.get("n_failed")},
             {"what": "exports failed", "value": len(r.get("export_failures") or [])},
-            {"what": "fuel t", "value": _r(r.get("fuel_t"))}, {"what": "baseline fuel t", "value": _r(r.get("baseline_fuel_t"))},
-            {"what": "savings %", "value": _r(r.get("savings_pct"))}]
+            {"what": "fuel t", "value": _r(r.get("fuel_t"))},
+            {"what": "savings % vs constant speed arriving at the RTA", "value": _r(r.get("savings_total_pct"))},
+            {"what": "… of which speed profile %", "value": _r(r.get("savings_speed_profile_pct"))},
+            {"what": "… of which route %", "value": _r(r.get("savings_route_pct"))},
+            {"what": "constant-speed baseline fuel t", "value": _r(r.get("honest_baseline_fuel_t"))},
+            {"what": "engine-change limits cost t", "value": _r(r.get("limits_fuel_t"), 2)},
+            {"what": "savings % vs discrete-rpm baseline (arrives early; overstated)",
+             "value": _r(r.get("savings_vs_discrete_pct"))}]
     return rows
 
 
@@ -240,8 +246,19 @@ def _link(where: str) -> str:
     return where if "://" in where else f"file://{where}"
 
 
+def headline(r: dict) -> str:
+    """The run's savings in one sentence: the honest figure, split."""
+    total = _r(r.get("savings_total_pct"))
+    if total is None:
+        return "Savings: no voyage of this run has a constant-speed baseline to compare with."
+    return (f"Savings {total} % against sailing the base route at the one constant speed that arrives at the RTA "
+            f"({r.get('n_compared')} voyages, fuel-weighted): speed profile {_r(r.get('savings_speed_profile_pct'))} %, "
+            f"route {_r(r.get('savings_route_pct'))} %. The engine-change limits cost "
+            f"{_r(r.get('limits_fuel_t'), 2)} t.")
+
+
 def run_markdown(r: dict) -> str:
-    lines = [f"# Route run {r.get('run_id')} · cycle {r.get('cycle')}", "", "| | |", "|---|---|"]
+    lines = [f"# Route run {r.get('run_id')} · cycle {r.get('cycle')}", "", headline(r), "", "| | |", "|---|---|"]
     lines += [f"| {row['what']} | {row['value']} |" for row in summary_table(r)]
     if r.get("exports_dir"):
         lines += ["", f"Exports: `{r['exports_dir']}`"]

@@ -33,7 +33,7 @@ def failed_row(run_id: str, voyage: dict, cycle, reason: str, status: str = "fai
     row = {k: None for k in ROUTE_COLUMNS}
     row.update(run_id=run_id, voyage_id=str(voyage.get("voyage_id")), imo=voyage.get("imo"), status=status, reason=reason,
                depart_utc=voyage.get("depart_utc"), rta_utc=voyage.get("rta_utc"),
-               cycle=pd.Timestamp(cycle) if cycle is not None else None, n_legs=0, beyond_forecast=0)
+               cycle=pd.Timestamp(cycle) if cycle is not None else None, n_legs=0, n_legs_beyond_forecast=0)
     return row
 
 

@@ -4,10 +4,13 @@ Layout of a written file (version 1.1 unless asked otherwise; 1.0 and 1.2 are al
 
 - `routeInfo`: routeName (voyage id and ports, file-name safe; `rtz_file_name` gives the
   matching `<routeName>.rtz`), vesselName (IMO when the name is missing), vesselIMO,
-  vesselVoyage, optimizationMethod (solver), routeStatus; voyage totals in a jitroute extension.
+  vesselVoyage, optimizationMethod (solver), routeStatus; voyage totals, the savings against the
+  constant-speed baseline (total, speed profile, route) and what the engine-change limits cost in a jitroute
+  extension.
 - `waypoints`: ids 1..n+1 in order, positions to 6 decimals (longitude −180..<180). As RTZ
   keeps a leg's data on the waypoint the leg leads *to*, waypoint 1 has no `leg` and every later
-  waypoint carries `geometryType="Orthodrome"` (our legs are great circles).
+  waypoint carries `geometryType="Orthodrome"` (our legs are great circles) and the leg's planned speed (SOG,
+  knots) as both `speedMin` and `speedMax`.
 - `schedules`: one calculated schedule. Waypoint 1 has the ETD; waypoint k > 1 has the ETA (and
   ETD when not last), the planned SOG of the leg leading to it as `speed`, its rpm rounded in
   `rpm`, leg fuel in tonnes, the wind/current met, and the unrounded rpm, STW, Hs… in a jitroute
@@ -126,7 +129,11 @@ def route_to_rtz(route: dict, legs: list[dict], version: str = "1.1") -> bytes:
                departUtc=iso_utc(route.get("depart_utc")), etaUtc=iso_utc(route.get("eta_utc")),
                rtaUtc=iso_utc(route.get("rta_utc")), hours=_num(route.get("hours"), 3),
                fuelT=_num(route.get("fuel_t"), 3), baselineFuelT=_num(route.get("baseline_fuel_t"), 3),
-               savingsPct=_num(route.get("savings_pct"), 2), distanceNm=_num(route.get("distance_nm"), 2))
+               savingsPct=_num(route.get("savings_pct"), 2), distanceNm=_num(route.get("distance_nm"), 2),
+               savingsTotalPct=_num(route.get("savings_total_pct"), 2),
+               savingsSpeedProfilePct=_num(route.get("savings_speed_profile_pct"), 2),
+               savingsRoutePct=_num(route.get("savings_route_pct"), 2),
+               minEngineHoldH=_num(route.get("min_engine_hold_h"), 2), limitsFuelT=_num(route.get("limits_fuel_t"), 3))
 
     lat, lon = waypoints_deg(legs)
     names = waypoint_names(route, len(lat))
@@ -134,8 +141,9 @@ def route_to_rtz(route: dict, legs: list[dict], version: str = "1.1") -> bytes:
     for i, (la, lo, name) in enumerate(zip(lat, lon, names)):
         wp = etree.SubElement(wps, f"{{{ns}}}waypoint", id=str(i + 1), revision="0", name=name)
         etree.SubElement(wp, f"{{{ns}}}position", lat=f"{la:.6f}", lon=_lon(lo))
-        if i > 0:
-            etree.SubElement(wp, f"{{{ns}}}leg", geometryType="Orthodrome")
+        if i > 0:  # the planned speed of the leg as both its limits: the plan holds one speed per leg
+            speed = _speed(legs[i - 1].get("sog_kn"))
+            _set(etree.SubElement(wp, f"{{{ns}}}leg", geometryType="Orthodrome"), speedMin=speed, speedMax=speed)
 
     schedules = etree.SubElement(root, f"{{{ns}}}schedules")
     schedule = etree.SubElement(schedules, f"{{{ns}}}schedule", id="1",

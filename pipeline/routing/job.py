@@ -14,6 +14,7 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing import weather_field as wf
+from pipeline.routing.engine_limits import EngineLimits
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 from pipeline.routing.search_space import SearchSpace
@@ -32,6 +33,14 @@ class RoutingOptions:
     n_lines: int | None = None
     n_points: int = 21
     d_point_nm: float | None = None
+    land_clearance_nm: float = 2.0
+    port_approach_nm: float = 10.0
+    min_engine_hold_h: float = 12.0  # engine-change limits (pipeline.routing.engine_limits)
+    engine_change_cost_t: float = 0.05
+
+    @property
+    def limits(self) -> EngineLimits:
+        return EngineLimits(min_hold_h=float(self.min_engine_hold_h), change_cost_t=float(self.engine_change_cost_t))
 
     @classmethod
     def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
@@ -68,7 +77,8 @@ def routing_problem(job: RouteJob) -> RoutingProblem:
     model = PerformanceModel.from_json(job.model)
     return problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
                                window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
-                               d_point_nm=o.d_point_nm)
+                               d_point_nm=o.d_point_nm, land_clearance_nm=o.land_clearance_nm,
+                               port_approach_nm=o.port_approach_nm)
 
 
 def calm_weather(problem: RoutingProblem) -> wf.WeatherField:
@@ -89,4 +99,4 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
     space = problem.search_space()
     weather = calm_weather(problem) if weather_for is None else weather_for(problem, space)
     o = job.options
-    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space), weather
+    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space, limits=o.limits, savings=True), weather

@@ -1,38 +1,285 @@
-"""Land/sea from the `global-land-mask` grid (GEBCO-derived, 1/120° ≈ 0.5 NM), usable in numba.
+"""Land, sea and distance to land from the `global-land-mask` grid (GEBCO-derived, 1/120° ≈ 0.5 NM), usable in numba.
 
-`sea_mask()` returns the package's boolean grid (True = ocean, row 0 at 90° N, column 0 at
-180° W); `is_sea_nb` looks a point up in it from compiled code.
+The package's grid (21600 × 43200 booleans, True = ocean, row 0 at 90° N, column 0 at 180° W) takes 933 MB
+decompressed and is never held whole: `land_grid()` streams its npz once per process, 120 rows at a time,
+into a `LandGrid` of about 15 MB:
+
+- 1° × 1° tiles (120 × 120 cells), each all sea, all land or mixed; only mixed tiles keep their cells (packed
+  bits), so `is_sea` is exact at the grid's resolution;
+- for tiles with land in them or next to them, a lower bound of the distance to land per 1/12° block
+  (10 × 10 cells, ≈ 5 NM; 0.1 NM units); tiles farther out get the bound one tile of open water gives
+  (up to `BOUND_CAP_NM`).
+
+Distance to land (NM) is the distance from a point to the nearest land cell (cells as boxes, in the local flat
+metric at the point: a cell is 0.5 NM north–south and 0.5·cos(lat) NM east–west): 0 on land, exact up to the
+`limit_nm` asked for (the cells within it are scanned, where the block bound says land may be that near), and
+otherwise a value ≥ `limit_nm` that is a true lower bound. Sphere tracing along a leg therefore never steps
+over land: from a point at distance d, every point within d − c of it is at least c from land.
 """
 
 from __future__ import annotations
+
+import importlib.metadata
+import importlib.util
+import math
+import threading
+import zipfile
+from pathlib import Path
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 MASK_RES_DEG = 1.0 / 120.0
+CELL_NM = 0.5  # north–south size of a cell (60 NM per degree / 120)
+TILE = 120  # cells per 1° tile side
+BLOCK = 10  # cells per bound block side (1/12°)
+N_ROWS, N_COLS = 180 * TILE, 360 * TILE
+SEA_TILE, LAND_TILE = -1, -2  # LandGrid.slot for tiles without cells kept
+BOUND_UNIT_NM = 0.1
+BOUND_CAP_NM = 25.0
+_MASK_FILE = "globe_combined_mask_compressed.npz"
 
 
-def sea_mask() -> np.ndarray:
-    from global_land_mask import globe
+class LandGrid(NamedTuple):
+    """The land structure as kernels see it (see the module docstring)."""
 
-    return globe._mask
+    slot: np.ndarray  # (180, 360) int32: SEA_TILE, LAND_TILE, or the tile's index into `bits`
+    bits: np.ndarray  # (n_mixed, 120, 15) uint8: the mixed tiles' cells, packed big-endian, 1 = sea
+    near: np.ndarray  # (180, 360) int32: the tile's index into `bound`, SEA_TILE (use `far_nm` of its row), LAND_TILE
+    bound: np.ndarray  # (n_near, 12, 12) uint8: lower bound of the distance to land per block, BOUND_UNIT_NM
+    far_nm: np.ndarray  # (180,) float64: lower bound of the distance to land in a tile with open water all round
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(a.nbytes for a in self))
+
+
+def _mask_path() -> Path:
+    spec = importlib.util.find_spec("global_land_mask")  # finds the package without importing it (its import loads 933 MB)
+    if spec is None or not spec.submodule_search_locations:
+        raise RuntimeError("the global-land-mask package is not installed; pip install global-land-mask")
+    return Path(list(spec.submodule_search_locations)[0]) / _MASK_FILE
+
+
+def _tile_rows(path: Path):
+    """Yield the mask 120 rows (one tile row) at a time as (120, 43200) bool, decompressing as it goes."""
+    with zipfile.ZipFile(path) as z, z.open("mask.npy") as f:
+        version = np.lib.format.read_magic(f)
+        shape, fortran, dtype = (np.lib.format.read_array_header_1_0(f) if version == (1, 0)
+                                 else np.lib.format.read_array_header_2_0(f))
+        if tuple(shape) != (N_ROWS, N_COLS) or fortran or np.dtype(dtype) != np.bool_:
+            raise RuntimeError(f"{path}: expected a C-ordered bool {N_ROWS}×{N_COLS} mask, found {dtype} {shape}")
+        for _ in range(N_ROWS // TILE):
+            buf = f.read(TILE * N_COLS)
+            if len(buf) != TILE * N_COLS:
+                raise RuntimeError(f"{path}: the mask ends early")
+            yield np.frombuffer(buf, dtype=np.bool_).reshape(TILE, N_COLS)
+
+
+def _cos_poleward(row: int) -> float:
+    """cos of the poleward edge latitude of tile row `row` (row 0: 90°..89° N)."""
+    return math.cos(math.radians(max(abs(90.0 - row), abs(89.0 - row))))
 
 
 @numba.njit(cache=True)
-def is_sea_nb(mask, lat, lon):
-    i = int((90.0 - lat) / MASK_RES_DEG)
-    lon = ((lon + 180.0) % 360.0) - 180.0
-    j = int((lon + 180.0) / MASK_RES_DEG)
-    i = min(max(i, 0), mask.shape[0] - 1)
-    j = min(max(j, 0), mask.shape[1] - 1)
-    return mask[i, j]
+def _classify_tile_row(rows, tile_sea, land_blocks):
+    """One tile row of cells (120, 43200; 1 = sea) → sea cells per tile (360,) and land per block (12, 4320)."""
+    tile_sea[:] = 0
+    land_blocks[:] = False
+    for i in range(rows.shape[0]):
+        for j in range(rows.shape[1]):
+            if rows[i, j]:
+                tile_sea[j // TILE] += 1
+            else:
+                land_blocks[i // BLOCK, j // BLOCK] = True
+
+
+def build_land_grid(path: Path | None = None) -> LandGrid:
+    """Stream the package's mask into a LandGrid (a few seconds; peak about 30 MB above the result)."""
+    from scipy.ndimage import binary_dilation, distance_transform_edt
+
+    path = _mask_path() if path is None else Path(path)
+    nb = TILE // BLOCK
+    slot = np.full((180, 360), SEA_TILE, np.int32)
+    bits, land_blocks = [], np.zeros((180 * nb, 360 * nb), bool)
+    tile_sea = np.empty(360, np.int64)
+    for r, rows in enumerate(_tile_rows(path)):
+        _classify_tile_row(rows.view(np.uint8), tile_sea, land_blocks[r * nb:(r + 1) * nb])
+        slot[r, tile_sea == 0] = LAND_TILE
+        mixed = np.flatnonzero((tile_sea > 0) & (tile_sea < TILE * TILE))
+        if len(mixed):
+            slot[r, mixed] = np.arange(len(mixed), dtype=np.int32) + sum(len(b) for b in bits)
+            bits.append(np.packbits(rows.reshape(TILE, 360, TILE)[:, mixed, :], axis=-1).transpose(1, 0, 2))
+    bits = np.concatenate(bits) if bits else np.zeros((0, TILE, TILE // 8), np.uint8)
+    far_nm = np.array([min(BOUND_CAP_NM, 60.0 * _cos_poleward(r)) for r in range(180)])
+    # tiles that need a bound per block: those with land in them or in one of their 8 neighbours
+    not_sea = slot != SEA_TILE
+    near_mask = ~(slot == LAND_TILE) & binary_dilation(np.pad(not_sea, ((1, 1), (0, 0)), mode="constant")[:, list(range(-1, 360)) + [0]],
+                                structure=np.ones((3, 3), bool))[1:-1, 1:-1]
+    near = np.full((180, 360), -1, np.int32)
+    near[near_mask] = np.arange(int(near_mask.sum()), dtype=np.int32)
+    near[slot == LAND_TILE] = LAND_TILE
+    bound = np.zeros((int(near_mask.sum()), nb, nb), np.uint8)
+    # land grown by one block, then the EDT of block centres gives the gap between blocks (a lower bound of any
+    # point-to-land distance); east–west spacing at the tile's poleward edge keeps it a lower bound
+    grown = binary_dilation(np.concatenate([land_blocks[:, -nb:], land_blocks, land_blocks[:, :nb]], axis=1),
+                            structure=np.ones((3, 3), bool))
+    for r in range(180):
+        cols = np.flatnonzero(near_mask[r])
+        if not len(cols):
+            continue
+        lo, hi = max(0, (r - 1) * nb), min(180 * nb, (r + 2) * nb)
+        band = grown[lo:hi]
+        if not (~band).any():
+            continue  # bound stays 0: land everywhere
+        d_nm = distance_transform_edt(~band, sampling=(BLOCK * CELL_NM, BLOCK * CELL_NM * _cos_poleward(r)))
+        top = r * nb - lo
+        d_nm = np.minimum(d_nm[top:top + nb, nb:-nb], far_nm[r])  # land beyond the band is a tile away
+        q = np.floor(d_nm / BOUND_UNIT_NM).astype(np.uint8)
+        bound[near[r, cols]] = q.reshape(nb, 360, nb).transpose(1, 0, 2)[cols]
+    return LandGrid(slot=slot, bits=bits, near=near, bound=bound, far_nm=far_nm)
+
+
+_GRID: LandGrid | None = None
+_GRID_LOCK = threading.Lock()  # a worker's threads build it once between them
+_CACHE_NAME = "land_grid_v1.npz"
+
+
+def land_grid(cache_dir: Path | None = None) -> LandGrid:
+    """The process's LandGrid, built on first use. With `cache_dir` (a folder under the data root or a temporary
+    folder) it is read from `land_grid_v1.npz` there when that was made from the same package version and mask
+    file, and written there when missing."""
+    if _GRID is not None and cache_dir is None:
+        return _GRID
+    with _GRID_LOCK:
+        return _load_or_build(cache_dir)
+
+
+def _load_or_build(cache_dir: Path | None) -> LandGrid:
+    global _GRID
+    mask_path = _mask_path()
+    key = f"global-land-mask {importlib.metadata.version('global-land-mask')}, {mask_path.stat().st_size} bytes"
+    cached = Path(cache_dir) / _CACHE_NAME if cache_dir is not None else None
+    if _GRID is None and cached is not None and cached.exists():
+        with np.load(cached) as z:
+            if str(z["key"]) == key:
+                _GRID = LandGrid(**{k: z[k] for k in LandGrid._fields})
+    if _GRID is None:
+        _GRID = build_land_grid(mask_path)
+    if cached is not None and not cached.exists():
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cached.with_suffix(".tmp.npz")
+        np.savez_compressed(tmp, key=key, **_GRID._asdict())
+        tmp.replace(cached)
+    return _GRID
+
+
+@numba.njit(cache=True)
+def cell_of_nb(lat, lon):
+    """(row, column) of the cell holding (lat, lon): row 0 at 90° N, column 0 at 180° W."""
+    i = int((90.0 - lat) * 120.0)
+    i = min(max(i, 0), N_ROWS - 1)
+    j = int((((lon + 180.0) % 360.0)) * 120.0) % N_COLS
+    return i, j
+
+
+@numba.njit(cache=True)
+def cell_is_sea_nb(grid, i, j):
+    j = j % N_COLS
+    s = grid.slot[i // TILE, j // TILE]
+    if s == SEA_TILE:
+        return True
+    if s == LAND_TILE:
+        return False
+    jj = j % TILE
+    return (grid.bits[s, i % TILE, jj >> 3] >> (7 - (jj & 7))) & 1 == 1
+
+
+@numba.njit(cache=True)
+def is_sea_nb(grid, lat, lon):
+    i, j = cell_of_nb(lat, lon)
+    return cell_is_sea_nb(grid, i, j)
+
+
+@numba.njit(cache=True)
+def _bound_nm(grid, i, j):
+    r, c = i // TILE, j // TILE
+    n = grid.near[r, c]
+    if n == SEA_TILE:
+        return grid.far_nm[r]
+    if n == LAND_TILE:
+        return 0.0
+    return grid.bound[n, (i % TILE) // BLOCK, (j % TILE) // BLOCK] * BOUND_UNIT_NM
+
+
+@numba.njit(cache=True)
+def _row_distance_nm(grid, ii, jx, x, gy, ew_nm, nj, best):
+    """Least distance to a land cell of row `ii`, scanning outwards from column `jx` while it can beat `best`."""
+    for side in (1, -1):
+        dj = 0 if side == 1 else 1
+        while dj <= nj:
+            jj = jx + side * dj
+            gx = max(0.0, jj - x, x - (jj + 1)) * ew_nm
+            if gx >= best:
+                break  # farther out only gets farther
+            jw = jj % N_COLS
+            if grid.slot[ii // TILE, jw // TILE] == SEA_TILE:  # on to the next tile
+                dj += TILE - jw % TILE if side == 1 else jw % TILE + 1
+                continue
+            if not cell_is_sea_nb(grid, ii, jw):
+                best = min(best, math.sqrt(gx * gx + gy * gy))
+            dj += 1
+    return best
+
+
+@numba.njit(cache=True)
+def distance_to_land_nb(grid, lat, lon, limit_nm):
+    """Distance (NM) from (lat, lon) to the nearest land cell: exact below `limit_nm`, else a lower bound ≥ it."""
+    i, j = cell_of_nb(lat, lon)
+    bound = _bound_nm(grid, i, j)
+    if bound >= limit_nm:
+        return bound
+    y = (90.0 - lat) * 120.0  # in cells, continuous
+    x = (((lon + 180.0) % 360.0)) * 120.0
+    ew_nm = CELL_NM * max(math.cos(math.radians(lat)), 1e-3)  # east–west size of a cell here
+    ni = int(limit_nm / CELL_NM) + 1
+    nj = min(int(limit_nm / ew_nm) + 1, N_COLS // 2)
+    best = limit_nm
+    for k in range(2 * ni + 1):  # rows 0, +1, -1, +2, … away, so near land cuts the scan short
+        ii = i + ((k + 1) // 2 if k % 2 else -(k // 2))
+        if ii < 0 or ii >= N_ROWS:
+            continue
+        gy = max(0.0, ii - y, y - (ii + 1)) * CELL_NM
+        if gy < best:
+            best = _row_distance_nm(grid, ii, int(x), x, gy, ew_nm, nj, best)
+    return best
+
+
+@numba.njit(cache=True)
+def _distances(grid, lat, lon, limit_nm, out):
+    for k in range(lat.size):
+        out[k] = distance_to_land_nb(grid, lat[k], lon[k], limit_nm)
+
+
+@numba.njit(cache=True)
+def _sea(grid, lat, lon, out):
+    for k in range(lat.size):
+        out[k] = is_sea_nb(grid, lat[k], lon[k])
+
+
+def distance_to_land_nm(lat, lon, limit_nm: float = BOUND_CAP_NM) -> np.ndarray:
+    """Vectorised distance (NM) to the nearest land cell; values ≥ `limit_nm` mean "at least that far"."""
+    lat, lon = np.broadcast_arrays(np.asarray(lat, np.float64), np.asarray(lon, np.float64))
+    out = np.empty(lat.shape)
+    _distances(land_grid(), np.ascontiguousarray(lat).ravel(), np.ascontiguousarray(lon).ravel(), float(limit_nm),
+               out.reshape(-1))
+    return out
 
 
 def is_sea(lat, lon) -> np.ndarray:
     """Vectorised: True where (lat, lon) is open water."""
-    lat = np.asarray(lat, dtype=np.float64)
-    lon = np.asarray(lon, dtype=np.float64)
-    m = sea_mask()
-    i = np.clip(((90.0 - lat) / MASK_RES_DEG).astype(np.int64), 0, m.shape[0] - 1)
-    j = np.clip((((lon + 180.0) % 360.0) / MASK_RES_DEG).astype(np.int64), 0, m.shape[1] - 1)
-    return m[i, j]
+    lat, lon = np.broadcast_arrays(np.asarray(lat, np.float64), np.asarray(lon, np.float64))
+    out = np.empty(lat.shape, bool)
+    _sea(land_grid(), np.ascontiguousarray(lat).ravel(), np.ascontiguousarray(lon).ravel(), out.reshape(-1))
+    return out

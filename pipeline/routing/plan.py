@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -11,7 +12,14 @@ import pandas as pd
 from pipeline.routing import geodesy as geo
 from pipeline.routing import leg_kernel as lk
 
+if TYPE_CHECKING:
+    from pipeline.routing.engine_limits import EngineLimits
+    from pipeline.routing.savings import SavingsSplit
+
 STATUSES = ("ok", "late", "infeasible", "failed")
+SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_baseline_hours", "profile_fuel_t",
+                   "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct")
+LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
 
 
 def _utc(t) -> pd.Timestamp | None:
@@ -37,6 +45,13 @@ class Plan:
     n_evals: int = 0
     model_version: int | None = None
     cycle: np.datetime64 | None = None
+    min_land_clearance_nm: float = math.nan  # least distance to land outside the port approaches (0.1 NM sampling)
+    # engine-change limits (engine_limits.py): the limits the legs obey (None: none), and the fuel (t) of the
+    # solver's plan without them, for what the limits cost
+    limits: "EngineLimits | None" = None
+    unlimited_fuel_t: float = math.nan
+    # the savings against the honest constant-rpm baseline, split (savings.py; None: not computed)
+    savings: "SavingsSplit | None" = None
 
     @property
     def hours(self) -> float:
@@ -76,7 +91,18 @@ class Plan:
         return ", ".join(flags) or None
 
     @property
+    def n_engine_changes(self) -> int:
+        return sum(a["rpm"] != b["rpm"] for a, b in zip(self.legs, self.legs[1:]))
+
+    @property
+    def limits_fuel_t(self) -> float:
+        """Fuel the engine-change limits cost: this plan's minus the solver's plan without them (negative when the
+        exact post-pass finds a better engine plan than a heuristic solver did, despite the limits)."""
+        return self.fuel_t - self.unlimited_fuel_t if self.limits is not None and self.legs else math.nan
+
+    @property
     def savings_pct(self) -> float:
+        """Saving against the discrete-rpm baseline (`baseline`), which usually arrives early; see `savings`."""
         b = self.baseline
         if b is None or not b.legs or not self.legs or not (b.fuel_t > 0):
             return math.nan
@@ -100,9 +126,28 @@ class Plan:
             "savings_pct": self.savings_pct, "distance_nm": self.distance_nm,
             "cost": self.cost if math.isfinite(self.cost) else None, "model_version": self.model_version,
             "cycle": _utc(self.cycle), "seed": self.seed, "runtime_s": self.runtime_s, "n_legs": len(self.legs),
-            "beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
+            "n_legs_beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
             "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
+            "min_land_clearance_nm": self.min_land_clearance_nm,
+            **self._savings_row(), **self._limits_row(),
         }
+
+    def _savings_row(self) -> dict:
+        s = self.savings
+        if s is None:
+            return dict.fromkeys(SAVINGS_COLUMNS)
+        return {"honest_baseline_rpm": s.baseline_rpm, "honest_baseline_fuel_t": s.baseline_fuel_t,
+                "honest_baseline_hours": s.baseline_hours, "profile_fuel_t": s.profile_fuel_t,
+                "savings_total_pct": s.total_pct, "savings_speed_profile_pct": s.speed_profile_pct,
+                "savings_route_pct": s.route_pct}
+
+    def _limits_row(self) -> dict:
+        lim = self.limits
+        return {"min_engine_hold_h": lim.min_hold_h if lim else None,
+                "engine_change_cost_t": lim.change_cost_t if lim else None,
+                "n_engine_changes": self.n_engine_changes if self.legs else None,
+                "unlimited_fuel_t": self.unlimited_fuel_t if lim and self.legs else None,
+                "limits_fuel_t": self.limits_fuel_t if lim and self.legs else None}
 
     def leg_rows(self, run_id: str | None = None) -> list[dict]:
         return [{"run_id": run_id, "voyage_id": self.voyage_id, **leg} for leg in self.legs]
@@ -121,8 +166,8 @@ class Plan:
             return v
         row = self.route_row()
         keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
-                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "beyond_forecast",
-                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle")
+                "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "n_legs_beyond_forecast",
+                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm") + SAVINGS_COLUMNS + LIMITS_COLUMNS
         out = {k: clean(row[k]) for k in keys}
         out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
         return out

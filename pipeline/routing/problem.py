@@ -76,6 +76,8 @@ class RoutingProblem:
     lat_limits: tuple[float, float] = (-75.0, 75.0)
     limit_lines: tuple = field(default=())
     max_step_h: float = 1.0
+    land_clearance_nm: float = 2.0  # legs keep this far from land, except within port_approach_nm of a port
+    port_approach_nm: float = 10.0
 
     def __post_init__(self):
         object.__setattr__(self, "depart_utc", np.datetime64(self.depart_utc, "s"))
@@ -101,6 +103,7 @@ class RoutingProblem:
         return build_search_space(self.dep, self.arr, n_lines=self.n_lines, n_points=self.n_points,
                                   d_point_nm=self.d_point_nm, base=self.base, max_shift=self.max_shift,
                                   lat_limits=self.lat_limits, limit_lines=list(self.limit_lines),
+                                  clearance_nm=self.land_clearance_nm, approach_nm=self.port_approach_nm,
                                   dep_name=f"voyage {self.voyage_id}: {_place('departure', self.dep_name)}",
                                   arr_name=f"voyage {self.voyage_id}: {_place('destination', self.arr_name)}")
 

@@ -8,6 +8,7 @@ allowed setting, that arrives at the RTA in the same weather and model (the slow
 that arrives early; the fastest, late, when none arrives in time). Against its fuel F_b:
 
     speed profile  (F_b − F_p) / F_b   F_p: the best engine plan over the allowed settings on the base route
+                                       (under the same engine-change limits as the plan, when it has them)
     route          (F_p − F) / F_b     F: the plan's fuel
     total          (F_b − F) / F_b     = speed profile + route
 """
@@ -16,14 +17,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.astar import best_engine_plan
 from pipeline.routing.baseline import evaluate, shortest_route
-from pipeline.routing.plan import Plan
+from pipeline.routing.engine_limits import EngineLimits, limited_plan
 from pipeline.routing.problem import Instance
+
+if TYPE_CHECKING:
+    from pipeline.routing.plan import Plan
 
 
 @dataclass(frozen=True)
@@ -70,23 +75,33 @@ def constant_rpm_for_rta(inst: Instance, nodes: np.ndarray, tol_h: float = 1e-3)
     return hi, h_hi, f_hi
 
 
-def savings_split(problem, weather, plan: Plan, space=None) -> SavingsSplit | None:
-    """The plan's savings against the honest baseline of its voyage, split (None: no baseline can be sailed)."""
-    space = space if space is not None else problem.search_space()
-    inst = Instance.build(problem, space, weather)
-    nodes = shortest_route(space)
-    if nodes is None or not plan.legs:
+def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float,
+             limits: EngineLimits | None = None) -> SavingsSplit | None:
+    """The split for a plan burning `plan_fuel_t` in the instance whose base route is `base_nodes` (None: no
+    baseline can be sailed). With engine-change limits the speed-profile plan obeys them too (engine_limits)."""
+    if base_nodes is None or not math.isfinite(plan_fuel_t):
         return None
-    base = constant_rpm_for_rta(inst, nodes)
+    base = constant_rpm_for_rta(inst, base_nodes)
     if base is None:
         return None
     rpm, hours, f_b = base
-    if plan.baseline is not None and plan.baseline.legs:
-        inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it (the thesis objective's scale)
-    rpm_idx, cost, _ = best_engine_plan(inst, nodes)
+    if limits is not None and limits.active:
+        best = limited_plan(inst, base_nodes, limits)
+        rpm_idx, cost = best.rpm_idx, best.cost
+    else:
+        rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
     if not math.isfinite(cost):
         return None
-    f_p = evaluate(inst, nodes, rpm_idx)[2]
-    f = plan.fuel_t
+    f_p = evaluate(inst, base_nodes, rpm_idx)[2]
+    f = plan_fuel_t
     return SavingsSplit(rpm, f_b, hours, f_p, f, 100.0 * (f_b - f_p) / f_b, 100.0 * (f_p - f) / f_b,
                         100.0 * (f_b - f) / f_b)
+
+
+def savings_split(problem, weather, plan: Plan, space=None, limits: EngineLimits | None = None) -> SavingsSplit | None:
+    """The plan's savings against the honest baseline of its voyage, split (None: no baseline can be sailed)."""
+    space = space if space is not None else problem.search_space()
+    inst = Instance.build(problem, space, weather)
+    if plan.baseline is not None and plan.baseline.legs:
+        inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it (the thesis objective's scale)
+    return split_of(inst, shortest_route(space), plan.fuel_t if plan.legs else math.nan, limits)

@@ -4,8 +4,9 @@ Line 0 is the departure and line L+1 the arrival (only their centre node is used
 1..L are spread evenly along the base route (great circle by default, or rhumb), each
 perpendicular to it, with nodes D_point NM apart (the centre node on the base route). A route
 is one node per line. An edge (line i, node a) → (line i+1, node b) exists when |a − b| ≤
-`max_shift` and the straight (great-circle) leg stays at sea (land mask sampled every
-`land_step_nm`), inside the lat/lon limits, and crosses no limit line.
+`max_shift` and the straight (great-circle) leg keeps its clearance from land (clearance.py: `clearance_nm`
+outside the port approaches, at sea inside them, checked at ≤ 0.1 NM), stays inside the latitude limits, and
+crosses no limit line. Nodes are held to the same clearance.
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.land import is_sea, is_sea_nb, sea_mask
+from pipeline.routing.clearance import (DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, Clearance, clearance, leg_is_clear_nb,
+                                        point_is_clear_nb)
+from pipeline.routing.land import is_sea, land_grid
 
 
 class VoyageGeometryError(ValueError):
@@ -45,6 +48,7 @@ class SearchSpace:
     base: str
     max_shift: int
     base_distance_nm: float
+    clearance: Clearance | None = None  # None: land was not checked
 
     @property
     def graph(self) -> Graph:
@@ -93,32 +97,32 @@ def _segments_cross(ax, ay, bx, by, cx, cy, dx, dy) -> bool:
 
 
 @numba.njit(cache=True)
-def _edges_at_sea(mask, lat, lon, node_ok, max_shift, step_nm, lat_lo, lat_hi, out):
+def _nodes_clear(grid, rule, lat, lon, out):
+    for i in range(lat.shape[0]):
+        for j in range(lat.shape[1]):
+            out[i, j] = out[i, j] and point_is_clear_nb(grid, rule, lat[i, j], lon[i, j])
+
+
+@numba.njit(cache=True)
+def _edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
     L2, P = lat.shape
     for i in range(L2 - 1):
         for a in range(P):
             if not node_ok[i, a]:
                 continue
             for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
-                if not node_ok[i + 1, b]:
-                    continue
-                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])
-                n = int(d / step_nm) + 1
-                ok = True
-                for k in range(1, n):
-                    plat, plon = geo.gc_interpolate(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], k / n)
-                    if plat < lat_lo or plat > lat_hi or not is_sea_nb(mask, plat, plon):
-                        ok = False
-                        break
-                out[i, a, b] = ok
+                if node_ok[i + 1, b]:
+                    out[i, a, b] = leg_is_clear_nb(grid, rule, lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b],
+                                                   lat_lo, lat_hi)
 
 
 def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_lines: int | None = None,
                        n_points: int = 21, d_point_nm: float | None = None, base: str = "gc", max_shift: int | None = None,
                        lat_limits: tuple[float, float] = (-75.0, 75.0), limit_lines: list[list[tuple[float, float]]] | None = None,
-                       land_step_nm: float = 1.0, check_land: bool = True, dep_name: str = "departure",
-                       arr_name: str = "destination") -> SearchSpace:
-    """Lay out the node lines for a voyage from `dep` to `arr` ((lat, lon) degrees)."""
+                       clearance_nm: float = DEFAULT_CLEARANCE_NM, approach_nm: float = DEFAULT_APPROACH_NM,
+                       check_land: bool = True, dep_name: str = "departure", arr_name: str = "destination") -> SearchSpace:
+    """Lay out the node lines for a voyage from `dep` to `arr` ((lat, lon) degrees); legs and nodes keep
+    `clearance_nm` from land outside `approach_nm` of either port (see clearance.py)."""
     if base not in ("gc", "rhumb"):
         raise ValueError(f"base route must be 'gc' or 'rhumb', not {base!r}")
     for name, (la, lo) in ((dep_name, dep), (arr_name, arr)):
@@ -161,11 +165,12 @@ def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_
                 side = course + (90.0 if off > 0 else -90.0)
                 lat[i, j], lon[i, j] = geo.destination(blat, blon, side, abs(off))
         node_ok[i] = (lat[i] >= lat_limits[0]) & (lat[i] <= lat_limits[1])
-        if check_land:
-            node_ok[i] &= is_sea(lat[i], lon[i])
+    rule = clearance(dep, arr, clearance_nm, approach_nm) if check_land else None
     edge_ok = np.zeros((L + 1, P, P), dtype=bool)
     if check_land:
-        _edges_at_sea(sea_mask(), lat, lon, node_ok, ms, land_step_nm, lat_limits[0], lat_limits[1], edge_ok)
+        grid = land_grid()
+        _nodes_clear(grid, rule, lat[1:-1], lon[1:-1], node_ok[1:-1])  # the ports were checked above: at sea
+        _edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
     else:
         for i in range(L + 1):
             for a in range(P):
@@ -174,7 +179,7 @@ def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_
     for line in limit_lines or []:
         _forbid_crossing(lat, lon, edge_ok, line)
     return SearchSpace(lat=lat, lon=lon, node_ok=node_ok, edge_ok=edge_ok, d_point_nm=float(dp), base=base,
-                       max_shift=int(ms), base_distance_nm=float(dist))
+                       max_shift=int(ms), base_distance_nm=float(dist), clearance=rule)
 
 
 def _forbid_crossing(lat, lon, edge_ok, polyline):

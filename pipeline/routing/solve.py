@@ -3,7 +3,10 @@
 Solvers (the registry in solvers.py): `bfoa` (default, improved BFOA), `dp` (dynamic programming on the
 same graph), `astar` (A* with the α sweep), `gc` and `rhumb` (baselines: the shortest sea route along the
 great circle / rhumb-line graph at the slowest constant rpm that meets the RTA, else the fastest). Every
-plan carries the great-circle baseline for its savings %.
+plan carries that discrete-rpm baseline, and its savings against the honest constant-rpm baseline split into
+speed profile and route (savings.py). With engine-change limits the solver's route is re-planned so every
+engine setting is held (engine_limits.py); the plan keeps the solver's fuel without the limits for what
+they cost.
 """
 
 from __future__ import annotations
@@ -16,9 +19,12 @@ import numpy as np
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
+from pipeline.routing.clearance import least_clearance_nm
 from pipeline.routing.dp import DpOptions
+from pipeline.routing.engine_limits import EngineLimits, limited_plan
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
+from pipeline.routing.savings import split_of
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
 from pipeline.routing.solvers import SOLVERS as REGISTRY
 from pipeline.routing.weather_field import WeatherField
@@ -37,6 +43,8 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
         legs, code, bad_leg = legs_of_route(inst, nodes, rpm_idx)
         if code == lk.OK:
             plan.legs = legs
+            if inst.space.clearance is not None:
+                plan.min_land_clearance_nm = least_clearance_nm(plan.waypoints, inst.space.clearance)
             plan.cost, _, _, _ = evaluate(inst, nodes, rpm_idx)
             late_h = plan.hours - p.t_req_h
             if late_h > 1e-6:
@@ -92,12 +100,32 @@ def _options(solver: str, options, params: BfoaParams | None, bucket_h: float | 
     return options
 
 
+def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
+    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan); the
+    solver's plan, without limits, is kept as `unlimited_fuel_t` for what the limits cost."""
+    held = limited_plan(inst, nodes, limits)
+    if not np.isfinite(held.cost):
+        return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
+    limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
+                    n_evals=plan.n_evals + held.legs_sailed)
+    limited.cost = held.cost
+    limited.limits, limited.unlimited_fuel_t = limits, plan.fuel_t
+    if limited.status == "late" and plan.status == "ok":
+        limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
+                          f"{limited.hours - inst.problem.t_req_h:.1f} h late (without the limits on time, "
+                          f"{plan.fuel_t:.1f} t)")
+    return limited
+
+
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa", seed: int = 1, options=None,
-          params: BfoaParams | None = None, space: SearchSpace | None = None, bucket_h: float | None = None) -> Plan:
+          params: BfoaParams | None = None, space: SearchSpace | None = None, bucket_h: float | None = None,
+          limits: EngineLimits | None = None, savings: bool = False) -> Plan:
     """Route one voyage. Never raises for a voyage that simply cannot be sailed: the plan says why.
 
     `options` are the solver's own (solvers.SOLVERS[solver].options); `params` (BfoaParams, for bfoa) and
-    `bucket_h` (for dp) are shorthands for them.
+    `bucket_h` (for dp) are shorthands for them. With `limits` (engine_limits.EngineLimits) the solver's route
+    gets the best engine plan holding each setting; `savings` adds the split against the honest baseline
+    (savings.py) to the plan (fleet and CLI plans always have both, see job.plan_voyage).
     """
     if solver not in REGISTRY:
         raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
@@ -124,9 +152,14 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         found = spec.search(inst, base, seed=int(seed), options=opts)
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if solver == "bfoa" else None, t0=t0,
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=_infeasible_reason(base))
+        if limits is not None and limits.active and plan.legs:
+            plan = _with_limits(inst, plan, found.nodes, limits)
     plan.baseline = baseline
+    if savings and plan.legs and base.ok:
+        plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits)
+    plan.runtime_s = time.perf_counter() - t0
     return plan
 
 
 __all__ = ["solve", "SOLVERS", "RoutingProblem", "RoutingInputError", "VoyageGeometryError", "BfoaParams", "DpOptions",
-           "Plan", "shortest_route", "constant_rpm_route"]
+           "Plan", "shortest_route", "constant_rpm_route", "EngineLimits"]

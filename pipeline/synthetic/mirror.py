@@ -17,8 +17,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from global_land_mask import globe
 
+from pipeline.routing.land import is_sea
 from pipeline.synthetic import weather
 from pipeline.synthetic.grib_writer import jma_grid, write_gsm_file, write_gwm_file
 from pipeline.synthetic.oscar_writer import V1_EPOCH, write_oscar_v1
@@ -72,7 +72,7 @@ def write_cycle(rish_dir: Path, cycle: np.datetime64, *, seed: int = 0, max_lead
     folder.mkdir(parents=True, exist_ok=True)
     lat, lon = jma_grid(res_deg)
     L, O = np.meshgrid(lat, lon, indexing="ij")
-    land = globe.is_land(L, ((O + 180.0) % 360.0) - 180.0)
+    land = ~is_sea(L, O)
     t0 = weather.hours_since_epoch(np.datetime64(cycle, "ns"))
     steps = list(range(0, max_lead_h + 1, step_h))
     written = []

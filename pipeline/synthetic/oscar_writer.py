@@ -15,7 +15,7 @@ from pathlib import Path
 import netCDF4
 import numpy as np
 
-from global_land_mask import globe
+from pipeline.routing.land import is_sea
 
 V1_EPOCH = np.datetime64("1992-10-05T00:00", "ns")
 V2_EPOCH = np.datetime64("1990-01-01T00:00", "ns")
@@ -26,7 +26,7 @@ def _days(times, epoch) -> np.ndarray:
 
 
 def _land(lat2d, lon2d) -> np.ndarray:
-    return globe.is_land(lat2d, ((lon2d + 180.0) % 360.0) - 180.0)
+    return ~is_sea(lat2d, lon2d)
 
 
 def write_oscar_v1(path: Path, times: Sequence[np.datetime64], uv: Callable, res_deg: float = 1 / 3) -> Path:

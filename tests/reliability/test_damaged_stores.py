@@ -147,7 +147,7 @@ def _row(vid, status, fuel, reason=None):
     return {"voyage_id": vid, "imo": 9140607, "solver": "bfoa", "objective": "jit", "status": status, "reason": reason,
             "depart_utc": "2020-12-01T06:00Z", "eta_utc": "2020-12-03T06:00Z" if fuel else None, "rta_utc": "2020-12-03T06:00Z",
             "hours": 48.0 if fuel else None, "fuel_t": fuel, "baseline_fuel_t": 100.0 if fuel else None, "cycle": "2020-12-01T00Z",
-            "seed": 1, "n_legs": 2 if fuel else 0, "beyond_forecast": 0}
+            "seed": 1, "n_legs": 2 if fuel else 0, "n_legs_beyond_forecast": 0}
 
 
 def test_latest_routes_keeps_the_last_good_plan_and_flags_a_later_failure(tmp_path):

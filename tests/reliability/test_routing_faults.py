@@ -96,7 +96,7 @@ def test_voyage_running_past_the_forecast_horizon_is_flagged_with_its_hours():
     assert f"{plan.hours_beyond_forecast:.1f} h of the voyage" in plan.reason and "beyond the forecast horizon" in plan.reason
     row = plan.route_row()
     assert row["forecast_flag"] == "beyond horizon" and row["hours_beyond_forecast"] == pytest.approx(eta_h - 18.0, abs=1e-3)
-    assert row["beyond_forecast"] == plan.n_beyond_forecast > 0
+    assert row["n_legs_beyond_forecast"] == plan.n_beyond_forecast > 0
 
 
 def test_departure_before_the_cycle_is_flagged_with_its_hours():

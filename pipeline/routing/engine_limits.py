@@ -1,0 +1,265 @@
+"""Engine plans a master can sail: each rpm setting held for a minimum time, a small cost per change.
+
+The solvers choose an rpm per leg freely, so their plans may switch setting every few hours. `limited_plan` is
+an exact post-pass on a fixed route (the solver's): a dynamic programme over the route's legs choosing one rpm
+setting per leg, each leg sailed with the same time-dependent kernel (`leg_kernel.sail_leg_nb`) from the
+label's exact time. A label is a partial plan at line i: its setting r, arrival time t, fuel f, number of
+changes n and hours held since its last change (or since departure). The rules:
+
+- a change of setting is allowed only after the current one has been held `min_hold_h` hours;
+- the last setting must be held `min_hold_h` hours too (no exemption at the ends: every setting of the plan
+  is held at least that long), except in a plan of one setting, which may be shorter than the hold;
+- a plan costs its objective value (objectives.route_cost_nb) plus `change_cost_t` per change.
+
+Per (line, setting) the labels are taken by arrival time and a label B is dropped when an earlier kept label A
+has  f_A + c·n_A − e·t_A ≤ f_B + c·n_B − e·t_B  and held_A ≥ held_B (hours held capped at the hold), e being
+the early rate of `jit` as in dp.py. Every continuation of B is then open to A at no greater cost, exactly in
+weather that does not change with time (a continuation's legs take the same hours from either start); in
+time-varying weather this is the same one assumption as the exact DP's (dp.py). A plan of one setting
+throughout is always kept (it alone may end with less than the hold).
+
+Bounds (as in dp.py; they never drop a label of an optimal plan): when the route can arrive by the RTA at its
+fastest setting, labels that can no longer make it are dropped; under `jit`, a label whose fuel and change
+costs so far plus the least fuel to finish in the time left (dp.finish_bounds, on the route alone) exceed a
+known plan's cost is dropped. The known plan: the best of one setting throughout and one change between two
+settings at any line, among those obeying the limits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numba
+import numpy as np
+
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing.dp import _grow, finish_bounds, fuel_to_finish_lb
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
+
+
+@dataclass(frozen=True)
+class EngineLimits:
+    """How often the engine setting may change: the least hours a setting is held, and a cost (t of fuel) per
+    change that the plan's objective adds. Both zero: no limits."""
+
+    min_hold_h: float = 12.0
+    change_cost_t: float = 0.05
+
+    @property
+    def active(self) -> bool:
+        return self.min_hold_h > 0.0 or self.change_cost_t > 0.0
+
+
+@numba.njit(cache=True)
+def _route_latest_departures(lat, lon, nodes, v, w, fast_rpm, deadline, ld):
+    """ld[i] ≥ the latest time the ship can leave line i on the route and still arrive by `deadline` at the
+    fastest setting (first-in-first-out legs: fixed point of t = target − hours(t), then checked from above)."""
+    out = np.empty(N_LEG_OUT)
+    L2 = nodes.shape[0]
+    ld[L2 - 1] = deadline
+    for i in range(L2 - 2, -1, -1):
+        a, b = nodes[i], nodes[i + 1]
+        target = ld[i + 1]
+        t = target
+        ok = False
+        for _it in range(8):
+            sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, fast_rpm, v, w, out)
+            if out[CODE] != OK:
+                break
+            ok = True
+            t = target - out[H]
+        if not ok:
+            ld[i] = target  # a leg that cannot be sailed at full speed: no pruning before it
+            continue
+        step = 1e-3
+        while t < target:  # move up until leaving then arrives after the target
+            sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, fast_rpm, v, w, out)
+            if out[CODE] != OK or t + out[H] > target:
+                break
+            t += step
+            step *= 2.0
+        ld[i] = min(t, target)
+
+
+@numba.njit(cache=True)
+def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune, upper, lams, m_route, t_min, eps):
+    """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
+    (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`;
+    under `jit`, labels whose fuel and change costs so far plus the least fuel to finish (dp.fuel_to_finish_lb
+    with the route's tables m_route (K, lines), t_min (lines)) exceed `upper`, a known plan's cost, too. With
+    eps > 0 (t) a label is also dropped when an earlier one comes within eps of dominating it."""
+    rpm_options = v.rpm_options
+    R = rpm_options.shape[0]
+    L2 = nodes.shape[0]
+    t_dep_h, max_hours = o.t_dep_h, o.max_hours
+    e = o.early_t_per_h if o.kind == OBJ_JIT else 0.0
+    deadline = t_dep_h + (o.t_req_h if upper < LATE_STEP_T else max_hours)
+    tol = 1e-9 * max(1.0, abs(upper))
+    cap = 1024
+    kt, kf, kh = np.empty(cap), np.empty(cap), np.empty(cap)
+    kn, kr, kpar = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
+    n_kept = 0
+    line_lo = 0
+    ccap = 1024
+    ct, cf, ch = np.empty(ccap), np.empty(ccap), np.empty(ccap)
+    cn, cr, cpar = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
+    out = np.empty(N_LEG_OUT)
+    n_legs = 0
+    for i in range(L2 - 1):
+        a, b = nodes[i], nodes[i + 1]
+        n_c = 0
+        n_src = 1 if i == 0 else n_kept - line_lo
+        for q in range(n_src):
+            j = -1 if i == 0 else line_lo + q
+            t0 = t_dep_h if j < 0 else kt[j]
+            f0 = 0.0 if j < 0 else kf[j]
+            h0 = 0.0 if j < 0 else kh[j]
+            n0 = 0 if j < 0 else kn[j]
+            r0 = -1 if j < 0 else kr[j]
+            for r in range(R):
+                change = r0 >= 0 and r != r0
+                if change and h0 < min_hold_h - 1e-9:
+                    continue
+                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t0, rpm_options[r], v, w, out)
+                n_legs += 1
+                if out[CODE] != OK:
+                    continue
+                t1 = t0 + out[H]
+                if t1 - t_dep_h > max_hours or (prune and t1 > ld[i + 1]):
+                    continue
+                f1 = f0 + out[FUEL]
+                n1 = n0 + (1 if change else 0)
+                if o.kind == OBJ_JIT and upper < np.inf:
+                    lb = f1 + change_cost_t * n1 + fuel_to_finish_lb(m_route[:, i + 1], lams, t_min[i + 1], deadline - t1)
+                    if lb > upper + tol:
+                        continue
+                if n_c >= ct.shape[0]:
+                    ct, cf, ch = _grow(ct, n_c + 1), _grow(cf, n_c + 1), _grow(ch, n_c + 1)
+                    cn, cr, cpar = _grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1)
+                held = out[H] if change else h0 + out[H]
+                ct[n_c], cf[n_c], ch[n_c] = t1, f1, min(held, min_hold_h)
+                cn[n_c], cr[n_c], cpar[n_c] = n1, r, j
+                n_c += 1
+        # per setting, by arrival time: keep a label unless an earlier kept one dominates it
+        order = np.argsort(ct[:n_c], kind="mergesort")
+        line_lo = n_kept
+        for r in range(R):
+            start = n_kept
+            for q in range(n_c):
+                k = order[q]
+                if cr[k] != r:
+                    continue
+                gk = cf[k] + change_cost_t * cn[k] - e * ct[k]
+                dominated = False
+                if cn[k] > 0:  # a plan of one setting is always kept
+                    for m in range(start, n_kept):
+                        if kf[m] + change_cost_t * kn[m] - e * kt[m] <= gk + eps and kh[m] >= ch[k]:
+                            dominated = True
+                            break
+                if dominated:
+                    continue
+                if n_kept >= kt.shape[0]:
+                    kt, kf, kh = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1), _grow(kh, n_kept + 1)
+                    kn, kr, kpar = _grow(kn, n_kept + 1), _grow(kr, n_kept + 1), _grow(kpar, n_kept + 1)
+                kt[n_kept], kf[n_kept], kh[n_kept] = ct[k], cf[k], ch[k]
+                kn[n_kept], kr[n_kept], kpar[n_kept] = cn[k], cr[k], cpar[k]
+                n_kept += 1
+    rpm_idx = np.zeros(L2 - 1, np.int64)
+    best, best_j = np.inf, -1
+    for j in range(line_lo, n_kept):
+        if kn[j] > 0 and kh[j] < min_hold_h - 1e-9:
+            continue  # the last setting was not held long enough
+        q = route_cost_nb(o, kt[j] - t_dep_h, kf[j]) + change_cost_t * kn[j]
+        if q < best:
+            best, best_j = q, j
+    if best_j < 0:
+        return rpm_idx, np.inf, np.nan, 0, n_legs
+    j = best_j
+    fuel, changes = kf[j], kn[j]
+    for i in range(L2 - 2, -1, -1):
+        rpm_idx[i] = kr[j]
+        j = kpar[j]
+    return rpm_idx, best, fuel, changes, n_legs
+
+
+@dataclass(frozen=True)
+class LimitedPlan:
+    rpm_idx: np.ndarray  # per leg
+    cost: float  # objective plus the change costs (inf: no plan under the limits)
+    fuel_t: float
+    n_changes: int
+    legs_sailed: int
+
+
+def _runs_held(hours: np.ndarray, rpm_idx: np.ndarray, min_hold_h: float) -> bool:
+    """Every setting of the plan (legs' hours, setting per leg) held at least min_hold_h, unless it has one."""
+    cuts = np.flatnonzero(np.diff(rpm_idx)) + 1
+    if len(cuts) == 0:
+        return True
+    return bool(min(float(np.sum(x)) for x in np.split(hours, cuts)) >= min_hold_h - 1e-9)
+
+
+def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits) -> float:
+    """The cost of a plan obeying the limits, for pruning: the best of each setting held throughout and of one
+    change from one setting to another at any line (inf when none can be sailed)."""
+    L = len(nodes) - 1
+    R = len(inst.rpm_options)
+    ct, cf = np.empty(L + 1), np.empty(L + 1)
+    best = np.inf
+    plans = [np.full(L, r, np.int64) for r in range(R)]
+    plans += [np.where(np.arange(L) < k, r0, r1) for r0 in range(R) for r1 in range(R) if r0 != r1 for k in range(1, L)]
+    for rpm_idx in plans:
+        code, _ = lk.sail_route_nb(nodes, rpm_idx.astype(np.int64), 0, inst.graph, inst.vessel, inst.wx, inst.objective,
+                                   ct, cf)
+        if code != lk.OK or not _runs_held(np.diff(ct), rpm_idx, limits.min_hold_h):
+            continue
+        changes = int(np.count_nonzero(np.diff(rpm_idx)))
+        best = min(best, route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1]) + limits.change_cost_t * changes)
+    return best
+
+
+def _route_finish_tables(inst, nodes: np.ndarray):
+    """dp.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
+    sp = inst.space
+    on_route = np.zeros_like(sp.edge_ok)
+    idx = np.arange(len(nodes) - 1)
+    on_route[idx, nodes[:-1], nodes[1:]] = sp.edge_ok[idx, nodes[:-1], nodes[1:]]
+    lams, m_lam, t_min = finish_bounds(replace(inst, space=replace(sp, edge_ok=on_route)))
+    lines = np.arange(len(nodes))
+    return lams, np.ascontiguousarray(m_lam[:, lines, nodes]), np.ascontiguousarray(t_min[lines, nodes])
+
+
+def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:
+    """The best engine plan on the fixed route `nodes` under `limits` (see the module docstring); with gap > 0
+    within that share of a known plan's cost of the optimum (faster). The hold itself keeps the labels few:
+    without limits (EngineLimits(0, 0)) a long route takes far longer."""
+    nodes = np.ascontiguousarray(nodes, np.int64)
+    g, v, o = inst.graph, inst.vessel, inst.objective
+    ld = np.full(len(nodes), np.inf)
+    _route_latest_departures(g.lat, g.lon, nodes, v, inst.wx, float(v.rpm_options[-1]), o.t_dep_h + o.t_req_h + 1e-9,
+                             ld)
+    prune = bool(ld[0] >= o.t_dep_h)  # the RTA can be met at full speed: late labels cannot win
+    upper = incumbent_cost(inst, nodes, limits)
+    lams, m_route, t_min = _route_finish_tables(inst, nodes)
+    hold, cost_t = float(limits.min_hold_h), float(limits.change_cost_t)
+    eps = gap * upper / (len(nodes) - 1) if gap > 0.0 and math.isfinite(upper) else 0.0
+    rpm_idx, cost, fuel, changes, n_legs = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, hold, cost_t, ld, prune,
+                                                           upper, lams, m_route, t_min, eps)
+    if not math.isfinite(cost):  # the hold makes the RTA unreachable: the least-late plan, without the bounds
+        rpm_idx, cost, fuel, changes, n_legs2 = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, hold, cost_t, ld,
+                                                                False, np.inf, lams, m_route, t_min, 0.0)
+        n_legs += n_legs2
+    return LimitedPlan(rpm_idx, float(cost), float(fuel), int(changes), int(n_legs))
+
+
+def settings_held_h(legs: list[dict]) -> list[tuple[float, float]]:
+    """(rpm, hours held) of each run of equal settings along a plan's legs, in order."""
+    runs: list[tuple[float, float]] = []
+    for leg in legs:
+        if runs and runs[-1][0] == leg["rpm"]:
+            runs[-1] = (leg["rpm"], runs[-1][1] + leg["hours"])
+        else:
+            runs.append((leg["rpm"], leg["hours"]))
+    return runs

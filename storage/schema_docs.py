@@ -1,0 +1,274 @@
+"""What each warehouse table, view and column holds, with units, as DuckDB comments (`COMMENT ON`).
+
+Analysts and BI tools read them from `duckdb_tables()`, `duckdb_views()` and `duckdb_columns()`. They are
+applied by one migration that comes after all others and is named by a digest of its text and of every other
+migration's name: a changed description, or any new migration (a new column, a rebuilt table), makes it new, so
+it runs again and every comment matches this module. A column without a description fails a test.
+"""
+
+import hashlib
+
+from storage.warehouse import Migration
+
+UTC = "(UTC)"
+
+# --- columns shared by several tables -----------------------------------------------------------------------------
+_NOON = {
+    "imo": "IMO number of the vessel",
+    "ts_utc": f"time of the noon report {UTC}",
+    "lat": "latitude at report time, degrees north", "lon": "longitude at report time, degrees east",
+    "rpm": "mean main engine speed since the last report, revolutions per minute",
+    "draft_m": "mean draft, metres", "trim_m": "trim (aft minus fore draft), metres",
+    "stw_kn": "mean speed through water since the last report, knots",
+    "sog_kn": "mean speed over ground since the last report, knots",
+    "dist_nm": "distance sailed since the last report, nautical miles",
+    "hours": "hours steamed since the last report",
+    "fuel_t": "fuel burnt since the last report, tonnes (all grades)",
+    "fuel_hfo_t": "heavy fuel oil burnt since the last report, tonnes",
+    "fuel_mgo_t": "marine gas oil burnt since the last report, tonnes",
+    "wind_kn": "true wind speed, knots",
+    "wind_dir_rel_deg": "wind coming from, degrees relative to the bow (0 head, 180 following)",
+    "wave_m": "significant wave height, metres",
+    "wave_dir_rel_deg": "waves coming from, degrees relative to the bow (0 head, 180 following)",
+    "current_kn": "current speed, knots",
+    "current_dir_rel_deg": "current setting towards, degrees relative to the bow",
+    "months_since_drydock": "months since the last dry-docking (hull fouling)",
+    "source_file": "file the row was imported from",
+}
+_REJECTED = {
+    "raw": "the row as it came in",
+    "reason": "why the row was refused",
+    "rejected_at": f"when the row was refused {UTC}",
+}
+
+_ROUTES = {
+    "run_id": "routing run that made this plan (route_runs.run_id)",
+    "voyage_id": "voyage routed (voyages.voyage_id)",
+    "imo": "IMO number of the vessel",
+    "solver": "routing solver used (e.g. bfoa, dp, astar)",
+    "objective": "what the solver minimised (e.g. jit: least fuel arriving by the RTA)",
+    "status": "ok (on time) | late (arrives after the RTA) | infeasible (no route) | failed (not routed: reason)",
+    "reason": "why the plan is not ok, or notes on it",
+    "depart_utc": f"planned departure {UTC}",
+    "eta_utc": f"planned arrival {UTC}",
+    "rta_utc": f"required time of arrival {UTC}",
+    "hours": "planned passage time, hours",
+    "fuel_t": "planned fuel burnt in tonnes",
+    "baseline_fuel_t": "fuel burnt in tonnes on the baseline (great circle, constant speed) route",
+    "baseline_hours": "passage time of the baseline route, hours",
+    "savings_pct": "fuel saved against the baseline, percent",
+    "distance_nm": "planned distance, nautical miles",
+    "cost": "solver objective value (dimensionless)",
+    "model_version": "performance model version used (perf_models.version)",
+    "cycle": f"weather forecast cycle used, its init time {UTC}",
+    "seed": "random seed of the solver",
+    "runtime_s": "solver run time, seconds",
+    "n_legs": "number of legs of the plan",
+    "n_legs_beyond_forecast": "number of legs sailed past the forecast horizon (weather of the last step persisted)",
+    "forecast_flag": "'beyond horizon', 'before cycle', both (comma separated) or empty when the voyage lies in the forecast",
+    "hours_beyond_forecast": "hours sailed past the last forecast step",
+    "hours_before_cycle": "hours sailed before the forecast cycle's init time",
+    "honest_baseline_rpm": "the one constant rpm (between the vessel's limits) at which the base route arrives at the RTA",
+    "honest_baseline_fuel_t": "fuel burnt in tonnes on the base route at honest_baseline_rpm, same weather and model",
+    "honest_baseline_hours": "passage time at honest_baseline_rpm, hours",
+    "profile_fuel_t": "fuel burnt in tonnes by the best engine plan on the base route",
+    "savings_total_pct": "fuel saved against the honest baseline, percent (= speed profile + route)",
+    "savings_speed_profile_pct": "part of the saving from the speed profile (best engine plan on the base route), percent",
+    "savings_route_pct": "part of the saving from the route, percent",
+    "min_engine_hold_h": "least hours each engine setting is held (engine-change limit), hours",
+    "engine_change_cost_t": "cost of one engine change in the objective, tonnes of fuel",
+    "n_engine_changes": "engine setting changes along the plan",
+    "unlimited_fuel_t": "fuel burnt in tonnes by the solver's plan on the same route without engine-change limits",
+    "limits_fuel_t": "what the engine-change limits cost, tonnes (fuel_t minus unlimited_fuel_t)",
+    "min_land_clearance_nm": "least distance to land along the plan outside its port approaches, nautical miles (0.1 NM sampling; 25 means at least 25)",
+}
+_LEGS = {
+    "run_id": _ROUTES["run_id"], "voyage_id": _ROUTES["voyage_id"],
+    "leg": "leg number along the route, from 0",
+    "lat0": "leg start latitude, degrees north", "lon0": "leg start longitude, degrees east",
+    "lat1": "leg end latitude, degrees north", "lon1": "leg end longitude, degrees east",
+    "course_deg": "course over ground, degrees true",
+    "dist_nm": "leg distance, nautical miles",
+    "rpm": "main engine speed, revolutions per minute",
+    "stw_kn": "speed through water, knots",
+    "sog_kn": "speed over ground, knots",
+    "hours": "leg time, hours",
+    "fuel_t": "fuel burnt in tonnes on the leg",
+    "etd_utc": f"leg start time {UTC}",
+    "eta_utc": f"leg end time {UTC}",
+    "wind_kn": "true wind speed on the leg, knots",
+    "wind_dir_deg": "wind coming from, degrees true",
+    "hs_m": "significant wave height on the leg, metres",
+    "wave_dir_deg": "waves coming from, degrees true",
+    "current_kn": "current speed on the leg, knots",
+    "beyond_forecast": "true when the leg is sailed past the forecast horizon (weather of the last step persisted)",
+}
+_RUNS = {
+    "run_id": "routing run id",
+    "started_at": f"when the run started {UTC}",
+    "finished_at": f"when the run finished {UTC}",
+    "cycle": f"weather forecast cycle routed on, its init time {UTC}",
+    "n_voyages": "voyages in the run",
+    "n_ok": "voyages with a plan (ok or late)",
+    "n_failed": "voyages without a plan (infeasible or failed)",
+    "status": "running | ok (every voyage planned) | partial (some) | failed (none, or the run died: reason)",
+    "solver": "routing solver used",
+    "trigger": "what started the run: nightly | backfill | manual",
+    "host": "host the run ran on",
+    "pid": "process id of the run on its host",
+    "pid_started": "start time of that process (clock ticks after boot), so a reused pid is not taken for it",
+    "reason": "why the run failed",
+    "n_export_failed": "exports (RTZ, GeoJSON, PNG) that failed",
+    "export_errors": "one line per failed export: voyage, kind, error",
+}
+_VESSELS = {
+    "imo": "IMO number of the vessel", "name": "vessel name", "type": "vessel type",
+    "dwt": "deadweight, tonnes", "design_speed_kn": "design speed, knots", "mcr_kw": "maximum continuous rating, kW",
+    "rpm_max": "maximum main engine speed, revolutions per minute",
+    "design_fuel_tph": "design fuel consumption, tonnes per hour",
+}
+_MODELS = {
+    "imo": "IMO number of the vessel",
+    "version": "model version, per vessel and target",
+    "fitted_at": f"when the model was fitted {UTC}",
+    "form": "model form: thesis | physical | fuzzy",
+    "target": "what the model predicts: speed (knots through water) | fuel (tonnes per hour)",
+    "coefficients": "JSON {regressor: value}",
+    "n_rows": "noon reports fitted on",
+    "r2": "coefficient of determination on the fitted rows",
+    "rmse": "root mean square error on the fitted rows (knots for speed, tonnes per hour for fuel)",
+    "cv_rmse": "cross-validated root mean square error (units of the target)",
+    "status": "active | rejected (failed validation: reason) | superseded (a newer model is active)",
+    "reason": "why the model was activated or rejected",
+    "active": "true for the model routing uses",
+    "months_dd": "months since dry-docking the model was fitted at",
+    "holdout_rmse": "root mean square error on the newest reports, fitted without them (units of the target)",
+    "n_holdout": "newest reports held out for holdout_rmse",
+    "data_hash": "digest of the rows, form and fit settings (the same inputs give the same model)",
+    "data_to_utc": f"newest report the coefficients were fitted on {UTC}",
+    "flag": "why new reports contradict this active model",
+}
+_VOYAGES = {
+    "voyage_id": "voyage id", "imo": "IMO number of the vessel",
+    "dep_name": "departure port", "dep_lat": "departure latitude, degrees north", "dep_lon": "departure longitude, degrees east",
+    "arr_name": "arrival port", "arr_lat": "arrival latitude, degrees north", "arr_lon": "arrival longitude, degrees east",
+    "depart_utc": f"departure time {UTC}", "rta_utc": f"required time of arrival {UTC}",
+    "draft_m": "draft, metres", "trim_m": "trim (aft minus fore draft), metres",
+    "rpm_options": "main engine speeds the solver may choose, revolutions per minute",
+    "max_hs_m": "highest significant wave height allowed, metres", "max_wind_kn": "highest wind allowed, knots",
+    "status": "voyage status from the voyages file (planned voyages are routed)",
+}
+_INGEST = {
+    "run_id": "ingest run that fetched the file",
+    "source": "weather source: GSM (wind) | GWM (waves) | OSCAR (currents)",
+    "cycle": f"forecast cycle the file was fetched for, its init time {UTC}",
+    "file_name": "file name", "url": "where the file was fetched from", "bytes": "file size, bytes",
+    "sha256": "SHA-256 of the file",
+    "status": "ok (fetched) | skipped (already had) | missing (not found, or no answer in time) | corrupt (did not decode) "
+              "| error (refused, e.g. no permission)",
+    "error": "what went wrong", "started_at": f"fetch start {UTC}", "finished_at": f"fetch end {UTC}",
+}
+_CYCLES = {
+    "cycle": f"forecast cycle, its init time {UTC}",
+    "complete": "true when every expected file is in the weather cube",
+    "n_files_expected": "files the cycle needs", "n_files_ok": "files fetched or already had",
+    "missing": "what is missing, e.g. \"GSM FD0512; GWM 90-132 h\"",
+    "written_at": f"when the status was written {UTC}",
+}
+_SAVINGS = {
+    "run_id": _RUNS["run_id"], "started_at": _RUNS["started_at"], "cycle": _RUNS["cycle"], "trigger": _RUNS["trigger"],
+    "run_status": _RUNS["status"], "n_voyages": "voyages routed in the run",
+    "n_on_time": "voyages planned to arrive by the RTA (status ok)", "n_late": "voyages planned to arrive late",
+    "n_infeasible": "voyages with no route", "n_failed": "voyages not routed (failed)",
+    "n_not_routed": "n_infeasible + n_failed", "n_export_failed": _RUNS["n_export_failed"],
+    "n_compared": "voyages with an honest constant-rpm baseline (the sums below are over these)",
+    "fuel_t": "planned fuel burnt in tonnes, voyages with an honest baseline only",
+    "honest_baseline_fuel_t": "fuel burnt in tonnes sailing the base route at the one constant rpm that arrives at the RTA",
+    "profile_fuel_t": "fuel burnt in tonnes by the best engine plan on the base route",
+    "savings_total_pct": "fuel saved against the honest baseline, percent (fuel-weighted over the voyages)",
+    "savings_speed_profile_pct": "part of savings_total_pct from the speed profile (best engine plan on the base route), percent",
+    "savings_route_pct": "part of savings_total_pct from the route, percent",
+    "limits_fuel_t": "fuel the engine-change limits cost, tonnes (plan minus the solver's plan without them)",
+    "unlimited_fuel_t": "fuel burnt in tonnes by the solver's plans without engine-change limits",
+    "discrete_baseline_fuel_t": "fuel burnt in tonnes on the discrete-rpm baseline (arrives early: overstates savings)",
+    "savings_vs_discrete_pct": "fuel saved against the discrete-rpm baseline, percent (arrives early: overstated)",
+}
+
+
+def _view_of(base: dict, **extra: str) -> dict:
+    return {**base, **extra}
+
+
+TABLES: dict[str, tuple[str, dict[str, str]]] = {
+    "schema_migrations": ("schema changes applied to this warehouse, by name",
+                          {"name": "migration name", "applied_at": f"when it was applied {UTC}"}),
+    "vessels": ("the fleet: one row per vessel", _VESSELS),
+    "vessels_rejected": ("rows of vessels files refused on import",
+                         {"imo": _VESSELS["imo"], **_REJECTED, "source_file": _NOON["source_file"]}),
+    "noon_reports": ("noon reports: what each vessel sailed, burnt and met, per report", _NOON),
+    "noon_reports_rejected": ("noon reports refused on import, with the reason", {**_NOON, **_REJECTED}),
+    "perf_models": ("fitted vessel performance models (speed and fuel), every version", _MODELS),
+    "voyages": ("voyages to route: ports, departure and required arrival", _VOYAGES),
+    "voyages_rejected": ("rows of voyages files refused on import",
+                         {"voyage_id": _VOYAGES["voyage_id"], "imo": _VOYAGES["imo"], **_REJECTED,
+                          "source_file": _NOON["source_file"]}),
+    "bunker_logs": ("fuel bunkered: what, where, from whom, and what remained on board", {
+        "imo": "IMO number of the vessel", "bill_no": "bunker delivery note number",
+        "date_utc": f"delivery date {UTC}", "port": "port of delivery", "supplier": "supplier",
+        "fuel_type": "fuel grade, upper case: HFO | LFO | MGO | MDO | DO | LNG | ...",
+        "received_t": "fuel received, tonnes", "rob_t": "fuel of this grade remaining on board before receiving, tonnes",
+        "source_file": _NOON["source_file"]}),
+    "ingest_log": ("weather files fetched: one row per file and attempt", _INGEST),
+    "cycles": ("weather forecast cycles: complete or what is missing", _CYCLES),
+    "route_runs": ("fleet routing runs: one row per run", _RUNS),
+    "routes": ("route plans: one row per run and voyage (fuel in tonnes, times UTC)", _ROUTES),
+    "route_legs": ("legs of each route plan, with the weather met (speeds in knots, times UTC)", _LEGS),
+}
+VIEWS: dict[str, tuple[str, dict[str, str]]] = {
+    "latest_routes": ("the plan to sail per voyage: its newest plan, flagged when a newer attempt failed", _view_of(
+        _ROUTES, dep_name=_VOYAGES["dep_name"], arr_name=_VOYAGES["arr_name"], vessel_name=_VESSELS["name"],
+        newer_attempt_failed="true when a newer attempt made no plan (this one is still the plan)",
+        newer_attempt_run_id="run of that newer attempt", newer_attempt_status="status of that newer attempt",
+        newer_attempt_reason="why that newer attempt made no plan",
+        newer_attempt_at=f"when that newer attempt's run started {UTC}")),
+    "fleet_savings": ("fuel and savings per routing run", _SAVINGS),
+    "model_quality": ("fit quality of each vessel's active models", _view_of(
+        {k: _MODELS[k] for k in ("imo", "target", "form", "version", "fitted_at", "n_rows", "r2", "rmse", "cv_rmse",
+                                 "n_holdout", "holdout_rmse", "data_to_utc", "flag")},
+        vessel_name=_VESSELS["name"], n_reports="noon reports of the vessel",
+        n_rejected="noon reports of the vessel refused on import")),
+    "ingest_health": ("per forecast cycle: completeness and what the files did", _view_of(
+        _CYCLES, files_downloaded="files fetched (status ok)", files_skipped="files already had",
+        files_missing="files not found", files_corrupt="files that did not decode")),
+    "voyage_performance": ("each voyage's plan against what its noon reports show", {
+        "voyage_id": _VOYAGES["voyage_id"], "imo": _VOYAGES["imo"], "vessel_name": _VESSELS["name"],
+        "dep_name": _VOYAGES["dep_name"], "arr_name": _VOYAGES["arr_name"], "depart_utc": _VOYAGES["depart_utc"],
+        "rta_utc": _VOYAGES["rta_utc"], "run_id": "run of the plan (latest_routes)", "plan_status": _ROUTES["status"],
+        "model_version": _ROUTES["model_version"], "planned_fuel_t": "planned fuel burnt in tonnes",
+        "planned_eta_utc": f"planned arrival {UTC}", "n_reports": "noon reports at sea on the voyage",
+        "actual_fuel_t": "fuel burnt in tonnes, from the noon reports", "actual_hours": "hours steamed, from the noon reports",
+        "actual_dist_nm": "distance sailed, nautical miles, from the noon reports",
+        "actual_arrival_utc": f"last noon report of the voyage, standing for the arrival {UTC}",
+        "fuel_error_pct": "planned minus actual fuel, percent of actual",
+        "arrival_error_h": "actual minus planned arrival, hours", "late_h": "actual arrival minus RTA, hours"}),
+}
+
+
+def _quoted(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"
+
+
+def comments_sql(tables: dict[str, tuple[str, dict[str, str]]], kind: str) -> str:
+    """COMMENT ON statements for `tables` ({name: (description, {column: description})}); kind TABLE or VIEW."""
+    lines = []
+    for name, (about, columns) in tables.items():
+        lines.append(f"COMMENT ON {kind} {name} IS {_quoted(about)};")
+        lines += [f"COMMENT ON COLUMN {name}.{col} IS {_quoted(text)};" for col, text in columns.items()]
+    return "\n".join(lines)
+
+
+def comments_migration(after: list[str]) -> Migration:
+    """The migration applying every comment, named anew whenever its text or the migrations `after` change."""
+    sql = comments_sql(TABLES, "TABLE") + "\n" + comments_sql(VIEWS, "VIEW")
+    digest = hashlib.sha256("\n".join([sql, *after]).encode()).hexdigest()[:12]
+    return Migration(f"docs_comments_{digest}", sql)

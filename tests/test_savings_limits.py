@@ -1,0 +1,105 @@
+"""Honest savings (constant speed arriving at the RTA, split into speed profile and route) and engine-change limits
+(each rpm setting held a minimum time, a cost per change) on small voyages in steady, non-uniform weather.
+
+Expected values come from exhaustive enumeration or from the definitions, not from the code under test.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing.baseline import shortest_route
+from pipeline.routing.engine_limits import EngineLimits, limited_plan, settings_held_h
+from pipeline.routing.objectives import route_cost_nb
+from pipeline.routing.problem import Instance
+from pipeline.routing.solve import solve
+from routing_cases import field, problem, wavy
+
+DEP, ARR = (30.0, -160.0), (33.0, -146.0)
+WEATHER = field(wavy(7))  # steady in time: the limited plan's dominance rule is exact here
+
+
+def _voyage(rpm_rta: float, **kw):
+    """A voyage whose RTA is the calm-water passage at `rpm_rta` (reference model: STW = 0.14·rpm kn)."""
+    pr0 = problem(DEP, ARR, 100.0, **kw)
+    hours = pr0.search_space().base_distance_nm / (0.14 * rpm_rta)
+    return problem(DEP, ARR, hours, **kw)
+
+
+def _brute_force(inst, nodes, limits: EngineLimits) -> float:
+    """Least objective + change cost over every rpm sequence that holds each setting (all but a single one)."""
+    L = len(nodes) - 1
+    ct, cf = np.empty(L + 1), np.empty(L + 1)
+    best = np.inf
+    for seq in itertools.product(range(len(inst.rpm_options)), repeat=L):
+        rpm_idx = np.array(seq, np.int64)
+        code, _ = lk.sail_route_nb(nodes, rpm_idx, 0, inst.graph, inst.vessel, inst.wx, inst.objective, ct, cf)
+        if code != lk.OK:
+            continue
+        hours = np.diff(ct)
+        runs = [sum(hours[i] for i, _ in grp) for _, grp in itertools.groupby(enumerate(seq), key=lambda x: x[1])]
+        if len(runs) > 1 and min(runs) < limits.min_hold_h - 1e-9:
+            continue
+        cost = route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1]) + limits.change_cost_t * (len(runs) - 1)
+        best = min(best, cost)
+    return best
+
+
+@pytest.mark.parametrize("limits", [EngineLimits(12.0, 0.05), EngineLimits(20.0, 0.0), EngineLimits(0.0, 0.5),
+                                    EngineLimits(0.0, 0.0)])
+def test_limited_plan_equals_brute_force_over_hold_respecting_sequences(limits):
+    pr = _voyage(80.0, n_lines=6, n_points=5)  # 7 legs of ≈ 7 h, 3 settings: 2,187 sequences
+    space = pr.search_space()
+    inst = Instance.build(pr, space, WEATHER)
+    nodes = shortest_route(space)
+    got = limited_plan(inst, nodes, limits)
+    assert got.cost == pytest.approx(_brute_force(inst, nodes, limits), rel=1e-12)
+    ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
+    lk.sail_route_nb(nodes, got.rpm_idx, 0, inst.graph, inst.vessel, inst.wx, inst.objective, ct, cf)
+    assert got.fuel_t == pytest.approx(cf[-1], rel=1e-12)
+    assert got.n_changes == int(np.count_nonzero(np.diff(got.rpm_idx)))
+
+
+def test_limited_plan_holds_every_setting_and_costs_fuel():
+    pr = _voyage(80.0, n_lines=8, n_points=7)
+    limits = EngineLimits(min_hold_h=12.0, change_cost_t=0.05)
+    free = solve(pr, WEATHER, solver="dp")
+    held = solve(pr, WEATHER, solver="dp", limits=limits)
+    assert min(h for _, h in settings_held_h(free.legs)) < limits.min_hold_h  # the limits bind on this voyage
+    runs = settings_held_h(held.legs)
+    assert len(runs) > 1 and min(h for _, h in runs) >= limits.min_hold_h - 1e-6
+    assert held.status == "ok" and held.hours <= pr.t_req_h + 1e-6
+    assert held.unlimited_fuel_t == pytest.approx(free.fuel_t, rel=1e-9)
+    assert held.fuel_t >= held.unlimited_fuel_t - 1e-9 and held.limits_fuel_t == held.fuel_t - free.fuel_t
+    assert held.cost == pytest.approx(held.fuel_t + 0.05 * held.n_engine_changes)  # on time inside the window
+    row = held.route_row()
+    assert row["min_engine_hold_h"] == 12.0 and row["n_engine_changes"] == len(runs) - 1
+    assert row["limits_fuel_t"] == pytest.approx(held.limits_fuel_t)
+
+
+def test_honest_baseline_arrives_at_the_rta_and_the_split_adds_up():
+    """RTA between two settings: the discrete baseline must take the faster one and arrives hours early, which
+    the old figure credited to routing; against the constant speed that arrives at the RTA little is left."""
+    pr = _voyage(72.0)
+    plan = solve(pr, WEATHER, solver="dp", savings=True)
+    sp = plan.savings
+    assert pr.t_req_h - plan.baseline.hours > 5.0  # the discrete-rpm baseline arrives hours early
+    assert 70.0 < sp.baseline_rpm < 100.0 and sp.baseline_rpm not in pr.rpm_options
+    assert pr.t_req_h - 1e-3 - 1e-9 <= sp.baseline_hours <= pr.t_req_h
+    # the constant rpm, sailed independently, gives the baseline's hours and fuel
+    inst = Instance.build(pr, pr.search_space(), WEATHER)
+    one = inst.vessel._replace(rpm_options=np.array([sp.baseline_rpm]))
+    nodes = shortest_route(inst.space)
+    ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
+    lk.sail_route_nb(nodes, np.zeros(len(nodes) - 1, np.int64), 0, inst.graph, one, inst.wx, inst.objective, ct, cf)
+    assert ct[-1] - inst.t_dep_h == pytest.approx(sp.baseline_hours) and cf[-1] == pytest.approx(sp.baseline_fuel_t)
+    assert sp.plan_fuel_t == plan.fuel_t
+    assert sp.speed_profile_pct + sp.route_pct == pytest.approx(sp.total_pct, abs=1e-12)
+    assert sp.total_pct == pytest.approx(100 * (sp.baseline_fuel_t - plan.fuel_t) / sp.baseline_fuel_t)
+    assert plan.savings_pct > 10.0 and sp.total_pct < plan.savings_pct - 8.0
+    row = plan.route_row()
+    assert row["savings_total_pct"] == sp.total_pct and row["honest_baseline_rpm"] == sp.baseline_rpm
