@@ -37,16 +37,16 @@ def register(app: typer.Typer) -> None:
         c = parse_cycle(cycle) if cycle else None
         lay = load_settings(data_root=data).layout
         if c is None:
-            c = cube.latest_complete_cycle(lay.weather_cube)
+            c = cube.latest_complete_cycle(lay.cube_store)
             if c is None:
-                raise FileNotFoundError(f"no complete forecast cycle in {lay.weather_cube}: run `jitroute ingest` first")
+                raise FileNotFoundError(f"no complete forecast cycle in {lay.weather_cube_url}: run `jitroute ingest` first")
         name = f"{var}_{label(c)}.gif" if animate else f"{var}_{label(c)}_{step:03d}h.png"
         target = Path(out) if out else lay.exports / "weather" / name
         if animate:
             log = logging.getLogger("jitroute.weather")
-            data_bytes = weather_maps.animation(lay.weather_cube, c, var,
+            data_bytes = weather_maps.animation(lay.cube_store, c, var,
                                                 progress=lambda k, n: log.info("frame %d/%d", k, n))
         else:
-            data_bytes = weather_maps.step_png(lay.weather_cube, c, step, var)
+            data_bytes = weather_maps.step_png(lay.cube_store, c, step, var)
         path = export_store.write_file(target.parent.resolve(), target.name, data_bytes)
         console.print(f"{'animation' if animate else 'map'}: {path}")

@@ -1,13 +1,19 @@
 """The one typed settings object: every path, URL, grid and solver parameter, with defaults.
 
 Values come from (lowest to highest priority) the defaults below, environment variables
-(`JITROUTE_DATA`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`, `JITROUTE_ALLOWED_REDIRECT_HOSTS`,
-`JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`) and explicit overrides from the CLI. Lower layers never read this
-object; flows pass the values they need as plain arguments.
+(`JITROUTE_DATA`, `JITROUTE_OBJECT_ROOT`, `JITROUTE_STORAGE_OPTIONS`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`,
+`JITROUTE_ALLOWED_REDIRECT_HOSTS`, `JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`) and
+explicit overrides from the CLI. Lower layers never read this object; flows pass the values they need as plain arguments.
+
+Object storage: `JITROUTE_OBJECT_ROOT` (e.g. `s3://bucket/jitroute`) puts the cube and the run exports there.
+Credentials and endpoint come the usual fsspec/botocore way (`AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`,
+`AWS_ENDPOINT_URL`, `~/.aws/…`), or as fsspec storage options in `JITROUTE_STORAGE_OPTIONS` (JSON, e.g.
+`{"endpoint_url": "http://minio:9000"}`); storage options are never logged (they may hold keys).
 """
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -86,6 +92,8 @@ class RoutingSettings:
 @dataclass(frozen=True)
 class Settings:
     data_root: Path = Path("data")
+    object_root: str | None = None  # URL of the cube and the exports (s3://bucket/prefix); None: under data_root
+    storage_options: dict = field(default_factory=dict, repr=False)  # fsspec options for object_root; may hold keys
     performance: Gate = field(default_factory=Gate)  # what a refitted model must pass to become active
     grid: GridSettings = field(default_factory=GridSettings)
     sources: SourceSettings = field(default_factory=SourceSettings)
@@ -96,7 +104,7 @@ class Settings:
 
     @property
     def layout(self) -> DataLayout:
-        return DataLayout(Path(self.data_root))
+        return DataLayout(Path(self.data_root), self.object_root, dict(self.storage_options))
 
     def with_overrides(self, **overrides) -> "Settings":
         """Return a copy with top-level or `section.name` overrides; None values are ignored."""
@@ -112,11 +120,31 @@ class Settings:
         return s
 
 
+class SettingsError(ValueError):
+    """A setting from the environment that cannot be read; the message names the variable."""
+
+
+def storage_options_from_env(text: str | None) -> dict | None:
+    """`JITROUTE_STORAGE_OPTIONS` as a dict (JSON object); the error never repeats the value (it may hold keys)."""
+    if not text:
+        return None
+    try:
+        value = json.loads(text)
+    except ValueError:
+        value = None
+    if not isinstance(value, dict):
+        raise SettingsError("JITROUTE_STORAGE_OPTIONS is not a JSON object of fsspec storage options, "
+                            'e.g. {"endpoint_url": "http://127.0.0.1:9000"}')
+    return value
+
+
 def load_settings(**overrides) -> Settings:
     """Defaults, then environment, then `overrides` (e.g. `data_root=...`, `sources.rish_url=...`)."""
     env = os.environ
     s = Settings().with_overrides(
         data_root=Path(env["JITROUTE_DATA"]) if env.get("JITROUTE_DATA") else None,
+        object_root=env.get("JITROUTE_OBJECT_ROOT") or None,
+        storage_options=storage_options_from_env(env.get("JITROUTE_STORAGE_OPTIONS")),
         dask_address=env.get("JITROUTE_DASK_ADDRESS") or None,
         dask_workers=int(env["JITROUTE_DASK_WORKERS"]) if env.get("JITROUTE_DASK_WORKERS") else None,
         **{
@@ -130,4 +158,4 @@ def load_settings(**overrides) -> Settings:
     return s.with_overrides(**overrides)
 
 
-__all__ = ["Settings", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings"]
+__all__ = ["Settings", "SettingsError", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings"]

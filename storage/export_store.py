@@ -1,43 +1,40 @@
-"""A run's export files (RTZ, GeoJSON, PNG): written to a staging folder, published whole or not at all.
+"""Export files: single files written in place, and a run's files (RTZ, GeoJSON, PNG) published whole or not at all.
 
-`exports/runs/.staging-<run_id>/` fills while the run routes; after the warehouse commit it is
-renamed to `exports/runs/<run_id>/` in one step. A failed or killed run never leaves files for
-voyages whose rows did not reach the warehouse: its staging folder is removed (by the run itself,
-or by the next run when the process died).
+A run's files go under an exports root that is a local folder or an object-store URL (`s3://bucket/prefix/exports`,
+through fsspec). While the run routes they are written under `runs/.staging-<run_id>/`; after the warehouse
+commit each is moved to `runs/<run_id>/` and then, LAST, `runs/<run_id>/_SUCCESS` is written: a JSON manifest
+listing every file with its size. On an object store a move is a copy per object, so a reader may see a run
+folder fill up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run
+never publishes: its staging prefix is removed (by the run itself, or by the next run when the process died).
 """
 
 from __future__ import annotations
 
-import os
-import shutil
+import functools
+import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 STAGING_PREFIX = ".staging-"
+MANIFEST = "_SUCCESS"
 
 
 class ExportPathError(ValueError):
     """An export file name that would land outside its run folder."""
 
 
-def runs_dir(exports: Path) -> Path:
-    return Path(exports) / "runs"
-
-
-def run_dir(exports: Path, run_id: str) -> Path:
-    return runs_dir(exports) / run_id
-
-
-def staging_dir(exports: Path, run_id: str) -> Path:
-    return runs_dir(exports) / f"{STAGING_PREFIX}{run_id}"
+def check_file_name(name: str) -> str:
+    """`name` if it is one plain file name (no separator, no control character), else ExportPathError."""
+    if (not name or name in (".", "..") or "/" in name or "\\" in name or "\x00" in name
+            or any(ord(ch) < 32 for ch in name) or len(name) > 255):
+        raise ExportPathError(f"export file name {name!r} is not a plain file name; nothing written")
+    return name
 
 
 def child_path(folder: Path, name: str) -> Path:
     """`folder/name`, refusing any name that is not one plain file name inside `folder`."""
     folder = Path(folder)
-    if (not name or name in (".", "..") or "/" in name or "\\" in name or "\x00" in name
-            or any(ord(ch) < 32 for ch in name) or len(name) > 255):
-        raise ExportPathError(f"export file name {name!r} is not a plain file name; nothing written")
-    path = folder / name
+    path = folder / check_file_name(name)
     if path.resolve().parent != folder.resolve():
         raise ExportPathError(f"export file {name!r} would be written outside {folder}; nothing written")
     return path
@@ -53,28 +50,83 @@ def write_file(folder: Path, name: str, data: bytes) -> Path:
     return path
 
 
-def publish(exports: Path, run_id: str) -> Path | None:
-    """Move the run's staging folder into place; returns the published folder (None when nothing was staged)."""
-    src, dst = staging_dir(exports, run_id), run_dir(exports, run_id)
-    if not src.exists():
-        return None
-    os.replace(src, dst)
-    return dst
+@dataclass(frozen=True)
+class RunExports:
+    """The runs under one exports root: a local folder or an fsspec URL (`s3://bucket/prefix/exports`)."""
 
+    url: str
+    storage_options: dict = field(default_factory=dict, repr=False)  # may hold keys: never shown
 
-def discard(exports: Path, run_id: str) -> None:
-    shutil.rmtree(staging_dir(exports, run_id), ignore_errors=True)
+    @functools.cached_property
+    def _located(self) -> tuple:
+        import fsspec
 
+        fs, root = fsspec.core.url_to_fs(self.url, **self.storage_options)
+        return fs, root.rstrip("/")
 
-def discard_stale(exports: Path, live_run_ids: set[str]) -> list[str]:
-    """Remove staging folders of runs that are no longer running (killed processes); returns their run ids."""
-    gone = []
-    root = runs_dir(exports)
-    if not root.exists():
+    @property
+    def fs(self):
+        return self._located[0]
+
+    def _runs(self) -> str:
+        return f"{self._located[1]}/runs"
+
+    def _staging(self, run_id: str) -> str:
+        return f"{self._runs()}/{STAGING_PREFIX}{check_file_name(run_id)}"
+
+    def _run(self, run_id: str) -> str:
+        return f"{self._runs()}/{check_file_name(run_id)}"
+
+    def run_url(self, run_id: str) -> str:
+        """Where the run's files are published (a local path when the root is local)."""
+        return f"{self.url.rstrip('/')}/runs/{check_file_name(run_id)}"
+
+    def stage(self, run_id: str, name: str, data: bytes) -> str:
+        """Write one file of the run under its staging prefix; returns the file name."""
+        fs, folder = self.fs, self._staging(run_id)
+        fs.makedirs(folder, exist_ok=True)
+        fs.pipe_file(f"{folder}/{check_file_name(name)}", data)
+        return name
+
+    def publish(self, run_id: str) -> dict | None:
+        """Move the staged files to `runs/<run_id>/`, then write the manifest last; returns the manifest
+        (None when nothing was staged)."""
+        fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
+        if not fs.exists(src):
+            return None
+        sizes = {p.rsplit("/", 1)[1]: int(info["size"]) for p, info in fs.find(src, detail=True).items()}
+        fs.makedirs(dst, exist_ok=True)
+        for name in sorted(sizes):
+            fs.mv(f"{src}/{name}", f"{dst}/{name}")
+        manifest = {"run_id": run_id, "files": [{"name": n, "bytes": sizes[n]} for n in sorted(sizes)]}
+        fs.pipe_file(f"{dst}/{MANIFEST}", json.dumps(manifest, indent=1).encode())
+        self.discard(run_id)
+        return manifest
+
+    def manifest(self, run_id: str) -> dict | None:
+        """The published run's manifest; None while it is not (or never will be) whole."""
+        try:
+            return json.loads(self.fs.cat_file(f"{self._run(run_id)}/{MANIFEST}"))
+        except FileNotFoundError:
+            return None
+
+    def discard(self, run_id: str) -> None:
+        """Remove the run's staging prefix (nothing there is fine)."""
+        try:
+            self.fs.rm(self._staging(run_id), recursive=True)
+        except FileNotFoundError:
+            pass
+
+    def discard_stale(self, live_run_ids: set[str]) -> list[str]:
+        """Remove staging prefixes of runs that are no longer running (killed processes); returns their run ids."""
+        fs, runs = self.fs, self._runs()
+        if not fs.exists(runs):
+            return []
+        gone = []
+        for p in fs.ls(runs, detail=False):
+            name = p.rstrip("/").rsplit("/", 1)[-1]
+            rid = name[len(STAGING_PREFIX):] if name.startswith(STAGING_PREFIX) else None
+            if rid is not None and rid not in live_run_ids:
+                self.discard(rid)
+                gone.append(rid)
         return gone
-    for p in root.glob(f"{STAGING_PREFIX}*"):
-        rid = p.name[len(STAGING_PREFIX):]
-        if rid not in live_run_ids:
-            shutil.rmtree(p, ignore_errors=True)
-            gone.append(rid)
-    return gone

@@ -1,14 +1,21 @@
-"""Where everything lives under the one data root (default `./data`, env `JITROUTE_DATA`)."""
+"""Where everything lives under the one data root (default `./data`, env `JITROUTE_DATA`).
+
+With an object root (`JITROUTE_OBJECT_ROOT`, e.g. `s3://bucket/jitroute`) the weather cube and the run exports live
+there instead (`<object root>/cubes/weather.zarr`, `<object root>/exports/runs/<run id>/`); the warehouse, the raw
+downloads and the locks stay under the local data root of the process that runs the jobs.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 
 @dataclass(frozen=True)
 class DataLayout:
     root: Path
+    object_root: str | None = None  # URL (s3://…) of the cube and the exports; None: both under `root`
+    storage_options: dict = field(default_factory=dict, repr=False)  # fsspec options for object_root; may hold keys
 
     @property
     def raw(self) -> Path:
@@ -40,6 +47,28 @@ class DataLayout:
     @property
     def exports(self) -> Path:
         return self.root / "exports"
+
+    @property
+    def weather_cube_url(self) -> str:
+        """The cube as a URL or local path: under the object root when there is one."""
+        return f"{self.object_root.rstrip('/')}/cubes/weather.zarr" if self.object_root else str(self.weather_cube)
+
+    @property
+    def cube_store(self):
+        """The cube as `storage.cube` opens it: its path or URL with the storage options."""
+        from storage.cube import locate
+
+        return locate(self.weather_cube_url, self.storage_options)
+
+    @property
+    def cube_lock_dir(self) -> Path | None:
+        """Where the cube's writer lock lives: beside a local cube (None), in `locks/` for a cube at a URL."""
+        return self.locks if self.object_root else None
+
+    @property
+    def run_exports_url(self) -> str:
+        """Where runs publish their export files (`runs/<run id>/`): under the object root when there is one."""
+        return f"{self.object_root.rstrip('/')}/exports" if self.object_root else str(self.exports)
 
     @property
     def locks(self) -> Path:

@@ -70,3 +70,54 @@ def fleet_data_root(base: Path, mirror: Path, *, n_vessels: int, days: int, seed
     if refit:
         refit_job(data_root=str(root))
     return root
+
+
+S3_CREDENTIALS = {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing", "AWS_DEFAULT_REGION": "us-east-1"}
+
+
+@pytest.fixture
+def s3_endpoint(tmp_path):
+    """An S3-compatible server (moto's server mode) on a free loopback port, with an empty bucket `jitroute`.
+    Yields the environment variables a client needs (endpoint and dummy credentials); killed at teardown."""
+    from tests.processes import VENV_BIN, describe, free_port, new_tag, poll, port_open, start, stop, tagged_env
+
+    tag, port = new_tag(), free_port()
+    log = tmp_path / "moto.log"
+    server = start([str(VENV_BIN / "moto_server"), "-H", "127.0.0.1", "-p", str(port)], tagged_env(tag), log)
+    try:
+        poll("the S3 server", lambda: port_open(port, server, log), 60, 0.2)
+        env = {"AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}", **S3_CREDENTIALS}
+        import boto3
+
+        boto3.client("s3", endpoint_url=env["AWS_ENDPOINT_URL"], aws_access_key_id="testing",
+                     aws_secret_access_key="testing", region_name="us-east-1").create_bucket(Bucket="jitroute")
+        yield env
+    finally:
+        left = stop([server], tag)
+        assert not left, describe(left)
+
+
+@pytest.fixture
+def dask_cluster(tmp_path, s3_endpoint):
+    """`dask scheduler` and two `dask worker --nthreads 1` processes (no nanny: a killed worker stays dead), started
+    in an empty folder with no JITROUTE_DATA: they see the S3 endpoint, not the data root. Yields
+    (scheduler address, the processes by name); all stopped at teardown, none left behind."""
+    from tests.processes import TAG_VAR, VENV_BIN, describe, free_port, new_tag, poll, port_open, start, stop, tagged_env
+
+    tag, port = new_tag(), free_port()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    env = {k: v for k, v in tagged_env(tag, **s3_endpoint).items() if not k.startswith("JITROUTE_") or k == TAG_VAR}
+    address = f"tcp://127.0.0.1:{port}"
+    procs = {"scheduler": start([str(VENV_BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                                 "--no-dashboard"], env, tmp_path / "scheduler.log", cwd=elsewhere)}
+    try:
+        poll("the dask scheduler", lambda: port_open(port, procs["scheduler"], tmp_path / "scheduler.log"), 60, 0.2)
+        for k in (1, 2):
+            procs[f"worker{k}"] = start([str(VENV_BIN / "dask"), "worker", address, "--nthreads", "1", "--no-nanny",
+                                         "--no-dashboard", "--name", f"worker{k}", "--local-directory", str(elsewhere)],
+                                        env, tmp_path / f"worker{k}.log", cwd=elsewhere)
+        yield address, procs
+    finally:
+        left = stop(list(procs.values()), tag)
+        assert not left, describe(left)

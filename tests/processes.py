@@ -75,6 +75,45 @@ def kill_tagged(tag: str) -> None:
             pass
 
 
+def poll(what: str, fn, timeout_s: float, every_s: float = 1.0):
+    """`fn()`'s first truthy value, asked every `every_s` until `timeout_s`; else AssertionError naming `what`."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        out = fn()
+        if out:
+            return out
+        time.sleep(every_s)
+    raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+
+def port_open(port: int, proc: subprocess.Popen, log: Path) -> bool:
+    """Whether 127.0.0.1:`port` accepts connections; AssertionError with the log's tail if `proc` has exited."""
+    assert proc.poll() is None, f"{proc.args[0]} exited with {proc.returncode}:\n{log.read_text()[-3000:]}"
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def start(args: list[str], env: dict, log: Path, cwd: Path | None = None) -> subprocess.Popen:
+    """A background process of the test, its output in `log`, in its own session (stopped by `stop`)."""
+    return subprocess.Popen(args, env=env, cwd=cwd, stdout=open(log, "w"), stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+def stop(procs: list[subprocess.Popen], tag: str) -> list[int]:
+    """Terminate the processes, then kill whatever still carries the tag; returns PIDs that outlived even that."""
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+    kill_tagged(tag)
+    return wait_until_gone(tag, 15)
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import duckdb
@@ -17,19 +16,9 @@ import httpx
 import pytest
 
 from tests.conftest import fleet_data_root, mirror_urls
-from tests.processes import VENV_BIN, describe, free_port, kill_tagged, new_tag, tagged_env, wait_until_gone
+from tests.processes import VENV_BIN, describe, free_port, kill_tagged, new_tag, poll, tagged_env, wait_until_gone
 
 pytestmark = pytest.mark.slow
-
-
-def _poll(what: str, fn, timeout_s: float, every_s: float = 1.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        out = fn()
-        if out:
-            return out
-        time.sleep(every_s)
-    raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
 
 @pytest.fixture
@@ -69,7 +58,7 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
                 assert server.poll() is None, (logs / "server.log").read_text()[-3000:]
                 return False
 
-        _poll("the Prefect server", healthy, 120, 0.5)
+        poll("the Prefect server", healthy, 120, 0.5)
         client_env = dict(env, PREFECT_API_URL=api)
         serve = subprocess.Popen([str(VENV_BIN / "jitroute"), "serve", "--nightly-cron", "* * * * *", "--data", str(root),
                                   "--rish-url", urls["rish_url"], "--oscar-url", urls["oscar_url"]],
@@ -83,7 +72,7 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
             assert not failed, (json.dumps(failed, indent=1)[:2000], (logs / "serve.log").read_text()[-5000:])
             return [r for r in runs if r["state_type"] == "COMPLETED" and r["name"] and r.get("deployment_id")]
 
-        done = _poll("a scheduled nightly run to complete", completed_scheduled_nightly, 240, 2)
+        done = poll("a scheduled nightly run to complete", completed_scheduled_nightly, 240, 2)
         deployments = {d["id"]: d["name"] for d in httpx.post(f"{api}/deployments/filter", json={}, timeout=10).json()}
         assert "nightly" in {deployments.get(r["deployment_id"]) for r in done}
 

@@ -1,9 +1,10 @@
 """The fleet jobs: `route-fleet` (every upcoming voyage on one cube cycle) and `nightly` (ingest → refit → route).
 
 Voyages go out over dask in batches (flows/jobs/dask_pool.py); workers route with plain functions and
-return rows and export bytes. This process is the one writer: it stages the exports as results
-arrive, puts the run's rows into DuckDB in one transaction, then publishes the staged exports (a run
-that fails or is killed publishes nothing). A voyage that fails (bad input, no model, no way through,
+return rows and export bytes, so they write nothing. This process is the one writer: it stages the exports
+as results arrive (under the local data root or the object root, storage/export_store.py), puts the run's
+rows into DuckDB in one transaction, then publishes the staged exports with their manifest (a run that
+fails or is killed publishes nothing). A voyage that fails (bad input, no model, no way through,
 even a lost worker) is recorded with status and reason and never fails the others.
 """
 
@@ -25,7 +26,7 @@ from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.export.bundle import SUFFIX
 from pipeline.performance.model import model_from_stored
-from pipeline.export.paths import ExportPathError, export_path
+from pipeline.export.paths import ExportPathError, export_name
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
@@ -54,8 +55,9 @@ def _length_nm(job: RouteJob) -> float:
 
 
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
-               options: RoutingOptions, exports: bool) -> list[RouteJob]:
-    """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle."""
+               options: RoutingOptions, exports: bool, cycle_version: int | None = None) -> list[RouteJob]:
+    """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle;
+    each carries the cycle's content version read at the start of the run."""
     table = fleet_store.load_voyages(db, voyage_ids=voyage_ids)
     if voyage_ids:
         unknown = sorted(set(voyage_ids) - set(table["voyage_id"].astype(str)))
@@ -73,13 +75,14 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     for v in table.to_dict("records"):
         v = {k: plain(x) for k, x in v.items()}
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
-                             run_id=run_id, cycle=cyc, exports=exports, options=options))
+                             run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version))
     return jobs
 
 
-def route_voyages(jobs: list[RouteJob], cube_path: str, staging: Path | None, dask_address: str | None,
-                  n_workers: int, per_batch: int | None) -> dict:
-    """Route every job on dask; stage export files as results arrive. Returns rows, legs and export errors."""
+def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
+                  dask_address: str | None, n_workers: int, per_batch: int | None) -> dict:
+    """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves); stage export
+    files as results arrive. Returns rows, legs and export errors."""
     rows, legs, export_errors = [], [], []
     done = 0
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
@@ -98,9 +101,8 @@ def route_voyages(jobs: list[RouteJob], cube_path: str, staging: Path | None, da
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
             for kind, data in res.get("exports", {}).items():
-                try:  # the voyage ID makes the file name: resolved inside the run folder, or refused naming the voyage
-                    path = export_path(staging, r["voyage_id"], SUFFIX[kind])
-                    export_store.write_file(path.parent, path.name, data)
+                try:  # the voyage ID makes the file name: one plain name in the run folder, or refused naming the voyage
+                    run_exports.stage(r["run_id"], export_name(r["voyage_id"], SUFFIX[kind]), data)
                 except (OSError, ExportPathError) as exc:
                     export_errors.append(f"{r['voyage_id']}: {kind}: {exc}")
                     LOG.error("voyage %s: %s export not written: %s", r["voyage_id"], kind, exc)
@@ -111,8 +113,8 @@ def route_voyages(jobs: list[RouteJob], cube_path: str, staging: Path | None, da
     if jobs:
         with dask_pool.dask_client(dask_address, n_workers) as client:
             per = dask_pool.voyages_per_batch(len(jobs), dask_pool.worker_slots(client), per_batch)
-            dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_path,
-                                  on_done=on_done)
+            dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_store.url,
+                                  cube_store.options, on_done=on_done)
     return {"rows": rows, "legs": legs, "export_errors": export_errors}
 
 
@@ -123,21 +125,23 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     s = load_settings(data_root=Path(data_root) if data_root else None,
                       **{"routing.solver": solver, "routing.seed": seed, "routing.voyages_per_task": batch_size})
     layout = s.layout.ensure()
-    c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(layout.weather_cube)
+    c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(layout.cube_store)
     if c is None:
-        raise FleetRunError(f"no complete forecast cycle in {layout.weather_cube}: run `jitroute ingest --cycle …` first")
-    if c not in cube.cycle_states(layout.weather_cube):
-        raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube}: ingest it first")
+        raise FleetRunError(f"no complete forecast cycle in {layout.weather_cube_url}: run `jitroute ingest --cycle …` first")
+    if c not in cube.cycle_states(layout.cube_store, layout.cube_lock_dir):
+        raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube_url}: ingest it first")
     run_id = f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:6]}"
     options = RoutingOptions.from_settings(s.routing)
-    jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports)
+    jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports,
+                      cube.cycle_versions(layout.cube_store).get(c))
     route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger, n_voyages=len(jobs))
-    export_store.discard_stale(layout.exports, route_store.running_run_ids(layout.warehouse))
-    staging = export_store.staging_dir(layout.exports, run_id) if exports else None
+    run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
+    run_exports.discard_stale(route_store.running_run_ids(layout.warehouse))
     LOG.info("run %s: routing %d voyages on cycle %s (%s)", run_id, len(jobs), cycle_label(c),
              f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
-        out = run.step(route_voyages, jobs, str(layout.weather_cube), staging, s.dask_address, s.dask_workers,
+        out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
+                       s.dask_address, s.dask_workers,
                        s.routing.voyages_per_task, name="route-voyages", timeout_s=s.routing.task_timeout_s)
         if exports and out["rows"]:
             from pipeline.export import plots
@@ -147,24 +151,26 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                 by_voyage.setdefault(leg["voyage_id"], []).append(leg)
             pairs = [(r, by_voyage.get(r["voyage_id"], [])) for r in out["rows"]]
             fig = plots.fleet_map_figure(pairs, title=f"run {run_id} · cycle {cycle_label(c)}")
-            export_store.write_file(staging, "fleet_map.png", plots.png_bytes(fig))
+            run_exports.stage(run_id, "fleet_map.png", plots.png_bytes(fig))
             for var in ("waves", "wind"):  # the weather of the cycle at its start, for people to look at
                 try:
-                    export_store.write_file(staging, f"weather_{var}_{cycle_label(c)}.png",
-                                            weather_maps.step_png(layout.weather_cube, c, 0, var))
+                    run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png",
+                                      weather_maps.step_png(layout.cube_store, c, 0, var))
                 except Exception as exc:  # a picture; the run's data does not depend on it
                     out["export_errors"].append(f"fleet: weather map {var}: {type(exc).__name__}: {exc}")
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
                                       out["export_errors"])
     except BaseException as exc:
-        export_store.discard(layout.exports, run_id)
+        run_exports.discard(run_id)
         route_store.fail_run(layout.warehouse, run_id, f"{type(exc).__name__}: {exc}")
         raise
-    published = export_store.publish(layout.exports, run_id) if exports else None
+    manifest = run_exports.publish(run_id) if exports else None
+    files = [f["name"] for f in manifest["files"]] if manifest else []
+    out_url = run_exports.run_url(run_id)
     summary = route_store.run_summary(layout.warehouse, run_id)
-    summary.update(run_id=run_id, exports_dir=str(published) if published else None,
-                   fleet_map=str(published / "fleet_map.png") if published and (published / "fleet_map.png").exists() else None,
-                   weather_maps=sorted(str(p) for p in published.glob("weather_*.png")) if published else [])
+    summary.update(run_id=run_id, exports_dir=out_url if manifest else None,
+                   fleet_map=f"{out_url}/fleet_map.png" if "fleet_map.png" in files else None,
+                   weather_maps=[f"{out_url}/{n}" for n in files if n.startswith("weather_") and n.endswith(".png")])
     for line in summary["export_failures"]:
         LOG.warning("export failed: %s", line)
     run.publish(key="route-fleet", markdown=run_markdown(summary), table=summary_table(summary),
@@ -197,7 +203,7 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
                                        oscar_url=oscar_url))
         LOG.info("[nightly 2/3] refit: speed and fuel models from noon reports")
         fits = run.subflow("refit-performance", refit_job, data_root=data_root)
-        c = cube.latest_complete_cycle(layout.weather_cube, at_or_before=max(targets))
+        c = cube.latest_complete_cycle(layout.cube_store, at_or_before=max(targets))
         summary = {"date": date or str(np.datetime64(utcnow_h(), "D")), "cycles_targeted": labels, "ingest": ingests,
                    "models_changed": sum(bool(f.get("changed")) for f in fits), "vessels": len(fits),
                    "cycle_used": cycle_label(c) if c is not None else None}
@@ -235,6 +241,11 @@ def summary_table(r: dict) -> list[dict]:
     return rows
 
 
+def _link(where: str) -> str:
+    """A local path as a file:// link; URLs (s3://…) as they are."""
+    return where if "://" in where else f"file://{where}"
+
+
 def headline(r: dict) -> str:
     """The run's savings in one sentence: the honest figure, split."""
     total = _r(r.get("savings_total_pct"))
@@ -252,8 +263,8 @@ def run_markdown(r: dict) -> str:
     if r.get("exports_dir"):
         lines += ["", f"Exports: `{r['exports_dir']}`"]
     if r.get("fleet_map"):
-        lines += [f"Fleet map: [{r['fleet_map']}](file://{r['fleet_map']})"]
-    lines += [f"Weather: [{Path(p).name}](file://{p})" for p in r.get("weather_maps") or []]
+        lines += [f"Fleet map: [{r['fleet_map']}]({_link(r['fleet_map'])})"]
+    lines += [f"Weather: [{p.rsplit('/', 1)[-1]}]({_link(p)})" for p in r.get("weather_maps") or []]
     problems = r.get("problems") or []
     if problems or r.get("export_failures"):
         lines += ["", "## Needing attention", "", "| voyage | status | reason |", "|---|---|---|"]

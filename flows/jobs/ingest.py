@@ -191,7 +191,7 @@ def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complet
                 problems: list[str]) -> None:
     """Cube first, then the file log, then the cycle status: the status is written last, so a run killed
     before it is never taken for a complete one."""
-    cube.write_cycle(layout.weather_cube, ds, complete=complete)
+    cube.write_cycle(layout.cube_store, ds, complete=complete, lock_dir=layout.cube_lock_dir)
     now = ingest_log.utcnow()
     run_id = uuid.uuid4().hex[:12]
     ingest_log.record_files(layout.warehouse, [
@@ -223,8 +223,8 @@ def ingest_cycle(cycle: str | None = None, data_root: str | None = None, rish_ur
 
 
 def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: bool, run) -> dict:
-    if not force and c in cube.complete_cycles(layout.weather_cube) and _recorded_complete(layout.warehouse, c):
-        bad = cube.corrupt_chunks(layout.weather_cube, [c])  # "complete" must also mean readable
+    if not force and c in cube.complete_cycles(layout.cube_store) and _recorded_complete(layout.warehouse, c):
+        bad = cube.corrupt_chunks(layout.cube_store, [c])  # "complete" must also mean readable
         if not bad:
             LOG.info("cycle %s is already complete; skipping", label)
             return CycleReport(label, True, 0, 0, skipped=True).__dict__

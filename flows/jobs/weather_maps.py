@@ -18,11 +18,11 @@ class WeatherMapError(ValueError):
 
 
 def _cycle(cube_path: Path, cycle) -> "object":
-    ds = cube.open_cube(Path(cube_path))
+    ds = cube.open_cube(cube_path)
     c = np.datetime64(cycle, "ns")
     if c not in ds["cycle"].values:
         have = ", ".join(cycle_label(x) for x in ds["cycle"].values[-5:]) or "none"
-        raise WeatherMapError(f"cycle {cycle_label(c)} is not in the cube {cube_path} (newest: {have})")
+        raise WeatherMapError(f"cycle {cycle_label(c)} is not in the cube {cube.locate(cube_path).url} (newest: {have})")
     return ds.sel(cycle=c)
 
 

@@ -11,9 +11,9 @@ class ExportPathError(InvalidIdentifier):
     """A voyage's export file would land outside its run folder (or the voyage ID is unusable)."""
 
 
-def export_path(run_dir: Path, voyage_id: str, suffix: str) -> Path:
-    """`run_dir / (voyage_id + suffix)`, refused (ExportPathError naming the voyage) unless the voyage ID is a
-    plain name (`pipeline.validate_ids.VOYAGE_ID_PATTERN`) and the resolved file lies directly in `run_dir`.
+def export_name(voyage_id: str, suffix: str) -> str:
+    """`voyage_id + suffix` as one plain file name, refused (ExportPathError naming the voyage) unless the voyage
+    ID is a plain name (`pipeline.validate_ids.VOYAGE_ID_PATTERN`).
 
     `suffix` is the file ending, e.g. ".rtz" or "_plan.png"; it must not contain a path separator either.
     """
@@ -23,8 +23,15 @@ def export_path(run_dir: Path, voyage_id: str, suffix: str) -> Path:
         raise ExportPathError(f"{exc}: its export files are not written") from exc
     if "/" in suffix or "\\" in suffix or "\x00" in suffix or ".." in suffix:
         raise ExportPathError(f"voyage {vid}: export suffix {suffix!r} is not a plain file ending")
+    return f"{vid}{suffix}"
+
+
+def export_path(run_dir: Path, voyage_id: str, suffix: str) -> Path:
+    """`run_dir / export_name(voyage_id, suffix)`, refused unless the resolved file lies directly in `run_dir`."""
+    name = export_name(voyage_id, suffix)
+    vid = name[: len(name) - len(suffix)]
     base = Path(run_dir).resolve()
-    target = (base / f"{vid}{suffix}").resolve()
+    target = (base / name).resolve()
     if target.parent != base:
         raise ExportPathError(f"voyage {vid}: export file {target} would be outside the run folder {base}; not written")
     return target
