@@ -81,7 +81,7 @@ def main() -> None:
         "refit": ([str(BIN / "jitroute"), "refit", "--data", str(root)],
                   [py, "-c", f"from flows.jobs.refit import refit_job; refit_job(data_root={str(root)!r})"]),
         "route": ([str(BIN / "jitroute"), "route", "--voyage", "V20003", "--data", str(root), "--json"],
-                  [py, "-c", "from flows.jobs.route_worker import cycle_field; from flows.settings import load_settings; "
+                  [py, "-c", "from flows.jobs.route_worker import cube_weather; from flows.settings import load_settings; "
                              "from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage; "
                              "from storage import fleet_store; import json; "
                              f"db={str(root / 'warehouse.duckdb')!r}; "
@@ -91,7 +91,7 @@ def main() -> None:
                              "m=model_from_stored(fleet_store.active_model(db, int(v['imo'])), int(v['imo'])); "
                              "job=RouteJob(voyage=v, vessel=ves, model=m.to_json(), run_id='adhoc', "
                              "cycle='2020-12-01T00:00:00', exports=False, options=RoutingOptions()); "
-                             f"p,_=plan_voyage(job, cycle_field({str(root / 'cubes' / 'weather.zarr')!r}, '2020-12-01T00:00:00')); "
+                             f"p,_=plan_voyage(job, cube_weather({str(root / 'cubes' / 'weather.zarr')!r}, job)); "
                              "print(json.dumps(p.to_json(), default=str)[:10])"]),
     }
     print(f"{'command':<14} {'jitroute s':>10} {'function s':>10} {'overhead s':>10} {'ratio':>6}")

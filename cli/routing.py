@@ -85,7 +85,7 @@ def register(app: typer.Typer) -> None:
         """Plan one voyage: waypoints, rpm per leg and ETAs, compared with the great-circle baseline."""
         import numpy as np
 
-        from flows.jobs.route_worker import cycle_field
+        from flows.jobs.route_worker import cube_weather
         from flows.settings import load_settings
         from pipeline.performance.model import model_from_stored
         from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
@@ -128,17 +128,19 @@ def register(app: typer.Typer) -> None:
         model = model_from_stored(fleet_store.active_model(lay.warehouse, int(v["imo"])), int(v["imo"]))
         if model is None:
             fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
-        cube_path, c = None, None
+        cube_path, c, version = None, None, None
         if not calm:
             c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(lay.weather_cube)
             if c is None:
                 fail(f"no complete forecast cycle in {lay.weather_cube}: run `jitroute ingest --cycle …` (or use --calm)")
+            version = cube.cycle_versions(lay.weather_cube).get(c)
             cube_path, c = str(lay.weather_cube), str(np.datetime_as_string(np.datetime64(c, "s")))
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
-                       options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed))
+                       options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed),
+                       cycle_version=version)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
-                plan, weather = plan_voyage(job, cycle_field(cube_path, c) if cube_path else None)
+                plan, weather = plan_voyage(job, cube_weather(cube_path, job))
         except KeyError as exc:
             fail(str(exc).strip("'\""))
         if as_json:

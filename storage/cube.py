@@ -28,9 +28,12 @@ import contextlib
 import fcntl
 import os
 import shutil
+import time
+import warnings
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 import dask.array
 import numpy as np
@@ -62,6 +65,58 @@ class CubeError(RuntimeError):
     pass
 
 
+class Location(NamedTuple):
+    """Where a store lives: `url` as given (a local path, `file://…` or an object-store URL such as `s3://bucket/…`),
+    the fsspec `options` for a URL (e.g. {"endpoint_url": …, "key": …, "secret": …} for S3), and `local`, the
+    local path (None on an object store)."""
+
+    url: str
+    options: dict
+    local: Path | None
+
+    @property
+    def name(self) -> str:
+        return self.url.rstrip("/").rsplit("/", 1)[-1]
+
+    def zarr_store(self, read_only: bool = False):
+        """What zarr and xarray open: the local path, or an fsspec store for a URL."""
+        if self.local is not None:
+            return str(self.local)
+        from zarr.storage import FsspecStore
+
+        return FsspecStore.from_url(self.url, storage_options=self.options, read_only=read_only)
+
+    def has(self, key: str) -> bool:
+        """Whether the object `key` (e.g. "zarr.json") exists in the store."""
+        if self.local is not None:
+            return (self.local / key).exists()
+        import fsspec
+
+        fs, root = fsspec.core.url_to_fs(self.url, **self.options)
+        fs.invalidate_cache()
+        return fs.exists(f"{root}/{key}")
+
+    def read_text(self, key: str) -> str:
+        if self.local is not None:
+            return (self.local / key).read_text()
+        import fsspec
+
+        fs, root = fsspec.core.url_to_fs(self.url, **self.options)
+        return fs.cat_file(f"{root}/{key}").decode()
+
+
+def locate(store, storage_options: dict | None = None) -> Location:
+    """The Location of `store`: a local path (str or Path), `file://…`, or a URL with its fsspec options."""
+    if isinstance(store, Location):
+        return store
+    url = str(store)
+    if url.startswith("file://"):
+        return Location(url, {}, Path(url.removeprefix("file://")))
+    if "://" in url:
+        return Location(url.rstrip("/"), dict(storage_options or {}), None)
+    return Location(url, {}, Path(url))
+
+
 class CorruptChunkError(CubeError):
     """A chunk file of the cube cannot be decoded (damaged on disk); the message names it and the fix."""
 
@@ -71,11 +126,15 @@ DECODE_ERRORS = (RuntimeError, ValueError, OSError, KeyError)  # what zarr/numco
 
 
 @contextlib.contextmanager
-def writer_lock(lock_dir: Path | None, store: Path) -> Iterator[None]:
-    """Exclusive lock per store (file `<lock_dir or store's folder>/<store name>.lock`)."""
-    lock_dir = Path(lock_dir) if lock_dir is not None else Path(store).parent
+def writer_lock(lock_dir: Path | None, store) -> Iterator[None]:
+    """Exclusive lock per store (file `<lock_dir or store's folder>/<store name>.lock`). A store at a URL has no
+    folder to lock in: its lock lives in `lock_dir` (the data root's `locks/`), on the one host that writes."""
+    loc = locate(store)
+    if lock_dir is None and loc.local is None:
+        raise CubeError(f"{loc.url}: a cube at a URL is written under a local lock; give its lock_dir")
+    lock_dir = Path(lock_dir) if lock_dir is not None else loc.local.parent
     lock_dir.mkdir(parents=True, exist_ok=True)
-    with open(lock_dir / (Path(store).name + ".lock"), "w") as fh:
+    with open(lock_dir / (loc.name + ".lock"), "w") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
@@ -119,9 +178,9 @@ def _encoding(ds: xr.Dataset) -> dict:
     return enc
 
 
-def _repair(path: Path) -> None:
+def _repair(loc: Location) -> None:
     """Trim arrays left longer than the others along `cycle` by an append that was killed."""
-    group = zarr.open_group(str(path), mode="r+")
+    group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
     lengths = {name: arr.shape[0] for name, arr in group.arrays() if "cycle" in (arr.metadata.dimension_names or ())[:1]}
     if lengths and len(set(lengths.values())) > 1:
         n = min(lengths.values())
@@ -130,74 +189,109 @@ def _repair(path: Path) -> None:
                 arr.resize((n, *arr.shape[1:]))
 
 
-def _cycles_in_store(path: Path) -> np.ndarray:
-    with xr.open_zarr(path, consolidated=False) as ds:
+def _cycles_in_store(loc: Location) -> np.ndarray:
+    with xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False) as ds:
         return ds["cycle"].values.astype("datetime64[ns]")
 
 
-def _check_grid(path: Path, cycle_ds: xr.Dataset) -> None:
-    with xr.open_zarr(path, consolidated=False) as ds:
+def _check_grid(loc: Location, cycle_ds: xr.Dataset) -> None:
+    with xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False) as ds:
         for c in ("step", "lat", "lon"):
             if ds.sizes[c] != cycle_ds.sizes[c] or not np.allclose(ds[c].values, cycle_ds[c].values):
-                raise CubeError(f"{path}: the cycle's {c} axis differs from the cube's; regrid to the cube's grid first")
+                raise CubeError(f"{loc.url}: the cycle's {c} axis differs from the cube's; regrid to the cube's grid first")
 
 
-def write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None = None) -> None:
-    """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely.
+def write_cycle(path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None = None,
+                storage_options: dict | None = None) -> None:
+    """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely, then publish it.
 
-    A failed write (e.g. a full disk) raises CubeError naming the store; the cycle stays hidden.
+    `path` is a local path or a URL (`s3://bucket/…/weather.zarr`, with fsspec `storage_options`; its writer lock
+    then lives in `lock_dir`). A failed write (e.g. a full disk) raises CubeError naming the store; the cycle stays
+    hidden.
     """
+    loc = locate(path, storage_options)
     try:
-        _write_cycle(Path(path), cycle_ds, complete=complete, lock_dir=lock_dir)
+        _write_cycle(loc, cycle_ds, complete=complete, lock_dir=lock_dir)
     except OSError as exc:
         label = np.datetime_as_string(np.datetime64(cycle_ds["cycle"].values, "h"), unit="h")
-        raise CubeError(f"{path}: writing cycle {label} failed ({exc}); no part of it is visible. "
+        raise CubeError(f"{loc.url}: writing cycle {label} failed ({exc}); no part of it is visible. "
                         "Fix the cause (e.g. free space on the data root) and re-run the ingest") from exc
 
 
-def _create_store(path: Path, tmpl: xr.Dataset) -> None:
-    """Write the first template beside the store and rename it into place: the store exists whole or not
-    at all. A creation killed half-way leaves only `<store>.creating`, removed by the next writer."""
-    tmp = path.with_name(path.name + ".creating")
+def _create_store(loc: Location, tmpl: xr.Dataset) -> None:
+    """Create the store with its first (hidden) cycle. On a local path it is written beside the store and renamed
+    into place: the store exists whole or not at all, and a creation killed half-way leaves only `<store>.creating`,
+    removed by the next writer. An object store has no rename: it is written in place under the writer lock, and
+    readers ignore it until its first publication (no consolidated metadata before)."""
+    if loc.local is None:
+        tmpl.to_zarr(loc.zarr_store(), mode="w", encoding=_encoding(tmpl), consolidated=False, zarr_format=3,
+                     compute=False)
+        return
+    loc.local.parent.mkdir(parents=True, exist_ok=True)
+    tmp = loc.local.with_name(loc.local.name + ".creating")
     shutil.rmtree(tmp, ignore_errors=True)
     tmpl.to_zarr(tmp, mode="w", encoding=_encoding(tmpl), consolidated=False, zarr_format=3, compute=False)
-    os.replace(tmp, path)
+    os.replace(tmp, loc.local)
 
 
-def _write_cycle(path: Path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None) -> None:
+def _append_hidden(loc: Location, tmpl: xr.Dataset) -> int:
+    """Grow every array along `cycle` by the template's one hidden cycle; returns its index. Written through zarr,
+    array by array: the group's own metadata (with the published view) is left as it is, so plain readers keep
+    seeing the published cycles only. Data chunks never written read as the NaN fill value."""
+    group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+    index = group["cycle"].shape[0]
+    for name, arr in group.arrays():
+        if "cycle" not in (arr.metadata.dimension_names or ())[:1]:
+            continue
+        arr.resize((index + 1, *arr.shape[1:]))
+        data = tmpl[name].variable.data
+        if isinstance(data, np.ndarray):  # coordinates, state and age; the data variables stay at the fill value
+            arr[index] = (_encoded_times(data, arr) if np.issubdtype(data.dtype, np.datetime64) else data)[0]
+    return index
+
+
+def _encoded_times(values: np.ndarray, arr) -> np.ndarray:
+    """Datetimes in the stored encoding of `arr` (its `units`/`calendar` attributes, e.g. hours since 2000)."""
+    from xarray.coding.times import encode_cf_datetime
+
+    encoded, _, _ = encode_cf_datetime(values, arr.attrs["units"], arr.attrs.get("calendar"), dtype=arr.dtype)
+    return encoded
+
+
+def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None) -> None:
     cycle = np.datetime64(cycle_ds["cycle"].values, "ns")
     missing = [v for v in DATA_VARS if v not in cycle_ds]
     if missing:
         raise CubeError(f"cycle {cycle} lacks variables {missing}")
-    with writer_lock(lock_dir, path):
-        damaged = metadata_problems(path) if path.exists() else []
+    with writer_lock(lock_dir, loc):
+        exists = loc.local.exists() if loc.local is not None else loc.has("zarr.json")
+        damaged = metadata_problems(loc) if exists else []
         if damaged:
-            raise CubeError(f"{path}: the store is damaged ({'; '.join(damaged)}); nothing was written. Run "
+            raise CubeError(f"{loc.url}: the store is damaged ({'; '.join(damaged)}); nothing was written. Run "
                             "`jitroute cube check`, then `jitroute cube repair` (moves the store aside) and re-ingest")
-        if not (path / "zarr.json").exists():
-            path.parent.mkdir(parents=True, exist_ok=True)
-            _create_store(path, _template(cycle_ds, cycle))
+        if not loc.has("zarr.json"):
+            _create_store(loc, _template(cycle_ds, cycle))
             index = 0
         else:
-            _repair(path)
-            _check_grid(path, cycle_ds)
-            cycles = _cycles_in_store(path)
+            _repair(loc)
+            _check_grid(loc, cycle_ds)
+            cycles = _cycles_in_store(loc)
             hits = np.flatnonzero(cycles == cycle)
             if hits.size:
                 index = int(hits[0])
-                _set_state(path, index, STATE_HIDDEN)
+                _set_state(loc, index, STATE_HIDDEN)
             else:
-                _template(cycle_ds, cycle).to_zarr(path, append_dim="cycle", consolidated=False, compute=False)
-                index = cycles.size
-        _write_region(path, index, cycle_ds)
-        _set_state(path, index, STATE_COMPLETE if complete else STATE_INCOMPLETE)
+                index = _append_hidden(loc, _template(cycle_ds, cycle))
+        _write_region(loc, index, cycle_ds)
+        _set_state(loc, index, STATE_COMPLETE if complete else STATE_INCOMPLETE)
+        _publish(loc, cycle)
 
 
-def _write_region(path: Path, index: int, cycle_ds: xr.Dataset) -> None:
+def _write_region(loc: Location, index: int, cycle_ds: xr.Dataset) -> None:
     """Write the cycle's values into row `index` of every array, straight through zarr (the metadata,
     coordinates and encodings are already in the store): the float32 arrays go in as they are, no copy,
     WRITE_WORKERS variables at a time (Blosc compresses without holding the GIL)."""
-    group = zarr.open_group(str(path), mode="r+")
+    group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
     age = (np.asarray(cycle_ds["current_age_h"].values, np.float32) if "current_age_h" in cycle_ds
            else np.full(cycle_ds.sizes["step"], np.nan, np.float32))
     group["current_age_h"][index] = age
@@ -209,67 +303,112 @@ def _write_region(path: Path, index: int, cycle_ds: xr.Dataset) -> None:
         list(pool.map(put, DATA_VARS))  # re-raises the first failure (e.g. a full disk)
 
 
-def _set_state(path: Path, index: int, state: int) -> None:
-    arr = zarr.open_array(str(path / "cycle_state"), mode="r+")
-    arr[index] = state
+def _set_state(loc: Location, index: int, state: int) -> None:
+    group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+    group["cycle_state"][index] = state
 
 
-def _open_consistent(path: Path, lock_dir: Path | None) -> xr.Dataset:
+def _publish(loc: Location, cycle: np.datetime64) -> None:
+    """Make the store's present shape the published view: give the cycle a new content version (root attribute
+    `cycle_versions`, ISO cycle → int, nanoseconds since 1970 at publication, always increasing), then rewrite the
+    consolidated metadata. Each is one atomic write of the root `zarr.json`."""
+    group = zarr.open_group(loc.zarr_store(), mode="r+")
+    versions = dict(group.attrs.get("cycle_versions", {}))
+    label = _version_label(cycle)
+    versions[label] = max(time.time_ns(), int(versions.get(label, 0)) + 1)
+    group.attrs.update({"cycle_versions": versions})
+    with warnings.catch_warnings():  # zarr notes that consolidated metadata is not in the Zarr 3 spec (yet)
+        warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part", category=UserWarning)
+        zarr.consolidate_metadata(loc.zarr_store())
+
+
+def _version_label(cycle) -> str:
+    return str(np.datetime_as_string(np.datetime64(cycle, "s"), unit="s"))
+
+
+def cycle_versions(path, storage_options: dict | None = None) -> dict[np.datetime64, int]:
+    """The content version of every published cycle: a re-ingest gives its cycle a new one. A store never
+    published (or written before versions existed) has none."""
+    loc = locate(path, storage_options)
+    if not loc.has("zarr.json"):
+        return {}
+    attrs = zarr.open_group(loc.zarr_store(read_only=True), mode="r").attrs
+    return {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
+
+
+def _open_consistent(loc: Location, lock_dir: Path | None) -> xr.Dataset:
     try:
-        return xr.open_zarr(path, consolidated=False, chunks={})
+        return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False, chunks={})
     except ValueError as exc:
         if "conflicting sizes" not in str(exc):
             raise
     # A writer was killed mid-append (or is appending right now): wait for the lock, trim, reopen.
-    with writer_lock(lock_dir, path):
-        _repair(path)
-    return xr.open_zarr(path, consolidated=False, chunks={})
+    with writer_lock(lock_dir, loc):
+        _repair(loc)
+    return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False, chunks={})
 
 
-def open_cube(path: Path, *, include_incomplete: bool = True, lock_dir: Path | None = None) -> xr.Dataset:
-    """Lazy (dask) view of every visible cycle, sorted by cycle."""
-    path = Path(path)
-    if path.exists() and not (path / "zarr.json").exists():
-        raise CubeError(f"{path}: the store is damaged ({'; '.join(metadata_problems(path))}): run `jitroute cube check`, "
+def _require_store(loc: Location) -> None:
+    has_meta = loc.has("zarr.json")
+    if loc.local is not None and loc.local.exists() and not has_meta:
+        raise CubeError(f"{loc.url}: the store is damaged ({'; '.join(metadata_problems(loc))}): run `jitroute cube check`, "
                         "then `jitroute cube repair`")
-    if not (path / "zarr.json").exists():
-        raise FileNotFoundError(f"no weather cube at {path}: run `jitroute ingest` (or `jitroute demo`) first")
-    ds = _open_consistent(path, lock_dir)
+    if not has_meta:
+        raise FileNotFoundError(f"no weather cube at {loc.url}: run `jitroute ingest` (or `jitroute demo`) first")
+
+
+def open_cube(path, *, include_incomplete: bool = True, lock_dir: Path | None = None,
+              storage_options: dict | None = None) -> xr.Dataset:
+    """Lazy (dask) view of every visible cycle, sorted by cycle."""
+    loc = locate(path, storage_options)
+    _require_store(loc)
+    ds = _open_consistent(loc, lock_dir)
     state = ds["cycle_state"].values
     keep = state == STATE_COMPLETE if not include_incomplete else state != STATE_HIDDEN
     ds = ds.isel(cycle=np.flatnonzero(keep))
+    ds.attrs.pop("cycle_versions", None)  # the publications' bookkeeping, read with cycle_versions()
     return ds.sortby("cycle")
 
 
-def cycle_states(path: Path, lock_dir: Path | None = None) -> dict[np.datetime64, int]:
-    path = Path(path)
-    if not (path / "zarr.json").exists():
+def cycle_states(path, lock_dir: Path | None = None, storage_options: dict | None = None) -> dict[np.datetime64, int]:
+    loc = locate(path, storage_options)
+    if not loc.has("zarr.json"):
         return {}
-    with _open_consistent(path, lock_dir) as ds:
+    with _open_consistent(loc, lock_dir) as ds:
         return dict(zip(ds["cycle"].values.astype("datetime64[ns]"), ds["cycle_state"].values.astype(int)))
 
 
-def complete_cycles(path: Path) -> list[np.datetime64]:
-    return sorted(c for c, s in cycle_states(path).items() if s == STATE_COMPLETE)
+def complete_cycles(path, storage_options: dict | None = None) -> list[np.datetime64]:
+    return sorted(c for c, s in cycle_states(path, storage_options=storage_options).items() if s == STATE_COMPLETE)
 
 
-def latest_complete_cycle(path: Path, at_or_before=None) -> np.datetime64 | None:
-    cycles = complete_cycles(path)
+def latest_complete_cycle(path, at_or_before=None, storage_options: dict | None = None) -> np.datetime64 | None:
+    cycles = complete_cycles(path, storage_options)
     if at_or_before is not None:
         limit = np.datetime64(at_or_before, "ns")
         cycles = [c for c in cycles if c <= limit]
     return cycles[-1] if cycles else None
 
 
-def load_cycle(path: Path, cycle, lat_range_deg: tuple[float, float] | None = None) -> xr.Dataset:
+def _corrupt_chunk_error(loc: Location, c: np.datetime64, exc: Exception) -> CorruptChunkError:
+    bad = [p for p in corrupt_chunks(loc, cycles=[c])] or None
+    label = np.datetime_as_string(np.datetime64(c, "h"), unit="h")
+    where = ", ".join(str(p.chunk) for p in bad[:3]) if bad else f"(reading failed: {exc})"
+    return CorruptChunkError(f"cube chunk {where} of cycle {label} is corrupt ({type(exc).__name__}: {exc}): "
+                             f"run `jitroute ingest --cycle {label} --force`")
+
+
+def load_cycle(path, cycle, lat_range_deg: tuple[float, float] | None = None,
+               storage_options: dict | None = None) -> xr.Dataset:
     """One visible cycle, eager, dims (step, lat, lon); only the latitude band `lat_range_deg` if given.
 
     A chunk damaged on disk raises CorruptChunkError naming the chunk, the cycle and the re-ingest that fixes it.
     """
-    ds = open_cube(path)
+    loc = locate(path, storage_options)
+    ds = open_cube(loc)
     c = np.datetime64(cycle, "ns")
     if c not in ds["cycle"].values:
-        raise KeyError(f"cycle {c} is not in the cube at {path} (have {len(ds.cycle)} cycles)")
+        raise KeyError(f"cycle {c} is not in the cube at {loc.url} (have {len(ds.cycle)} cycles)")
     one = ds.sel(cycle=c)
     if lat_range_deg is not None:
         lo, hi = sorted(lat_range_deg)
@@ -277,48 +416,136 @@ def load_cycle(path: Path, cycle, lat_range_deg: tuple[float, float] | None = No
     try:
         return one.load()
     except DECODE_ERRORS as exc:
-        bad = [p for p in corrupt_chunks(path, cycles=[c])] or None
-        label = np.datetime_as_string(np.datetime64(c, "h"), unit="h")
-        where = ", ".join(str(p.chunk) for p in bad[:3]) if bad else f"(reading failed: {exc})"
-        raise CorruptChunkError(f"cube chunk {where} of cycle {label} is corrupt ({type(exc).__name__}: {exc}): "
-                                f"run `jitroute ingest --cycle {label} --force`") from exc
+        raise _corrupt_chunk_error(loc, c, exc) from exc
+
+
+# --- reading one voyage's window ----------------------------------------------------------------------------------
+
+
+def open_published(path, storage_options: dict | None = None) -> xr.Dataset:
+    """The published view of the store (its consolidated metadata: one read), lazy without dask (`chunks=None`):
+    indexing it reads only the chunks it touches. A local store written before publication existed is read as it
+    is (cycle_state still hides unfinished cycles) until its next ingest publishes it; a store at a URL never
+    published raises FileNotFoundError."""
+    loc = locate(path, storage_options)
+    if loc.local is not None:
+        _require_store(loc)
+    try:
+        return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=True, chunks=None)
+    except (FileNotFoundError, ValueError, KeyError) as exc:
+        if loc.local is not None and "not found" in str(exc):
+            return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False, chunks=None)
+        raise FileNotFoundError(f"no published weather cube at {loc.url} ({type(exc).__name__}: {exc}): "
+                                "run `jitroute ingest` (or `jitroute demo`) first") from exc
+
+
+def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:
+    """The steps whose valid times bracket t_from..t_to (the step at or before t_from to the one at or after
+    t_to), clipped to the cycle's steps."""
+    n = valid.size
+    i0 = int(np.clip(np.searchsorted(valid, np.datetime64(t_from, "ns"), side="right") - 1, 0, n - 1))
+    i1 = int(np.clip(np.searchsorted(valid, np.datetime64(t_to, "ns"), side="left"), i0, n - 1))
+    return slice(i0, i1 + 1)
+
+
+def _lat_slice(lat: np.ndarray, lat_deg: tuple[float, float], pad_deg: float) -> slice:
+    """Rows covering lat_deg ± pad_deg (at least 2), whatever the order of the cube's latitudes."""
+    lo, hi = min(lat_deg) - pad_deg, max(lat_deg) + pad_deg
+    rows = np.flatnonzero((lat >= lo) & (lat <= hi))
+    if rows.size < 2:  # a box at or beyond the grid's edge: the two nearest rows
+        rows = np.sort(np.argsort(np.abs(lat - 0.5 * (lo + hi)))[:2])
+    return slice(int(rows[0]), int(rows[-1]) + 1)
+
+
+def _lon_slices(lon: np.ndarray, lon_deg: tuple[float, float], pad_deg: float) -> tuple[list[slice], np.ndarray]:
+    """Column slices covering west..east (degrees east, east ≥ west, any turn) ± pad_deg on a regular grid, and
+    the longitudes they give, continuous and increasing (a box across the grid's seam reads two slices; their
+    longitudes go on past 360). A box about as wide as the globe reads every column."""
+    n, dlon = lon.size, float(lon[1] - lon[0])
+    west, east = lon_deg[0] - pad_deg, lon_deg[1] + pad_deg
+    if not abs(n * dlon - 360.0) < 1e-6:  # a regional grid: clip, never wrap
+        cols = np.flatnonzero((lon >= west) & (lon <= east))
+        cols = cols if cols.size >= 2 else np.sort(np.argsort(np.abs(lon - 0.5 * (west + east)))[:2])
+        return [slice(int(cols[0]), int(cols[-1]) + 1)], lon[cols[0]:cols[-1] + 1]
+    if east - west >= 360.0 - 2 * dlon:
+        return [slice(0, n)], lon
+    k0 = int(np.floor(((west - lon[0]) % 360.0) / dlon))
+    count = int(np.ceil((east - west) / dlon)) + 2
+    first = slice(k0, min(n, k0 + count))
+    slices = [first] if k0 + count <= n else [first, slice(0, k0 + count - n)]
+    return slices, lon[k0] + dlon * np.arange(count)
+
+
+def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], lon_deg: tuple[float, float],
+                variables: tuple[str, ...] = DATA_VARS, margin_cells: int = 3, storage_options: dict | None = None,
+                published: xr.Dataset | None = None) -> xr.Dataset:
+    """One visible cycle's weather in a window, eager, dims (step, lat, lon): the steps whose valid times cover
+    `valid_utc` = (from, to), and the box `lat_deg` (south, north) × `lon_deg` (west, east in degrees east; east ≥ west,
+    e.g. (170, 200) across 180°) padded by `margin_cells` grid cells. Only the chunks in the window are read,
+    without dask. A box across the grid's seam comes back with continuous longitudes (past 360).
+
+    `path` is a local path or URL (`s3://bucket/…/weather.zarr` with fsspec `storage_options`); `published` is an
+    already opened `open_published(path)` to read from (its caller then keeps it). Raises KeyError for a cycle not
+    published or hidden, CorruptChunkError for a chunk that does not decode.
+    """
+    loc = locate(path, storage_options)
+    ds = published if published is not None else open_published(loc)
+    c = np.datetime64(cycle, "ns")
+    hits = np.flatnonzero(ds["cycle"].values.astype("datetime64[ns]") == c)
+    if not hits.size or int(ds["cycle_state"].values[hits[0]]) == STATE_HIDDEN:  # the state is read live
+        raise KeyError(f"cycle {c} is not in the cube at {loc.url} (or is being re-written)")
+    ci = int(hits[0])
+    valid = c + ds["step"].values.astype("timedelta64[h]").astype("timedelta64[ns]")
+    steps = _step_slice(valid, *valid_utc)
+    lat = ds["lat"].values
+    lats = _lat_slice(lat, lat_deg, margin_cells * abs(float(lat[1] - lat[0])))
+    lon = ds["lon"].values
+    lon_parts, lon_out = _lon_slices(lon, lon_deg, margin_cells * float(lon[1] - lon[0]))
+    try:
+        data = {v: (("step", "lat", "lon"),
+                    np.concatenate([ds[v].variable[ci, steps, lats, part].values for part in lon_parts], axis=-1))
+                for v in variables}
+    except DECODE_ERRORS as exc:
+        raise _corrupt_chunk_error(loc, c, exc) from exc
+    return xr.Dataset(data, coords={"cycle": c, "step": ds["step"].values[steps], "lat": lat[lats], "lon": lon_out})
 
 
 # --- checking and repairing a store damaged on disk ---------------------------------------------------------------
 
 
-def metadata_problems(path: Path) -> list[str]:
+def metadata_problems(path) -> list[str]:
     """What is missing or unreadable among the store's metadata files (`zarr.json` of the group and arrays)."""
     import json
 
+    loc = locate(path)
     out = []
     for node in METADATA_NODES:
-        meta = Path(path) / node / "zarr.json" if node else Path(path) / "zarr.json"
-        if not meta.exists():
-            out.append(f"{meta.relative_to(Path(path).parent)} is missing")
+        key = f"{node}/zarr.json" if node else "zarr.json"
+        if not loc.has(key):
+            out.append(f"{loc.name}/{key} is missing")
             continue
         try:
-            json.loads(meta.read_text())
+            json.loads(loc.read_text(key))
         except (OSError, ValueError) as exc:
-            out.append(f"{meta.relative_to(Path(path).parent)} is unreadable ({exc})")
+            out.append(f"{loc.name}/{key} is unreadable ({exc})")
     return out
 
 
 class BadChunk:
     """One chunk that does not decode: `chunk` is its file, `variable` and `cycle` what it holds."""
 
-    def __init__(self, chunk: Path, variable: str, cycle: np.datetime64, error: str):
+    def __init__(self, chunk: Path | str, variable: str, cycle: np.datetime64, error: str):
         self.chunk, self.variable, self.cycle, self.error = chunk, variable, cycle, error
 
     def __repr__(self) -> str:
         return f"BadChunk({self.chunk}, {self.variable}, {self.cycle})"
 
 
-def corrupt_chunks(path: Path, cycles: list | None = None) -> list[BadChunk]:
+def corrupt_chunks(path, cycles: list | None = None, storage_options: dict | None = None) -> list[BadChunk]:
     """Decode every chunk of the data variables (of `cycles`, default all) and list those that fail."""
-    path = Path(path)
-    group = zarr.open_group(str(path), mode="r")
-    times = xr.open_zarr(path, consolidated=False, chunks={})["cycle"].values.astype("datetime64[ns]")
+    loc = locate(path, storage_options)
+    group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
+    times = _cycles_in_store(loc)
     wanted = range(len(times)) if cycles is None else [int(i) for c in cycles for i in np.flatnonzero(times == np.datetime64(c, "ns"))]
     bad = []
     for v in DATA_VARS:
@@ -331,7 +558,8 @@ def corrupt_chunks(path: Path, cycles: list | None = None) -> list[BadChunk]:
                     try:
                         arr[i, :, j * clat:(j + 1) * clat, k * clon:(k + 1) * clon]
                     except DECODE_ERRORS as exc:
-                        bad.append(BadChunk(path / v / "c" / str(i) / "0" / str(j) / str(k), v, times[i],
+                        key = f"{v}/c/{i}/0/{j}/{k}"
+                        bad.append(BadChunk(loc.local / key if loc.local is not None else f"{loc.url}/{key}", v, times[i],
                                             f"{type(exc).__name__}: {exc}"))
     return bad
 
@@ -351,8 +579,6 @@ def check_store(path: Path) -> tuple[list[str], list[BadChunk]]:
 def move_aside(path: Path, lock_dir: Path | None = None) -> Path:
     """Move a damaged store to `<store>.damaged-<UTC time>` (kept for inspection), under the writer lock, and
     remove a `<store>.creating` left by a failed creation; the next ingest creates a fresh store."""
-    import time
-
     path = Path(path)
     with writer_lock(lock_dir, path):
         shutil.rmtree(path.with_name(path.name + ".creating"), ignore_errors=True)
@@ -363,9 +589,9 @@ def move_aside(path: Path, lock_dir: Path | None = None) -> Path:
 
 def hide_cycles(path: Path, cycles: list, lock_dir: Path | None = None) -> None:
     """Set the cycles back to hidden (readers stop seeing them) until a re-ingest writes them again."""
-    path = Path(path)
-    with writer_lock(lock_dir, path):
-        times = _cycles_in_store(path)
+    loc = locate(path)
+    with writer_lock(lock_dir, loc):
+        times = _cycles_in_store(loc)
         for c in cycles:
             for i in np.flatnonzero(times == np.datetime64(c, "ns")):
-                _set_state(path, int(i), STATE_HIDDEN)
+                _set_state(loc, int(i), STATE_HIDDEN)

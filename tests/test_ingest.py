@@ -65,12 +65,17 @@ def test_second_ingest_is_skipped_and_forced_reingest_is_identical(ingested, dem
     root, _ = ingested
     store = DataLayout(root).weather_cube
     before = xr.open_zarr(store, consolidated=False).load()
+    version = cube.cycle_versions(store)[np.datetime64(CYCLE, "ns")]
     again = _ingest(root, f"file://{demo_mirror}/rish/", f"file://{demo_mirror}/oscar/")
     assert again["skipped"]
+    assert cube.cycle_versions(store)[np.datetime64(CYCLE, "ns")] == version  # a skipped ingest publishes nothing
     forced = _ingest(root, f"file://{demo_mirror}/rish/", f"file://{demo_mirror}/oscar/", force=True)
     assert forced["complete"]
     after = xr.open_zarr(store, consolidated=False).load()
     assert after.sizes["cycle"] == 1
+    assert cube.cycle_versions(store)[np.datetime64(CYCLE, "ns")] > version  # re-written: readers must read it again
+    for ds in (before, after):
+        ds.attrs.pop("cycle_versions")
     xr.testing.assert_identical(before, after)  # file:// gives the same cube as http://
 
 

@@ -54,8 +54,9 @@ def _length_nm(job: RouteJob) -> float:
 
 
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
-               options: RoutingOptions, exports: bool) -> list[RouteJob]:
-    """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle."""
+               options: RoutingOptions, exports: bool, cycle_version: int | None = None) -> list[RouteJob]:
+    """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle;
+    each carries the cycle's content version read at the start of the run."""
     table = fleet_store.load_voyages(db, voyage_ids=voyage_ids)
     if voyage_ids:
         unknown = sorted(set(voyage_ids) - set(table["voyage_id"].astype(str)))
@@ -73,7 +74,7 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     for v in table.to_dict("records"):
         v = {k: plain(x) for k, x in v.items()}
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
-                             run_id=run_id, cycle=cyc, exports=exports, options=options))
+                             run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version))
     return jobs
 
 
@@ -130,7 +131,8 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
         raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube}: ingest it first")
     run_id = f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:6]}"
     options = RoutingOptions.from_settings(s.routing)
-    jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports)
+    jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports,
+                      cube.cycle_versions(layout.weather_cube).get(c))
     route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger, n_voyages=len(jobs))
     export_store.discard_stale(layout.exports, route_store.running_run_ids(layout.warehouse))
     staging = export_store.staging_dir(layout.exports, run_id) if exports else None

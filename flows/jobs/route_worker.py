@@ -3,20 +3,25 @@
 No Prefect here (workers never start or call a Prefect API) and nothing written where the worker
 runs: each result carries the route row, leg rows, export files as bytes and the log lines the
 parent re-emits (so errors from workers reach the run's logs).
+
+Each voyage reads only its window of the cube cycle (the steps and the lat/lon box it can meet), without dask;
+windows are cached per (store, cycle, content version, window), so a re-ingested cycle is read afresh.
 """
 
 from __future__ import annotations
 
 import functools
+import json
 import logging
 import math
 import traceback
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from pipeline.routing.job import RouteJob, plan_voyage
+from pipeline.routing import weather_field as wf
+from pipeline.routing.job import RouteJob, WeatherFor, plan_voyage
+from pipeline.routing.problem import WeatherWindow
 from storage import cube
 from storage.route_store import ROUTE_COLUMNS
 
@@ -37,23 +42,42 @@ def failed_result(job: RouteJob, reason: str, log: list | None = None) -> dict:
             "export_errors": {}, "log": log or []}
 
 
+WINDOWS_CACHED = 4  # a few MB each for an ocean crossing; voyages on one route and departure share theirs
+
+
 @functools.lru_cache(maxsize=2)
-def cycle_field(cube_path: str, cycle: str):
-    """One cube cycle as a WeatherField, read once per worker process and reused for its voyages."""
-    from pipeline.routing import weather_field as wf
-
-    return wf.from_cycle(cube.load_cycle(Path(cube_path), cycle), cycle)
+def published_view(store: str, options_json: str, cycle: str, version: int | None):
+    """The store's published view (metadata and coordinates only), opened once per cycle content version."""
+    return cube.open_published(store, json.loads(options_json))
 
 
-def route_one(job: RouteJob, cube_path: str | None) -> dict:
+@functools.lru_cache(maxsize=WINDOWS_CACHED)
+def window_field(store: str, options_json: str, cycle: str, version: int | None, window: WeatherWindow) -> wf.WeatherField:
+    """A voyage's window of a cube cycle as a WeatherField, read once per (store, cycle, content version, window)
+    in this process; `options_json` is the store's fsspec options as JSON (hashable)."""
+    ds = cube.read_window(store, cycle, valid_utc=(window.from_utc, window.to_utc), lat_deg=window.lat_deg,
+                          lon_deg=window.lon_deg, variables=wf.CUBE_VARIABLES, storage_options=json.loads(options_json),
+                          published=published_view(store, options_json, cycle, version))
+    return wf.from_cycle(ds, cycle)
+
+
+def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | None = None) -> WeatherFor | None:
+    """Where a job's weather comes from: its voyage's window of the job's cube cycle (None: calm water)."""
+    if cube_path is None:
+        return None
+    options_json = json.dumps(storage_options or {}, sort_keys=True)
+    return lambda problem, space: window_field(str(cube_path), options_json, job.cycle, job.cycle_version,
+                                               problem.weather_window(space))
+
+
+def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None = None) -> dict:
     """Route one voyage end to end; a voyage that cannot be routed becomes a `failed` row with the reason."""
     from pipeline.export.bundle import export_plan
     from pipeline.routing.problem import RoutingInputError
     from pipeline.routing.search_space import VoyageGeometryError
 
     try:
-        weather = cycle_field(cube_path, job.cycle) if cube_path is not None else None
-        plan, weather = plan_voyage(job, weather)
+        plan, weather = plan_voyage(job, cube_weather(cube_path, job, storage_options))
     except (RoutingInputError, VoyageGeometryError, KeyError, cube.CubeError) as exc:  # the message says what to do
         return failed_result(job, str(exc).strip("'\""))
     except Exception as exc:  # a bug or bad data: record it, keep the rest of the fleet going
@@ -70,9 +94,10 @@ def route_one(job: RouteJob, cube_path: str | None) -> dict:
     return out
 
 
-def route_batch(jobs: list[RouteJob], cube_path: str | None) -> list[dict]:
-    """Route a few voyages one after the other; each is isolated (its own try/except and row)."""
-    return [route_one(job, cube_path) for job in jobs]
+def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: dict | None = None) -> list[dict]:
+    """Route a few voyages one after the other; each is isolated (its own try/except and row). `cube_path` is a
+    local path or a URL (`s3://…`, with fsspec `storage_options`)."""
+    return [route_one(job, cube_path, storage_options) for job in jobs]
 
 
 def plain(v):

@@ -2,11 +2,12 @@
 
 `RouteJob` carries plain rows (voyage, vessel, active model as JSON) so it pickles cheaply to any
 worker; `RoutingOptions` holds the solver settings of the run. `plan_voyage` is the whole per-voyage
-science: problem → search space → solve in the given weather.
+science: problem → search space → its weather (only the window of the forecast it can meet) → solve.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,6 +16,7 @@ from pipeline.performance.model import PerformanceModel
 from pipeline.routing import weather_field as wf
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
+from pipeline.routing.search_space import SearchSpace
 from pipeline.routing.solve import solve
 from pipeline.routing.voyage import problem_from_voyage
 
@@ -50,6 +52,7 @@ class RouteJob:
     cycle: str | None  # ISO cycle of the cube, None for calm water
     exports: bool = True
     options: RoutingOptions = field(default_factory=RoutingOptions)
+    cycle_version: int | None = None  # the cycle's content version when the run started (storage.cube.cycle_versions)
 
     @property
     def voyage_id(self) -> str:
@@ -73,14 +76,17 @@ def calm_weather(problem: RoutingProblem) -> wf.WeatherField:
     return wf.uniform(problem.depart_utc - np.timedelta64(1, "h"), 2.0 * problem.t_req_h + 240.0)
 
 
-def plan_voyage(job: RouteJob, weather: wf.WeatherField | None) -> tuple[Plan, wf.WeatherField]:
-    """Solve the job in `weather` (None: calm water). Returns (plan, the weather it was planned in).
+WeatherFor = Callable[[RoutingProblem, SearchSpace], wf.WeatherField]  # the weather of a voyage, given its search space
+
+
+def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf.WeatherField]:
+    """Solve the job in the weather `weather_for(problem, space)` gives (None: calm water). Returns (plan, the
+    weather it was planned in).
 
     Raises RoutingInputError / VoyageGeometryError / KeyError for voyages that cannot be routed as given.
     """
     problem = routing_problem(job)
     space = problem.search_space()
-    if weather is None:
-        weather = calm_weather(problem)
+    weather = calm_weather(problem) if weather_for is None else weather_for(problem, space)
     o = job.options
     return solve(problem, weather, solver=o.solver, seed=o.seed, space=space), weather

@@ -4,6 +4,7 @@ weather and objective as named structures)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,6 +20,26 @@ class RoutingInputError(ValueError):
 
 
 MAX_VOYAGE_H = 90 * 24.0  # longer is a typing mistake in the RTA, not a voyage (same limit as the voyages import)
+
+
+class WeatherWindow(NamedTuple):
+    """The part of a forecast a voyage can meet: valid times from its departure to the end of its planning
+    horizon, and the box of its search space (degrees; `lon_deg` = (west, east) in degrees east with east ≥ west,
+    west in 0..360, so a box across 180° is e.g. (170, 200))."""
+
+    from_utc: np.datetime64
+    to_utc: np.datetime64
+    lat_deg: tuple[float, float]
+    lon_deg: tuple[float, float]
+
+
+def lon_span_deg(lon_deg) -> tuple[float, float]:
+    """The shortest arc of longitude holding every given longitude: (west, east), west in 0..360, east ≥ west."""
+    x = np.unique(np.asarray(lon_deg, dtype=np.float64) % 360.0)
+    gaps = np.diff(np.append(x, x[0] + 360.0))  # gap after each longitude, going east
+    k = int(np.argmax(gaps))
+    west = float(x[(k + 1) % x.size])
+    return west, west + 360.0 - float(gaps[k])
 
 
 def _place(role: str, name: str) -> str:
@@ -83,9 +104,25 @@ class RoutingProblem:
                                   dep_name=f"voyage {self.voyage_id}: {_place('departure', self.dep_name)}",
                                   arr_name=f"voyage {self.voyage_id}: {_place('destination', self.arr_name)}")
 
-    def lat_band_deg(self, space: SearchSpace, margin_deg: float = 1.0) -> tuple[float, float]:
-        ok = space.lat[space.node_ok]
-        return float(np.min(space.lat) - margin_deg), float(np.max(space.lat) + margin_deg)
+    def slowest_kn(self) -> float:
+        """Calm-water speed at the lowest allowed rpm; RoutingInputError when the model gives next to nothing."""
+        m = self.model
+        slow = float(m.stw_kn(self.rpm_options[0], self.draft_m, self.trim_m))
+        if slow < 1.0:
+            raise RoutingInputError(
+                f"voyage {self.voyage_id}: the performance model of vessel {self.imo} gives {slow:.2f} kn at "
+                f"{self.rpm_options[0]:g} rpm in calm water; refit the model or check the allowed rpm settings")
+        return slow
+
+    def planning_horizon_h(self, space: SearchSpace) -> float:
+        """The longest passage the solvers consider (hours after departure); longer ones are refused."""
+        return max(1.6 * self.t_req_h, 1.6 * space.base_distance_nm / self.slowest_kn())
+
+    def weather_window(self, space: SearchSpace) -> WeatherWindow:
+        """The weather this voyage can meet: departure .. departure + planning horizon, over its search space."""
+        end = self.depart_utc + np.timedelta64(int(np.ceil(self.planning_horizon_h(space) * 3600.0)), "s")
+        return WeatherWindow(self.depart_utc, end, (float(space.lat.min()), float(space.lat.max())),
+                             lon_span_deg(space.lon))
 
 
 @dataclass
@@ -104,13 +141,9 @@ class Instance:
     @classmethod
     def build(cls, problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> "Instance":
         m = problem.model
-        slow = float(m.stw_kn(problem.rpm_options[0], problem.draft_m, problem.trim_m))
-        if slow < 1.0:
-            raise RoutingInputError(
-                f"voyage {problem.voyage_id}: the performance model of vessel {problem.imo} gives {slow:.2f} kn at "
-                f"{problem.rpm_options[0]:g} rpm in calm water; refit the model or check the allowed rpm settings")
+        problem.slowest_kn()  # refuses a model that barely moves the ship, before the weather is looked at
         _check_coverage(problem, space, weather)
-        max_hours = max(1.6 * problem.t_req_h, 1.6 * space.base_distance_nm / slow)
+        max_hours = problem.planning_horizon_h(space)
         ves = vessel(m, draft_m=problem.draft_m, trim_m=problem.trim_m, max_hs_m=problem.max_hs_m,
                      max_wind_kn=problem.max_wind_kn, max_step_h=problem.max_step_h, rpm_options=problem.rpm_options)
         obj = objective(problem.objective, t_dep_h=weather.hours_after_ref(problem.depart_utc), max_hours=max_hours,

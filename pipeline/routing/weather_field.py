@@ -26,6 +26,7 @@ import numpy as np
 
 N_VARS = 7
 U10, V10, SWH, WAVE_X, WAVE_Y, UO, VO = range(N_VARS)
+CUBE_VARIABLES = ("u10", "v10", "swh", "mwd", "uo", "vo")  # what from_cycle takes of a cube cycle
 
 
 class Grid(NamedTuple):
@@ -93,10 +94,11 @@ def _grid(lat: np.ndarray, lon: np.ndarray) -> Grid:
                 int(lon.size), wraps)
 
 
-def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=None) -> WeatherField:
-    """Build a field from (nt, nlat, nlon) arrays (mwd in degrees, coming from)."""
+def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=None, t_ref=None) -> WeatherField:
+    """Build a field from (nt, nlat, nlon) arrays (mwd in degrees, coming from); times count from `t_ref`
+    (default the first valid time)."""
     times = np.asarray(times_utc, dtype="datetime64[s]")
-    t_ref = times[0]
+    t_ref = times[0] if t_ref is None else np.datetime64(t_ref, "s")
     times_h = ((times - t_ref) / np.timedelta64(1, "s")).astype(np.float64) / 3600.0
     if np.any(np.diff(times_h) <= 0):
         raise ValueError("weather valid times must increase")
@@ -112,11 +114,13 @@ def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=No
 
 
 def from_cycle(ds, cycle=None) -> WeatherField:
-    """From one cube cycle (xarray dims step, lat, lon; variables u10 v10 swh mwd uo vo)."""
+    """From one cube cycle, whole or a window of it (xarray dims step, lat, lon; variables CUBE_VARIABLES). Times
+    count from the cycle, whichever steps the window holds, so a voyage meets the same numbers in both."""
     cyc = np.datetime64(cycle if cycle is not None else ds["cycle"].values, "s")
     times = cyc + (np.asarray(ds["step"].values, dtype=np.int64) * 3600).astype("timedelta64[s]")
     return from_arrays(ds["lat"].values, ds["lon"].values, times, u10=ds["u10"].values, v10=ds["v10"].values,
-                       swh=ds["swh"].values, mwd_deg=ds["mwd"].values, uo=ds["uo"].values, vo=ds["vo"].values, cycle=cyc)
+                       swh=ds["swh"].values, mwd_deg=ds["mwd"].values, uo=ds["uo"].values, vo=ds["vo"].values, cycle=cyc,
+                       t_ref=cyc)
 
 
 def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0, wave_from_deg=0.0,

@@ -168,12 +168,12 @@ def test_a_plain_ingest_re_ingests_a_complete_cycle_whose_chunk_is_corrupt(root,
 
 
 def test_routing_on_a_corrupt_chunk_fails_the_voyage_with_the_chunk_and_the_fix(root):
-    from flows.jobs.route_worker import cycle_field, route_one
+    from flows.jobs.route_worker import route_one, window_field
     from pipeline.routing.job import RouteJob, RoutingOptions
 
     store = DataLayout(root).weather_cube
     _spoil_chunk(store)
-    cycle_field.cache_clear()
+    window_field.cache_clear()
     voyage = {"voyage_id": "VCHUNK", "imo": 1, "dep_lat": 34.0, "dep_lon": 140.0, "arr_lat": 30.0, "arr_lon": 145.0,
               "depart_utc": np.datetime64("2020-12-01T02"), "rta_utc": np.datetime64("2020-12-02T12"), "rpm_options": [70, 80]}
     from tests.reliability.test_routing_faults import MODEL
