@@ -1,19 +1,25 @@
-"""Fleet routing throughput: 200 voyages with 1 and with 2 local dask workers (target scaling ≥ 1.7×).
+"""Fleet routing throughput and worker memory: 200 voyages with 1 and with 2 local dask workers.
 
 Builds (once, under bench/out/fleet) a data root with one ingested demo cycle, a 12-vessel fleet
 with fitted models and 200 voyages on the demo's port pairs with staggered departures, then runs
 the `route-fleet` flow (exports off) against a local dask cluster of 1 and of 2 single-threaded
 worker processes (passed as an existing scheduler address, as in production) and prints voyages
-per minute and the ratio. Each cluster is warmed up first (imports, land mask, numba caches, the
-cube cycle) so both timings measure routing, not start-up.
+per minute (per worker) and the ratio. Each cluster is warmed up first (imports, land mask, numba caches)
+so both timings measure routing, not start-up.
 
-    .venv/bin/python bench/fleet.py [--voyages 200]
+Memory: the peak resident memory (RSS high-water mark) of each worker process over its cluster's runs, and,
+to judge the weather's share on its own, what importing the land mask alone adds to a fresh interpreter.
+
+Targets: scaling 1 → 2 workers ≥ 1.7×; peak worker memory ≤ 300 MB.
+
+    .venv/bin/python bench/fleet.py [--voyages 200] [--workers 1,2]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -73,14 +79,30 @@ def run(root: Path, address: str, voyages: list[str]) -> float:
     return dt
 
 
+def peak_rss_mb() -> float:
+    """This process's resident-memory high-water mark in MB (Linux reports KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def land_mask_mb() -> float:
+    """What importing the land mask adds to the peak RSS of a fresh interpreter (numpy already imported)."""
+    code = ("import resource, numpy; a = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; "
+            "import global_land_mask.globe; b = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; print((b - a) / 1024)")
+    return float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
+
+
 def main() -> None:
     import logging
 
-    from distributed import LocalCluster
+    from distributed import Client, LocalCluster
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--voyages", type=int, default=200)
+    ap.add_argument("--workers", default="1,2", help="cluster sizes to time, comma separated")
     args = ap.parse_args()
+    sizes = [int(w) for w in args.workers.split(",")]
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     OUT.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("PREFECT_HOME", str(OUT / "prefect"))
@@ -88,20 +110,26 @@ def main() -> None:
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     root = prepare(args.voyages)
     ids = [f"B{k:04d}" for k in range(args.voyages)]
-    times = {}
-    for workers in (1, 2):
+    times, peaks = {}, {}
+    for workers in sizes:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                           silence_logs=logging.WARNING) as cluster:
             os.environ["JITROUTE_DASK_WORKERS"] = str(workers)
-            run(root, cluster.scheduler_address, ids[: 2 * workers])  # warm-up: imports, land mask, numba caches, cube
+            run(root, cluster.scheduler_address, ids[: 2 * workers])  # warm-up: imports, land mask, numba caches
             times[workers] = run(root, cluster.scheduler_address, ids)
-    t1, t2 = times[1], times[2]
-    v1, v2 = args.voyages / t1 * 60, args.voyages / t2 * 60
-    ratio = t1 / t2
-    print(f"{'workers':>8} {'seconds':>9} {'voyages/min':>12}")
-    print(f"{1:>8} {t1:>9.1f} {v1:>12.1f}")
-    print(f"{2:>8} {t2:>9.1f} {v2:>12.1f}")
-    print(f"scaling 1 → 2 workers: {ratio:.2f}× (target ≥ 1.7×: {'met' if ratio >= 1.7 else 'NOT met'})")
+            with Client(cluster.scheduler_address) as client:
+                peaks[workers] = max(client.run(peak_rss_mb).values())
+    land = land_mask_mb()
+    print(f"{'workers':>8} {'seconds':>9} {'voyages/min':>12} {'per worker':>11} {'peak worker MB':>15}")
+    for w in sizes:
+        v = args.voyages / times[w] * 60
+        print(f"{w:>8} {times[w]:>9.1f} {v:>12.1f} {v / w:>11.1f} {peaks[w]:>15.0f}")
+    print(f"land mask import alone: {land:.0f} MB of each worker's peak; without it: "
+          + ", ".join(f"{peaks[w] - land:.0f} MB ({w} worker{'s' if w > 1 else ''})" for w in sizes)
+          + f" (target ≤ 300 MB in all: {'met' if max(peaks.values()) <= 300 else 'NOT met'})")
+    if 1 in times and 2 in times:
+        ratio = times[1] / times[2]
+        print(f"scaling 1 → 2 workers: {ratio:.2f}× (target ≥ 1.7×: {'met' if ratio >= 1.7 else 'NOT met'})")
 
 
 if __name__ == "__main__":

@@ -9,17 +9,44 @@ Store contents (CF attributes and units on every variable):
   current_age_h (cycle, step)  age of that analysis in hours
   cycle_state   (cycle)        0 = being written (hidden), 1 = complete, 2 = incomplete (visible, flagged)
 
+Where it lives: a local path, or a URL (`s3://bucket/…/weather.zarr` through s3fs, `file://…`) with fsspec
+`storage_options` (for S3 e.g. {"endpoint_url": …, "key": …, "secret": …}). One writer per store (the ingest of the
+flow process) under an exclusive fcntl lock: `<store>.lock` beside a local store, in the given `lock_dir` (the
+data root's `locks/`) for a URL.
+
 How writes stay idempotent and crash-safe:
-1. Under an exclusive file lock (one writer per store; `<store>.lock` beside it), a new cycle is appended as an all-NaN
-   template with `cycle_state = 0`; an existing cycle is first set back to 0.
+1. Under the writer lock, a new cycle is appended as an all-NaN hidden row (`cycle_state = 0`), array by array
+   through zarr; an existing cycle is first set back to 0.
 2. Its data variables are written into that cycle's region.
-3. `cycle_state` is set last. Readers only see cycles whose state is not 0, so a writer killed
-   at any point leaves no partial cycle visible; the next write of the cycle repairs it.
-The store itself is created as `<store>.creating` and renamed into place, so a writer killed while
-creating it leaves no half store behind. Write failures (a full disk) raise CubeError; the cycle stays hidden.
+3. `cycle_state` is set, then the cycle is published (below). Readers that know `cycle_state` only see cycles
+   whose state is not 0, so a writer killed at any point leaves no partial cycle visible; the next write of the
+   cycle repairs it.
+A local store is created as `<store>.creating` and renamed into place, so a writer killed while creating it leaves
+no half store behind; an object store has no rename: it is created in place under the lock and readers ignore it
+until its first publication. Write failures (a full disk) raise CubeError; the cycle stays hidden.
 A half-finished append (arrays of unequal length along `cycle`) is trimmed back on the next
 write, or by a reader that meets it (after waiting for the lock, so never under a live writer). The time encoding of `cycle` is fixed ("hours since 2000-01-01", int64) so appended
 cycles never shift.
+
+Publication, for readers that know nothing of `cycle_state` (a plain `xr.open_zarr(store)`): the Zarr
+consolidated metadata in the root `zarr.json` is the publication point. It is rewritten (one atomic write: a
+rename on a local disk, one PUT on S3) only when a cycle becomes visible, together with the root attribute
+`cycle_versions` (ISO cycle → content version, a new one at every write of the cycle). Until then a consolidated
+reader keeps the array shapes of the last publication, so it does not see a cycle being appended (its chunks
+lie past those shapes), and `xr.open_zarr` opens the store without a warning. Appends therefore go through zarr
+array by array (xarray's append rewrites the root metadata, dropping the consolidated view). The published view
+is what routing workers read (`open_published`, `read_window`), one metadata read per store even on S3.
+The hard case is the in-place re-write of an existing cycle (`ingest --force`, or incomplete → complete): its
+chunks are overwritten where they are, so while it runs a plain reader may read a mix of old and new chunks of
+that cycle (the `cycle_state` it can read says 0, hidden, but a plain reader does not look). Readers that know
+`cycle_state` never see it, and workers key their caches on the content version, so they read the new values
+as soon as it is published. Writing the new values to a fresh row and swapping would make the cycle axis
+carry duplicates for plain readers; not done.
+Icechunk (transactional commits and snapshots over the same object store) would make every write, the
+re-write included, atomic for every reader of its repository, but only for readers that open it through
+Icechunk, not for a plain `xr.open_zarr` of the Zarr store; it would replace the lock and the state bookkeeping
+with its own and add a dependency. Not adopted: consolidated metadata gives plain readers what they need short
+of the re-write case above.
 """
 
 from __future__ import annotations
