@@ -13,6 +13,7 @@ import sys
 import duckdb
 import numpy as np
 import pytest
+import xarray as xr
 from typer.testing import CliRunner
 
 from cli.main import app
@@ -71,6 +72,17 @@ def _spoil_chunk(store, var="u10", key="0/0/1/1"):
     data[len(data) // 2:] = np.random.default_rng(3).bytes(len(data) - len(data) // 2)
     chunk.write_bytes(bytes(data))
     return chunk
+
+
+def _chunk_key(store, var, *, lat, lon, cycle_index=0):
+    """The key (`i/0/j/k`) of the chunk of `var` holding the point."""
+    import zarr
+
+    arr = zarr.open_array(str(store / var), mode="r")
+    grid = xr.open_zarr(store, consolidated=False)
+    j = int(np.argmin(np.abs(grid["lat"].values - lat))) // arr.chunks[2]
+    k = int(np.argmin(np.abs(grid["lon"].values - lon))) // arr.chunks[3]
+    return f"{cycle_index}/0/{j}/{k}"
 
 
 def test_a_corrupt_chunk_is_named_with_its_cycle_and_the_re_ingest_that_fixes_it(root, small_mirror, ingest, clean_cube):
@@ -172,7 +184,7 @@ def test_routing_on_a_corrupt_chunk_fails_the_voyage_with_the_chunk_and_the_fix(
     from pipeline.routing.job import RouteJob, RoutingOptions
 
     store = DataLayout(root).weather_cube
-    _spoil_chunk(store)
+    _spoil_chunk(store, "u10", _chunk_key(store, "u10", lat=32.0, lon=142.0))  # under the voyage: its window reads it
     window_field.cache_clear()
     voyage = {"voyage_id": "VCHUNK", "imo": 1, "dep_lat": 34.0, "dep_lon": 140.0, "arr_lat": 30.0, "arr_lon": 145.0,
               "depart_utc": np.datetime64("2020-12-01T02"), "rta_utc": np.datetime64("2020-12-02T12"), "rpm_options": [70, 80]}

@@ -1,0 +1,193 @@
+"""A voyage reads only its window of a cube cycle; cycles are published through consolidated metadata with a
+content version; the cube may live on S3 (moto's server on loopback)."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from pipeline.routing import weather_field as wf
+from pipeline.routing.problem import lon_span_deg
+from storage import cube
+from tests.processes import free_port
+
+CYCLE = np.datetime64("2020-12-01T00", "ns")
+CYCLE2 = np.datetime64("2020-12-01T06", "ns")
+LAT = np.arange(-80.0, 80.01, 2.0)
+LON = np.arange(0.0, 360.0, 2.0)
+STEPS = np.arange(0, 49, 6)
+
+
+def cycle_ds(cycle=CYCLE, wind_ms: float = 0.0) -> xr.Dataset:
+    """A global cycle whose every value differs (so a wrong cell or step shows), plus `wind_ms` of east wind."""
+    t, la, lo = np.meshgrid(STEPS, LAT, LON, indexing="ij")
+    smooth = np.sin(np.radians(lo)) * np.cos(np.radians(la)) + 0.01 * t + 0.001 * la
+    dims = ("step", "lat", "lon")
+    data = {v: (dims, (smooth * (k + 1) + (wind_ms if v == "u10" else 0.0)).astype(np.float32))
+            for k, v in enumerate(cube.DATA_VARS)}
+    data["mwd"] = (dims, ((lo + 10 * t) % 360.0).astype(np.float32))
+    data["current_age_h"] = (("step",), np.zeros(STEPS.size, np.float32))
+    return xr.Dataset(data, coords={"cycle": cycle, "step": STEPS, "lat": LAT, "lon": LON})
+
+
+@pytest.fixture
+def store(tmp_path):
+    path = tmp_path / "cubes" / "weather.zarr"
+    cube.write_cycle(path, cycle_ds(), complete=True)
+    return path
+
+
+def window(store, box_lat, box_lon, t_from="2020-12-01T13", t_to="2020-12-02T05", **kw) -> wf.WeatherField:
+    ds = cube.read_window(store, CYCLE, valid_utc=(np.datetime64(t_from), np.datetime64(t_to)), lat_deg=box_lat,
+                          lon_deg=box_lon, variables=wf.CUBE_VARIABLES, **kw)
+    return wf.from_cycle(ds, CYCLE)
+
+
+@pytest.mark.parametrize("box_lat, box_lon", [((10, 30), (140, 160)),  # open ocean
+                                               ((20, 50), (170, 200)),  # across 180°
+                                               ((-10, 10), (350, 375))])  # across 0°, the grid's seam
+def test_a_window_samples_like_the_whole_cycle_inside_its_box(store, box_lat, box_lon):
+    whole = wf.from_cycle(cube.load_cycle(store, CYCLE), CYCLE)
+    part = window(store, box_lat, box_lon)
+    assert part.values.size < whole.values.size / 10 and not part.grid.wraps
+    assert part.t_ref == whole.t_ref  # times count from the cycle in both
+    rng = np.random.default_rng(1)
+    a, b = np.zeros(7, np.float32), np.zeros(7, np.float32)
+    for _ in range(300):
+        lat, lon = rng.uniform(*box_lat), (rng.uniform(*box_lon) + 180.0) % 360.0 - 180.0
+        t_h = rng.uniform(13.0, 29.0)
+        assert wf.sample_nb(whole.kernel, t_h, lat, lon, a) == wf.sample_nb(part.kernel, t_h, lat, lon, b)
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6, err_msg=f"at {lat:.2f}, {lon:.2f}, {t_h:.1f} h")
+
+
+def test_a_window_holds_the_steps_bracketing_its_times_clipped_to_the_cycle(store):
+    assert list(window(store, (0, 10), (0, 10)).times_h) == [12, 18, 24, 30]  # 13 h .. 29 h
+    late = window(store, (0, 10), (0, 10), t_from="2020-12-02T10", t_to="2020-12-09T00")
+    assert list(late.times_h) == [30, 36, 42, 48]  # the cycle's last step stays the horizon
+    after = window(store, (0, 10), (0, 10), t_from="2020-12-05T00", t_to="2020-12-09T00")
+    assert list(after.times_h) == [48]
+
+
+def test_a_window_across_the_seam_has_continuous_longitudes(store):
+    part = window(store, (-10, 10), (350, 375))
+    g = part.grid
+    assert g.lon0 < 350 and g.lon0 + g.dlon * (g.nlon - 1) > 375
+    lon = g.lon0 + g.dlon * np.arange(g.nlon)
+    u10 = part.values[wf.U10, 0, 0]
+    expected = cycle_ds()["u10"].isel(step=2).sel(lat=part.grid.lat0).sel(lon=lon % 360.0).values
+    np.testing.assert_array_equal(u10, expected)
+
+
+def test_lon_span_is_the_shortest_arc():
+    assert lon_span_deg([140.0, 150.0, 145.0]) == (140.0, 150.0)
+    assert lon_span_deg([175.0, -175.0, 179.0]) == (175.0, 185.0)
+    assert lon_span_deg([-5.0, 5.0]) == (355.0, 365.0)
+
+
+def test_a_plain_reader_sees_only_published_cycles_without_a_warning(store):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert xr.open_zarr(store).sizes["cycle"] == 1
+    loc = cube.locate(store)
+    with cube.writer_lock(None, loc):  # a writer between its append and its publication
+        index = cube._append_hidden(loc, cube._template(cycle_ds(CYCLE2), CYCLE2))
+        cube._write_region(loc, index, cycle_ds(CYCLE2))
+        cube._set_state(loc, index, cube.STATE_COMPLETE)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert list(xr.open_zarr(store)["cycle"].values) == [CYCLE]
+        assert CYCLE2 not in cube.cycle_versions(store)
+        cube._publish(loc, CYCLE2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert list(xr.open_zarr(store)["cycle"].values) == [CYCLE, CYCLE2]
+    assert set(cube.cycle_versions(store)) == {CYCLE, CYCLE2}
+
+
+def _route(store, version):
+    from flows.jobs.route_worker import route_one
+    from pipeline.performance.model import reference_model
+    from pipeline.routing.job import RouteJob, RoutingOptions
+
+    voyage = {"voyage_id": "VREINGEST", "imo": 1, "dep_lat": 34.0, "dep_lon": 141.0, "arr_lat": 30.0,
+              "arr_lon": 147.0, "depart_utc": np.datetime64("2020-12-01T02"), "rta_utc": np.datetime64("2020-12-02T18"),
+              "rpm_options": [70, 85, 100]}
+    job = RouteJob(voyage=voyage, vessel={"rpm_max": 100}, model=reference_model(14.0, 100.0, 1.5).to_json(),
+                   run_id="r1", cycle=str(CYCLE)[:19], exports=False, options=RoutingOptions(n_lines=6, n_points=7),
+                   cycle_version=version)
+    return route_one(job, str(store))["legs"]
+
+
+def test_a_worker_routes_on_the_new_values_after_a_re_ingest(store):
+    v1 = cube.cycle_versions(store)[CYCLE]
+    calm_legs = _route(store, v1)
+    cube.write_cycle(store, cycle_ds(wind_ms=15.0), complete=True)  # the same cycle, re-ingested
+    v2 = cube.cycle_versions(store)[CYCLE]
+    assert v2 > v1
+    assert _route(store, v1)[0]["wind_kn"] == calm_legs[0]["wind_kn"]  # same version: the cached window
+    windy_legs = _route(store, v2)
+    assert windy_legs[0]["wind_kn"] > calm_legs[0]["wind_kn"] + 10  # the run that read v2 meets the new wind
+
+
+# --- the cube on S3 -----------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def s3_endpoint():
+    """moto's S3 server on a free loopback port, as a process, with a bucket `cubes`."""
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "AWS_ACCESS_KEY_ID": "test", "AWS_SECRET_ACCESS_KEY": "test"})
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("moto server did not start")
+                time.sleep(0.1)
+        import boto3
+
+        endpoint = f"http://127.0.0.1:{port}"
+        boto3.client("s3", endpoint_url=endpoint, region_name="us-east-1", aws_access_key_id="test",
+                     aws_secret_access_key="test").create_bucket(Bucket="cubes")
+        yield {"endpoint_url": endpoint, "key": "test", "secret": "test"}
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_readers(s3_endpoint, store, tmp_path):
+    url, locks = "s3://cubes/root/cubes/weather.zarr", tmp_path / "locks"
+    with pytest.raises(cube.CubeError, match="lock_dir"):
+        cube.write_cycle(url, cycle_ds(), complete=True, storage_options=s3_endpoint)
+    cube.write_cycle(url, cycle_ds(), complete=True, lock_dir=locks, storage_options=s3_endpoint)
+    assert (locks / "weather.zarr.lock").exists()
+    on_s3 = window(url, (20, 50), (170, 200), storage_options=s3_endpoint)
+    local = window(store, (20, 50), (170, 200))
+    np.testing.assert_array_equal(on_s3.values, local.values)
+    assert on_s3.grid == local.grid
+
+    loc = cube.locate(url, s3_endpoint)
+    with cube.writer_lock(locks, loc):  # a second cycle appended and written, not yet published
+        index = cube._append_hidden(loc, cube._template(cycle_ds(CYCLE2), CYCLE2))
+        cube._write_region(loc, index, cycle_ds(CYCLE2))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert list(xr.open_zarr(url, storage_options=s3_endpoint)["cycle"].values) == [CYCLE]
+        assert cube.cycle_states(url, storage_options=s3_endpoint) == {CYCLE: cube.STATE_COMPLETE,
+                                                                       CYCLE2: cube.STATE_HIDDEN}
+        cube._set_state(loc, index, cube.STATE_COMPLETE)
+        cube._publish(loc, CYCLE2)
+    assert list(xr.open_zarr(url, storage_options=s3_endpoint)["cycle"].values) == [CYCLE, CYCLE2]
