@@ -7,7 +7,7 @@ worker processes (passed as an existing scheduler address, as in production) and
 per minute (per worker) and the ratio. Each cluster is warmed up first (imports, land mask, numba caches)
 so both timings measure routing, not start-up.
 
-Memory: the peak resident memory (RSS high-water mark) of each worker process over its cluster's runs, and,
+Memory: the peak resident memory (VmHWM, the RSS high-water mark) of each worker process over its cluster's runs, and,
 to judge the weather's share on its own, what importing the land mask alone adds to a fresh interpreter.
 
 Targets: scaling 1 → 2 workers ≥ 1.7×; peak worker memory ≤ 300 MB.
@@ -79,17 +79,24 @@ def run(root: Path, address: str, voyages: list[str]) -> float:
     return dt
 
 
-def peak_rss_mb() -> float:
-    """This process's resident-memory high-water mark in MB (Linux reports KiB)."""
-    import resource
+def _status_mb(field: str) -> float:
+    """A memory figure of this process from /proc/self/status (Linux reports kB)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) / 1024.0
+    raise KeyError(field)
 
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+def peak_rss_mb() -> float:
+    """This process's resident-memory high-water mark in MB: VmHWM, which starts afresh with the process image
+    (getrusage's ru_maxrss would carry over the peak of the parent a worker process was forked from)."""
+    return _status_mb("VmHWM")
 
 
 def land_mask_mb() -> float:
-    """What importing the land mask adds to the peak RSS of a fresh interpreter (numpy already imported)."""
-    code = ("import resource, numpy; a = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; "
-            "import global_land_mask.globe; b = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; print((b - a) / 1024)")
+    """What importing the land mask adds to the resident memory of a fresh interpreter (numpy already imported)."""
+    code = (f"import sys; sys.path.insert(0, {str(REPO)!r}); from bench.fleet import _status_mb; import numpy; "
+            "a = _status_mb('VmRSS'); import global_land_mask.globe; print(_status_mb('VmRSS') - a)")
     return float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
 
 
