@@ -24,6 +24,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from pipeline.weather.cube_variables import step_hours
+
 N_VARS = 7
 U10, V10, SWH, WAVE_X, WAVE_Y, UO, VO = range(N_VARS)
 
@@ -114,7 +116,7 @@ def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=No
 def from_cycle(ds, cycle=None) -> WeatherField:
     """From one cube cycle (xarray dims step, lat, lon; variables u10 v10 swh mwd uo vo)."""
     cyc = np.datetime64(cycle if cycle is not None else ds["cycle"].values, "s")
-    times = cyc + (np.asarray(ds["step"].values, dtype=np.int64) * 3600).astype("timedelta64[s]")
+    times = cyc + (step_hours(ds["step"].values) * 3600).astype("timedelta64[s]")
     return from_arrays(ds["lat"].values, ds["lon"].values, times, u10=ds["u10"].values, v10=ds["v10"].values,
                        swh=ds["swh"].values, mwd_deg=ds["mwd"].values, uo=ds["uo"].values, vo=ds["vo"].values, cycle=cyc)
 
