@@ -56,7 +56,6 @@ SPATIAL_SPLITS = 3  # chunks per spatial axis: (1, all steps, ≈ nlat/3, ≈ nl
 DATA_CODEC = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
 
 
-
 class CubeError(RuntimeError):
     pass
 
@@ -208,27 +207,26 @@ def _valid_time_hours(cycle: np.datetime64, step) -> np.ndarray:
 
 def _upgrade(path: Path) -> None:
     """Bring a store written before `valid_time` existed up to the current layout, in place: CF attributes on the
-    coordinates and bookkeeping variables (`step` becomes a duration, lat/lon lose their fill value) and a
-    `valid_time` array for the cycles already stored. Data chunks are not touched."""
+    coordinates and bookkeeping variables, lat/lon without a fill value, a `valid_time` array for the cycles
+    already stored, and last the attribute that makes `step` read as a duration (the mark of an upgraded store,
+    so an upgrade killed half-way is redone by the next write). Data chunks are not touched."""
     group = zarr.open_group(str(path), mode="r+")
-    if "valid_time" in group:
-        return
     step = group["step"]
-    step.attrs.update(cv.attrs("step") | {"dtype": "timedelta64[ns]"})  # the marker xarray decodes a duration by
+    if "dtype" in step.attrs:
+        return
+    hours = group["cycle"][:][:, None] + step[:].astype(np.int64)[None, :]  # both in hours since TIME_EPOCH
+    valid = group.create_array("valid_time", shape=hours.shape, chunks=(1, hours.shape[1]), dtype="int64",
+                               dimension_names=("cycle", "step"), overwrite=True,
+                               attributes=cv.attrs("valid_time") | {k: CYCLE_ENCODING[k] for k in ("units", "calendar")})
+    if hours.size:
+        valid[:] = hours
     for name in (*DATA_VARS, cv.CURRENT_AGE.name):
         group[name].attrs["coordinates"] = "valid_time"
     for name in ("cycle", "lat", "lon", cv.CURRENT_AGE.name, cv.CYCLE_STATE.name):
-        attrs = {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cv.attrs(name).items()}
-        group[name].attrs.update(attrs)
+        group[name].attrs.update({k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cv.attrs(name).items()})
     for name in ("lat", "lon"):
         group[name].attrs.pop("_FillValue", None)
-    cycles = group["cycle"][:]
-    valid = np.stack([cycles[i] + step[:].astype(np.int64) for i in range(cycles.size)]) if cycles.size else None
-    arr = group.create_array("valid_time", shape=(cycles.size, step.shape[0]), chunks=(1, step.shape[0]),
-                             dtype="int64", dimension_names=("cycle", "step"),
-                             attributes=cv.attrs("valid_time") | {k: CYCLE_ENCODING[k] for k in ("units", "calendar")})
-    if valid is not None:
-        arr[:] = valid
+    step.attrs.update(cv.attrs("step") | {"dtype": "timedelta64[ns]"})  # xarray decodes a duration by this
 
 
 def _write_region(path: Path, index: int, cycle_ds: xr.Dataset) -> None:
