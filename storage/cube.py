@@ -1,6 +1,6 @@
 """The Zarr weather cube: dims (cycle, step, lat, lon), one cycle per region write.
 
-Store contents (names, units and CF attributes from pipeline/weather/cube_variables.py):
+Store contents (names, units and CF attributes from schemas/cube_variables.py):
   u10, v10  m/s   10 m wind (u east, v north)
   swh       m     significant wave height
   mwd       deg   mean wave direction, coming FROM
@@ -42,8 +42,8 @@ import xarray as xr
 import zarr
 from zarr.codecs import BloscCodec
 
-from pipeline.weather import cube_variables as cv
-from pipeline.weather.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
+from schemas import cube_variables as cv
+from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
 
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
 TIME_EPOCH = np.datetime64("2000-01-01T00", "ns")  # of CYCLE_ENCODING

@@ -13,7 +13,7 @@ import xarray as xr
 
 from flows.ingest import ingest_weather
 from pipeline.synthetic import weather
-from pipeline.weather import cube_variables
+from schemas import cube_variables
 from storage import cube
 from storage.layout import DataLayout
 from tests.http_mirror import serve

@@ -89,7 +89,7 @@ def test_file_urls_work_like_http(tmp_path):
 
 def test_every_cube_variable_comes_from_exactly_one_registered_source():
     from pipeline.sources.registry import SOURCES
-    from pipeline.weather.cube_variables import DATA_VARS
+    from schemas.cube_variables import DATA_VARS
 
     provided = [v for src in SOURCES for v in src.variables]
     assert sorted(provided) == sorted(DATA_VARS)

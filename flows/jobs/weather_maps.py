@@ -8,7 +8,7 @@ import numpy as np
 
 from pipeline.export import weather_map
 from pipeline.sources.cycles import label as cycle_label
-from pipeline.weather.cube_variables import step_hours
+from schemas.cube_variables import step_hours
 from storage import cube
 
 STEP_VARIABLES = ("u10", "v10", "swh", "mwd", "uo", "vo")

@@ -14,7 +14,7 @@ import xarray as xr
 
 from pipeline.decode.errors import DecodeError
 from pipeline.decode.grib import GridInfo, read_fields
-from pipeline.weather import cube_variables
+from schemas import cube_variables
 
 # name → (discipline, category, number, level type, level)
 GSM_WIND = {"u10": (0, 2, 2, 103, 10.0), "v10": (0, 2, 3, 103, 10.0)}

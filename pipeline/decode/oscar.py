@@ -13,7 +13,7 @@ import numpy as np
 import xarray as xr
 
 from pipeline.decode.errors import DecodeError
-from pipeline.weather import cube_variables
+from schemas import cube_variables
 
 
 def _open(path: Path) -> xr.Dataset:

@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from pipeline.weather.cube_variables import step_hours
+from schemas.cube_variables import step_hours
 
 N_VARS = 7
 U10, V10, SWH, WAVE_X, WAVE_Y, UO, VO = range(N_VARS)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from pipeline.weather.cube_variables import provided_by
+from schemas.cube_variables import provided_by
 
 ROLES = ("wind", "waves", "currents")  # what the cycle assembly does with a source's decoded files
 
@@ -49,5 +49,5 @@ class Source:
 
     @property
     def variables(self) -> tuple[str, ...]:
-        """The cube variables this source provides (pipeline/weather/cube_variables.py)."""
+        """The cube variables this source provides (schemas/cube_variables.py)."""
         return provided_by(self.name)

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 
-from pipeline.weather.cube_variables import provided_by
+from schemas.cube_variables import provided_by
 from pipeline.weather.currents import analysis_for, persist_into
 from pipeline.weather.regrid import regrid
 
