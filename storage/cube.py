@@ -1,6 +1,6 @@
 """The Zarr weather cube: dims (cycle, step, lat, lon), one cycle per region write.
 
-Store contents (CF attributes and units on every variable):
+Store contents (names, units and CF attributes from schemas/cube_variables.py):
   u10, v10  m/s   10 m wind (u east, v north)
   swh       m     significant wave height
   mwd       deg   mean wave direction, coming FROM
@@ -8,6 +8,8 @@ Store contents (CF attributes and units on every variable):
   uo, vo    m/s   surface current, going TO (latest OSCAR analysis ≤ valid time)
   current_age_h (cycle, step)  age of that analysis in hours
   cycle_state   (cycle)        0 = being written (hidden), 1 = complete, 2 = incomplete (visible, flagged)
+  coordinates: cycle (forecast_reference_time), step (forecast_period, a duration stored in whole hours),
+               valid_time (cycle, step) = cycle + step, lat, lon (axes Y, X); none has a fill value
 
 Where it lives: a local path, or a URL (`s3://bucket/…/weather.zarr` through s3fs, `file://…`) with fsspec
 `storage_options` (for S3 e.g. {"endpoint_url": …, "key": …, "secret": …}). One writer per store (the ingest of the
@@ -25,8 +27,10 @@ A local store is created as `<store>.creating` and renamed into place, so a writ
 no half store behind; an object store has no rename: it is created in place under the lock and readers ignore it
 until its first publication. Write failures (a full disk) raise CubeError; the cycle stays hidden.
 A half-finished append (arrays of unequal length along `cycle`) is trimmed back on the next
-write, or by a reader that meets it (after waiting for the lock, so never under a live writer). The time encoding of `cycle` is fixed ("hours since 2000-01-01", int64) so appended
-cycles never shift.
+write, or by a reader that meets it (after waiting for the lock, so never under a live writer). The time encoding of
+`cycle` and `valid_time` is fixed ("hours since 2000-01-01", int64) so appended cycles never shift.
+A store written before `valid_time` existed (step as plain hours, no CF axes) opens as it is (readers take `step`
+through `cube_variables.step_hours`) and is upgraded in place, metadata only, by the next write.
 
 Publication, for readers that know nothing of `cycle_state` (a plain `xr.open_zarr(store)`): the Zarr
 consolidated metadata in the root `zarr.json` is the publication point. It is rewritten (one atomic write: a
@@ -68,24 +72,18 @@ import xarray as xr
 import zarr
 from zarr.codecs import BloscCodec
 
-DATA_VARS = ("u10", "v10", "swh", "mwd", "mwp", "uo", "vo")
-STATE_HIDDEN, STATE_COMPLETE, STATE_INCOMPLETE = 0, 1, 2
+from schemas import cube_variables as cv
+from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
+
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
+TIME_EPOCH = np.datetime64("2000-01-01T00", "ns")  # of CYCLE_ENCODING
+STEP_ENCODING = {"units": "hours", "dtype": "int32"}
+NO_FILL = {"_FillValue": None}  # CF: coordinates have no missing values
 WRITE_WORKERS = 2
 SPATIAL_SPLITS = 3  # chunks per spatial axis: (1, all steps, ≈ nlat/3, ≈ nlon/3), e.g. 107 × 240 on the 0.5° grid
 # LZ4 after byte shuffle: about as small as zstd on smooth float32 fields, faster to write and ~3× faster to
 # read (routing workers read the cube). Fixed when the store is created; appended cycles inherit it.
 DATA_CODEC = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
-
-VAR_ATTRS = {
-    "u10": {"units": "m s-1", "standard_name": "eastward_wind", "long_name": "10 m eastward wind"},
-    "v10": {"units": "m s-1", "standard_name": "northward_wind", "long_name": "10 m northward wind"},
-    "swh": {"units": "m", "standard_name": "sea_surface_wave_significant_height", "long_name": "significant wave height"},
-    "mwd": {"units": "degree", "standard_name": "sea_surface_wave_from_direction", "long_name": "mean wave direction (coming from)"},
-    "mwp": {"units": "s", "standard_name": "sea_surface_wave_mean_period", "long_name": "mean wave period"},
-    "uo": {"units": "m s-1", "standard_name": "eastward_sea_water_velocity", "long_name": "surface current east (going to)"},
-    "vo": {"units": "m s-1", "standard_name": "northward_sea_water_velocity", "long_name": "surface current north (going to)"},
-}
 
 
 class CubeError(RuntimeError):
@@ -180,16 +178,19 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
     metadata goes to the store, and chunks never written read as the NaN fill value."""
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
     nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32, chunks=(1, nstep, *spatial_chunks(nlat, nlon)))
-    data = {v: (("cycle", "step", "lat", "lon"), nan, VAR_ATTRS[v]) for v in DATA_VARS}
-    data["current_age_h"] = (("cycle", "step"), np.full((1, nstep), np.nan, np.float32), {"units": "hours", "long_name": "age of the OSCAR analysis used"})
-    data["cycle_state"] = (("cycle",), np.array([STATE_HIDDEN], np.int8), {"flag_values": "0 1 2", "flag_meanings": "hidden complete incomplete"})
+    data = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
+    age, state = cv.CURRENT_AGE, cv.CYCLE_STATE
+    data[age.name] = (age.dims, np.full((1, nstep), np.nan, age.dtype), cv.attrs(age.name))
+    data[state.name] = (state.dims, np.array([STATE_HIDDEN], state.dtype), cv.attrs(state.name))
+    step = cv.step_duration(cycle_ds["step"].values)
     return xr.Dataset(
         data,
         coords={
-            "cycle": ("cycle", np.array([cycle], "datetime64[ns]"), {"long_name": "forecast cycle (model init time, UTC)"}),
-            "step": ("step", cycle_ds["step"].values.astype(np.int32), {"units": "hours", "long_name": "lead time"}),
-            "lat": ("lat", cycle_ds["lat"].values, {"units": "degrees_north", "standard_name": "latitude"}),
-            "lon": ("lon", cycle_ds["lon"].values, {"units": "degrees_east", "standard_name": "longitude"}),
+            "cycle": ("cycle", np.array([cycle], "datetime64[ns]"), cv.attrs("cycle")),
+            "step": ("step", step, cv.attrs("step")),
+            "valid_time": (("cycle", "step"), np.datetime64(cycle, "ns") + step[None, :], cv.attrs("valid_time")),
+            "lat": ("lat", cycle_ds["lat"].values, cv.attrs("lat")),
+            "lon": ("lon", cycle_ds["lon"].values, cv.attrs("lon")),
         },
         attrs={"title": "jitroute weather cube", "Conventions": "CF-1.8",
                "direction_conventions": "wind and waves coming-from; currents going-to"},
@@ -199,7 +200,10 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
 def _encoding(ds: xr.Dataset) -> dict:
     nstep = ds.sizes["step"]
     enc = {v: {"chunks": (1, nstep, *spatial_chunks(ds.sizes["lat"], ds.sizes["lon"])), "compressors": (DATA_CODEC,)} for v in DATA_VARS}
-    enc["cycle"] = dict(CYCLE_ENCODING)
+    enc["cycle"] = CYCLE_ENCODING | NO_FILL
+    enc["step"] = STEP_ENCODING | NO_FILL
+    enc["valid_time"] = CYCLE_ENCODING | NO_FILL | {"chunks": (1, nstep)}
+    enc["lat"] = enc["lon"] = dict(NO_FILL)
     enc["current_age_h"] = {"chunks": (1, nstep)}
     enc["cycle_state"] = {"chunks": (1,)}
     return enc
@@ -224,7 +228,9 @@ def _cycles_in_store(loc: Location) -> np.ndarray:
 def _check_grid(loc: Location, cycle_ds: xr.Dataset) -> None:
     with xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False) as ds:
         for c in ("step", "lat", "lon"):
-            if ds.sizes[c] != cycle_ds.sizes[c] or not np.allclose(ds[c].values, cycle_ds[c].values):
+            have, new = ((cv.step_hours(ds[c].values), cv.step_hours(cycle_ds[c].values)) if c == "step"
+                         else (ds[c].values, cycle_ds[c].values))
+            if ds.sizes[c] != cycle_ds.sizes[c] or not np.allclose(have, new):
                 raise CubeError(f"{loc.url}: the cycle's {c} axis differs from the cube's; regrid to the cube's grid first")
 
 
@@ -301,6 +307,7 @@ def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_di
             index = 0
         else:
             _repair(loc)
+            _upgrade(loc)
             _check_grid(loc, cycle_ds)
             cycles = _cycles_in_store(loc)
             hits = np.flatnonzero(cycles == cycle)
@@ -314,11 +321,41 @@ def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_di
         _publish(loc, cycle)
 
 
+def _valid_time_hours(cycle: np.datetime64, step) -> np.ndarray:
+    """valid_time = cycle + step as stored (CYCLE_ENCODING: int64 hours since TIME_EPOCH)."""
+    return ((np.datetime64(cycle, "ns") + cv.step_duration(step)) - TIME_EPOCH) // np.timedelta64(1, "h")
+
+
+def _upgrade(loc: Location) -> None:
+    """Bring a store written before `valid_time` existed up to the current layout, in place: CF attributes on the
+    coordinates and bookkeeping variables, lat/lon without a fill value, a `valid_time` array for the cycles
+    already stored, and last the attribute that makes `step` read as a duration (the mark of an upgraded store,
+    so an upgrade killed half-way is redone by the next write). Data chunks are not touched."""
+    group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+    step = group["step"]
+    if "dtype" in step.attrs:
+        return
+    hours = group["cycle"][:][:, None] + step[:].astype(np.int64)[None, :]  # both in hours since TIME_EPOCH
+    valid = group.create_array("valid_time", shape=hours.shape, chunks=(1, hours.shape[1]), dtype="int64",
+                               dimension_names=("cycle", "step"), overwrite=True,
+                               attributes=cv.attrs("valid_time") | {k: CYCLE_ENCODING[k] for k in ("units", "calendar")})
+    if hours.size:
+        valid[:] = hours
+    for name in (*DATA_VARS, cv.CURRENT_AGE.name):
+        group[name].attrs["coordinates"] = "valid_time"
+    for name in ("cycle", "lat", "lon", cv.CURRENT_AGE.name, cv.CYCLE_STATE.name):
+        group[name].attrs.update({k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cv.attrs(name).items()})
+    for name in ("lat", "lon"):
+        group[name].attrs.pop("_FillValue", None)
+    step.attrs.update(cv.attrs("step") | {"dtype": "timedelta64[ns]"})  # xarray decodes a duration by this
+
+
 def _write_region(loc: Location, index: int, cycle_ds: xr.Dataset) -> None:
     """Write the cycle's values into row `index` of every array, straight through zarr (the metadata,
     coordinates and encodings are already in the store): the float32 arrays go in as they are, no copy,
     WRITE_WORKERS variables at a time (Blosc compresses without holding the GIL)."""
     group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+    group["valid_time"][index] = _valid_time_hours(np.datetime64(cycle_ds["cycle"].values, "ns"), cycle_ds["step"].values)
     age = (np.asarray(cycle_ds["current_age_h"].values, np.float32) if "current_age_h" in cycle_ds
            else np.full(cycle_ds.sizes["step"], np.nan, np.float32))
     group["current_age_h"][index] = age

@@ -13,6 +13,7 @@ import xarray as xr
 
 from flows.ingest import ingest_weather
 from pipeline.synthetic import weather
+from schemas import cube_variables
 from storage import cube
 from storage.layout import DataLayout
 from tests.http_mirror import serve
@@ -40,15 +41,15 @@ def test_http_ingest_matches_the_analytic_fields(ingested):
     for step, lat, lon in [(0, 35.0, 160.0), (36, -20.0, 75.5), (132, 45.5, 200.0)]:
         u, v = weather.wind_uv(T0 + step, lat, lon)
         swh, mwd, mwp = weather.waves(T0 + step, lat, lon)
-        p = ds.sel(step=step, lat=lat, lon=lon)
+        p = ds.sel(step=np.timedelta64(step, "h"), lat=lat, lon=lon)
         assert float(p.u10) == pytest.approx(float(u), abs=0.01)
         assert float(p.v10) == pytest.approx(float(v), abs=0.01)
         assert float(p.swh) == pytest.approx(float(swh), abs=0.01)
         assert float(p.mwp) == pytest.approx(float(mwp), abs=0.01)
     # currents: the OSCAR grid is 1/3°, the cube 0.5°: bilinear error on a smooth jet is small
     cu, cv = weather.currents_uv(T0, 33.0, 135.0)
-    assert float(ds.uo.sel(step=0, lat=33.0, lon=135.0)) == pytest.approx(float(cu), abs=0.05)
-    assert np.isnan(float(ds.swh.sel(step=0, lat=36.0, lon=138.5)))  # land
+    assert float(ds.uo.sel(step=np.timedelta64(0, "h"), lat=33.0, lon=135.0)) == pytest.approx(float(cu), abs=0.05)
+    assert np.isnan(float(ds.swh.sel(step=np.timedelta64(0, "h"), lat=36.0, lon=138.5)))  # land
     assert not list(Path(root).rglob("*.idx"))
 
 
@@ -94,8 +95,8 @@ def test_missing_and_corrupt_files_make_an_incomplete_cycle_then_a_rerun_repairs
         store = DataLayout(root).weather_cube
         assert cube.complete_cycles(store) == []
         ds = cube.open_cube(store).sel(cycle=np.datetime64(CYCLE, "ns"))
-        assert np.isnan(ds.u10.sel(step=36).values).all() and np.isnan(ds.u10.sel(step=48).values).all()
-        assert not np.isnan(ds.u10.sel(step=42).values).all()
+        assert np.isnan(ds.u10.sel(step=np.timedelta64(36, "h")).values).all() and np.isnan(ds.u10.sel(step=np.timedelta64(48, "h")).values).all()
+        assert not np.isnan(ds.u10.sel(step=np.timedelta64(42, "h")).values).all()
         assert len(list((root / "quarantine" / "gsm").iterdir())) == 1
         con = duckdb.connect(str(DataLayout(root).warehouse_snapshot), read_only=True)
         statuses = dict(con.execute("SELECT file_name, status FROM ingest_log").fetchall())
@@ -178,3 +179,61 @@ def test_concurrent_writes_of_one_cycle_are_serialised(ingested, tmp_path):
     out = cube.open_cube(dst)
     assert out.sizes["cycle"] == 1 and cube.complete_cycles(dst) == [np.datetime64(CYCLE, "ns")]
     np.testing.assert_array_equal(out.swh.isel(cycle=0).values, ds.swh.values)
+
+
+def test_ingested_cube_is_cf(ingested):
+    """cf-xarray finds the CF roles of the cube's coordinates by their attributes alone."""
+    import cf_xarray  # noqa: F401  (registers the .cf accessor)
+
+    root, _ = ingested
+    ds = cube.open_cube(DataLayout(root).weather_cube)
+    assert ds.cf["forecast_reference_time"].name == "cycle" and ds.cf["forecast_period"].name == "step"
+    assert ds.cf["latitude"].name == "lat" and ds.cf["longitude"].name == "lon"
+    assert ds.cf.axes == {"X": ["lon"], "Y": ["lat"], "T": ["valid_time"]}
+    assert ds.cf["time"].dims == ("cycle", "step")
+    np.testing.assert_array_equal(ds.cf["time"].values, ds.cycle.values[:, None] + ds.step.values[None, :])
+    assert ds.step.values[-1] == np.timedelta64(132, "h") and ds.step.encoding["units"] == "hours"
+    assert ds.current_age_h.attrs["units"] == "h"
+    flags = ds.cycle_state.attrs["flag_values"]  # Zarr keeps attributes as JSON: typed again by the variable's dtype
+    assert cube_variables.attrs("cycle_state")["flag_values"].dtype == ds.cycle_state.dtype == np.int8
+    np.testing.assert_array_equal(np.asarray(flags, ds.cycle_state.dtype), flags)
+    assert bool((ds.cycle_state.cf == "complete").all())
+    for c in ("cycle", "step", "valid_time", "lat", "lon"):
+        assert "_FillValue" not in ds[c].encoding and "_FillValue" not in ds[c].attrs, c
+
+
+def _write_as_before_valid_time(path, cycle_ds):
+    """A one-cycle store in the layout written before `valid_time` existed: step as plain int32 hours with
+    units, lat/lon with a NaN fill value, flag_values as text."""
+    old = cycle_ds.drop_vars("current_age_h").expand_dims(cycle=[cycle_ds.cycle.values])
+    old = old.assign(current_age_h=cycle_ds.current_age_h.expand_dims(cycle=1).astype(np.float32),
+                     cycle_state=("cycle", np.array([cube.STATE_COMPLETE], np.int8),
+                                  {"flag_values": "0 1 2", "flag_meanings": "hidden complete incomplete"}))
+    old = old.assign_coords(step=("step", cycle_ds.step.values.astype(np.int32), {"units": "hours", "long_name": "lead time"}))
+    steps, shape = cycle_ds.sizes["step"], (cycle_ds.sizes["lat"], cycle_ds.sizes["lon"])
+    old.to_zarr(path, mode="w", consolidated=False, zarr_format=3,
+                encoding={"cycle": dict(cube.CYCLE_ENCODING)} | {v: {"chunks": (1, steps, *cube.spatial_chunks(*shape))} for v in cube.DATA_VARS})
+
+
+def test_a_store_written_before_valid_time_opens_and_is_upgraded_by_the_next_write(tmp_path):
+    lat, lon, steps = np.arange(-1.0, 1.5, 0.5), np.arange(0.0, 2.0, 0.5), np.array([0, 6, 12], np.int32)
+    first, second = np.datetime64("2020-12-01T00", "ns"), np.datetime64("2020-12-01T12", "ns")
+
+    def cycle_ds(c, value):
+        data = {v: (("step", "lat", "lon"), np.full((3, lat.size, lon.size), value + i, np.float32))
+                for i, v in enumerate(cube.DATA_VARS)}
+        return xr.Dataset(data | {"current_age_h": ("step", np.array([1.0, 7.0, 13.0], np.float32))},
+                          coords={"step": steps, "lat": lat, "lon": lon, "cycle": c})
+
+    store = tmp_path / "cube.zarr"
+    _write_as_before_valid_time(store, cycle_ds(first, 1.0))
+    old = cube.open_cube(store)  # read as it is: step in plain hours
+    assert list(cube_variables.step_hours(old.step.values)) == [0, 6, 12] and "valid_time" not in old
+    cube.write_cycle(store, cycle_ds(second, 10.0), complete=True)
+    ds = cube.open_cube(store).load()
+    assert list(ds.cycle.values) == [first, second]
+    np.testing.assert_array_equal(ds.step.values, steps.astype("timedelta64[h]").astype("timedelta64[ns]"))
+    np.testing.assert_array_equal(ds.valid_time.values, ds.cycle.values[:, None] + ds.step.values[None, :])
+    assert float(ds.u10.isel(cycle=0).max()) == 1.0 and float(ds.vo.isel(cycle=1).min()) == 16.0  # data kept
+    assert ds.lat.attrs["axis"] == "Y" and "_FillValue" not in ds.lat.encoding
+    assert ds.cycle_state.attrs["flag_values"] == [0, 1, 2] and ds.cycle.attrs["standard_name"] == "forecast_reference_time"

@@ -85,3 +85,12 @@ def test_file_urls_work_like_http(tmp_path):
     r = fetch(f"file://{tmp_path}/a.bin", tmp_path / "out" / "a.bin", FAST)
     assert r.status == "ok" and (tmp_path / "out" / "a.bin").read_bytes() == b"abc"
     assert fetch(f"file://{tmp_path}/b.bin", tmp_path / "out" / "b.bin", FAST).status == "missing"
+
+
+def test_every_cube_variable_comes_from_exactly_one_registered_source():
+    from pipeline.sources.registry import SOURCES
+    from schemas.cube_variables import DATA_VARS
+
+    provided = [v for src in SOURCES for v in src.variables]
+    assert sorted(provided) == sorted(DATA_VARS)
+    assert [s.name for s in SOURCES if s.primary] == ["GSM", "GWM"] and [s.name for s in SOURCES if s.needs_token] == ["OSCAR"]

@@ -23,12 +23,11 @@ import xarray as xr
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.decode.errors import DecodeError
-from pipeline.decode.jma import decode_gsm, decode_gwm
-from pipeline.decode.oscar import decode_oscar
-from pipeline.sources import oscar as oscar_src
 from pipeline.sources import rish
 from pipeline.sources.cycles import cycles_between, label as cycle_label, newest_published_cycles, parse_cycle, utcnow_h
 from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text
+from pipeline.sources.registry import BY_NAME, SOURCES
+from pipeline.sources.source import ROLES
 from pipeline.weather.assemble import assemble_cycle
 from pipeline.weather.grid import routing_grid
 from pipeline.weather.regrid import regrid
@@ -61,13 +60,14 @@ class CycleReport:
 
 
 def _opts(s: Settings, source: str, token: str | None = None) -> FetchOptions:
-    """Fetch options for RISH or OSCAR; only OSCAR requests carry the Earthdata token (`token`, else the settings')."""
+    """Fetch options for one source; only a source that needs it (OSCAR) sends the Earthdata token (`token`, else the
+    settings')."""
     src = s.sources
     return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
                         allowed_redirect_hosts=src.allowed_redirect_hosts, deadline_s=src.http_deadline_s,
                         min_rate_bps=src.http_min_rate_bps, rate_window_s=src.http_rate_window_s,
                         max_bytes=getattr(src, f"{source.lower()}_max_bytes"), max_index_bytes=src.index_max_bytes,
-                        token=(token or src.earthdata_token) if source == "OSCAR" else None)
+                        token=(token or src.earthdata_token) if BY_NAME[source].needs_token else None)
 
 
 def earthdata_token(s: Settings, blocks: bool = True) -> str | None:
@@ -98,37 +98,52 @@ DECODE_WORKERS = 2  # GRIB2 files decoded at once (eccodes is built thread-safe 
 @dataclass
 class Listing:
     items: list[Download]
-    rejected: list[str]
-    day_url: str
-    gaps: dict[str, list[int]]
-    n_oscar: int
+    rejected: list[tuple[str, str]]  # (unsafe name, index URL listing it)
+    index_urls: list[str]  # the primary sources' index pages
+    gaps: dict[str, list[int]]  # source → leads no listed file covers
+    n_expected: int
     problems: list[str] = field(default_factory=list)
 
+    def nothing_listed(self) -> str:
+        return f"no {'/'.join(s.name for s in SOURCES if s.primary)} files listed at {', '.join(self.index_urls)}"
 
-def list_sources(rish_url: str, oscar_url: str, cycle: np.datetime64, steps: list[int],
-                 opts: dict[str, FetchOptions]) -> Listing:
-    """The cycle's GSM/GWM files from the RISH day folder and the OSCAR files covering its leads (OSCAR is
-    not listed when RISH has nothing for the cycle)."""
-    day_url = rish.day_folder_url(rish_url, cycle)
-    try:
-        names, rejected = rish.parse_index(read_text(day_url, opts["GSM"]))
-    except FileNotFoundError:
-        names, rejected = [], []
-    files = rish.prefer_resolution(rish.files_for_cycle(names, cycle))
-    if not files:
-        return Listing([], rejected, day_url, {}, 0)
-    items = [Download(f.model, f.name, day_url + f.name) for f in files if f.model != "GSM" or f.first_lead_h in steps]
-    problems = []
-    try:
-        oscar_names, _ = rish.parse_index(read_text(oscar_url.rstrip("/") + "/", opts["OSCAR"]))
-    except FileNotFoundError:
-        oscar_names = []
-    except ConnectionError as exc:  # wind and waves are still worth ingesting; the cycle stays incomplete
-        oscar_names = []
-        problems.append(f"OSCAR listing unreachable ({exc})")
-    oscar_files = oscar_src.files_for_window(oscar_names, cycle, cycle + np.timedelta64(max(steps), "h"))
-    items += [Download("OSCAR", f.name, oscar_url.rstrip("/") + "/" + f.name) for f in oscar_files]
-    return Listing(items, rejected, day_url, rish.coverage(files, steps), len(oscar_files), problems)
+
+def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[int], opts: dict[str, FetchOptions]) -> Listing:
+    """The files each registered source has for the cycle (`base_urls`: source name → base URL). Each index page is
+    read once; the secondary sources are listed only when a primary one has files for the cycle."""
+    pages: dict[str, tuple[list[str], list[str]]] = {}
+    problems: list[str] = []
+
+    def names_at(src) -> tuple[str, list[str]]:
+        url = src.index_url(base_urls[src.name], cycle)
+        if url not in pages:
+            try:
+                pages[url] = rish.parse_index(read_text(url, opts[src.name]))
+            except FileNotFoundError:
+                pages[url] = [], []
+            except ConnectionError as exc:
+                if not src.listing_may_fail:
+                    raise
+                problems.append(f"{src.name} listing unreachable ({exc})")
+                return url, []
+        return url, pages[url][0]
+
+    items, gaps, n_expected, index_urls = [], {}, 0, []
+    for src in sorted(SOURCES, key=lambda src: not src.primary):  # primary first, registry order kept
+        if not src.primary and not items:
+            break
+        url, names = names_at(src)
+        if src.primary and url not in index_urls:
+            index_urls.append(url)
+        chosen = src.select(names, cycle, steps)
+        items += [Download(src.name, name, url + name) for name in chosen.names]
+        n_expected += chosen.n_expected
+        if chosen.gaps_h is not None:
+            gaps[src.name] = chosen.gaps_h
+    rejected = [(name, url) for url, (_, bad) in pages.items() for name in bad]
+    if not items:
+        return Listing([], rejected, index_urls, {}, 0)
+    return Listing(items, rejected, index_urls, gaps, n_expected, problems)
 
 
 def _fetch_one(it: Download, raw_dir: Path, cycle: np.datetime64, opts: dict[str, FetchOptions],
@@ -164,27 +179,30 @@ def _decoded_or_quarantined(it: Download, decode, quarantine_dir: Path):
         return None
 
 
-def _decode_grib(it: Download, grid: tuple, quarantine_dir: Path):
-    """A GSM/GWM file decoded onto the routing grid (None when corrupt)."""
-    ds = _decoded_or_quarantined(it, decode_gsm if it.source == "GSM" else decode_gwm, quarantine_dir)
-    return None if ds is None else regrid(ds, grid[0], grid[1])
+def _decode_one(it: Download, grid: tuple, quarantine_dir: Path):
+    """One file decoded (None when corrupt); a forecast file regridded onto the routing grid at once, current
+    analyses later, all together, by the cycle assembly."""
+    src = BY_NAME[it.source]
+    ds = _decoded_or_quarantined(it, src.decode, quarantine_dir)
+    return ds if ds is None or src.role == "currents" else regrid(ds, grid[0], grid[1])
 
 
 def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
-    """GRIB2 files decoded and regridded DECODE_WORKERS at a time; OSCAR NetCDF in this thread meanwhile (HDF5
-    is not thread-safe)."""
+    """Files of thread-safe decoders (GRIB2) decoded DECODE_WORKERS at a time, the others (OSCAR NetCDF: HDF5 is not
+    thread-safe) in this thread meanwhile; then assembled by the role of their source."""
     usable = [it for it in items if it.status in ("ok", "skipped")]
-    grib = [it for it in usable if it.source in ("GSM", "GWM")]
+    pooled = [it for it in usable if BY_NAME[it.source].thread_safe_decode]
     with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
-        decoded = pool.map(lambda it: _decode_grib(it, grid, quarantine_dir), grib)
-        osc = [_decoded_or_quarantined(it, decode_oscar, quarantine_dir) for it in usable if it.source == "OSCAR"]
-        osc = [ds for ds in osc if ds is not None]
-        decoded = list(decoded)
-    gsm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GSM"]
-    gwm = [ds for it, ds in zip(grib, decoded) if ds is not None and it.source == "GWM"]
-    oscar = xr.concat(osc, dim="time").sortby("time") if osc else None
-    ds, missing_steps = assemble_cycle(cycle, steps, grid[0], grid[1], gsm, gwm, oscar)
-    return ds, missing_steps, oscar is not None
+        decoded = pool.map(lambda it: (it, _decode_one(it, grid, quarantine_dir)), pooled)
+        serial = [(it, _decode_one(it, grid, quarantine_dir)) for it in usable if not BY_NAME[it.source].thread_safe_decode]
+        decoded = list(decoded) + serial
+    by_role: dict[str, list[xr.Dataset]] = {role: [] for role in ROLES}
+    for it, ds in decoded:
+        if ds is not None:
+            by_role[BY_NAME[it.source].role].append(ds)
+    currents = xr.concat(by_role["currents"], dim="time").sortby("time") if by_role["currents"] else None
+    ds, missing_steps = assemble_cycle(cycle, steps, grid[0], grid[1], by_role["wind"], by_role["waves"], currents)
+    return ds, missing_steps, currents is not None
 
 
 def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complete: bool, n_expected: int, n_ok: int,
@@ -231,30 +249,30 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
         LOG.warning("cycle %s is recorded complete but %d cube chunk(s) are corrupt (first: %s); ingesting it again",
                     label, len(bad), bad[0].chunk)
     token = earthdata_token(s, blocks=run.prefect)
-    opts = {source: _opts(s, source, token) for source in ("GSM", "GWM", "OSCAR")}
+    opts = {src.name: _opts(s, src.name, token) for src in SOURCES}
     steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
     timeout = s.sources.step_timeout_s
-    listing = run.step(list_sources, s.sources.rish_url, s.sources.oscar_url, c, steps, opts, name="list-sources",
-                       retries=2, timeout_s=timeout)
-    for name in listing.rejected:
-        LOG.warning("ignored unsafe name %r listed at %s", name, listing.day_url)
+    base_urls = {src.name: getattr(s.sources, src.url_setting) for src in SOURCES}
+    listing = run.step(list_sources, base_urls, c, steps, opts, name="list-sources", retries=2, timeout_s=timeout)
+    for name, url in listing.rejected:
+        LOG.warning("ignored unsafe name %r listed at %s", name, url)
     if not listing.items:
-        LOG.warning("cycle %s: no GSM/GWM files listed at %s; nothing written", label, listing.day_url)
-        return CycleReport(label, False, 0, 0, missing=[f"no GSM/GWM files listed at {listing.day_url}"]).__dict__
+        LOG.warning("cycle %s: %s; nothing written", label, listing.nothing_listed())
+        return CycleReport(label, False, 0, 0, missing=[listing.nothing_listed()]).__dict__
     known = ingest_log.known_checksums(layout.warehouse, [it.name for it in listing.items])
     items = run.step(download_all, listing.items, layout.raw, c, opts, known, name="download", timeout_s=timeout)
     grid = routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg)
     ds, missing_steps, have_currents = run.step(decode_and_assemble, items, c, steps, grid, layout.quarantine,
                                                 name="decode-and-assemble", timeout_s=timeout)
     problems = listing.problems + [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
-    for model, leads in listing.gaps.items():
+    for source, leads in listing.gaps.items():
         if leads:
-            problems.append(f"{model} leads not listed: {', '.join(map(str, leads))} h")
+            problems.append(f"{source} leads not listed: {', '.join(map(str, leads))} h")
     if not have_currents:
         problems.append("no OSCAR analysis at or before the cycle")
     complete = not missing_steps and have_currents and not problems
     n_ok = sum(it.status in ("ok", "skipped") for it in items)
-    run.step(write_cycle, layout, c, ds, items, complete, len(steps) + 2 + listing.n_oscar, n_ok, problems,
+    run.step(write_cycle, layout, c, ds, items, complete, listing.n_expected, n_ok, problems,
              name="write-cycle", timeout_s=timeout)
     for p in problems:
         LOG.warning("cycle %s: %s", label, p)

@@ -8,6 +8,7 @@ import numpy as np
 
 from pipeline.export import weather_map
 from pipeline.sources.cycles import label as cycle_label
+from schemas.cube_variables import step_hours
 from storage import cube
 
 STEP_VARIABLES = ("u10", "v10", "swh", "mwd", "uo", "vo")
@@ -27,7 +28,7 @@ def _cycle(cube_path: Path, cycle) -> "object":
 
 
 def steps_h(cube_path: Path, cycle) -> list[int]:
-    return [int(s) for s in _cycle(cube_path, cycle)["step"].values]
+    return [int(s) for s in step_hours(_cycle(cube_path, cycle)["step"].values)]
 
 
 def step_png(cube_path: Path, cycle, step_h: int, var: str) -> bytes:
@@ -35,11 +36,11 @@ def step_png(cube_path: Path, cycle, step_h: int, var: str) -> bytes:
     if var not in weather_map.VARIABLES:
         raise WeatherMapError(f"unknown variable {var!r}; use one of {', '.join(weather_map.VARIABLES)}")
     one = _cycle(cube_path, cycle)
-    have = [int(s) for s in one["step"].values]
+    have = [int(s) for s in step_hours(one["step"].values)]
     if int(step_h) not in have:
         raise WeatherMapError(f"cycle {cycle_label(cycle)} has no step {step_h} h; it has {have[0]}..{have[-1]} h "
                               f"every {have[1] - have[0] if len(have) > 1 else 0} h")
-    at = one.sel(step=int(step_h))[list(STEP_VARIABLES)].load()
+    at = one.isel(step=have.index(int(step_h)))[list(STEP_VARIABLES)].load()
     valid = np.datetime64(cycle, "h") + np.timedelta64(int(step_h), "h")
     title = (f"{var} · cycle {cycle_label(cycle)} + {int(step_h)} h (valid {np.datetime_as_string(valid, unit='h')} UTC)")
     return weather_map.weather_map_png(at["lat"].values, at["lon"].values, {k: at[k].values for k in STEP_VARIABLES},

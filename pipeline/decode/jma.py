@@ -14,6 +14,7 @@ import xarray as xr
 
 from pipeline.decode.errors import DecodeError
 from pipeline.decode.grib import GridInfo, read_fields
+from schemas import cube_variables
 
 # name → (discipline, category, number, level type, level)
 GSM_WIND = {"u10": (0, 2, 2, 103, 10.0), "v10": (0, 2, 3, 103, 10.0)}
@@ -25,14 +26,6 @@ GWM_WAVES = {
 GWM_DIRECTION_ALTERNATIVES = ((10, 0, 4), (10, 0, 10))  # wind-wave direction, primary wave direction
 GWM_PERIOD_ALTERNATIVES = ((10, 0, 5), (10, 0, 11), (10, 0, 34))
 GWM_FILL_VALUE = 9999.0
-
-ATTRS = {
-    "u10": {"units": "m s-1", "standard_name": "eastward_wind", "long_name": "10 m eastward wind"},
-    "v10": {"units": "m s-1", "standard_name": "northward_wind", "long_name": "10 m northward wind"},
-    "swh": {"units": "m", "standard_name": "sea_surface_wave_significant_height", "long_name": "significant wave height"},
-    "mwd": {"units": "degree", "standard_name": "sea_surface_wave_from_direction", "long_name": "mean wave direction (coming from)"},
-    "mwp": {"units": "s", "standard_name": "sea_surface_wave_mean_period", "long_name": "mean wave period"},
-}
 
 
 def _order(axis: np.ndarray) -> np.ndarray | slice:
@@ -51,13 +44,13 @@ def _canonical(values: dict[str, dict[int, np.ndarray]], grid: GridInfo, cycle: 
     data = {}
     for name, by_step in values.items():
         cube = np.stack([by_step[s] for s in steps])[:, lat_order][:, :, lon_order]
-        data[name] = (("step", "lat", "lon"), cube, ATTRS.get(name, {}))
+        data[name] = (("step", "lat", "lon"), cube, cube_variables.attrs(name))
     ds = xr.Dataset(
         data,
         coords={
             "step": ("step", np.asarray(steps, dtype=np.int32), {"units": "hours", "long_name": "lead time"}),
-            "lat": ("lat", grid.lat[lat_order], {"units": "degrees_north"}),
-            "lon": ("lon", grid.lon[lon_order], {"units": "degrees_east"}),
+            "lat": ("lat", grid.lat[lat_order], cube_variables.attrs("lat")),
+            "lon": ("lon", grid.lon[lon_order], cube_variables.attrs("lon")),
             "cycle": np.datetime64(cycle, "ns"),
         },
     )
@@ -119,7 +112,7 @@ def decode_gwm(path: Path) -> xr.Dataset:
         raise DecodeError(path, "no significant wave height (GRIB2 10/0/3) in this GWM file")
     for k in ("mwd", "mwp"):
         if not values[k]:
-            raise DecodeError(path, f"no {ATTRS[k]['long_name']} in this GWM file")
+            raise DecodeError(path, f"no {cube_variables.attrs(k)['long_name']} in this GWM file")
     _require_global(grid, path)
     steps = sorted(set(values["swh"]) & set(values["mwd"]) & set(values["mwp"]))
     if not steps:

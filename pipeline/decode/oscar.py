@@ -13,11 +13,7 @@ import numpy as np
 import xarray as xr
 
 from pipeline.decode.errors import DecodeError
-
-ATTRS = {
-    "uo": {"units": "m s-1", "standard_name": "eastward_sea_water_velocity", "long_name": "surface current east (going to)"},
-    "vo": {"units": "m s-1", "standard_name": "northward_sea_water_velocity", "long_name": "surface current north (going to)"},
-}
+from schemas import cube_variables
 
 
 def _open(path: Path) -> xr.Dataset:
@@ -54,9 +50,9 @@ def decode_oscar(path: Path) -> xr.Dataset:
     for k in ("uo", "vo"):
         v = ds[k].values.astype(np.float32)
         v[(v <= -999.0) | (np.abs(v) > 20.0)] = np.nan  # fill values and garbage
-        ds[k] = (("time", "lat", "lon"), v, ATTRS[k])
+        ds[k] = (("time", "lat", "lon"), v, cube_variables.attrs(k))
         if not np.isfinite(v).any():  # an all-fill file would give a "complete" cycle without currents
             raise DecodeError(path, f"no valid values in {k[0]} (every value is fill or out of range)")
-    ds["lat"].attrs = {"units": "degrees_north"}
-    ds["lon"].attrs = {"units": "degrees_east"}
+    ds["lat"].attrs = cube_variables.attrs("lat")
+    ds["lon"].attrs = cube_variables.attrs("lon")
     return ds

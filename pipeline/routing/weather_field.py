@@ -24,6 +24,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from schemas.cube_variables import step_hours
+
 N_VARS = 7
 U10, V10, SWH, WAVE_X, WAVE_Y, UO, VO = range(N_VARS)
 CUBE_VARIABLES = ("u10", "v10", "swh", "mwd", "uo", "vo")  # what from_cycle takes of a cube cycle
@@ -117,7 +119,7 @@ def from_cycle(ds, cycle=None) -> WeatherField:
     """From one cube cycle, whole or a window of it (xarray dims step, lat, lon; variables CUBE_VARIABLES). Times
     count from the cycle, whichever steps the window holds, so a voyage meets the same numbers in both."""
     cyc = np.datetime64(cycle if cycle is not None else ds["cycle"].values, "s")
-    times = cyc + (np.asarray(ds["step"].values, dtype=np.int64) * 3600).astype("timedelta64[s]")
+    times = cyc + (step_hours(ds["step"].values) * 3600).astype("timedelta64[s]")
     return from_arrays(ds["lat"].values, ds["lon"].values, times, u10=ds["u10"].values, v10=ds["v10"].values,
                        swh=ds["swh"].values, mwd_deg=ds["mwd"].values, uo=ds["uo"].values, vo=ds["vo"].values, cycle=cyc,
                        t_ref=cyc)

@@ -1,4 +1,4 @@
-"""OSCAR file naming and choice of the files a forecast cycle needs.
+"""OSCAR surface currents: file naming, choice of the files a forecast cycle needs, and the source entry.
 
 Names: v1 `oscar_vel{N}.nc[.gz]` (N = days since 1992-10-05 of the analysis), v1 yearly
 `oscar_vel{YYYY}.nc`, v2 `oscar_currents_{final|interim|nrt}_YYYYMMDD.nc`. When several v2
@@ -11,6 +11,9 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
+
+from pipeline.decode.oscar import decode_oscar
+from pipeline.sources.source import Selection, Source
 
 V1_RE = re.compile(r"^oscar_vel(?P<n>\d{1,5})\.nc(?P<gz>\.gz)?$")
 V2_RE = re.compile(r"^oscar_currents_(?P<kind>final|interim|nrt)_(?P<date>\d{8})\.nc$")
@@ -53,3 +56,20 @@ def files_for_window(names: list[str], start: np.datetime64, end: np.datetime64)
     before = [t for t in times if t <= start]
     chosen = ([before[-1]] if before else []) + [t for t in times if start < t <= end]
     return [best[t] for t in chosen]
+
+
+def index_url(base_url: str, cycle: np.datetime64) -> str:
+    """OSCAR lists every analysis in one folder."""
+    return base_url.rstrip("/") + "/"
+
+
+def select(names: list[str], cycle: np.datetime64, steps_h: list[int]) -> Selection:
+    """The analyses covering the cycle's valid times (latest at or before the cycle, then every later one)."""
+    files = files_for_window(names, cycle, cycle + np.timedelta64(max(steps_h), "h"))
+    return Selection([f.name for f in files], len(files))
+
+
+# Currents are worth little alone (listed only when the forecast is) and wind and waves are still worth ingesting
+# without them (an unreachable OSCAR leaves the cycle incomplete).
+OSCAR = Source("OSCAR", "currents", "oscar_url", index_url, select, decode_oscar, primary=False,
+               listing_may_fail=True, thread_safe_decode=False, needs_token=True)

@@ -11,11 +11,13 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 
+from schemas.cube_variables import provided_by
 from pipeline.weather.currents import analysis_for, persist_into
 from pipeline.weather.regrid import regrid
 
-WIND_VARS = ("u10", "v10")
-WAVE_VARS = ("swh", "mwd", "mwp")
+WIND_VARS = provided_by("GSM")
+WAVE_VARS = provided_by("GWM")
+CURRENT_VARS = provided_by("OSCAR")
 
 
 def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray, lon: np.ndarray,
@@ -24,7 +26,7 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
     steps = np.asarray(steps_h, dtype=np.int32)
     shape = (steps.size, lat.size, lon.size)
     # uninitialised: every slot is written once below, by a field or by NaN (no full-size NaN prefill to overwrite)
-    out = {v: np.empty(shape, np.float32) for v in (*WIND_VARS, *WAVE_VARS, "uo", "vo")}
+    out = {v: np.empty(shape, np.float32) for v in (*WIND_VARS, *WAVE_VARS, *CURRENT_VARS)}
     have_wind = np.zeros(steps.size, bool)
     have_waves = np.zeros(steps.size, bool)
     pos = {int(s): i for i, s in enumerate(steps)}
@@ -54,12 +56,12 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
         # regrid each analysis once, then persist it to the valid times (same values, far fewer fields)
         cur = regrid(oscar, lat, lon)
         idx, age = analysis_for(cur["time"].values, valid)
-        for v in ("uo", "vo"):
+        for v in CURRENT_VARS:
             persist_into(cur[v].values, idx, out[v])
     else:
         age = np.full(steps.size, np.nan, np.float32)
-        out["uo"].fill(np.nan)
-        out["vo"].fill(np.nan)
+        for v in CURRENT_VARS:
+            out[v].fill(np.nan)
     missing = [int(s) for s, w, a in zip(steps, have_wind, have_waves) if not (w and a)]
     ds = xr.Dataset(
         {k: (("step", "lat", "lon"), v) for k, v in out.items()} | {"current_age_h": (("step",), age.astype(np.float32))},

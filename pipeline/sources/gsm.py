@@ -1,0 +1,19 @@
+"""JMA GSM (global spectral model): 10 m wind, one GRIB2 file per lead time, listed in the RISH day folders."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.decode.jma import decode_gsm
+from pipeline.sources import rish
+from pipeline.sources.source import Selection, Source
+
+
+def select(names: list[str], cycle: np.datetime64, steps_h: list[int]) -> Selection:
+    """The cycle's GSM files at the cube's lead times."""
+    files = [f for f in rish.prefer_resolution(rish.files_for_cycle(names, cycle)) if f.model == "GSM"]
+    return Selection([f.name for f in files if f.first_lead_h in steps_h], len(steps_h),
+                     rish.coverage(files, steps_h)["GSM"])
+
+
+GSM = Source("GSM", "wind", "rish_url", rish.day_folder_url, select, decode_gsm)

@@ -1,0 +1,1 @@
+"""Definitions every layer shares (pipeline, storage, flows): imports nothing of the project."""
