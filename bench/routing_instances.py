@@ -54,7 +54,7 @@ INSTANCES = (
     SuiteInstance("transpac-west", "ocean, west-bound into the westerlies, dateline", (33.5, -118.8), (33.0, 136.0),
                   "2021-01-10T00:00", 40, 31, ("slow", 0.9)),
     SuiteInstance("short-coastal", "short voyage along the coast of Japan against the Kuroshio, tight RTA", (34.8, 139.9), (33.3, 135.6),
-                  "2021-01-12T06:00", 10, 11, ("fast", 1.25)),
+                  "2021-01-12T06:00", 10, 11, ("fast", 1.4)),
     SuiteInstance("luzon-strait", "strait between Taiwan and Luzon (land closes most of the graph), loose RTA",
                   (18.5, 116.0), (21.5, 124.5), "2021-01-10T00:00", 20, 21, ("slow", 1.2)),
     SuiteInstance("storm-limit", "storm leaving Japan a day after the ship and overtaking it, against Hs ≤ 6 m and "

@@ -19,6 +19,8 @@ HTTP timeout. The report is printed as JSON on the last line.
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import os
 import resource
@@ -94,8 +96,10 @@ def install_stop(point: str, n: int, how: str, marker: Path | None = None) -> No
         fetch._download = _counted(stop, n, fetch._download, before=False)
     elif point == "decode":
         shared = {"n": 0}
-        for name in ("decode_gsm", "decode_gwm", "decode_oscar"):
-            setattr(flow, name, _counted(stop, n, getattr(flow, name), before=False, count=shared))
+        counted = {name: dataclasses.replace(src, decode=_counted(stop, n, src.decode, before=False, count=shared))
+                   for name, src in flow.BY_NAME.items()}
+        flow.BY_NAME.clear()
+        flow.BY_NAME.update(counted)  # the ingest decodes each file through its source's entry
     elif point == "zarr":
         zarr_local._put = _counted(stop, n, zarr_local._put, before=True)
     elif point == "state":
