@@ -23,7 +23,7 @@ demo: install
 	$(BIN)/jitroute demo
 
 test: install
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 
 bench: install
 	$(BIN)/python bench/ingest.py

@@ -9,9 +9,10 @@ import sys
 import typer
 from rich.console import Console
 
-# On a terminal rich fits tables to the window; in a pipe or file it would cut them at 80 columns.
-console = Console(width=None if sys.stdout.isatty() else 4000)
-err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 4000)
+# On a terminal rich fits tables to the window; in a pipe or file it would cut them at 80 columns. Text lines are
+# never broken (soft_wrap): a path or URL in a message stays whole wherever the output goes.
+console = Console(width=None if sys.stdout.isatty() else 4000, soft_wrap=True)
+err_console = Console(stderr=True, width=None if sys.stderr.isatty() else 4000, soft_wrap=True)
 
 
 class _ProgressHandler(logging.Handler):
