@@ -183,3 +183,18 @@ def test_bfoa_polish_finds_the_best_plan_in_its_corridor(kind, obj, n):
     assert route_cost_nb(o, ct[-1] - o.t_dep_h, cf[-1]) == pytest.approx(got, rel=1e-12)
     narrow = polish(nodes, rpm, cost, replace(wide, polish_window_h=0.0, polish_fuel=0.0), g, v, w, o)[2]
     assert narrow <= cost
+
+
+def test_a_model_form_without_corner_bounds_gets_zero_bounds_that_prune_nothing():
+    """The MLP has no speed/fuel corner bounds: the tables must still be lower bounds (zero), not an error, so the
+    engine-limits post-pass and the DP route such a vessel (a demo vessel with an MLP model once failed here)."""
+    from dataclasses import replace
+
+    pr = problem(DEP, ARR, 48.0, rpm_options=(70, 85, 100), n_lines=3, n_points=5, max_shift=2, d_point_nm=25.0)
+    inst = Instance.build(pr, pr.search_space(), _weather("static", 0))
+    inst = replace(inst, vessel=inst.vessel._replace(form_id=2))
+    lams, m_lam, t_min, tau, phi = finish_bounds(inst)
+    L2, P = inst.space.lat.shape
+    assert m_lam.shape == (len(lams), L2, P) and t_min.shape == (L2, P) and tau.shape == phi.shape == (L2, P, 3)
+    assert not (m_lam.any() or t_min.any() or tau.any() or phi.any())
+    assert fuel_to_finish_lb(m_lam[:, 0, 0], lams, t_min[0, 0], 10.0) == 0.0

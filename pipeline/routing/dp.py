@@ -409,10 +409,13 @@ def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
     """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P), tau, phi (L+2, P, R)): the fuel-to-finish bound tables of the
     exact DP and the least hours and fuel per NM they are built from."""
     v, sp = inst.vessel, inst.space
-    if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
-        raise ValueError(f"no speed and fuel bounds for performance model form {v.form_id}")
     L2, P = sp.lat.shape
     R = len(v.rpm_options)
+    if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
+        # no corner bounds for this model form (e.g. the MLP): zero hours and fuel to finish are still lower
+        # bounds, so every search that uses these tables stays exact, it only prunes less
+        zeros = np.zeros((L2, P))
+        return np.zeros(1), zeros[None].copy(), zeros, np.zeros((L2, P, R)), np.zeros((L2, P, R))
     wind, hs, cur = local_weather_max(inst)
     tau, phi = np.empty((L2 * P, R)), np.empty((L2 * P, R))
     _corner_bounds(v, wind.ravel(), hs.ravel(), cur.ravel(), tau, phi)
