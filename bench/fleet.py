@@ -8,7 +8,7 @@ per minute (per worker) and the ratio. Each cluster is warmed up first (imports,
 so both timings measure routing, not start-up.
 
 Memory: the peak resident memory (VmHWM, the RSS high-water mark) of each worker process over its cluster's runs, and,
-to judge the voyages' share, what a fresh interpreter holds with the routing code imported and the land structure built.
+to judge the voyages' share, what a fresh interpreter holds with the routing code imported and the land structure loaded.
 
 Targets: scaling 1 → 2 workers ≥ 1.7×; peak worker memory ≤ 300 MB.
 
@@ -94,7 +94,7 @@ def peak_rss_mb() -> float:
 
 
 def baseline_mb() -> tuple[float, float]:
-    """(resident MB of a fresh interpreter that imported what a worker routes with, what building the land structure
+    """(resident MB of a fresh interpreter that imported what a worker routes with, what loading the land structure
     adds to it): the part of a worker's peak that is not the voyages' weather and work."""
     code = (f"import sys; sys.path.insert(0, {str(REPO)!r}); from bench.fleet import _status_mb; "
             "import flows.jobs.route_worker; a = _status_mb('VmRSS'); "

@@ -39,7 +39,7 @@ rename on a local disk, one PUT on S3) only when a cycle becomes visible, togeth
 reader keeps the array shapes of the last publication, so it does not see a cycle being appended (its chunks
 lie past those shapes), and `xr.open_zarr` opens the store without a warning. Appends therefore go through zarr
 array by array (xarray's append rewrites the root metadata, dropping the consolidated view). The published view
-is what routing workers read (`open_published`, `read_window`), one metadata read per store even on S3.
+is what routing workers read (storage/cube_window.py), one metadata read per store even on S3.
 The hard case is the in-place re-write of an existing cycle (`ingest --force`, or incomplete → complete): its
 chunks are overwritten where they are, so while it runs a plain reader may read a mix of old and new chunks of
 that cycle (the `cycle_state` it can read says 0, hidden, but a plain reader does not look). Readers that know
@@ -64,9 +64,7 @@ import warnings
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import NamedTuple
 
-import dask.array
 import numpy as np
 import xarray as xr
 import zarr
@@ -74,6 +72,7 @@ from zarr.codecs import BloscCodec
 
 from schemas import cube_variables as cv
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
+from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, locate
 
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
 TIME_EPOCH = np.datetime64("2000-01-01T00", "ns")  # of CYCLE_ENCODING
@@ -86,68 +85,7 @@ SPATIAL_SPLITS = 3  # chunks per spatial axis: (1, all steps, ≈ nlat/3, ≈ nl
 DATA_CODEC = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
 
 
-class CubeError(RuntimeError):
-    pass
-
-
-class Location(NamedTuple):
-    """Where a store lives: `url` as given (a local path, `file://…` or an object-store URL such as `s3://bucket/…`),
-    the fsspec `options` for a URL (e.g. {"endpoint_url": …, "key": …, "secret": …} for S3), and `local`, the
-    local path (None on an object store)."""
-
-    url: str
-    options: dict
-    local: Path | None
-
-    @property
-    def name(self) -> str:
-        return self.url.rstrip("/").rsplit("/", 1)[-1]
-
-    def zarr_store(self, read_only: bool = False):
-        """What zarr and xarray open: the local path, or an fsspec store for a URL."""
-        if self.local is not None:
-            return str(self.local)
-        from zarr.storage import FsspecStore
-
-        return FsspecStore.from_url(self.url, storage_options=self.options, read_only=read_only)
-
-    def has(self, key: str) -> bool:
-        """Whether the object `key` (e.g. "zarr.json") exists in the store."""
-        if self.local is not None:
-            return (self.local / key).exists()
-        import fsspec
-
-        fs, root = fsspec.core.url_to_fs(self.url, **self.options)
-        fs.invalidate_cache()
-        return fs.exists(f"{root}/{key}")
-
-    def read_text(self, key: str) -> str:
-        if self.local is not None:
-            return (self.local / key).read_text()
-        import fsspec
-
-        fs, root = fsspec.core.url_to_fs(self.url, **self.options)
-        return fs.cat_file(f"{root}/{key}").decode()
-
-
-def locate(store, storage_options: dict | None = None) -> Location:
-    """The Location of `store`: a local path (str or Path), `file://…`, or a URL with its fsspec options."""
-    if isinstance(store, Location):
-        return store
-    url = str(store)
-    if url.startswith("file://"):
-        return Location(url, {}, Path(url.removeprefix("file://")))
-    if "://" in url:
-        return Location(url.rstrip("/"), dict(storage_options or {}), None)
-    return Location(url, {}, Path(url))
-
-
-class CorruptChunkError(CubeError):
-    """A chunk file of the cube cannot be decoded (damaged on disk); the message names it and the fix."""
-
-
 METADATA_NODES = ("", *DATA_VARS, "cycle", "step", "lat", "lon", "cycle_state", "current_age_h")  # "" is the group
-DECODE_ERRORS = (RuntimeError, ValueError, OSError, KeyError)  # what zarr/numcodecs raise for a damaged chunk
 
 
 @contextlib.contextmanager
@@ -177,6 +115,8 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
     """One hidden all-NaN cycle. The data variables are lazy and written with `compute=False`: only their
     metadata goes to the store, and chunks never written read as the NaN fill value."""
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
+    import dask.array  # only writers need it (routing workers import this module without dask)
+
     nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32, chunks=(1, nstep, *spatial_chunks(nlat, nlon)))
     data = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
     age, state = cv.CURRENT_AGE, cv.CYCLE_STATE
@@ -412,7 +352,7 @@ def _open_consistent(loc: Location, lock_dir: Path | None) -> xr.Dataset:
     return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False, chunks={})
 
 
-def _require_store(loc: Location) -> None:
+def require_store(loc: Location) -> None:
     has_meta = loc.has("zarr.json")
     if loc.local is not None and loc.local.exists() and not has_meta:
         raise CubeError(f"{loc.url}: the store is damaged ({'; '.join(metadata_problems(loc))}): run `jitroute cube check`, "
@@ -425,7 +365,7 @@ def open_cube(path, *, include_incomplete: bool = True, lock_dir: Path | None = 
               storage_options: dict | None = None) -> xr.Dataset:
     """Lazy (dask) view of every visible cycle, sorted by cycle."""
     loc = locate(path, storage_options)
-    _require_store(loc)
+    require_store(loc)
     ds = _open_consistent(loc, lock_dir)
     state = ds["cycle_state"].values
     keep = state == STATE_COMPLETE if not include_incomplete else state != STATE_HIDDEN
@@ -454,7 +394,7 @@ def latest_complete_cycle(path, at_or_before=None, storage_options: dict | None 
     return cycles[-1] if cycles else None
 
 
-def _corrupt_chunk_error(loc: Location, c: np.datetime64, exc: Exception) -> CorruptChunkError:
+def corrupt_chunk_error(loc: Location, c: np.datetime64, exc: Exception) -> CorruptChunkError:
     bad = [p for p in corrupt_chunks(loc, cycles=[c])] or None
     label = np.datetime_as_string(np.datetime64(c, "h"), unit="h")
     where = ", ".join(str(p.chunk) for p in bad[:3]) if bad else f"(reading failed: {exc})"
@@ -480,98 +420,7 @@ def load_cycle(path, cycle, lat_range_deg: tuple[float, float] | None = None,
     try:
         return one.load()
     except DECODE_ERRORS as exc:
-        raise _corrupt_chunk_error(loc, c, exc) from exc
-
-
-# --- reading one voyage's window ----------------------------------------------------------------------------------
-
-
-def open_published(path, storage_options: dict | None = None) -> xr.Dataset:
-    """The published view of the store (its consolidated metadata: one read), lazy without dask (`chunks=None`):
-    indexing it reads only the chunks it touches. A local store written before publication existed is read as it
-    is (cycle_state still hides unfinished cycles) until its next ingest publishes it; a store at a URL never
-    published raises FileNotFoundError."""
-    loc = locate(path, storage_options)
-    if loc.local is not None:
-        _require_store(loc)
-    try:
-        return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=True, chunks=None)
-    except (FileNotFoundError, ValueError, KeyError) as exc:
-        if loc.local is not None and "not found" in str(exc):
-            return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False, chunks=None)
-        raise FileNotFoundError(f"no published weather cube at {loc.url} ({type(exc).__name__}: {exc}): "
-                                "run `jitroute ingest` (or `jitroute demo`) first") from exc
-
-
-def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:
-    """The steps whose valid times bracket t_from..t_to (the step at or before t_from to the one at or after
-    t_to), clipped to the cycle's steps."""
-    n = valid.size
-    i0 = int(np.clip(np.searchsorted(valid, np.datetime64(t_from, "ns"), side="right") - 1, 0, n - 1))
-    i1 = int(np.clip(np.searchsorted(valid, np.datetime64(t_to, "ns"), side="left"), i0, n - 1))
-    return slice(i0, i1 + 1)
-
-
-def _lat_slice(lat: np.ndarray, lat_deg: tuple[float, float], pad_deg: float) -> slice:
-    """Rows covering lat_deg ± pad_deg (at least 2), whatever the order of the cube's latitudes."""
-    lo, hi = min(lat_deg) - pad_deg, max(lat_deg) + pad_deg
-    rows = np.flatnonzero((lat >= lo) & (lat <= hi))
-    if rows.size < 2:  # a box at or beyond the grid's edge: the two nearest rows
-        rows = np.sort(np.argsort(np.abs(lat - 0.5 * (lo + hi)))[:2])
-    return slice(int(rows[0]), int(rows[-1]) + 1)
-
-
-def _lon_slices(lon: np.ndarray, lon_deg: tuple[float, float], pad_deg: float) -> tuple[list[slice], np.ndarray]:
-    """Column slices covering west..east (degrees east, east ≥ west, any turn) ± pad_deg on a regular grid, and
-    the longitudes they give, continuous and increasing (a box across the grid's seam reads two slices; their
-    longitudes go on past 360). A box about as wide as the globe reads every column."""
-    n, dlon = lon.size, float(lon[1] - lon[0])
-    west, east = lon_deg[0] - pad_deg, lon_deg[1] + pad_deg
-    if not abs(n * dlon - 360.0) < 1e-6:  # a regional grid: clip, never wrap
-        cols = np.flatnonzero((lon >= west) & (lon <= east))
-        cols = cols if cols.size >= 2 else np.sort(np.argsort(np.abs(lon - 0.5 * (west + east)))[:2])
-        return [slice(int(cols[0]), int(cols[-1]) + 1)], lon[cols[0]:cols[-1] + 1]
-    if east - west >= 360.0 - 2 * dlon:
-        return [slice(0, n)], lon
-    k0 = int(np.floor(((west - lon[0]) % 360.0) / dlon))
-    count = int(np.ceil((east - west) / dlon)) + 2
-    first = slice(k0, min(n, k0 + count))
-    slices = [first] if k0 + count <= n else [first, slice(0, k0 + count - n)]
-    return slices, lon[k0] + dlon * np.arange(count)
-
-
-def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], lon_deg: tuple[float, float],
-                variables: tuple[str, ...] = DATA_VARS, margin_cells: int = 3, storage_options: dict | None = None,
-                published: xr.Dataset | None = None) -> xr.Dataset:
-    """One visible cycle's weather in a window, eager, dims (step, lat, lon): the steps whose valid times cover
-    `valid_utc` = (from, to), and the box `lat_deg` (south, north) × `lon_deg` (west, east in degrees east; east ≥ west,
-    e.g. (170, 200) across 180°) padded by `margin_cells` grid cells. Only the chunks in the window are read,
-    without dask. A box across the grid's seam comes back with continuous longitudes (past 360).
-
-    `path` is a local path or URL (`s3://bucket/…/weather.zarr` with fsspec `storage_options`); `published` is an
-    already opened `open_published(path)` to read from (its caller then keeps it). Raises KeyError for a cycle not
-    published or hidden, CorruptChunkError for a chunk that does not decode.
-    """
-    loc = locate(path, storage_options)
-    ds = published if published is not None else open_published(loc)
-    c = np.datetime64(cycle, "ns")
-    hits = np.flatnonzero(ds["cycle"].values.astype("datetime64[ns]") == c)
-    if not hits.size or int(ds["cycle_state"].values[hits[0]]) == STATE_HIDDEN:  # the state is read live
-        raise KeyError(f"cycle {c} is not in the cube at {loc.url} (or is being re-written)")
-    ci = int(hits[0])
-    valid = c + ds["step"].values.astype("timedelta64[h]").astype("timedelta64[ns]")
-    steps = _step_slice(valid, *valid_utc)
-    lat = ds["lat"].values
-    lats = _lat_slice(lat, lat_deg, margin_cells * abs(float(lat[1] - lat[0])))
-    lon = ds["lon"].values
-    lon_parts, lon_out = _lon_slices(lon, lon_deg, margin_cells * float(lon[1] - lon[0]))
-    try:
-        data = {v: (("step", "lat", "lon"),
-                    np.concatenate([ds[v].variable[ci, steps, lats, part].values for part in lon_parts], axis=-1))
-                for v in variables}
-    except DECODE_ERRORS as exc:
-        raise _corrupt_chunk_error(loc, c, exc) from exc
-    return xr.Dataset(data, coords={"cycle": c, "step": ds["step"].values[steps], "lat": lat[lats], "lon": lon_out})
+        raise corrupt_chunk_error(loc, c, exc) from exc
 
 
 # --- checking and repairing a store damaged on disk ---------------------------------------------------------------

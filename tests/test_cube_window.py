@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ import xarray as xr
 
 from pipeline.routing import weather_field as wf
 from pipeline.routing.problem import lon_span_deg
-from storage import cube
+from storage import cube, cube_window
 from tests.processes import free_port
 
 CYCLE = np.datetime64("2020-12-01T00", "ns")
@@ -46,9 +47,9 @@ def store(tmp_path):
 
 
 def window(store, box_lat, box_lon, t_from="2020-12-01T13", t_to="2020-12-02T05", **kw) -> wf.WeatherField:
-    ds = cube.read_window(store, CYCLE, valid_utc=(np.datetime64(t_from), np.datetime64(t_to)), lat_deg=box_lat,
-                          lon_deg=box_lon, variables=wf.CUBE_VARIABLES, **kw)
-    return wf.from_cycle(ds, CYCLE)
+    win = cube_window.read_window(store, CYCLE, valid_utc=(np.datetime64(t_from), np.datetime64(t_to)),
+                                  lat_deg=box_lat, lon_deg=box_lon, variables=wf.CUBE_VARIABLES, **kw)
+    return wf.from_window(win)
 
 
 @pytest.mark.parametrize("box_lat, box_lon", [((10, 30), (140, 160)),  # open ocean
@@ -135,6 +136,25 @@ def test_a_worker_routes_on_the_new_values_after_a_re_ingest(store):
     assert _route(store, v1)[0]["wind_kn"] == calm_legs[0]["wind_kn"]  # same version: the cached window
     windy_legs = _route(store, v2)
     assert windy_legs[0]["wind_kn"] > calm_legs[0]["wind_kn"] + 10  # the run that read v2 meets the new wind
+
+
+def test_a_worker_routes_from_the_cube_without_pandas_xarray_or_duckdb(store):
+    """What keeps a dask worker small: routing a voyage (exports off) imports none of the big table libraries."""
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
+            "import numpy as np\n"
+            "from flows.jobs.route_worker import route_one\n"
+            "from pipeline.performance.model import reference_model\n"
+            "from pipeline.routing.job import RouteJob, RoutingOptions\n"
+            "voyage = {'voyage_id': 'VSMALL', 'imo': 1, 'dep_lat': 34.0, 'dep_lon': 141.0, 'arr_lat': 30.0,\n"
+            "          'arr_lon': 147.0, 'depart_utc': np.datetime64('2020-12-01T02'),\n"
+            "          'rta_utc': np.datetime64('2020-12-02T18'), 'rpm_options': [70, 85, 100]}\n"
+            "job = RouteJob(voyage=voyage, vessel={'rpm_max': 100}, model=reference_model(14.0, 100.0, 1.5).to_json(),\n"
+            f"               run_id='r1', cycle={str(CYCLE)[:19]!r}, exports=False,\n"
+            "               options=RoutingOptions(n_lines=6, n_points=7))\n"
+            f"row = route_one(job, {str(store)!r})['route']\n"
+            "print(row['status'], sorted({m.split('.')[0] for m in sys.modules} & {'pandas', 'xarray', 'pyarrow', 'duckdb'}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "ok []", out
 
 
 # --- the cube on S3 -----------------------------------------------------------------------------------------------

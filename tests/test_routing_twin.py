@@ -20,10 +20,7 @@ CASES = r'''
 import json, sys
 sys.path.insert(0, sys.argv[1])
 from routing_cases import field, problem, wavy, moving_storm
-from pipeline.routing.land import land_grid
 from pipeline.routing.solve import BfoaParams, DpOptions, solve
-
-land_grid(sys.argv[2])  # the compiled run builds the land structure and caches it; the twin loads it (a pure-Python build takes minutes)
 
 tiny = BfoaParams(n_bacteria=5, n_chemo=3, n_cycles=4, ed_every=2, steps_to_die=6)
 out = {}
@@ -43,16 +40,16 @@ print(json.dumps(out))
 '''
 
 
-def _run(disable_jit: bool, land_cache: Path) -> dict:
+def _run(disable_jit: bool) -> dict:
     env = dict(os.environ, NUMBA_DISABLE_JIT="1" if disable_jit else "0")
-    res = subprocess.run([sys.executable, "-c", CASES, str(TESTS), str(land_cache)], env=env, capture_output=True, text=True, timeout=900,
+    res = subprocess.run([sys.executable, "-c", CASES, str(TESTS)], env=env, capture_output=True, text=True, timeout=900,
                          cwd=TESTS.parent)
     assert res.returncode == 0, res.stderr[-3000:]
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def test_compiled_kernels_equal_their_pure_python_twin(tmp_path):
-    compiled, twin = _run(False, tmp_path), _run(True, tmp_path)  # in this order: the first caches the land structure
+def test_compiled_kernels_equal_their_pure_python_twin():
+    compiled, twin = _run(False), _run(True)  # both load the shipped land structure (a pure-Python build takes minutes)
     assert compiled.keys() == twin.keys()
     for name in compiled:
         assert compiled[name][0] == "ok", (name, compiled[name])

@@ -101,25 +101,32 @@ def test_distance_to_a_small_island_equals_the_raw_mask(island):
     assert np.all(far <= np.maximum(got, 0.5) + 1e-9) and np.all(far[want >= 0.5] >= 0.5)
 
 
-def test_the_land_structure_is_small_and_never_loads_the_full_mask():
+def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
     code = ("import re, sys\n"
             "from pipeline.routing import land\n"
+            "g = land.build_land_grid()\n"
+            "peak_kb = int(re.search('VmHWM:\\\\s+(\\\\d+)', open('/proc/self/status').read()).group(1))\n"
+            "shipped = land._read_saved(land.PACKAGED, land._mask_key(land._mask_path()))\n"
+            "same = shipped is not None and all((a == b).all() for a, b in zip(g, shipped))\n"
+            "print(g.nbytes, 'global_land_mask.globe' in sys.modules, same, peak_kb // 1024)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    nbytes, loaded, same_as_shipped, peak_mb = int(out[0]), out[1] == "True", out[2] == "True", int(out[3])
+    assert nbytes < 20e6 and not loaded
+    assert peak_mb < 300, f"building the land structure peaked at {peak_mb} MB"
+    assert same_as_shipped, ("the shipped land_grid_v1.npz differs from a build from the installed mask: "
+                             "run `python -m pipeline.routing.land` and commit it")
+
+
+def test_processes_load_the_shipped_land_structure_without_building_it():
+    code = ("import re, sys\n"
+            "from pipeline.routing import land\n"
+            "land.build_land_grid = None  # a build would fail\n"
             "g = land.land_grid()\n"
             "peak_kb = int(re.search('VmHWM:\\\\s+(\\\\d+)', open('/proc/self/status').read()).group(1))\n"
-            "print(g.nbytes, 'global_land_mask.globe' in sys.modules, bool(land.is_sea(24.286, 153.979)), peak_kb // 1024)\n")
+            "print(bool(land.is_sea(24.286, 153.979)), bool(land.is_sea(25.0, 150.0)), peak_kb // 1024)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
-    nbytes, loaded, marcus_sea, peak_mb = int(out[0]), out[1] == "True", out[2] == "True", int(out[3])
-    assert nbytes < 20e6 and not loaded and not marcus_sea
-    assert peak_mb < 300, f"building the land structure peaked at {peak_mb} MB"
-
-
-def test_cached_land_structure_is_the_same(tmp_path, monkeypatch):
-    built = land.land_grid()
-    land.land_grid(tmp_path)  # writes the cache
-    monkeypatch.setattr(land, "_GRID", None)
-    again = land.land_grid(tmp_path)  # reads it
-    assert (tmp_path / "land_grid_v1.npz").exists()
-    assert all(np.array_equal(a, b) for a, b in zip(built, again))
+    assert out[:2] == ["False", "True"]  # Minami-Tori-shima is land, the ocean west of it is not
+    assert int(out[2]) < 200, f"loading the land structure peaked at {out[2]} MB"
 
 
 def test_strait_closes_when_the_clearance_is_more_than_half_its_width():

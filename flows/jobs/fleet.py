@@ -11,6 +11,7 @@ even a lost worker) is recorded with status and reason and never fails the other
 from __future__ import annotations
 
 import logging
+import math
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
@@ -21,7 +22,7 @@ import pandas as pd
 from flows.jobs import dask_pool, weather_maps
 from flows.jobs.ingest import ingest_cycle
 from flows.jobs.refit import refit_job
-from flows.jobs.route_worker import failed_result, plain, route_batch
+from flows.jobs.route_worker import failed_result, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.export.bundle import SUFFIX
@@ -44,6 +45,24 @@ def upcoming(voyages: pd.DataFrame, cycle: np.datetime64, lookahead_h: float) ->
     c = pd.Timestamp(cycle)
     keep = (voyages["depart_utc"] >= c) & (voyages["depart_utc"] < c + pd.Timedelta(hours=lookahead_h))
     return voyages[keep & (voyages["status"].fillna("planned") == "planned")]
+
+
+def plain(v):
+    """A warehouse value as a plain Python value for a worker (numpy scalars and arrays unpacked, NaN and NaT → None,
+    times as naive UTC datetimes): jobs then unpickle in a worker without pandas."""
+    if isinstance(v, pd.Timestamp):
+        return (v.tz_convert("UTC").tz_localize(None) if v.tzinfo is not None else v).to_pydatetime()
+    if v is pd.NaT:
+        return None
+    if isinstance(v, np.datetime64):
+        return None if np.isnat(v) else v.astype("datetime64[us]").item()
+    if isinstance(v, np.generic):
+        return plain(v.item())
+    if isinstance(v, np.ndarray):
+        return [plain(x) for x in v.tolist()]
+    if isinstance(v, float) and math.isnan(v):
+        return None
+    return v
 
 
 def _length_nm(job: RouteJob) -> float:

@@ -13,27 +13,27 @@ from __future__ import annotations
 import functools
 import json
 import logging
-import math
 import traceback
 
 import numpy as np
-import pandas as pd
 
 from pipeline.routing import weather_field as wf
 from pipeline.routing.job import RouteJob, WeatherFor, plan_voyage
+from pipeline.routing.plan import Plan
 from pipeline.routing.problem import WeatherWindow
-from storage import cube
-from storage.route_store import ROUTE_COLUMNS
+from storage import cube_window
+from storage.cube_location import CubeError
 
 LOG = logging.getLogger("jitroute.fleet")
 
 
 def failed_row(run_id: str, voyage: dict, cycle, reason: str, status: str = "failed") -> dict:
-    """The route row of a voyage that was not routed, with the reason."""
-    row = {k: None for k in ROUTE_COLUMNS}
+    """The route row of a voyage that was not routed, with the reason (every column of a plan's row, empty)."""
+    row = dict.fromkeys(Plan(voyage_id="", imo=None, solver="", objective="", status=status, reason=reason,
+                             depart_utc=None, rta_utc=None).route_row())
     row.update(run_id=run_id, voyage_id=str(voyage.get("voyage_id")), imo=voyage.get("imo"), status=status, reason=reason,
                depart_utc=voyage.get("depart_utc"), rta_utc=voyage.get("rta_utc"),
-               cycle=pd.Timestamp(cycle) if cycle is not None else None, n_legs=0, n_legs_beyond_forecast=0)
+               cycle=np.datetime64(cycle, "s").item() if cycle is not None else None, n_legs=0, n_legs_beyond_forecast=0)
     return row
 
 
@@ -48,17 +48,18 @@ WINDOWS_CACHED = 4  # a few MB each for an ocean crossing; voyages on one route 
 @functools.lru_cache(maxsize=2)
 def published_view(store: str, options_json: str, cycle: str, version: int | None):
     """The store's published view (metadata and coordinates only), opened once per cycle content version."""
-    return cube.open_published(store, json.loads(options_json))
+    return cube_window.open_published(store, json.loads(options_json))
 
 
 @functools.lru_cache(maxsize=WINDOWS_CACHED)
 def window_field(store: str, options_json: str, cycle: str, version: int | None, window: WeatherWindow) -> wf.WeatherField:
     """A voyage's window of a cube cycle as a WeatherField, read once per (store, cycle, content version, window)
     in this process; `options_json` is the store's fsspec options as JSON (hashable)."""
-    ds = cube.read_window(store, cycle, valid_utc=(window.from_utc, window.to_utc), lat_deg=window.lat_deg,
-                          lon_deg=window.lon_deg, variables=wf.CUBE_VARIABLES, storage_options=json.loads(options_json),
-                          published=published_view(store, options_json, cycle, version))
-    return wf.from_cycle(ds, cycle)
+    win = cube_window.read_window(store, cycle, valid_utc=(window.from_utc, window.to_utc), lat_deg=window.lat_deg,
+                                  lon_deg=window.lon_deg, variables=wf.CUBE_VARIABLES,
+                                  storage_options=json.loads(options_json),
+                                  published=published_view(store, options_json, cycle, version))
+    return wf.from_window(win)
 
 
 def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | None = None) -> WeatherFor | None:
@@ -72,13 +73,12 @@ def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | N
 
 def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None = None) -> dict:
     """Route one voyage end to end; a voyage that cannot be routed becomes a `failed` row with the reason."""
-    from pipeline.export.bundle import export_plan
     from pipeline.routing.problem import RoutingInputError
     from pipeline.routing.search_space import VoyageGeometryError
 
     try:
         plan, weather = plan_voyage(job, cube_weather(cube_path, job, storage_options))
-    except (RoutingInputError, VoyageGeometryError, KeyError, cube.CubeError) as exc:  # the message says what to do
+    except (RoutingInputError, VoyageGeometryError, KeyError, CubeError) as exc:  # the message says what to do
         return failed_result(job, str(exc).strip("'\""))
     except Exception as exc:  # a bug or bad data: record it, keep the rest of the fleet going
         return failed_result(job, f"unexpected error: {type(exc).__name__}: {exc}",
@@ -86,6 +86,8 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
     out = {"route": plan.route_row(job.run_id), "legs": plan.leg_rows(job.run_id), "exports": {}, "export_errors": {},
            "log": []}
     if job.exports and plan.legs:
+        from pipeline.export.bundle import export_plan  # matplotlib and pandas: only workers that export load them
+
         bundle = export_plan(plan, weather, job.vessel, job.voyage)
         out["exports"] = dict(bundle.files)  # kind → bytes; the run's process names and writes them
         out["export_errors"] = bundle.errors
@@ -98,14 +100,3 @@ def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: di
     """Route a few voyages one after the other; each is isolated (its own try/except and row). `cube_path` is a
     local path or a URL (`s3://…`, with fsspec `storage_options`)."""
     return [route_one(job, cube_path, storage_options) for job in jobs]
-
-
-def plain(v):
-    """A warehouse value as a plain Python value (numpy scalars and arrays unpacked, NaN → None)."""
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return [plain(x) for x in v.tolist()]
-    if isinstance(v, float) and math.isnan(v):
-        return None
-    return v

@@ -1,8 +1,9 @@
 """Land, sea and distance to land from the `global-land-mask` grid (GEBCO-derived, 1/120° ≈ 0.5 NM), usable in numba.
 
 The package's grid (21600 × 43200 booleans, True = ocean, row 0 at 90° N, column 0 at 180° W) takes 933 MB
-decompressed and is never held whole: `land_grid()` streams its npz once per process, 120 rows at a time,
-into a `LandGrid` of about 15 MB:
+decompressed and is never held whole: `build_land_grid()` streams its npz 120 rows at a time into a `LandGrid`
+of about 15 MB, which ships with the code (`land_grid_v1.npz`, 1 MB; `python -m pipeline.routing.land` writes it
+again after a change of the mask package) so processes load it instead of building it:
 
 - 1° × 1° tiles (120 × 120 cells), each all sea, all land or mixed; only mixed tiles keep their cells (packed
   bits), so `is_sea` is exact at the grid's resolution;
@@ -142,36 +143,40 @@ def build_land_grid(path: Path | None = None) -> LandGrid:
 
 
 _GRID: LandGrid | None = None
-_GRID_LOCK = threading.Lock()  # a worker's threads build it once between them
+_GRID_LOCK = threading.Lock()  # a worker's threads load it once between them
 _CACHE_NAME = "land_grid_v1.npz"
+PACKAGED = Path(__file__).with_name(_CACHE_NAME)  # shipped with the code: workers load 1 MB instead of building
 
 
-def land_grid(cache_dir: Path | None = None) -> LandGrid:
-    """The process's LandGrid, built on first use. With `cache_dir` (a folder under the data root or a temporary
-    folder) it is read from `land_grid_v1.npz` there when that was made from the same package version and mask
-    file, and written there when missing."""
-    if _GRID is not None and cache_dir is None:
-        return _GRID
-    with _GRID_LOCK:
-        return _load_or_build(cache_dir)
+def _mask_key(mask_path: Path) -> str:
+    """What a saved LandGrid was built from: the package version and the mask file's size."""
+    return f"global-land-mask {importlib.metadata.version('global-land-mask')}, {mask_path.stat().st_size} bytes"
 
 
-def _load_or_build(cache_dir: Path | None) -> LandGrid:
+def save_land_grid(grid: LandGrid, path: Path, key: str) -> None:
+    """Write `grid` to `path` (compressed npz, about 1 MB) with the key of the mask it was built from."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, key=key, **grid._asdict())
+    tmp.replace(path)
+
+
+def _read_saved(path: Path, key: str) -> LandGrid | None:
+    if not path.exists():
+        return None
+    with np.load(path) as z:
+        return LandGrid(**{k: z[k] for k in LandGrid._fields}) if str(z["key"]) == key else None
+
+
+def land_grid() -> LandGrid:
+    """The process's LandGrid: the one shipped with the code (`land_grid_v1.npz` beside this module) when it was
+    made from the installed mask, else built once (a few seconds, about 100 MB at the peak)."""
     global _GRID
-    mask_path = _mask_path()
-    key = f"global-land-mask {importlib.metadata.version('global-land-mask')}, {mask_path.stat().st_size} bytes"
-    cached = Path(cache_dir) / _CACHE_NAME if cache_dir is not None else None
-    if _GRID is None and cached is not None and cached.exists():
-        with np.load(cached) as z:
-            if str(z["key"]) == key:
-                _GRID = LandGrid(**{k: z[k] for k in LandGrid._fields})
     if _GRID is None:
-        _GRID = build_land_grid(mask_path)
-    if cached is not None and not cached.exists():
-        cached.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cached.with_suffix(".tmp.npz")
-        np.savez_compressed(tmp, key=key, **_GRID._asdict())
-        tmp.replace(cached)
+        with _GRID_LOCK:
+            if _GRID is None:
+                mask_path = _mask_path()
+                _GRID = _read_saved(PACKAGED, _mask_key(mask_path)) or build_land_grid(mask_path)
     return _GRID
 
 
@@ -283,3 +288,8 @@ def is_sea(lat, lon) -> np.ndarray:
     out = np.empty(lat.shape, bool)
     _sea(land_grid(), np.ascontiguousarray(lat).ravel(), np.ascontiguousarray(lon).ravel(), out.reshape(-1))
     return out
+
+
+if __name__ == "__main__":  # write the shipped LandGrid from the installed mask
+    save_land_grid(build_land_grid(), PACKAGED, _mask_key(_mask_path()))
+    print(f"wrote {PACKAGED} ({PACKAGED.stat().st_size / 1e6:.1f} MB)")

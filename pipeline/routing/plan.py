@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from datetime import datetime
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from pipeline.routing import geodesy as geo
 from pipeline.routing import leg_kernel as lk
@@ -22,8 +22,9 @@ SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_base
 LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
 
 
-def _utc(t) -> pd.Timestamp | None:
-    return None if t is None else pd.Timestamp(np.datetime64(t, "s"))
+def _utc(t) -> datetime | None:
+    """A time as a naive UTC datetime to the second (what rows carry: no pandas needed where plans are made)."""
+    return None if t is None else np.datetime64(t, "s").item()
 
 
 @dataclass
@@ -66,7 +67,7 @@ class Plan:
         return float(sum(leg["dist_nm"] for leg in self.legs)) if self.legs else math.nan
 
     @property
-    def eta_utc(self) -> pd.Timestamp | None:
+    def eta_utc(self) -> datetime | None:
         return self.legs[-1]["eta_utc"] if self.legs else None
 
     @property
@@ -155,7 +156,7 @@ class Plan:
     def to_json(self) -> dict:
         """JSON-safe summary for scripts (`jitroute route --json`)."""
         def clean(v):
-            if isinstance(v, pd.Timestamp):
+            if isinstance(v, datetime):
                 return v.strftime("%Y-%m-%dT%H:%M:%SZ")
             if isinstance(v, (np.floating, float)):
                 return None if not math.isfinite(float(v)) else round(float(v), 6)
@@ -197,7 +198,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
             "course_deg": float(geo.gc_bearing_deg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
             "dist_nm": float(geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
             "rpm": rpm, "stw_kn": float(o[lk.STW_KN]), "sog_kn": float(o[lk.SOG_KN]), "hours": float(o[lk.H]),
-            "fuel_t": float(o[lk.FUEL]), "etd_utc": pd.Timestamp(etd), "eta_utc": pd.Timestamp(eta),
+            "fuel_t": float(o[lk.FUEL]), "etd_utc": _utc(etd), "eta_utc": _utc(eta),
             "wind_kn": float(o[lk.WIND_KN]),
             "wind_dir_deg": float(np.degrees(np.arctan2(o[lk.WIND_FX], o[lk.WIND_FY])) % 360.0),
             "hs_m": float(o[lk.HS]),

@@ -119,10 +119,20 @@ def from_cycle(ds, cycle=None) -> WeatherField:
     """From one cube cycle, whole or a window of it (xarray dims step, lat, lon; variables CUBE_VARIABLES). Times
     count from the cycle, whichever steps the window holds, so a voyage meets the same numbers in both."""
     cyc = np.datetime64(cycle if cycle is not None else ds["cycle"].values, "s")
-    times = cyc + (step_hours(ds["step"].values) * 3600).astype("timedelta64[s]")
-    return from_arrays(ds["lat"].values, ds["lon"].values, times, u10=ds["u10"].values, v10=ds["v10"].values,
-                       swh=ds["swh"].values, mwd_deg=ds["mwd"].values, uo=ds["uo"].values, vo=ds["vo"].values, cycle=cyc,
-                       t_ref=cyc)
+    return _from_cube(cyc, step_hours(ds["step"].values), ds["lat"].values, ds["lon"].values,
+                      {v: ds[v].values for v in CUBE_VARIABLES})
+
+
+def from_window(window) -> WeatherField:
+    """From a storage.cube_window.Window (a cycle's variables in a box, as plain arrays); times count from the
+    cycle as in `from_cycle`."""
+    return _from_cube(np.datetime64(window.cycle, "s"), window.step_h, window.lat, window.lon, window.data)
+
+
+def _from_cube(cyc: np.datetime64, step_h, lat, lon, data: dict) -> WeatherField:
+    times = cyc + (np.asarray(step_h, np.int64) * 3600).astype("timedelta64[s]")
+    return from_arrays(lat, lon, times, u10=data["u10"], v10=data["v10"], swh=data["swh"], mwd_deg=data["mwd"],
+                       uo=data["uo"], vo=data["vo"], cycle=cyc, t_ref=cyc)
 
 
 def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0, wave_from_deg=0.0,

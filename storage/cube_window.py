@@ -1,0 +1,149 @@
+"""One voyage's window of a published cube cycle, read with zarr alone (no xarray, pandas or dask): what a routing
+worker reads, so its process stays small.
+
+`open_published` opens the store's published view (its consolidated metadata, one read even on S3) and decodes
+the coordinates; `read_window` reads the steps and the lat/lon box a voyage can meet, only the chunks inside it.
+The coordinates are decoded from their CF attributes as storage/cube.py writes them: `cycle` in "<unit> since
+<epoch>", `step` a duration (or, in older stores, plain hours).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import NamedTuple
+
+import numpy as np
+import zarr
+
+from schemas.cube_variables import DATA_VARS, STATE_HIDDEN
+from storage.cube_location import DECODE_ERRORS, CubeError, Location, locate
+
+_UNITS = {"days": "D", "hours": "h", "minutes": "m", "seconds": "s"}
+
+
+class Published(NamedTuple):
+    """The published view of a store: its zarr group and decoded coordinates."""
+
+    group: zarr.Group
+    cycle: np.ndarray  # datetime64[ns], one per cycle row (published and hidden)
+    step_h: np.ndarray  # int64 lead times in hours
+    lat: np.ndarray  # degrees north, as stored
+    lon: np.ndarray  # degrees east, as stored
+
+
+class Window(NamedTuple):
+    """A cycle's weather in a box: `data` maps a variable to its (step, lat, lon) float32 values."""
+
+    cycle: np.datetime64
+    step_h: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray  # continuous and increasing (past 360 for a box across the grid's seam)
+    data: dict
+
+
+def _times(arr) -> np.ndarray:
+    """A CF time coordinate ("hours since 2000-01-01 …") as datetime64[ns]."""
+    m = re.fullmatch(r"\s*(\w+) since (\S+)(?: (\S+))?\s*", str(arr.attrs.get("units", "")))
+    if m is None or m.group(1) not in _UNITS:
+        raise CubeError(f"cube coordinate {arr.name} has units {arr.attrs.get('units')!r}, not '<unit> since <time>'")
+    epoch = np.datetime64(m.group(2) + ("T" + m.group(3) if m.group(3) else ""), "ns")
+    return epoch + np.asarray(arr[:]).astype(np.int64).astype(f"timedelta64[{_UNITS[m.group(1)]}]")
+
+
+def _lead_hours(arr) -> np.ndarray:
+    """The `step` coordinate in whole hours, whatever its stored unit (hours when none is given)."""
+    unit = _UNITS.get(str(arr.attrs.get("units", "hours")), "h")
+    return (np.asarray(arr[:]).astype(np.int64).astype(f"timedelta64[{unit}]") // np.timedelta64(1, "h")).astype(np.int64)
+
+
+def open_published(path, storage_options: dict | None = None) -> Published:
+    """The published view of the store at `path` (a local path or URL with fsspec options). A local store written
+    before publication existed is read as it is (cycle_state still hides unfinished cycles) until its next ingest
+    publishes it; a store never published raises FileNotFoundError naming the fix."""
+    loc = locate(path, storage_options)
+    if loc.local is not None and not loc.has("zarr.json"):
+        from storage.cube import require_store  # names what is damaged, or says the store is missing
+
+        require_store(loc)
+    try:
+        group = zarr.open_consolidated(loc.zarr_store(read_only=True), mode="r")
+    except (FileNotFoundError, ValueError, KeyError, TypeError) as exc:
+        if loc.local is not None and loc.has("zarr.json"):
+            group = zarr.open_group(loc.zarr_store(read_only=True), mode="r")
+        else:
+            raise FileNotFoundError(f"no published weather cube at {loc.url} ({type(exc).__name__}: {exc}): "
+                                    "run `jitroute ingest` (or `jitroute demo`) first") from exc
+    return Published(group, _times(group["cycle"]), _lead_hours(group["step"]), np.asarray(group["lat"][:]),
+                     np.asarray(group["lon"][:]))
+
+
+def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:
+    """The steps whose valid times bracket t_from..t_to (the step at or before t_from to the one at or after
+    t_to), clipped to the cycle's steps."""
+    n = valid.size
+    i0 = int(np.clip(np.searchsorted(valid, np.datetime64(t_from, "ns"), side="right") - 1, 0, n - 1))
+    i1 = int(np.clip(np.searchsorted(valid, np.datetime64(t_to, "ns"), side="left"), i0, n - 1))
+    return slice(i0, i1 + 1)
+
+
+def _lat_slice(lat: np.ndarray, lat_deg: tuple[float, float], pad_deg: float) -> slice:
+    """Rows covering lat_deg ± pad_deg (at least 2), whatever the order of the cube's latitudes."""
+    lo, hi = min(lat_deg) - pad_deg, max(lat_deg) + pad_deg
+    rows = np.flatnonzero((lat >= lo) & (lat <= hi))
+    if rows.size < 2:  # a box at or beyond the grid's edge: the two nearest rows
+        rows = np.sort(np.argsort(np.abs(lat - 0.5 * (lo + hi)))[:2])
+    return slice(int(rows[0]), int(rows[-1]) + 1)
+
+
+def _lon_slices(lon: np.ndarray, lon_deg: tuple[float, float], pad_deg: float) -> tuple[list[slice], np.ndarray]:
+    """Column slices covering west..east (degrees east, east ≥ west, any turn) ± pad_deg on a regular grid, and
+    the longitudes they give, continuous and increasing (a box across the grid's seam reads two slices; their
+    longitudes go on past 360). A box about as wide as the globe reads every column."""
+    n, dlon = lon.size, float(lon[1] - lon[0])
+    west, east = lon_deg[0] - pad_deg, lon_deg[1] + pad_deg
+    if not abs(n * dlon - 360.0) < 1e-6:  # a regional grid: clip, never wrap
+        cols = np.flatnonzero((lon >= west) & (lon <= east))
+        cols = cols if cols.size >= 2 else np.sort(np.argsort(np.abs(lon - 0.5 * (west + east)))[:2])
+        return [slice(int(cols[0]), int(cols[-1]) + 1)], lon[cols[0]:cols[-1] + 1]
+    if east - west >= 360.0 - 2 * dlon:
+        return [slice(0, n)], lon
+    k0 = int(np.floor(((west - lon[0]) % 360.0) / dlon))
+    count = int(np.ceil((east - west) / dlon)) + 2
+    first = slice(k0, min(n, k0 + count))
+    slices = [first] if k0 + count <= n else [first, slice(0, k0 + count - n)]
+    return slices, lon[k0] + dlon * np.arange(count)
+
+
+def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], lon_deg: tuple[float, float],
+                variables: tuple[str, ...] = DATA_VARS, margin_cells: int = 3, storage_options: dict | None = None,
+                published: Published | None = None) -> Window:
+    """One visible cycle's weather in a window: the steps whose valid times cover `valid_utc` = (from, to), and the
+    box `lat_deg` (south, north) × `lon_deg` (west, east in degrees east; east ≥ west, e.g. (170, 200) across 180°)
+    padded by `margin_cells` grid cells. Only the chunks in the window are read.
+
+    `path` is a local path or URL (`s3://bucket/…/weather.zarr` with fsspec `storage_options`); `published` is an
+    already opened `open_published(path)` to read from (its caller then keeps it). Raises KeyError for a cycle not
+    published or hidden, CorruptChunkError for a chunk that does not decode.
+    """
+    loc = locate(path, storage_options)
+    pub = published if published is not None else open_published(loc)
+    c = np.datetime64(cycle, "ns")
+    hits = np.flatnonzero(pub.cycle == c)
+    if not hits.size or int(pub.group["cycle_state"][int(hits[0])]) == STATE_HIDDEN:  # the state is read live
+        raise KeyError(f"cycle {c} is not in the cube at {loc.url} (or is being re-written)")
+    ci = int(hits[0])
+    steps = _step_slice(c + pub.step_h.astype("timedelta64[h]"), *valid_utc)
+    lats = _lat_slice(pub.lat, lat_deg, margin_cells * abs(float(pub.lat[1] - pub.lat[0])))
+    lon_parts, lon_out = _lon_slices(pub.lon, lon_deg, margin_cells * float(pub.lon[1] - pub.lon[0]))
+    try:
+        data = {v: np.concatenate([pub.group[v][ci, steps, lats, part] for part in lon_parts], axis=-1)
+                for v in variables}
+    except DECODE_ERRORS as exc:
+        raise _corrupt_chunk_error(loc, c, exc) from exc
+    return Window(c, pub.step_h[steps], pub.lat[lats], lon_out, data)
+
+
+def _corrupt_chunk_error(loc: Location, c: np.datetime64, exc: Exception):
+    from storage.cube import corrupt_chunk_error  # finding the damaged chunk needs the full store code
+
+    return corrupt_chunk_error(loc, c, exc)
