@@ -193,42 +193,70 @@ class LimitedPlan:
     legs_sailed: int
 
 
-def _runs_held(hours: np.ndarray, rpm_idx: np.ndarray, min_hold_h: float) -> bool:
-    """Every setting of the plan (legs' hours, setting per leg) held at least min_hold_h, unless it has one."""
-    cuts = np.flatnonzero(np.diff(rpm_idx)) + 1
-    if len(cuts) == 0:
-        return True
-    return bool(min(float(np.sum(x)) for x in np.split(hours, cuts)) >= min_hold_h - 1e-9)
-
-
-def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits) -> float:
+@numba.njit(cache=True)
+def incumbent_cost_nb(nodes, g, v, w, o, min_hold_h, change_cost_t):
     """The cost of a plan obeying the limits, for pruning: the best of each setting held throughout and of one
-    change from one setting to another at any line (inf when none can be sailed)."""
-    L = len(nodes) - 1
-    R = len(inst.rpm_options)
-    ct, cf = np.empty(L + 1), np.empty(L + 1)
+    change from one setting to another at any line (inf when none can be sailed). A one-change plan shares its
+    first part with the plan of its first setting throughout, so only its second part is sailed."""
+    L = nodes.shape[0] - 1
+    R = v.rpm_options.shape[0]
+    ct, cf = np.empty((R, L + 1)), np.empty((R, L + 1))
+    sailed = np.zeros(R, np.int64)  # lines reached by the plan of each setting throughout
+    for r in range(R):
+        ct[r, 0], cf[r, 0] = o.t_dep_h, 0.0
+        rpm_idx = np.full(L, r, np.int64)
+        code, bad = lk.sail_route_nb(nodes, rpm_idx, 0, g, v, w, o, ct[r], cf[r])
+        sailed[r] = L if code == OK else bad
     best = np.inf
-    plans = [np.full(L, r, np.int64) for r in range(R)]
-    plans += [np.where(np.arange(L) < k, r0, r1) for r0 in range(R) for r1 in range(R) if r0 != r1 for k in range(1, L)]
-    for rpm_idx in plans:
-        code, _ = lk.sail_route_nb(nodes, rpm_idx.astype(np.int64), 0, inst.graph, inst.vessel, inst.wx, inst.objective,
-                                   ct, cf)
-        if code != lk.OK or not _runs_held(np.diff(ct), rpm_idx, limits.min_hold_h):
-            continue
-        changes = int(np.count_nonzero(np.diff(rpm_idx)))
-        best = min(best, route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1]) + limits.change_cost_t * changes)
+    for r in range(R):
+        if sailed[r] == L:
+            best = min(best, route_cost_nb(o, ct[r, L] - o.t_dep_h, cf[r, L]))
+    out = np.empty(N_LEG_OUT)
+    for r0 in range(R):
+        for k in range(1, sailed[r0] + 1 if sailed[r0] < L else L):
+            if ct[r0, k] - o.t_dep_h < min_hold_h - 1e-9:
+                continue  # the first setting is not held long enough yet
+            for r1 in range(R):
+                if r1 == r0:
+                    continue
+                t, f = ct[r0, k], cf[r0, k]
+                ok = True
+                for i in range(k, L):
+                    a, b = nodes[i], nodes[i + 1]
+                    if not g.edge_ok[i, a, b]:
+                        ok = False
+                        break
+                    sail_leg_nb(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], t, v.rpm_options[r1], v, w,
+                                out)
+                    if out[CODE] != OK:
+                        ok = False
+                        break
+                    t += out[H]
+                    f += out[FUEL]
+                    if t - o.t_dep_h > o.max_hours:
+                        ok = False
+                        break
+                if ok and t - ct[r0, k] >= min_hold_h - 1e-9:
+                    best = min(best, route_cost_nb(o, t - o.t_dep_h, f) + change_cost_t)
     return best
 
 
+def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits) -> float:
+    """incumbent_cost_nb for an instance."""
+    return float(incumbent_cost_nb(np.ascontiguousarray(nodes, np.int64), inst.graph, inst.vessel, inst.wx,
+                                   inst.objective, float(limits.min_hold_h), float(limits.change_cost_t)))
+
+
 def _route_finish_tables(inst, nodes: np.ndarray):
-    """dp.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
+    """dp.finish_bounds on the route alone (a graph of one node per line): (lams, m_route (K, lines), t_min (lines))."""
     sp = inst.space
-    on_route = np.zeros_like(sp.edge_ok)
-    idx = np.arange(len(nodes) - 1)
-    on_route[idx, nodes[:-1], nodes[1:]] = sp.edge_ok[idx, nodes[:-1], nodes[1:]]
-    lams, m_lam, t_min, _, _ = finish_bounds(replace(inst, space=replace(sp, edge_ok=on_route)))
     lines = np.arange(len(nodes))
-    return lams, np.ascontiguousarray(m_lam[:, lines, nodes]), np.ascontiguousarray(t_min[lines, nodes])
+    legs = lines[:-1]
+    route = replace(sp, lat=sp.lat[lines, nodes][:, None], lon=sp.lon[lines, nodes][:, None],
+                    node_ok=sp.node_ok[lines, nodes][:, None],
+                    edge_ok=sp.edge_ok[legs, nodes[:-1], nodes[1:]][:, None, None], max_shift=0)
+    lams, m_lam, t_min, _, _ = finish_bounds(replace(inst, space=route))
+    return lams, np.ascontiguousarray(m_lam[:, :, 0]), np.ascontiguousarray(t_min[:, 0])
 
 
 def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:

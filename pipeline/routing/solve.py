@@ -34,7 +34,9 @@ _evaluate = evaluate  # the name tests and scripts have used
 
 
 def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, history=None, n_evals=0,
-          reason_if_infeasible: str | None = None) -> Plan:
+          reason_if_infeasible: str | None = None, clearance_nm: float | None = None) -> Plan:
+    """The plan of a route and its engine settings; `clearance_nm`, when known (the same route planned before),
+    is taken as its least distance to land instead of tracing the legs again."""
     p = inst.problem
     plan = Plan(voyage_id=p.voyage_id, imo=p.imo, solver=solver, objective=p.objective, status="infeasible",
                 reason=reason_if_infeasible, depart_utc=p.depart_utc, rta_utc=p.rta_utc, seed=seed, history=history,
@@ -43,7 +45,9 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
         legs, code, bad_leg = legs_of_route(inst, nodes, rpm_idx)
         if code == lk.OK:
             plan.legs = legs
-            if inst.space.clearance is not None:
+            if clearance_nm is not None:
+                plan.min_land_clearance_nm = clearance_nm
+            elif inst.space.clearance is not None:
                 plan.min_land_clearance_nm = least_clearance_nm(plan.waypoints, inst.space.clearance)
             plan.cost, _, _, _ = evaluate(inst, nodes, rpm_idx)
             late_h = plan.hours - p.t_req_h
@@ -107,7 +111,7 @@ def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Pla
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
-                    n_evals=plan.n_evals + held.legs_sailed)
+                    n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
     limited.cost = held.cost
     limited.limits, limited.unlimited_fuel_t = limits, plan.fuel_t
     if limited.status == "late" and plan.status == "ok":
