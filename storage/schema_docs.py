@@ -78,7 +78,7 @@ _ROUTES = {
     "min_engine_hold_h": "least hours each engine setting is held (engine-change limit), hours",
     "engine_change_cost_t": "cost of one engine change in the objective, tonnes of fuel",
     "n_engine_changes": "engine setting changes along the plan",
-    "unlimited_fuel_t": "fuel burnt in tonnes by the solver's plan on the same route without engine-change limits",
+    "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plan on the same route without engine-change limits",
     "limits_fuel_t": "what the engine-change limits cost, tonnes (fuel_t minus unlimited_fuel_t)",
     "min_land_clearance_nm": "least distance to land along the plan outside its port approaches, nautical miles (0.1 NM sampling; 25 means at least 25)",
 }
@@ -188,8 +188,8 @@ _SAVINGS = {
     "savings_total_pct": "fuel saved against the honest baseline, percent (fuel-weighted over the voyages)",
     "savings_speed_profile_pct": "part of savings_total_pct from the speed profile (best engine plan on the base route), percent",
     "savings_route_pct": "part of savings_total_pct from the route, percent",
-    "limits_fuel_t": "fuel the engine-change limits cost, tonnes (plan minus the solver's plan without them)",
-    "unlimited_fuel_t": "fuel burnt in tonnes by the solver's plans without engine-change limits",
+    "limits_fuel_t": "fuel the engine-change limits cost, tonnes (plan minus the best plan on its route without them)",
+    "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plans on the same routes without engine-change limits",
     "discrete_baseline_fuel_t": "fuel burnt in tonnes on the discrete-rpm baseline (arrives early: overstates savings)",
     "savings_vs_discrete_pct": "fuel saved against the discrete-rpm baseline, percent (arrives early: overstated)",
 }

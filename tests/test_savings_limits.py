@@ -81,6 +81,24 @@ def test_limited_plan_holds_every_setting_and_costs_fuel():
     assert row["limits_fuel_t"] == pytest.approx(held.limits_fuel_t)
 
 
+def test_what_the_limits_cost_is_measured_against_the_best_plan_on_the_route_not_the_solvers():
+    """A solver plan with a poor engine plan must not make the limits look like a saving: the reference is the best
+    engine plan on the route without limits (certified within 0.1 %), here checked by enumerating every rpm
+    sequence on the route."""
+    from pipeline.routing.solve import _plan, _with_limits
+
+    pr = _voyage(80.0, n_lines=6, n_points=5)
+    inst = Instance.build(pr, pr.search_space(), WEATHER)
+    nodes = shortest_route(inst.space)
+    poor = _plan(inst, "bfoa", nodes, np.array([2, 0, 2, 0, 2, 0, 2], np.int64))  # fast and slow by turns
+    assert poor.status == "ok"
+    best_free = _brute_force(inst, nodes, EngineLimits(0.0, 0.0))
+    assert poor.cost > best_free * 1.01  # the poor plan burns clearly more than the best on its route
+    held = _with_limits(inst, poor, nodes, EngineLimits(12.0, 0.05))
+    assert held.unlimited_fuel_t == pytest.approx(best_free, rel=1e-3)  # jit on time: cost = fuel
+    assert 0.0 <= held.limits_fuel_t < poor.fuel_t - best_free
+
+
 def test_honest_baseline_arrives_at_the_rta_and_the_split_adds_up():
     """RTA between two settings: the discrete baseline must take the faster one and arrives hours early, which
     the old figure credited to routing; against the constant speed that arrives at the RTA little is left."""

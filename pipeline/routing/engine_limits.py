@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.dp import _grow, finish_bounds, fuel_to_finish_lb
+from pipeline.routing.dp import _grow, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures, trim_eps
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
@@ -247,16 +247,38 @@ def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits) -> float:
                                    inst.objective, float(limits.min_hold_h), float(limits.change_cost_t)))
 
 
-def _route_finish_tables(inst, nodes: np.ndarray):
-    """dp.finish_bounds on the route alone (a graph of one node per line): (lams, m_route (K, lines), t_min (lines))."""
+def _route_instance(inst, nodes: np.ndarray):
+    """The instance restricted to the route `nodes`: a graph of one node per line."""
     sp = inst.space
     lines = np.arange(len(nodes))
     legs = lines[:-1]
     route = replace(sp, lat=sp.lat[lines, nodes][:, None], lon=sp.lon[lines, nodes][:, None],
                     node_ok=sp.node_ok[lines, nodes][:, None],
                     edge_ok=sp.edge_ok[legs, nodes[:-1], nodes[1:]][:, None, None], max_shift=0)
-    lams, m_lam, t_min, _, _ = finish_bounds(replace(inst, space=route))
+    return replace(inst, space=route, graph=route.graph)
+
+
+def _route_finish_tables(inst, nodes: np.ndarray):
+    """dp.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
+    lams, m_lam, t_min, _, _ = finish_bounds(_route_instance(inst, nodes))
     return lams, np.ascontiguousarray(m_lam[:, :, 0]), np.ascontiguousarray(t_min[:, 0])
+
+
+def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3) -> tuple[float, float]:
+    """(cost, fuel) of the best engine plan on the route without limits, within `gap` of it (the exact DP on the
+    route alone, dp.dp_exact_nb with its bounds and ε-trimming), or (upper, nan) when none beats `upper`."""
+    sub = _route_instance(inst, nodes)
+    lams, m_lam, t_min, tau, phi = finish_bounds(sub)
+    ld = latest_departures(sub)
+    L2 = len(nodes)
+    eps = trim_eps(sub, gap, upper, lams, m_lam, t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
+    route, rpm_idx, cost, _, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
+                                             tau, phi, ld, eps)
+    if not math.isfinite(cost) or cost >= upper:
+        return upper, math.nan
+    ct, cf = np.empty(L2), np.empty(L2)
+    lk.sail_route_nb(np.zeros(L2, np.int64), rpm_idx, 0, sub.graph, sub.vessel, sub.wx, sub.objective, ct, cf)
+    return float(cost), float(cf[-1])
 
 
 def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:

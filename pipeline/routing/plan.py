@@ -48,7 +48,7 @@ class Plan:
     cycle: np.datetime64 | None = None
     min_land_clearance_nm: float = math.nan  # least distance to land outside the port approaches (0.1 NM sampling)
     # engine-change limits (engine_limits.py): the limits the legs obey (None: none), and the fuel (t) of the
-    # solver's plan without them, for what the limits cost
+    # best engine plan on the same route without them, for what the limits cost
     limits: "EngineLimits | None" = None
     unlimited_fuel_t: float = math.nan
     # the savings against the honest constant-rpm baseline, split (savings.py; None: not computed)
@@ -97,8 +97,8 @@ class Plan:
 
     @property
     def limits_fuel_t(self) -> float:
-        """Fuel the engine-change limits cost: this plan's minus the solver's plan without them (negative when the
-        exact post-pass finds a better engine plan than a heuristic solver did, despite the limits)."""
+        """Fuel the engine-change limits cost: this plan's minus the best engine plan on the same route without them
+        (solve._with_limits)."""
         return self.fuel_t - self.unlimited_fuel_t if self.limits is not None and self.legs else math.nan
 
     @property

@@ -21,7 +21,7 @@ from pipeline.routing.baseline import Baseline, baseline as find_baseline, const
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.clearance import least_clearance_nm
 from pipeline.routing.dp import DpOptions
-from pipeline.routing.engine_limits import EngineLimits, limited_plan
+from pipeline.routing.engine_limits import EngineLimits, limited_plan, unlimited_cost
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import split_of
@@ -105,15 +105,18 @@ def _options(solver: str, options, params: BfoaParams | None, bucket_h: float | 
 
 
 def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
-    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan); the
-    solver's plan, without limits, is kept as `unlimited_fuel_t` for what the limits cost."""
+    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan). For what
+    the limits cost, `unlimited_fuel_t` is the fuel of the best engine plan on the same route without them (the
+    solver's own, or a cheaper one the route's DP finds within 0.1 %), so the limits never seem to save fuel."""
     held = limited_plan(inst, nodes, limits)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
     limited.cost = held.cost
-    limited.limits, limited.unlimited_fuel_t = limits, plan.fuel_t
+    free_cost, free_fuel_t = unlimited_cost(inst, nodes, plan.cost)
+    limited.limits = limits
+    limited.unlimited_fuel_t = free_fuel_t if free_cost < plan.cost else plan.fuel_t
     if limited.status == "late" and plan.status == "ok":
         limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
                           f"{limited.hours - inst.problem.t_req_h:.1f} h late (without the limits on time, "
