@@ -190,3 +190,16 @@ def test_demo_voyage_off_luzon_keeps_two_miles_from_the_coast():
         raw = least_raw_clearance_nm(plan.waypoints, [dep, arr], 10.0)
         assert raw >= 2.0 - 0.01, (solver, raw)
         assert plan.min_land_clearance_nm >= 2.0
+
+
+def test_lines_are_laid_closer_when_the_default_ones_leave_no_route_at_sea():
+    # Qingdao → Busan: with a line every ~40 NM no 2 NM-clear leg threads Korea's south-western islands
+    from pipeline.routing.search_space import build_search_space, default_n_lines, reachable
+
+    dep, arr = (35.9, 120.65), (34.95, 129.15)
+    coarse = build_search_space(dep, arr, n_lines=default_n_lines(420.0))
+    assert not reachable(coarse)
+    space = build_search_space(dep, arr)
+    assert reachable(space) and space.n_lines == 2 * coarse.n_lines
+    open_sea = build_search_space((30.0, -160.0), (33.0, -146.0))  # nothing to thread: the default stays
+    assert open_sea.n_lines == default_n_lines(open_sea.base_distance_nm)

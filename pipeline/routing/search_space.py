@@ -116,13 +116,38 @@ def _edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
                                                    lat_lo, lat_hi)
 
 
+DENSER_LINES = (2, 4)  # when the default lines leave no route at sea: this many times as many, in turn
+MIN_LINE_SPACING_NM = 5.0  # never closer than this
+
+
 def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_lines: int | None = None,
-                       n_points: int = 21, d_point_nm: float | None = None, base: str = "gc", max_shift: int | None = None,
-                       lat_limits: tuple[float, float] = (-75.0, 75.0), limit_lines: list[list[tuple[float, float]]] | None = None,
-                       clearance_nm: float = DEFAULT_CLEARANCE_NM, approach_nm: float = DEFAULT_APPROACH_NM,
-                       check_land: bool = True, dep_name: str = "departure", arr_name: str = "destination") -> SearchSpace:
+                       **kw) -> SearchSpace:
     """Lay out the node lines for a voyage from `dep` to `arr` ((lat, lon) degrees); legs and nodes keep
-    `clearance_nm` from land outside `approach_nm` of either port (see clearance.py)."""
+    `clearance_nm` from land outside `approach_nm` of either port (see clearance.py). Keywords: those of
+    `lay_out_lines`.
+
+    With `n_lines` None the number of lines follows the voyage length (`default_n_lines`); when that leaves no
+    route at sea (legs too long to thread a coast's islands and keep their clearance, e.g. Qingdao → Busan past
+    Korea's south-west islands), the lines are laid `DENSER_LINES` times as close, in turn, before giving up."""
+    space = lay_out_lines(dep, arr, n_lines=n_lines, **kw)
+    if n_lines is not None or not kw.get("check_land", True) or reachable(space):
+        return space
+    most = int(space.base_distance_nm / MIN_LINE_SPACING_NM)
+    for k in DENSER_LINES:
+        if space.n_lines * k > most:
+            break
+        denser = lay_out_lines(dep, arr, n_lines=space.n_lines * k, **kw)
+        if reachable(denser):
+            return denser
+    return space
+
+
+def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines: int | None = None,
+                  n_points: int = 21, d_point_nm: float | None = None, base: str = "gc", max_shift: int | None = None,
+                  lat_limits: tuple[float, float] = (-75.0, 75.0), limit_lines: list[list[tuple[float, float]]] | None = None,
+                  clearance_nm: float = DEFAULT_CLEARANCE_NM, approach_nm: float = DEFAULT_APPROACH_NM,
+                  check_land: bool = True, dep_name: str = "departure", arr_name: str = "destination") -> SearchSpace:
+    """The node lines for a voyage from `dep` to `arr` with `n_lines` lines (None: `default_n_lines`)."""
     if base not in ("gc", "rhumb"):
         raise ValueError(f"base route must be 'gc' or 'rhumb', not {base!r}")
     for name, (la, lo) in ((dep_name, dep), (arr_name, arr)):
