@@ -4,7 +4,7 @@ worker reads, so its process stays small.
 `open_published` opens the store's published view (its consolidated metadata, one read even on S3) and decodes
 the coordinates; `read_window` reads the steps and the lat/lon box a voyage can meet, only the chunks inside it.
 The coordinates are decoded from their CF attributes as storage/cube.py writes them: `cycle` in "<unit> since
-<epoch>", `step` a duration (or, in older stores, plain hours).
+<epoch>", `step` in hours.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 import zarr
 
-from schemas.cube_variables import DATA_VARS, STATE_HIDDEN
+from schemas.cube_variables import DATA_VARS, STATE_HIDDEN, step_hours
 from storage.cube_location import DECODE_ERRORS, CubeError, Location, locate
 
 _UNITS = {"days": "D", "hours": "h", "minutes": "m", "seconds": "s"}
@@ -51,9 +51,10 @@ def _times(arr) -> np.ndarray:
 
 
 def _lead_hours(arr) -> np.ndarray:
-    """The `step` coordinate in whole hours, whatever its stored unit (hours when none is given)."""
-    unit = _UNITS.get(str(arr.attrs.get("units", "hours")), "h")
-    return (np.asarray(arr[:]).astype(np.int64).astype(f"timedelta64[{unit}]") // np.timedelta64(1, "h")).astype(np.int64)
+    """The `step` coordinate in whole hours (storage/cube.py stores it in hours, as older stores did)."""
+    if str(arr.attrs.get("units", "hours")) != "hours":
+        raise CubeError(f"cube coordinate step has units {arr.attrs.get('units')!r}, not 'hours'")
+    return step_hours(np.asarray(arr[:]))
 
 
 def open_published(path, storage_options: dict | None = None) -> Published:

@@ -3,11 +3,8 @@ content version; the cube may live on S3 (moto's server on loopback)."""
 
 from __future__ import annotations
 
-import os
-import socket
 import subprocess
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -18,7 +15,6 @@ import xarray as xr
 from pipeline.routing import weather_field as wf
 from pipeline.routing.problem import lon_span_deg
 from storage import cube, cube_window
-from tests.processes import free_port
 
 CYCLE = np.datetime64("2020-12-01T00", "ns")
 CYCLE2 = np.datetime64("2020-12-01T06", "ns")
@@ -160,54 +156,33 @@ def test_a_worker_routes_from_the_cube_without_pandas_xarray_or_duckdb(store):
 # --- the cube on S3 -----------------------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def s3_endpoint():
-    """moto's S3 server on a free loopback port, as a process, with a bucket `cubes`."""
-    port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "moto.server", "-H", "127.0.0.1", "-p", str(port)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env={**os.environ, "AWS_ACCESS_KEY_ID": "test", "AWS_SECRET_ACCESS_KEY": "test"})
-    try:
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                if proc.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError("moto server did not start")
-                time.sleep(0.1)
-        import boto3
-
-        endpoint = f"http://127.0.0.1:{port}"
-        boto3.client("s3", endpoint_url=endpoint, region_name="us-east-1", aws_access_key_id="test",
-                     aws_secret_access_key="test").create_bucket(Bucket="cubes")
-        yield {"endpoint_url": endpoint, "key": "test", "secret": "test"}
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+@pytest.fixture
+def s3_options(s3_endpoint):
+    """fsspec options for the suite's S3 server (conftest.s3_endpoint, bucket `jitroute`)."""
+    return {"endpoint_url": s3_endpoint["AWS_ENDPOINT_URL"], "key": s3_endpoint["AWS_ACCESS_KEY_ID"],
+            "secret": s3_endpoint["AWS_SECRET_ACCESS_KEY"]}
 
 
-def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_readers(s3_endpoint, store, tmp_path):
-    url, locks = "s3://cubes/root/cubes/weather.zarr", tmp_path / "locks"
+def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_readers(s3_options, store, tmp_path):
+    url, locks = "s3://jitroute/root/cubes/weather.zarr", tmp_path / "locks"
     with pytest.raises(cube.CubeError, match="lock_dir"):
-        cube.write_cycle(url, cycle_ds(), complete=True, storage_options=s3_endpoint)
-    cube.write_cycle(url, cycle_ds(), complete=True, lock_dir=locks, storage_options=s3_endpoint)
+        cube.write_cycle(url, cycle_ds(), complete=True, storage_options=s3_options)
+    cube.write_cycle(url, cycle_ds(), complete=True, lock_dir=locks, storage_options=s3_options)
     assert (locks / "weather.zarr.lock").exists()
-    on_s3 = window(url, (20, 50), (170, 200), storage_options=s3_endpoint)
+    on_s3 = window(url, (20, 50), (170, 200), storage_options=s3_options)
     local = window(store, (20, 50), (170, 200))
     np.testing.assert_array_equal(on_s3.values, local.values)
     assert on_s3.grid == local.grid
 
-    loc = cube.locate(url, s3_endpoint)
+    loc = cube.locate(url, s3_options)
     with cube.writer_lock(locks, loc):  # a second cycle appended and written, not yet published
         index = cube._append_hidden(loc, cube._template(cycle_ds(CYCLE2), CYCLE2))
         cube._write_region(loc, index, cycle_ds(CYCLE2))
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            assert list(xr.open_zarr(url, storage_options=s3_endpoint)["cycle"].values) == [CYCLE]
-        assert cube.cycle_states(url, storage_options=s3_endpoint) == {CYCLE: cube.STATE_COMPLETE,
+            assert list(xr.open_zarr(url, storage_options=s3_options)["cycle"].values) == [CYCLE]
+        assert cube.cycle_states(url, storage_options=s3_options) == {CYCLE: cube.STATE_COMPLETE,
                                                                        CYCLE2: cube.STATE_HIDDEN}
         cube._set_state(loc, index, cube.STATE_COMPLETE)
         cube._publish(loc, CYCLE2)
-    assert list(xr.open_zarr(url, storage_options=s3_endpoint)["cycle"].values) == [CYCLE, CYCLE2]
+    assert list(xr.open_zarr(url, storage_options=s3_options)["cycle"].values) == [CYCLE, CYCLE2]
