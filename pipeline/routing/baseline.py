@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
@@ -28,22 +29,36 @@ class Baseline:
         return self.nodes is not None and self.code == lk.OK
 
 
+@numba.njit(cache=True)
+def _shortest_nb(lat, lon, edge_ok, c, parent):
+    """Least distance from the centre node of line 0 to every node of the last line; `parent` (L+2, P) filled.
+    Ties go to the node nearer the centre line."""
+    L2, P = lat.shape
+    dist = np.full(P, np.inf)
+    dist[c] = 0.0
+    nxt = np.empty(P)
+    for i in range(L2 - 1):
+        nxt[:] = np.inf
+        for a in range(P):
+            if not np.isfinite(dist[a]):
+                continue
+            for b in range(P):
+                if not edge_ok[i, a, b]:
+                    continue
+                d = dist[a] + gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])
+                if d < nxt[b] - 1e-9 or (abs(d - nxt[b]) <= 1e-9 and abs(a - c) < abs(parent[i + 1, b] - c)):
+                    nxt[b] = d
+                    parent[i + 1, b] = a
+        dist[:] = nxt
+    return dist
+
+
 def shortest_route(space: SearchSpace) -> np.ndarray | None:
     """Least-distance node path through feasible edges (the base line itself when it is at sea)."""
     L2, P = space.lat.shape
     c = space.centre
-    dist = np.full(P, np.inf)
-    dist[c] = 0.0
     parent = np.full((L2, P), -1, np.int64)
-    for i in range(L2 - 1):
-        nxt = np.full(P, np.inf)
-        for a in np.flatnonzero(np.isfinite(dist)):
-            for b in np.flatnonzero(space.edge_ok[i, a]):
-                d = dist[a] + gc_distance_nm(space.lat[i, a], space.lon[i, a], space.lat[i + 1, b], space.lon[i + 1, b])
-                if d < nxt[b] - 1e-9 or (abs(d - nxt[b]) <= 1e-9 and abs(a - c) < abs(parent[i + 1, b] - c)):
-                    nxt[b] = d
-                    parent[i + 1, b] = a
-        dist = nxt
+    dist = _shortest_nb(space.lat, space.lon, space.edge_ok, c, parent)
     if not np.isfinite(dist[c]):
         return None
     nodes = np.full(L2, c, np.int64)
