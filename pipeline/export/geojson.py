@@ -16,7 +16,6 @@ from __future__ import annotations
 import datetime as dt
 
 import numpy as np
-import pandas as pd
 
 from pipeline.export.voyage import (finite_or_none, iso_utc, require_legs, unwrap_lon_deg, vessel_label,
                                     waypoint_names, waypoints_deg)
@@ -37,7 +36,7 @@ def json_value(v):
         return finite_or_none(v)
     if isinstance(v, (dt.date, np.datetime64)):
         return iso_utc(v)
-    if pd.api.types.is_scalar(v) and pd.isna(v):
+    if v != v:  # NaN-like (pandas NA, NaT)
         return None
     return str(v)
 

@@ -2,16 +2,17 @@
 
 A voyage is `route: dict` (one row of `routes`) and `legs: list[dict]` (its `route_legs` rows in
 order). Waypoint 0 is leg 0's start and waypoint i (i ≥ 1) is leg i−1's end, so n legs give
-n + 1 waypoints. Times are naive UTC (datetime, pandas Timestamp or numpy datetime64).
+n + 1 waypoints. Times are naive UTC (datetime, pandas Timestamp or numpy datetime64); nothing here needs
+pandas, so a routing worker that exports does not load it.
 """
 
 from __future__ import annotations
 
 import math
+from datetime import date, datetime, timedelta, timezone
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 
 def voyage_id(route: dict) -> str:
@@ -73,22 +74,32 @@ def unwrap_lon_deg(lon_deg, centre_deg: float | None = None) -> np.ndarray:
     return lon
 
 
-def utc_timestamp(t) -> pd.Timestamp | None:
-    """A naive UTC Timestamp, or None for None/NaT. Aware times are converted to UTC."""
-    if t is None:
+def utc_datetime(t) -> datetime | None:
+    """A naive UTC datetime from a datetime (pandas Timestamps are ones), numpy datetime64 or ISO string; None for
+    None, NaT and NaN. Aware times are converted to UTC."""
+    if t is None or (isinstance(t, float) and math.isnan(t)):
         return None
-    ts = pd.Timestamp(t)
-    if pd.isna(ts):
+    if isinstance(t, str):
+        t = datetime.fromisoformat(t)
+    elif isinstance(t, np.datetime64):
+        return None if np.isnat(t) else t.astype("datetime64[us]").item()
+    elif isinstance(t, date) and not isinstance(t, datetime):
+        return datetime(t.year, t.month, t.day)
+    if not isinstance(t, datetime):
+        raise TypeError(f"not a time: {t!r}")
+    if t != t:  # pandas NaT
         return None
-    if ts.tzinfo is not None:
-        ts = ts.tz_convert("UTC").tz_localize(None)
-    return ts
+    if t.tzinfo is not None:
+        t = t.astimezone(timezone.utc).replace(tzinfo=None)
+    return datetime(t.year, t.month, t.day, t.hour, t.minute, t.second, t.microsecond)
 
 
 def iso_utc(t) -> str | None:
     """ISO 8601 UTC with a Z, rounded to the second (what ECDIS and JSON readers expect)."""
-    ts = utc_timestamp(t)
-    return None if ts is None else ts.round("s").strftime("%Y-%m-%dT%H:%M:%SZ")
+    d = utc_datetime(t)
+    if d is None:
+        return None
+    return (d + timedelta(microseconds=500_000)).replace(microsecond=0).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def finite_or_none(x: Any) -> float | None:
