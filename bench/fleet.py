@@ -2,17 +2,17 @@
 
 Builds (once, under bench/out/fleet) a data root with one ingested demo cycle, a 12-vessel fleet
 with fitted models and 200 voyages on the demo's port pairs with staggered departures, then runs
-the `route-fleet` flow (exports off) against a local dask cluster of 1 and of 2 single-threaded
-worker processes (passed as an existing scheduler address, as in production) and prints voyages
-per minute (per worker) and the ratio. Each cluster is warmed up first (imports, land mask, numba caches)
-so both timings measure routing, not start-up.
+the `route-fleet` flow (exports off; `--exports`: with the exports the demo and the nightly write) against a
+local dask cluster of 1 and of 2 single-threaded worker processes (passed as an existing scheduler address, as
+in production) and prints voyages per minute (per worker) and the ratio. Each cluster is warmed up first
+(imports, numba caches) so both timings measure routing, not start-up.
 
 Memory: the peak resident memory (VmHWM, the RSS high-water mark) of each worker process over its cluster's runs, and,
 to judge the voyages' share, what a fresh interpreter holds with the routing code imported and the land structure loaded.
 
 Targets: scaling 1 → 2 workers ≥ 1.7×; peak worker memory ≤ 300 MB.
 
-    .venv/bin/python bench/fleet.py [--voyages 200] [--workers 1,2]
+    .venv/bin/python bench/fleet.py [--voyages 200] [--workers 1,2] [--exports]
 """
 
 from __future__ import annotations
@@ -68,12 +68,12 @@ def prepare(n_voyages: int) -> Path:
     return root
 
 
-def run(root: Path, address: str, voyages: list[str]) -> float:
+def run(root: Path, address: str, voyages: list[str], exports: bool = False) -> float:
     from flows.jobs.fleet import route_fleet_job
 
     os.environ["JITROUTE_DASK_ADDRESS"] = address
     t0 = time.perf_counter()
-    s = route_fleet_job(cycle="2020-12-01T00", voyages=voyages, data_root=str(root), exports=False, trigger="bench")
+    s = route_fleet_job(cycle="2020-12-01T00", voyages=voyages, data_root=str(root), exports=exports, trigger="bench")
     dt = time.perf_counter() - t0
     assert s["n"] == len(voyages), s
     return dt
@@ -111,6 +111,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--voyages", type=int, default=200)
     ap.add_argument("--workers", default="1,2", help="cluster sizes to time, comma separated")
+    ap.add_argument("--exports", action="store_true",
+                    help="workers also render each voyage's RTZ, GeoJSON and PNGs, as the demo and the nightly do")
     args = ap.parse_args()
     sizes = [int(w) for w in args.workers.split(",")]
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
@@ -125,11 +127,12 @@ def main() -> None:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                           silence_logs=logging.WARNING) as cluster:
             os.environ["JITROUTE_DASK_WORKERS"] = str(workers)
-            run(root, cluster.scheduler_address, ids[: 2 * workers])  # warm-up: imports, land mask, numba caches
-            times[workers] = run(root, cluster.scheduler_address, ids)
+            run(root, cluster.scheduler_address, ids[: 2 * workers], args.exports)  # warm-up: imports, numba caches
+            times[workers] = run(root, cluster.scheduler_address, ids, args.exports)
             with Client(cluster.scheduler_address) as client:
                 peaks[workers] = max(client.run(peak_rss_mb).values())
     imports, land = baseline_mb()
+    print(f"exports {'on' if args.exports else 'off'}")
     print(f"{'workers':>8} {'seconds':>9} {'voyages/min':>12} {'per worker':>11} {'peak worker MB':>15}")
     for w in sizes:
         v = args.voyages / times[w] * 60
