@@ -49,13 +49,7 @@ class Weather(NamedTuple):
 
     values: np.ndarray  # (7, nt, nlat, nlon) float32
     times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
-    lat0: float
-    dlat: float
-    nlat: int
-    lon0: float
-    dlon: float
-    nlon: int
-    wraps: bool
+    grid: Grid
 
 
 @dataclass(frozen=True)
@@ -68,7 +62,7 @@ class WeatherField:
 
     @property
     def kernel(self) -> Weather:
-        return Weather(self.values, self.times_h, *self.grid)
+        return Weather(self.values, self.times_h, self.grid)
 
     @property
     def horizon_utc(self) -> np.datetime64:
@@ -178,13 +172,14 @@ def sample_nb(w, t_h, lat, lon, out):
         i0 = np.searchsorted(times_h, t_h, side="right") - 1
         i1 = i0 + 1
         wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
-    lat0, dlat, nlat, lon0, dlon, nlon = w.lat0, w.dlat, w.nlat, w.lon0, w.dlon, w.nlon
+    g = w.grid
+    lat0, dlat, nlat, lon0, dlon, nlon = g.lat0, g.dlat, g.nlat, g.lon0, g.dlon, g.nlon
     values = w.values
     fy = (lat - lat0) / dlat
     fy = min(max(fy, 0.0), nlat - 1.0)
     iy = min(int(fy), nlat - 2)
     wy = fy - iy
-    if w.wraps:
+    if g.wraps:
         fx = ((lon - lon0) % 360.0) / dlon
         ix0 = int(fx) % nlon
         ix1 = (ix0 + 1) % nlon
