@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from pipeline.performance.refit import Gate
+from pipeline.routing.options import RoutingOptions
 from storage.layout import DataLayout
 
 RISH_URL_DEFAULT = "https://database.rish.kyoto-u.ac.jp/arch/jmadata/data/gpv/original/"
@@ -68,22 +69,10 @@ class SourceSettings:
 
 
 @dataclass(frozen=True)
-class RoutingSettings:
-    """Defaults for the route solvers (see pipeline.routing for their meaning)."""
+class RoutingSettings(RoutingOptions):
+    """Defaults for the route solvers (RoutingOptions, see pipeline.routing for their meaning) and how a fleet run
+    is spread."""
 
-    solver: str = "bfoa"
-    objective: str = "jit"
-    arrival_window_h: float = 6.0
-    seed: int = 1
-    n_lines: int | None = None  # None: chosen from the voyage length
-    n_points: int = 21
-    d_point_nm: float | None = None
-    land_clearance_nm: float = 2.0  # legs keep this far from land (checked at ≤ 0.1 NM) ...
-    port_approach_nm: float = 10.0  # ... except within this distance of a port, where they need only be at sea
-    # engine-change limits: every rpm setting of a plan is held at least this long, and each change costs this
-    # much fuel in the objective (0 and 0: the solver's plan as found, a setting per leg)
-    min_engine_hold_h: float = 12.0
-    engine_change_cost_t: float = 0.05
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
     voyages_per_task: int | None = None  # None: about three batches per dask worker thread
     task_timeout_s: float = 6 * 3600.0  # Prefect task timeout of a fleet's routing

@@ -14,40 +14,12 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing import weather_field as wf
-from pipeline.routing.engine_limits import EngineLimits
+from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 from pipeline.routing.search_space import SearchSpace
 from pipeline.routing.solve import solve
 from pipeline.routing.voyage import problem_from_voyage
-
-
-@dataclass(frozen=True)
-class RoutingOptions:
-    """Solver settings of a run (see pipeline.routing.solve)."""
-
-    solver: str = "bfoa"
-    objective: str = "jit"
-    arrival_window_h: float = 6.0
-    seed: int = 1
-    n_lines: int | None = None
-    n_points: int = 21
-    d_point_nm: float | None = None
-    land_clearance_nm: float = 2.0
-    port_approach_nm: float = 10.0
-    min_engine_hold_h: float = 12.0  # engine-change limits (pipeline.routing.engine_limits)
-    engine_change_cost_t: float = 0.05
-
-    @property
-    def limits(self) -> EngineLimits:
-        return EngineLimits(min_hold_h=float(self.min_engine_hold_h), change_cost_t=float(self.engine_change_cost_t))
-
-    @classmethod
-    def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
-        """From an object with these attribute names (the settings' routing section); None overrides are ignored."""
-        values = {k: getattr(routing_settings, k) for k in cls.__dataclass_fields__}
-        values.update({k: v for k, v in overrides.items() if v is not None})
-        return cls(**values)
 
 
 @dataclass(frozen=True)

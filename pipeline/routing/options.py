@@ -1,0 +1,41 @@
+"""The solver settings of a run, light to import (the settings module builds on them; no compiled code here)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pipeline.routing.engine_limits import EngineLimits
+
+
+@dataclass(frozen=True)
+class RoutingOptions:
+    """Solver settings of a run (see pipeline.routing.solve); the settings' `routing` section extends them."""
+
+    solver: str = "bfoa"
+    objective: str = "jit"
+    arrival_window_h: float = 6.0
+    seed: int = 1
+    n_lines: int | None = None  # None: chosen from the voyage length
+    n_points: int = 21
+    d_point_nm: float | None = None
+    land_clearance_nm: float = 2.0  # legs keep this far from land (checked at ≤ 0.1 NM) ...
+    port_approach_nm: float = 10.0  # ... except within this distance of a port, where they need only be at sea
+    # engine-change limits (engine_limits.py): every rpm setting of a plan is held at least this long, and each
+    # change costs this much fuel in the objective (0 and 0: the solver's plan as found, a setting per leg)
+    min_engine_hold_h: float = 12.0
+    engine_change_cost_t: float = 0.05
+
+    @property
+    def limits(self) -> "EngineLimits":
+        from pipeline.routing.engine_limits import EngineLimits  # compiled kernels: loaded when routing
+
+        return EngineLimits(min_hold_h=float(self.min_engine_hold_h), change_cost_t=float(self.engine_change_cost_t))
+
+    @classmethod
+    def from_settings(cls, routing_settings, **overrides) -> "RoutingOptions":
+        """From an object with these attribute names (the settings' routing section); None overrides are ignored."""
+        values = {k: getattr(routing_settings, k) for k in cls.__dataclass_fields__}
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**values)
