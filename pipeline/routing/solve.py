@@ -60,7 +60,8 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                 plan.reason = f"arrives {early_h:.1f} h before the arrival window" if early_h > 1e-6 else None
             notes = []
             if plan.hours_beyond_forecast > 1e-9:
-                notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({plan.n_beyond_forecast} legs) beyond "
+                n = plan.n_beyond_forecast
+                notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({n} leg{'s' if n != 1 else ''}) beyond "
                              f"the forecast horizon {inst.weather.horizon_utc} (its last step persisted)")
             if plan.hours_before_cycle > 1e-9:
                 notes.append(f"{plan.hours_before_cycle:.1f} h of the voyage before the forecast cycle "
