@@ -65,6 +65,7 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import dask.array  # imported here, not in a writer thread: concurrent first imports of dask fail
 import numpy as np
 import xarray as xr
 import zarr
@@ -115,8 +116,6 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
     """One hidden all-NaN cycle. The data variables are lazy and written with `compute=False`: only their
     metadata goes to the store, and chunks never written read as the NaN fill value."""
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
-    import dask.array  # only writers need it (routing workers import this module without dask)
-
     nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32, chunks=(1, nstep, *spatial_chunks(nlat, nlon)))
     data = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
     age, state = cv.CURRENT_AGE, cv.CYCLE_STATE
