@@ -21,7 +21,7 @@ from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.synthetic.fleet import generate_fleet, write_fleet
 from pipeline.validate_ids import VOYAGE_ID_PATTERN, is_valid_imo, voyage_id_problem
 
-SETTINGS = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+SETTINGS = settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                             HealthCheck.function_scoped_fixture])
 
 HOSTILE = {  # voyage ID -> what the refusal says

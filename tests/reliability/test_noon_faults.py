@@ -275,7 +275,7 @@ _CELL = st.one_of(st.text(max_size=10), st.sampled_from(["", "nan", "inf", "-inf
 _COLS = ["imo", "ts_utc", "rpm", "draft_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t"]
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(rows=st.lists(st.fixed_dictionaries({c: _CELL for c in _COLS}), max_size=6))
 def test_noon_validation_of_arbitrary_text_never_raises_and_keeps_only_sound_rows(rows):
     raw = pd.DataFrame(rows, columns=_COLS).astype(object)
