@@ -603,3 +603,87 @@ def test_honest_baseline_and_savings_split_in_calm_water():
     assert split.route_pct == pytest.approx(0.0, abs=1e-9)  # the DP's plan is on the great circle
     assert split.total_pct == pytest.approx(split.speed_profile_pct + split.route_pct)
     assert plan.savings_pct > 5.0  # what the discrete-rpm baseline used to credit to routing
+
+
+def _bfoa_start(pr, fld, params, seed=1):
+    """The initial swarm of the BFOA on a voyage: (swarm, instance, knobs)."""
+    from pipeline.routing import bfoa, engine_timing
+    from pipeline.routing.baseline import baseline
+
+    inst = Instance.build(pr, pr.search_space(), fld)
+    base = baseline(inst)
+    L2, P = inst.graph.lat.shape
+    k = params.knobs(L2 - 2, P, inst.graph.max_shift)
+    sw, s, wk = bfoa.swarm(k.n_bacteria, L2), engine_timing.scratch(L2), bfoa.work(L2)
+    bfoa.init_swarm_nb(sw, base.nodes, base.rpm_idx, inst.graph, inst.vessel, inst.wx, inst.objective, s, k, wk,
+                       np.random.default_rng(seed))
+    return sw, inst, k
+
+
+def test_bfoa_offset_routes_start_feasible_where_the_baseline_is_not():
+    """Behind a storm above the wave limit the baseline (bacterium 0) cannot be sailed; the offset routes, spread
+    from one side of the graph to the other, give the swarm feasible starts on both sides of it."""
+    pr6 = problem(STORM_DEP, STORM_ARR, 144, max_hs_m=6.0)
+    sw, inst, k = _bfoa_start(pr6, storm_field(8.0), FAST)
+    c = inst.graph.lat.shape[1] // 2
+    assert sw.cost[0] == math.inf and k.n_offset == FAST.n_bacteria - 1
+    for i, edge in ((1, -c), (k.n_offset, c)):  # the outermost offset routes round the storm on either side
+        off = sw.pos[i] - c
+        assert sw.cost[i] < math.inf and off[np.argmax(np.abs(off))] == edge
+        assert sw.cost[i] == pytest.approx(_evaluate(inst, sw.pos[i], sw.rpm[i])[0], rel=1e-12)
+    assert sw.best_cost[0] < math.inf
+
+
+def test_offset_route_goes_out_along_and_back():
+    from pipeline.routing.random_route import random_walk_nb
+
+    space = problem((30.0, -160.0), (35.0, -130.0), 144, n_lines=12, n_points=11).search_space()
+    L2, c = space.lat.shape[0], space.centre
+    nodes = np.empty(L2, np.int64)
+    for offset in (-5, -2, 0, 3, 5):
+        assert random_walk_nb(nodes, space.edge_ok, space.max_shift, 12, 4000, 2, 0.0, 0.0, 1.0, offset,
+                              np.random.default_rng(offset + 9))
+        o = nodes - c
+        k = abs(offset)
+        i = np.arange(L2)
+        expect = np.minimum(np.minimum(i, k), np.maximum(L2 - 2 - i, 0)) * np.sign(offset)  # home a line early
+        np.testing.assert_array_equal(o, expect)
+
+
+def test_bfoa_block_shift_moves_a_whole_plateau():
+    from pipeline.routing.bfoa import _block
+
+    nodes = np.array([5, 6, 7, 8, 8, 8, 8, 8, 8, 7, 6, 5], np.int64)  # out, a plateau on lines 3..8, back
+    L = len(nodes) - 2
+    vec = np.zeros(len(nodes), np.int64)
+    seen = set()
+    for seed in range(40):
+        vec[:] = 0
+        first = _block(L, nodes, vec, np.random.default_rng(seed))
+        moved = np.flatnonzero(vec)
+        assert moved[0] == first and np.all(np.diff(moved) == 1) and len(set(vec[moved].tolist())) == 1
+        block = (int(moved[0]), int(moved[-1]))
+        # the plateau itself, or from a line off it 4..L/2 lines (cut at the last inner line)
+        assert block == (3, 8) or (first in (1, 2, 9, 10) and block[1] in (min(L, first + 3), min(L, first + 4)))
+        seen.add(block)
+    assert (3, 8) in seen and len(seen) > 2
+
+
+def test_bfoa_stall_stop_ends_a_run_that_no_longer_gains():
+    """Calm water: the swarm finds the great circle at once and stops `stall_cycles` cycles later; without the
+    stall stop it runs every cycle. A run stops only after that many cycles without a gain of stall_tol."""
+    pr = problem((30.0, -160.0), (35.0, -140.0), 110, n_lines=8, n_points=9)
+    calm = wf.uniform("2020-12-01T00", 400)
+    params = BfoaParams(n_bacteria=12, n_chemo=6, n_cycles=30, stall_cycles=4)
+    stalled = solve(pr, calm, solver="bfoa", seed=1, params=params)
+    full = solve(pr, calm, solver="bfoa", seed=1, params=BfoaParams(n_bacteria=12, n_chemo=6, n_cycles=30,
+                                                                    stall_cycles=0))
+    assert len(full.history) == 30 and len(stalled.history) < 30
+    np.testing.assert_array_equal(stalled.history, full.history[:len(stalled.history)])  # the same run, cut
+    h = stalled.history
+    assert h[-1] >= h[-params.stall_cycles] * (1 - params.stall_tol)  # the last cycles gained nothing
+    assert stalled.n_evals < full.n_evals and stalled.cost <= full.history[-1] * (1 + 1e-3)
+    # round a storm the swarm still gains after its first cycle: it stops later than in calm water
+    storm = solve(problem(STORM_DEP, STORM_ARR, 144, max_hs_m=6.0), storm_field(8.0), solver="bfoa", seed=1,
+                  params=params)
+    assert storm.status == "ok" and len(storm.history) > len(h)

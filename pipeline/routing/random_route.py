@@ -8,20 +8,21 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step, rng):
+def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step, offset, rng):
     """Safe random route: a walk line by line whose step heads, one node at a time, for a target offset that
     is redrawn now and then (so random routes are smooth detours of every size, not zig-zags) and bends back
     to the destination in time. Each node: the preferred one first, then nodes ever farther from it (random
     side), R_max tries in all; on failure back up `backup` lines; give up after K_max tries overall.
-    Offsets are drawn ~ N(0, sigma) nodes; a new target with probability p_new per line; a step towards it with
-    probability p_step per line."""
+    Offsets are drawn ~ N(0, sigma) nodes, the first one around `offset` instead of 0; a new target with
+    probability p_new per line; a step towards it with probability p_step per line. With sigma 0, p_new 0 and
+    p_step 1 the walk is the offset route: out to `offset` one node a line, along it, and back in time."""
     L2 = nodes.shape[0]
     P = edge_ok.shape[1]
     c = P // 2
     L = L2 - 2
     nodes[0] = c
     nodes[L2 - 1] = c
-    target = c + int(np.round(rng.normal() * sigma))
+    target = c + offset + int(np.round(rng.normal() * sigma))
     i, tries = 1, 0
     while i <= L:
         a = nodes[i - 1]
