@@ -107,17 +107,21 @@ def _options(solver: str, options, params: BfoaParams | None, bucket_h: float | 
 
 def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
     """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan). For what
-    the limits cost, `unlimited_fuel_t` is the fuel of the best engine plan on the same route without them (the
-    solver's own, or a cheaper one the route's DP finds within 0.1 %), so the limits never seem to save fuel."""
+    the limits cost, `unlimited_fuel_t` is the fuel of the solver's plan; when the limited plan, its change costs
+    aside, beats that (the solver left a better engine plan on its route), it is the best engine plan on the route
+    without limits instead (the route's DP within 0.1 %, pruned by the limited plan), so the limits never seem to
+    save fuel. Run only then, as the route's DP can cost more than the solve on long routes."""
     held = limited_plan(inst, nodes, limits)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
     limited.cost = held.cost
-    free_cost, free_fuel_t = unlimited_cost(inst, nodes, plan.cost)
-    limited.limits = limits
-    limited.unlimited_fuel_t = free_fuel_t if free_cost < plan.cost else plan.fuel_t
+    limited.limits, limited.unlimited_fuel_t = limits, plan.fuel_t
+    held_objective = held.cost - limits.change_cost_t * held.n_changes  # a plan without limits too
+    if held_objective < plan.cost - 1e-9 * abs(plan.cost):
+        _, free_fuel_t = unlimited_cost(inst, nodes, held_objective * (1.0 + 1e-9) + 1e-12)
+        limited.unlimited_fuel_t = free_fuel_t if np.isfinite(free_fuel_t) else held.fuel_t
     if limited.status == "late" and plan.status == "ok":
         limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
                           f"{limited.hours - inst.problem.t_req_h:.1f} h late (without the limits on time, "
