@@ -90,7 +90,7 @@ def register(app: typer.Typer) -> None:
         from pipeline.performance.model import model_from_stored
         from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
         from pipeline.sources.cycles import parse_cycle
-        from storage import cube, export_store, fleet_store
+        from storage import cube_window, export_store, fleet_store
 
         # Bad input is refused before anything is opened.
         dep = _latlon(from_, "--from") if from_ is not None else None
@@ -130,10 +130,10 @@ def register(app: typer.Typer) -> None:
             fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
         cube_path, c, version = None, None, None
         if not calm:
-            c = parse_cycle(cycle) if cycle else cube.latest_complete_cycle(lay.cube_store)
+            c = parse_cycle(cycle) if cycle else cube_window.newest_complete_cycle(lay.cube_store)
             if c is None:
                 fail(f"no complete forecast cycle in {lay.weather_cube_url}: run `jitroute ingest --cycle …` (or use --calm)")
-            version = cube.cycle_versions(lay.cube_store).get(c)
+            version = cube_window.cycle_versions(lay.cube_store).get(c)
             cube_path, c = lay.weather_cube_url, str(np.datetime_as_string(np.datetime64(c, "s")))
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed),

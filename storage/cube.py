@@ -74,6 +74,7 @@ from zarr.codecs import BloscCodec
 from schemas import cube_variables as cv
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
 from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, locate
+from storage.cube_window import cycle_versions  # noqa: F401  (zarr alone; flows ask the cube module for it)
 
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
 TIME_EPOCH = np.datetime64("2000-01-01T00", "ns")  # of CYCLE_ENCODING
@@ -327,16 +328,6 @@ def _publish(loc: Location, cycle: np.datetime64) -> None:
 
 def _version_label(cycle) -> str:
     return str(np.datetime_as_string(np.datetime64(cycle, "s"), unit="s"))
-
-
-def cycle_versions(path, storage_options: dict | None = None) -> dict[np.datetime64, int]:
-    """The content version of every published cycle: a re-ingest gives its cycle a new one. A store never
-    published (or written before versions existed) has none."""
-    loc = locate(path, storage_options)
-    if not loc.has("zarr.json"):
-        return {}
-    attrs = zarr.open_group(loc.zarr_store(read_only=True), mode="r").attrs
-    return {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
 
 
 def _open_consistent(loc: Location, lock_dir: Path | None) -> xr.Dataset:

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 import zarr
 
-from schemas.cube_variables import DATA_VARS, STATE_HIDDEN, step_hours
+from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, step_hours
 from storage.cube_location import DECODE_ERRORS, CubeError, Location, locate
 
 _UNITS = {"days": "D", "hours": "h", "minutes": "m", "seconds": "s"}
@@ -76,6 +76,28 @@ def open_published(path, storage_options: dict | None = None) -> Published:
                                     "run `jitroute ingest` (or `jitroute demo`) first") from exc
     return Published(group, _times(group["cycle"]), _lead_hours(group["step"]), np.asarray(group["lat"][:]),
                      np.asarray(group["lon"][:]))
+
+
+def cycle_versions(path, storage_options: dict | None = None) -> dict[np.datetime64, int]:
+    """The content version of every published cycle: a re-ingest gives its cycle a new one. A store never
+    published (or written before versions existed) has none."""
+    loc = locate(path, storage_options)
+    if not loc.has("zarr.json"):
+        return {}
+    attrs = zarr.open_group(loc.zarr_store(read_only=True), mode="r").attrs
+    return {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
+
+
+def newest_complete_cycle(path, storage_options: dict | None = None) -> np.datetime64 | None:
+    """The newest complete cycle of the published view (None: none, or no store), for readers such as
+    `jitroute route`; a writer asks storage.cube.latest_complete_cycle, which also repairs a half-finished append."""
+    loc = locate(path, storage_options)
+    if not loc.has("zarr.json"):
+        return None
+    pub = open_published(loc)
+    state = np.asarray(pub.group["cycle_state"][:])[:pub.cycle.size]
+    done = pub.cycle[state == STATE_COMPLETE]
+    return done.max() if done.size else None
 
 
 def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:

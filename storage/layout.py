@@ -56,7 +56,7 @@ class DataLayout:
     @property
     def cube_store(self):
         """The cube as `storage.cube` opens it: its path or URL with the storage options."""
-        from storage.cube import locate
+        from storage.cube_location import locate
 
         return locate(self.weather_cube_url, self.storage_options)
 
