@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
+from pipeline.routing.baseline import evaluate
 from pipeline.routing.dp import _grow, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures, trim_eps
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
@@ -202,42 +203,29 @@ def incumbent_cost_nb(nodes, g, v, w, o, min_hold_h, change_cost_t):
     R = v.rpm_options.shape[0]
     ct, cf = np.empty((R, L + 1)), np.empty((R, L + 1))
     sailed = np.zeros(R, np.int64)  # lines reached by the plan of each setting throughout
+    rpm_idx = np.empty(L, np.int64)
     for r in range(R):
-        ct[r, 0], cf[r, 0] = o.t_dep_h, 0.0
-        rpm_idx = np.full(L, r, np.int64)
+        rpm_idx[:] = r
         code, bad = lk.sail_route_nb(nodes, rpm_idx, 0, g, v, w, o, ct[r], cf[r])
         sailed[r] = L if code == OK else bad
     best = np.inf
     for r in range(R):
         if sailed[r] == L:
             best = min(best, route_cost_nb(o, ct[r, L] - o.t_dep_h, cf[r, L]))
-    out = np.empty(N_LEG_OUT)
+    t2, f2 = np.empty(L + 1), np.empty(L + 1)
     for r0 in range(R):
         for k in range(1, sailed[r0] + 1 if sailed[r0] < L else L):
             if ct[r0, k] - o.t_dep_h < min_hold_h - 1e-9:
                 continue  # the first setting is not held long enough yet
+            t2[:k + 1], f2[:k + 1] = ct[r0, :k + 1], cf[r0, :k + 1]
             for r1 in range(R):
                 if r1 == r0:
                     continue
-                t, f = ct[r0, k], cf[r0, k]
-                ok = True
-                for i in range(k, L):
-                    a, b = nodes[i], nodes[i + 1]
-                    if not g.edge_ok[i, a, b]:
-                        ok = False
-                        break
-                    sail_leg_nb(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], t, v.rpm_options[r1], v, w,
-                                out)
-                    if out[CODE] != OK:
-                        ok = False
-                        break
-                    t += out[H]
-                    f += out[FUEL]
-                    if t - o.t_dep_h > o.max_hours:
-                        ok = False
-                        break
-                if ok and t - ct[r0, k] >= min_hold_h - 1e-9:
-                    best = min(best, route_cost_nb(o, t - o.t_dep_h, f) + change_cost_t)
+                rpm_idx[:k] = r0
+                rpm_idx[k:] = r1
+                code, _ = lk.sail_route_nb(nodes, rpm_idx, k, g, v, w, o, t2, f2)  # from line k on
+                if code == OK and t2[L] - ct[r0, k] >= min_hold_h - 1e-9:
+                    best = min(best, route_cost_nb(o, t2[L] - o.t_dep_h, f2[L]) + change_cost_t)
     return best
 
 
@@ -270,15 +258,12 @@ def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3) -> 
     sub = _route_instance(inst, nodes)
     lams, m_lam, t_min, tau, phi = finish_bounds(sub)
     ld = latest_departures(sub)
-    L2 = len(nodes)
     eps = trim_eps(sub, gap, upper, lams, m_lam, t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
-    route, rpm_idx, cost, _, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
-                                             tau, phi, ld, eps)
+    _, rpm_idx, cost, _, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
+                                         tau, phi, ld, eps)
     if not math.isfinite(cost) or cost >= upper:
         return upper, math.nan
-    ct, cf = np.empty(L2), np.empty(L2)
-    lk.sail_route_nb(np.zeros(L2, np.int64), rpm_idx, 0, sub.graph, sub.vessel, sub.wx, sub.objective, ct, cf)
-    return float(cost), float(cf[-1])
+    return float(cost), float(evaluate(inst, nodes, rpm_idx)[2])
 
 
 def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:
