@@ -69,10 +69,11 @@ def point_is_clear_nb(grid, c, lat, lon):
 def leg_is_clear_nb(grid, c, lat0, lon0, lat1, lon1, lat_lo, lat_hi):
     """The great-circle leg keeps the clearance (and the latitude limits) at every point, checked at ≤ 0.1 NM."""
     dist = geo.gc_distance_nm(lat0, lon0, lat1, lon1)
+    chord = geo.chord(lat0, lon0, lat1, lon1)
     s = 0.0
     while True:
         f = min(1.0, s / dist) if dist > 0.0 else 1.0
-        plat, plon = geo.gc_interpolate(lat0, lon0, lat1, lon1, f)
+        plat, plon = geo.chord_point(chord, f)
         if plat < lat_lo or plat > lat_hi:
             return False
         inside, gap = _approach(c, plat, plon)
@@ -92,10 +93,11 @@ def least_clearance_nb(grid, c, lat, lon):
     best = BOUND_CAP_NM
     for k in range(lat.size - 1):
         dist = geo.gc_distance_nm(lat[k], lon[k], lat[k + 1], lon[k + 1])
+        chord = geo.chord(lat[k], lon[k], lat[k + 1], lon[k + 1])
         s = 0.0
         while True:
             f = min(1.0, s / dist) if dist > 0.0 else 1.0
-            plat, plon = geo.gc_interpolate(lat[k], lon[k], lat[k + 1], lon[k + 1], f)
+            plat, plon = geo.chord_point(chord, f)
             inside, gap = _approach(c, plat, plon)
             if inside:
                 step = gap

@@ -9,6 +9,7 @@ callable from Python and from routing kernels alike.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 
@@ -54,6 +55,58 @@ def gc_interpolate(lat1, lon1, lat2, lon2, frac):
     y = a * math.cos(p1) * math.sin(l1) + b * math.cos(p2) * math.sin(l2)
     z = a * math.sin(p1) + b * math.sin(p2)
     return math.degrees(math.atan2(z, math.sqrt(x * x + y * y))), wrap180(math.degrees(math.atan2(y, x)))
+
+
+class Chord(NamedTuple):
+    """A great-circle chord's trigonometry, computed once for stepping along it (`chord`): the sines and cosines
+    of its end points' latitude and longitude, its angular length and that length's sine."""
+
+    cp1: float
+    sp1: float
+    cl1: float
+    sl1: float
+    cp2: float
+    sp2: float
+    cl2: float
+    sl2: float
+    d: float
+    sin_d: float
+    lat1: float
+    lon1: float
+    lon2: float
+
+
+@numba.njit(cache=True)
+def chord(lat1, lon1, lat2, lon2):
+    """The `Chord` from point 1 to point 2."""
+    p1, l1 = math.radians(lat1), math.radians(lon1)
+    p2, l2 = math.radians(lat2), math.radians(lon2)
+    d = gc_distance_nm(lat1, lon1, lat2, lon2) / EARTH_RADIUS_NM
+    return Chord(math.cos(p1), math.sin(p1), math.cos(l1), math.sin(l1), math.cos(p2), math.sin(p2), math.cos(l2),
+                 math.sin(l2), d, math.sin(d), lat1, lon1, lon2)
+
+
+@numba.njit(cache=True)
+def chord_point(c, frac):
+    """`gc_interpolate` along the chord: the same numbers, with the chord's trigonometry taken from `c`."""
+    if c.d < 1e-12:
+        return c.lat1, wrap180(c.lon1)
+    a = math.sin((1 - frac) * c.d) / c.sin_d
+    b = math.sin(frac * c.d) / c.sin_d
+    x = a * c.cp1 * c.cl1 + b * c.cp2 * c.cl2
+    y = a * c.cp1 * c.sl1 + b * c.cp2 * c.sl2
+    z = a * c.sp1 + b * c.sp2
+    return math.degrees(math.atan2(z, math.sqrt(x * x + y * y))), wrap180(math.degrees(math.atan2(y, x)))
+
+
+@numba.njit(cache=True)
+def chord_course_deg(c, lat, lon):
+    """`gc_bearing_deg` from (lat, lon) to the chord's end: the same numbers, the end's trigonometry from `c`."""
+    p1 = math.radians(lat)
+    dl = math.radians(wrap180(c.lon2 - lon))
+    y = math.sin(dl) * c.cp2
+    x = math.cos(p1) * c.sp2 - math.sin(p1) * c.cp2 * math.cos(dl)
+    return math.degrees(math.atan2(y, x)) % 360.0
 
 
 @numba.njit(cache=True)

@@ -81,10 +81,11 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
     if dist < 1e-6:
         return
     w = np.empty(N_VARS)
+    chord = geo.chord(lat0, lon0, lat1, lon1)  # the leg's trigonometry once, not at every step
     done, t, fuel = 0.0, t0_h, 0.0
     while done < dist - 1e-9:
-        lat, lon = geo.gc_interpolate(lat0, lon0, lat1, lon1, done / dist)
-        hdg = geo.gc_bearing_deg(lat, lon, lat1, lon1)
+        lat, lon = geo.chord_point(chord, done / dist)
+        hdg = geo.chord_course_deg(chord, lat, lon)
         if sample_nb(wx, t, lat, lon, w):
             out[BEYOND] = 1.0
         u = 0.0 if math.isnan(w[U10]) else w[U10]
