@@ -257,6 +257,14 @@ def test_weather_sampling_interpolates_time_space_and_direction():
     assert math.degrees(math.atan2(out[wf.WAVE_X], out[wf.WAVE_Y])) == pytest.approx(0.0, abs=1e-4)
     assert wf.sample_nb(f.kernel, 40.0, 15.0, 151.0, out)  # past the horizon: flagged, persisted
     assert out[wf.UO] == pytest.approx(3.0)
+    # stored per grid point (the sampling layout), offered variable by variable as before; latitudes given
+    # north to south are stored south to north, and sample the same
+    assert f.cells.shape == (2, 2, 3, wf.N_VARS) and f.cells.flags.c_contiguous and f.cells.dtype == np.float32
+    np.testing.assert_array_equal(f.values[wf.U10], u10)
+    np.testing.assert_array_equal(f.values[wf.SWH], ramp)
+    flipped = wf.from_arrays(lat[::-1], lon, times, u10=u10[:, ::-1], v10=np.zeros((3, 2, 2)), swh=ramp,
+                             mwd_deg=mwd, uo=ramp, vo=ramp)
+    np.testing.assert_array_equal(flipped.cells, f.cells)
 
 
 def test_compiled_leg_equals_the_pure_python_twin():

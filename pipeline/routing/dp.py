@@ -380,10 +380,12 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     can reach on the next line, padded by `pad_cells` for the legs' curvature)."""
     wf, sp = inst.weather, inst.space
     grid = wf.grid
-    vals = np.nan_to_num(wf.values.astype(np.float64), nan=0.0)
-    wind = np.hypot(vals[U10], vals[V10]).max(axis=0) * geo.KN_PER_MS
-    hs = vals[SWH].max(axis=0)
-    cur = np.hypot(vals[UO], vals[VO]).max(axis=0) * geo.KN_PER_MS
+    def var(k):  # (nlat, nlon, nt) float64, NaN as 0
+        return np.nan_to_num(wf.cells[..., k].astype(np.float64), nan=0.0)
+
+    wind = np.hypot(var(U10), var(V10)).max(axis=2) * geo.KN_PER_MS
+    hs = var(SWH).max(axis=2)
+    cur = np.hypot(var(UO), var(VO)).max(axis=2) * geo.KN_PER_MS
     L2, P = sp.lat.shape
     iy, ix = _cell_index(grid, sp.lat, sp.lon)
     out = np.zeros((3, L2, P))

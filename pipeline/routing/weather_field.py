@@ -13,6 +13,12 @@ re-weighted) and linear in time between the two bracketing valid times, with the
 over that interval. Directions are never averaged as angles: wave direction is interpolated
 through its components and turned back into an angle by the caller. Past the last valid time the
 last step is persisted and the sample is flagged `beyond`.
+
+The field is stored in the sampling layout `cells` (nlat, nlon, nt, 7): a sample reads 4 corners × 2
+valid times, and in this layout each corner's two times and seven variables are 56 contiguous bytes, and
+the next step along a leg (same cell, a little later) reads the same lines again. In the variable-first
+layout (7, nt, nlat, nlon), still offered as the view `values`, the same sample touches 28 cache lines
+spread over the whole field: sailing a leg took 3.3× as long in the hourly 5,000 NM bench weather.
 """
 
 from __future__ import annotations
@@ -45,16 +51,16 @@ class Grid(NamedTuple):
 
 
 class Weather(NamedTuple):
-    """What the compiled kernels see of a `WeatherField`: its values, valid times and grid."""
+    """What the compiled kernels see of a `WeatherField`: its cells, valid times and grid."""
 
-    values: np.ndarray  # (7, nt, nlat, nlon) float32
+    cells: np.ndarray  # (nlat, nlon, nt, 7) float32, C-contiguous (the sampling layout)
     times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
     grid: Grid
 
 
 @dataclass(frozen=True)
 class WeatherField:
-    values: np.ndarray  # (7, nt, nlat, nlon) float32
+    cells: np.ndarray  # (nlat, nlon, nt, 7) float32, C-contiguous: per grid point its variables at every valid time
     times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
     grid: Grid
     t_ref: np.datetime64  # UTC
@@ -62,7 +68,12 @@ class WeatherField:
 
     @property
     def kernel(self) -> Weather:
-        return Weather(self.values, self.times_h, self.grid)
+        return Weather(self.cells, self.times_h, self.grid)
+
+    @property
+    def values(self) -> np.ndarray:
+        """(7, nt, nlat, nlon): the variables one by one (a view of `cells`, for maps and bounds)."""
+        return self.cells.transpose(3, 2, 0, 1)
 
     @property
     def horizon_utc(self) -> np.datetime64:
@@ -99,13 +110,14 @@ def from_arrays(lat, lon, times_utc, *, u10, v10, swh, mwd_deg, uo, vo, cycle=No
     if np.any(np.diff(times_h) <= 0):
         raise ValueError("weather valid times must increase")
     mwd = np.radians(np.asarray(mwd_deg, dtype=np.float64))
-    vals = np.stack([np.asarray(u10), np.asarray(v10), np.asarray(swh), np.sin(mwd), np.cos(mwd), np.asarray(uo),
-                     np.asarray(vo)]).astype(np.float32)
     lat = np.asarray(lat, dtype=np.float64)
-    if lat[0] > lat[-1]:
-        lat = lat[::-1]
-        vals = vals[:, :, ::-1, :]
-    return WeatherField(values=np.ascontiguousarray(vals), times_h=times_h, grid=_grid(lat, lon), t_ref=t_ref,
+    flip = lat[0] > lat[-1]
+    grid = _grid(lat[::-1] if flip else lat, lon)
+    cells = np.empty((grid.nlat, grid.nlon, times_h.size, N_VARS), np.float32)
+    for k, var in enumerate((u10, v10, swh, np.sin(mwd), np.cos(mwd), uo, vo)):
+        a = np.asarray(var).transpose(1, 2, 0)  # (nlat, nlon, nt)
+        cells[..., k] = a[::-1] if flip else a
+    return WeatherField(cells=cells, times_h=times_h, grid=grid, t_ref=t_ref,
                         cycle=None if cycle is None else np.datetime64(cycle, "s"))
 
 
@@ -142,10 +154,11 @@ def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0,
                        uo=np.full(shape, current_ms[0]), vo=np.full(shape, current_ms[1]))
 
 
-@numba.njit(cache=True)
-def _bilinear(a, it, iy, ix0, ix1, wy, wx):
-    v00, v01 = a[it, iy, ix0], a[it, iy, ix1]
-    v10, v11 = a[it, iy + 1, ix0], a[it, iy + 1, ix1]
+@numba.njit(cache=True, inline="always")
+def _bilinear(cells, iy, ix0, ix1, it, v, wy, wx):
+    """Variable v at valid time index it, bilinear between the 4 corners, NaN corners left out."""
+    v00, v01 = cells[iy, ix0, it, v], cells[iy, ix1, it, v]
+    v10, v11 = cells[iy + 1, ix0, it, v], cells[iy + 1, ix1, it, v]
     s, w = 0.0, 0.0
     for val, wt in ((v00, (1 - wy) * (1 - wx)), (v01, (1 - wy) * wx), (v10, wy * (1 - wx)), (v11, wy * wx)):
         if not math.isnan(val) and wt > 0.0:
@@ -174,7 +187,7 @@ def sample_nb(w, t_h, lat, lon, out):
         wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
     g = w.grid
     lat0, dlat, nlat, lon0, dlon, nlon = g.lat0, g.dlat, g.nlat, g.lon0, g.dlon, g.nlon
-    values = w.values
+    cells = w.cells
     fy = (lat - lat0) / dlat
     fy = min(max(fy, 0.0), nlat - 1.0)
     iy = min(int(fy), nlat - 2)
@@ -192,10 +205,10 @@ def sample_nb(w, t_h, lat, lon, out):
         ix0 = min(int(fx), nlon - 2)
         ix1 = ix0 + 1
         wx = fx - ix0
-    for v in range(values.shape[0]):
-        a = _bilinear(values[v], i0, iy, ix0, ix1, wy, wx)
+    for v in range(N_VARS):
+        a = _bilinear(cells, iy, ix0, ix1, i0, v, wy, wx)
         if i1 != i0:
-            b = _bilinear(values[v], i1, iy, ix0, ix1, wy, wx)
+            b = _bilinear(cells, iy, ix0, ix1, i1, v, wy, wx)
             if math.isnan(a):
                 a = b
             elif not math.isnan(b):
