@@ -13,7 +13,7 @@ reference    `solve(solver="dp")` on the same search space (built once, passed t
              DP over non-dominated time/fuel labels, ε-trimmed so its plan is certified within 0.1 % of the
              optimum (see pipeline/routing/dp.py for the proof and its one assumption), or with --dp-bucket H
              the older DP that merges labels per H-hour arrival bucket (approximate).
-A*           `solve(solver="astar")`: the α sweep, each route with its best engine plan for the RTA.
+A*           `solve(solver="astar")`: the α sweep, each route with its best engine plan for the RTA (within 0.1 %).
 baseline     the great-circle baseline every plan carries (shortest sea route, constant rpm).
 savings      the BFOA plan (seed 1) again with the default engine-change limits: its savings against the honest
              constant-rpm baseline split into speed profile and route, what the limits cost, and the CPU time

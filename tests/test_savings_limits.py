@@ -13,11 +13,11 @@ import pytest
 
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import shortest_route
-from pipeline.routing.engine_limits import EngineLimits, limited_plan, settings_held_h
+from pipeline.routing.engine_limits import EngineLimits, best_engine_plan, limited_plan, settings_held_h
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solve
-from routing_cases import field, problem, wavy
+from routing_cases import field, moving_storm, problem, wavy
 
 DEP, ARR = (30.0, -160.0), (33.0, -146.0)
 WEATHER = field(wavy(7))  # steady in time: the limited plan's dominance rule is exact here
@@ -62,6 +62,26 @@ def test_limited_plan_equals_brute_force_over_hold_respecting_sequences(limits):
     lk.sail_route_nb(nodes, got.rpm_idx, 0, inst.graph, inst.vessel, inst.wx, inst.objective, ct, cf)
     assert got.fuel_t == pytest.approx(cf[-1], rel=1e-12)
     assert got.n_changes == int(np.count_nonzero(np.diff(got.rpm_idx)))
+
+
+STORM = field(moving_storm(3, 31.0, 203.0, drift_kn=(15.0, 0.0)), step_h=3, hours=200)  # crosses the route
+
+
+@pytest.mark.parametrize("weather, rpm_rta", [(WEATHER, 80.0), (WEATHER, 98.0), (WEATHER, 120.0), (STORM, 80.0)])
+def test_best_engine_plan_on_a_route_equals_enumeration(weather, rpm_rta):
+    # what A*, the savings split and the limits' reference use: on time at least fuel, else least late; exact by
+    # default, within its gap when asked (the RTA at 120 rpm cannot be met: the least-late plan)
+    pr = _voyage(rpm_rta, n_lines=6, n_points=5)
+    inst = Instance.build(pr, pr.search_space(), weather)
+    nodes = shortest_route(inst.space)
+    best = _brute_force(inst, nodes, EngineLimits(0.0, 0.0))
+    rpm_idx, cost, _ = best_engine_plan(inst, nodes)
+    assert cost == pytest.approx(best, rel=1e-12)
+    ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
+    lk.sail_route_nb(nodes, rpm_idx, 0, inst.graph, inst.vessel, inst.wx, inst.objective, ct, cf)
+    assert route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1]) == pytest.approx(cost, rel=1e-12)
+    _, near, _ = best_engine_plan(inst, nodes, gap=0.01)
+    assert best - 1e-9 <= near <= best * 1.01
 
 
 def test_limited_plan_holds_every_setting_and_costs_fuel():

@@ -7,8 +7,9 @@ bound of fuel per mile and an upper bound of speed, so it never overestimates un
 bounds (weather lowers the fuel rate by at most 30 % and adds at most 3 kn + 10 %). Sweeping α from
 time-only to fuel-only gives a family of routes. A* alone ignores the RTA (a time-heavy α arrives days early
 at high rpm), so each route of the sweep then gets the engine plan that meets the RTA on the least fuel: the
-exact DP restricted to that route (`best_engine_plan`), which keeps only plans arriving by the RTA when one
-can, else the least-late one. The route and plan with the best objective value win.
+DP restricted to that route (`engine_limits.best_engine_plan`, within `engine_gap` of the route's best), which
+keeps only plans arriving by the RTA when one can, else the least-late one; a route found again at another α is
+not planned again. The route and plan with the best objective value win.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.routing import geodesy as geo
+from pipeline.routing.engine_limits import best_engine_plan
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 
 ALPHAS = (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
@@ -78,6 +80,7 @@ def astar_route(inst, alpha: float, rpm_order: np.ndarray, fuel_per_nm_lb: float
 @dataclass(frozen=True)
 class AstarOptions:
     alphas: tuple[float, ...] = ALPHAS  # fuel weights swept, 0 = time only, 1 = fuel only
+    engine_gap: float = 1e-3  # each route's engine plan is within this share of its best (0: exact, far slower)
 
 
 def search(inst, baseline, *, seed: int, options: AstarOptions):
@@ -90,32 +93,16 @@ def search(inst, baseline, *, seed: int, options: AstarOptions):
     fuel = m.fuel_tph(rpm, p.draft_m, p.trim_m)
     fuel_per_nm_lb = float(np.min(0.7 * fuel / (stw + 3.0)))
     speed_ub = float(np.max(stw) * 1.1 + 3.0)
-    best, n_legs = None, 0
+    best, n_legs, seen = None, 0, set()
     for alpha in options.alphas:
         found = astar_route(inst, alpha, np.arange(len(rpm)), fuel_per_nm_lb, speed_ub, inst.f_target, p.t_req_h)
-        if found is None:
-            continue
+        if found is None or found[0].tobytes() in seen:
+            continue  # neighbouring weights often find the same route: its engine plan is known
         nodes = found[0]
-        rpm_idx, cost, n = best_engine_plan(inst, nodes)
+        seen.add(nodes.tobytes())
+        rpm_idx, cost, n = best_engine_plan(inst, nodes, gap=options.engine_gap)
         n_legs += n
         if np.isfinite(cost) and (best is None or cost < best[0]):
             best = (cost, (nodes, rpm_idx))
     return Found(None, None, n_legs) if best is None else Found(*best[1], n_legs)
 
-
-def best_engine_plan(inst, nodes: np.ndarray) -> tuple[np.ndarray, float, int]:
-    """(rpm index per leg, cost, legs sailed) of the best engine plan on a fixed route under the objective: on time
-    at the least fuel when the RTA can be met, else the least late (the exact DP on the route's edges only)."""
-    from pipeline.routing.dp import dp_exact_nb
-
-    g = inst.graph
-    L2, P = g.lat.shape
-    edge_ok = np.zeros_like(g.edge_ok)
-    for i in range(L2 - 1):
-        edge_ok[i, nodes[i], nodes[i + 1]] = g.edge_ok[i, nodes[i], nodes[i + 1]]
-    path = g._replace(edge_ok=edge_ok)
-    no_bound = np.zeros((0, L2, P))
-    no_rate = np.zeros((L2, P, len(inst.vessel.rpm_options)))
-    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(path, inst.vessel, inst.wx, inst.objective, np.inf, np.zeros(0), no_bound,
-                                              np.zeros((L2, P)), no_rate, no_rate, np.full((L2, P), np.inf), 0.0)
-    return rpm_idx, cost, n_legs

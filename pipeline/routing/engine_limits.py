@@ -252,18 +252,32 @@ def _route_finish_tables(inst, nodes: np.ndarray):
     return lams, np.ascontiguousarray(m_lam[:, :, 0]), np.ascontiguousarray(t_min[:, 0])
 
 
-def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3) -> tuple[float, float]:
-    """(cost, fuel) of the best engine plan on the route without limits, within `gap` of it (the exact DP on the
-    route alone, dp.dp_exact_nb with its bounds and ε-trimming), or (upper, nan) when none beats `upper`."""
+def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: float = 0.0) -> tuple[np.ndarray, float, int]:
+    """(rpm index per leg, cost, legs sailed) of the best engine plan without limits on the fixed route `nodes`:
+    on time at the least fuel when the RTA can be met, else the least late. The exact DP on the route alone
+    (dp.dp_exact_nb with its bounds), pruned by `upper` (default: the best plan of one setting throughout or one
+    change, `incumbent_cost_nb` without a hold); with gap > 0 its labels are ε-trimmed so the plan is within that
+    share of the best. Cost inf when no plan beats `upper` (or none can be sailed)."""
+    nodes = np.ascontiguousarray(nodes, np.int64)
+    if upper is None:
+        upper = float(incumbent_cost_nb(nodes, inst.graph, inst.vessel, inst.wx, inst.objective, 0.0, 0.0))
+        upper = upper * (1.0 + 1e-9) + 1e-12 if math.isfinite(upper) else math.inf  # that plan itself is kept
     sub = _route_instance(inst, nodes)
     lams, m_lam, t_min, tau, phi = finish_bounds(sub)
     ld = latest_departures(sub)
     eps = trim_eps(sub, gap, upper, lams, m_lam, t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
-    _, rpm_idx, cost, _, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
-                                         tau, phi, ld, eps)
+    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
+                                              tau, phi, ld, eps)
+    return rpm_idx, float(cost), int(n_legs)
+
+
+def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3) -> tuple[float, float]:
+    """(cost, fuel) of the best engine plan on the route without limits, within `gap` of it (`best_engine_plan`),
+    or (upper, nan) when none beats `upper`."""
+    rpm_idx, cost, _ = best_engine_plan(inst, nodes, upper, gap)
     if not math.isfinite(cost) or cost >= upper:
         return upper, math.nan
-    return float(cost), float(evaluate(inst, nodes, rpm_idx)[2])
+    return cost, float(evaluate(inst, nodes, rpm_idx)[2])
 
 
 def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:

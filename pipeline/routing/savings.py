@@ -22,9 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.astar import best_engine_plan
 from pipeline.routing.baseline import evaluate, shortest_route
-from pipeline.routing.engine_limits import EngineLimits, limited_plan
+from pipeline.routing.engine_limits import EngineLimits, best_engine_plan, limited_plan
 from pipeline.routing.problem import Instance
 
 if TYPE_CHECKING:
