@@ -69,7 +69,8 @@ def register(app: typer.Typer) -> None:
                         solver: Optional[str] = typer.Option(None, help="bfoa (default) | dp | astar | gc | rhumb."),
                         batch_size: Optional[int] = typer.Option(None, "--batch-size", min=1,
                                                                  help="Voyages per dask task (default: about three "
-                                                                      "tasks per worker thread of the live cluster)."),
+                                                                      "tasks per worker thread of the live cluster, "
+                                                                      "at most 16 voyages each)."),
                         data: Optional[Path] = DataOpt):
         """Route every upcoming voyage on a local dask cluster (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
         from flows.jobs.fleet import route_fleet_job

@@ -74,7 +74,7 @@ class RoutingSettings(RoutingOptions):
     is spread."""
 
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
-    voyages_per_task: int | None = None  # None: about three batches per dask worker thread
+    voyages_per_task: int | None = None  # None: about three batches per dask worker thread, ≤ 16 voyages each
     task_timeout_s: float = 6 * 3600.0  # Prefect task timeout of a fleet's routing
 
 

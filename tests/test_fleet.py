@@ -184,3 +184,15 @@ def test_killed_worker_loses_no_voyage(fleet_root, monkeypatch):
     assert ids == set(fl.voyages.voyage_id) | {"VLAND"}
     for vid, status, reason in rows:
         assert status in ("ok", "late") or vid == "VLAND" or "routing task lost" in (reason or ""), (vid, status, reason)
+
+
+def test_batches_are_sized_from_the_cluster_and_capped():
+    from flows.jobs import dask_pool
+
+    assert dask_pool.voyages_per_batch(12, 2, None) == 2  # about three batches per worker thread
+    assert dask_pool.voyages_per_batch(1000, 2, None) == dask_pool.MAX_VOYAGES_PER_BATCH  # not 167 held in a worker
+    assert dask_pool.voyages_per_batch(1000, 2, 50) == 50  # an explicit setting wins
+    jobs = list(range(40))
+    batches = dask_pool.batches(jobs, 16, length_nm=lambda j: j)
+    assert sorted(j for b in batches for j in b) == jobs and max(map(len, batches)) <= 16
+    assert [b[0] for b in batches] == [39, 38, 37]  # the longest voyages dealt first, one to each batch

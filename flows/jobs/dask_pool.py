@@ -22,11 +22,16 @@ def batches(jobs: list, per_batch: int, length_nm: Callable) -> list[list]:
     return [ordered[k::n] for k in range(n) if ordered[k::n]]
 
 
+MAX_VOYAGES_PER_BATCH = 16  # a batch's results (rows, and with exports ~0.5 MB of files a voyage) wait in its worker
+
+
 def voyages_per_batch(n_jobs: int, n_slots: int, setting: int | None) -> int:
-    """Explicit setting, else about three batches per worker thread (a batch is one dask task)."""
+    """Explicit setting, else about three batches per worker thread (a batch is one dask task), at most
+    MAX_VOYAGES_PER_BATCH voyages each: a worker holds a whole batch's results until they are collected, which for
+    a large fleet on a small cluster was tens of MB of export files per worker."""
     if setting:
         return max(1, int(setting))
-    return max(1, math.ceil(n_jobs / (3 * max(1, n_slots))))
+    return max(1, min(MAX_VOYAGES_PER_BATCH, math.ceil(n_jobs / (3 * max(1, n_slots)))))
 
 
 @contextlib.contextmanager
