@@ -247,6 +247,30 @@ def test_route_map_draws_the_dateline_route_in_one_piece(voyage, tmp_path):
     assert out == tmp_path / "maps" / "V0007.png" and _is_png(out)
 
 
+def _drawn_boxes(fig):
+    """Figure box and the drawn boxes (tick labels and title included) of every axes and legend."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    return fig.bbox, [a.get_tightbbox(renderer) for a in fig.axes], [lg.get_window_extent(renderer) for lg in fig.legends]
+
+
+@pytest.mark.parametrize("points", [None, [(20.0, 140.0), (52.0, 141.0)], [(35.0, 140.0), (36.0, 240.0)]])
+def test_route_map_layout_keeps_map_colourbar_title_and_legend_apart_and_inside(voyage, points):
+    # the map's layout is computed, not left to a layout engine: for the dateline voyage, a north-south one and a
+    # very wide one, everything drawn stays on the figure and nothing covers anything else
+    route, legs = voyage
+    if points is not None:
+        legs = make_legs(points=points, sog_kn=(12.0,), rpm=(70.0,))
+    fig = plots.route_map_figure(route, legs, None, field=_field())
+    page, (map_box, bar_box), legends = _drawn_boxes(fig)
+    for box in (map_box, bar_box, *legends):
+        assert page.x0 - 1 <= box.x0 and box.x1 <= page.x1 + 1 and page.y0 - 1 <= box.y0 and box.y1 <= page.y1 + 1
+    assert not map_box.overlaps(bar_box) and not any(map_box.overlaps(lg) for lg in legends)
+    assert fig.axes[0].get_aspect() == pytest.approx(1.0 / np.cos(np.radians(np.mean(fig.axes[0].get_ylim()))))
+
+
 def test_route_map_of_a_voyage_without_legs_still_draws(voyage, tmp_path):
     route = dict(voyage[0], status="infeasible", reason="no way through the ice limit")
     out = plots.route_map_png(tmp_path / "none.png", route, [], field=_field())

@@ -53,13 +53,15 @@ def weather_map_figure(lat, lon, step: dict, var: str, title: str) -> Figure:
     mag, u, v, label, cmap = (a[lat_order][:, order] if isinstance(a, np.ndarray) else a
                               for a in magnitude_and_flow(step, var))
     extent = (float(lon.min()), float(lon.max()), float(max(lat.min(), -85.0)), float(min(lat.max(), 85.0)))
-    fig, ax = _map_axes([title], extent)
+    fig, ax, cax = _map_axes([title], extent, colorbar=True)
     finite = np.isfinite(mag)
     if finite.any():
         top = float(np.nanpercentile(mag[finite], 99.5)) or float(np.nanmax(mag)) or 1.0
         levels = MaxNLocator(14).tick_values(0.0, top)
         cf = ax.contourf(lon, lat, np.clip(mag, 0.0, levels[-1]), levels=levels, cmap=cmap, zorder=0)
-        fig.colorbar(cf, ax=ax, shrink=0.8, label=label)
+        fig.colorbar(cf, cax=cax, label=label)
+    else:
+        cax.remove()
     _draw_land(ax, extent)
     sy, sx = max(1, lat.size // ARROWS_Y), max(1, lon.size // ARROWS_X)
     uu, vv = u[::sy, ::sx], v[::sy, ::sx]
