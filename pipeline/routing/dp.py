@@ -380,6 +380,7 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     can reach on the next line, padded by `pad_cells` for the legs' curvature)."""
     wf, sp = inst.weather, inst.space
     grid = wf.grid
+
     def var(k):  # (nlat, nlon, nt) float64, NaN as 0
         return np.nan_to_num(wf.cells[..., k].astype(np.float64), nan=0.0)
 

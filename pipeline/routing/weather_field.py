@@ -18,7 +18,8 @@ The field is stored in the sampling layout `cells` (nlat, nlon, nt, 7): a sample
 valid times, and in this layout each corner's two times and seven variables are 56 contiguous bytes, and
 the next step along a leg (same cell, a little later) reads the same lines again. In the variable-first
 layout (7, nt, nlat, nlon), still offered as the view `values`, the same sample touches 28 cache lines
-spread over the whole field: sailing a leg took 3.3× as long in the hourly 5,000 NM bench weather.
+spread over the whole field: in the hourly 5,000 NM bench weather a sample took 3.3× as long when steps jump
+about the field, and a whole BFOA solve about 9 % longer.
 """
 
 from __future__ import annotations
