@@ -28,6 +28,7 @@ from flows.settings import Settings, load_settings
 from pipeline.export.bundle import SUFFIX
 from pipeline.performance.model import model_from_stored
 from pipeline.export.paths import ExportPathError, export_name
+from pipeline.export.voyage import utc_datetime
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
@@ -50,12 +51,8 @@ def upcoming(voyages: pd.DataFrame, cycle: np.datetime64, lookahead_h: float) ->
 def plain(v):
     """A warehouse value as a plain Python value for a worker (numpy scalars and arrays unpacked, NaN and NaT → None,
     times as naive UTC datetimes): jobs then unpickle in a worker without pandas."""
-    if isinstance(v, pd.Timestamp):
-        return (v.tz_convert("UTC").tz_localize(None) if v.tzinfo is not None else v).to_pydatetime()
-    if v is pd.NaT:
-        return None
-    if isinstance(v, np.datetime64):
-        return None if np.isnat(v) else v.astype("datetime64[us]").item()
+    if isinstance(v, (datetime, np.datetime64)):  # pandas Timestamps and NaT are datetimes
+        return utc_datetime(v)
     if isinstance(v, np.generic):
         return plain(v.item())
     if isinstance(v, np.ndarray):
