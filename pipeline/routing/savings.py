@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
-from pipeline.routing.engine_limits import EngineLimits, best_engine_plan, limited_plan
+from pipeline.routing.engine_limits import PLAN_GAP, EngineLimits, best_engine_plan, limited_plan
 from pipeline.routing.problem import Instance
 
 if TYPE_CHECKING:
@@ -45,9 +45,10 @@ class SavingsSplit:
 
 def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | None = None) -> tuple[np.ndarray, float]:
     """(rpm index per leg, cost) of the best engine plan on the base route, under `limits` when they are active
-    (cost includes the change costs; inf: none can be sailed)."""
+    (within 0.1 % of the best, never dearer than a setting held throughout; cost includes the change costs; inf:
+    none can be sailed)."""
     if limits is not None and limits.active:
-        best = limited_plan(inst, base_nodes, limits)
+        best = limited_plan(inst, base_nodes, limits, gap=PLAN_GAP)
         return best.rpm_idx, best.cost
     rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
     return rpm_idx, cost

@@ -28,7 +28,7 @@ from pipeline.routing.baseline import Baseline, baseline as find_baseline, const
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.clearance import least_clearance_nm
 from pipeline.routing.dp import DpOptions
-from pipeline.routing.engine_limits import EngineLimits, limited_plan, unlimited_cost
+from pipeline.routing.engine_limits import PLAN_GAP, EngineLimits, limited_plan, unlimited_cost
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import profile_plan, split_of, with_constant_speed
@@ -121,10 +121,11 @@ def _unlimited_fuel_t(inst: Instance, nodes, known_cost: float, known_fuel_t: fl
 
 
 def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
-    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan). For what
+    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan, within
+    0.1 % of the best such plan and never dearer than a setting held throughout). For what
     the limits cost, `unlimited_fuel_t` is the best engine plan on the route without limits, so the limits never
     seem to save fuel and are not blamed for what the solver left on its route."""
-    held = limited_plan(inst, nodes, limits)
+    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
