@@ -51,7 +51,6 @@ from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
-from pipeline.routing.weather_field import SWH, U10, UO, V10, VO
 
 
 @numba.njit(cache=True)
@@ -382,12 +381,7 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     wf, sp = inst.weather, inst.space
     grid = wf.grid
 
-    def var(k):  # (nlat, nlon, nt) float64, NaN as 0
-        return np.nan_to_num(wf.cells[..., k].astype(np.float64), nan=0.0)
-
-    wind = np.hypot(var(U10), var(V10)).max(axis=2) * geo.KN_PER_MS
-    hs = var(SWH).max(axis=2)
-    cur = np.hypot(var(UO), var(VO)).max(axis=2) * geo.KN_PER_MS
+    wind, hs, cur = wf.max_over_time
     L2, P = sp.lat.shape
     iy, ix = _cell_index(grid, sp.lat, sp.lon)
     out = np.zeros((3, L2, P))
