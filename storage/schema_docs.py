@@ -65,7 +65,7 @@ _ROUTES = {
     "runtime_s": "solver run time, seconds",
     "n_legs": "number of legs of the plan",
     "n_legs_beyond_forecast": "number of legs sailed past the forecast horizon (weather of the last step persisted)",
-    "forecast_flag": "'beyond horizon', 'before cycle', both (comma separated) or empty when the voyage lies in the forecast",
+    "forecast_flag": "'beyond horizon', 'before cycle', 'weather missing' (a hole in the cube's wind, sailed as calm; the reason names the legs), comma separated, or empty when the voyage lies in the forecast",
     "hours_beyond_forecast": "hours sailed past the last forecast step",
     "hours_before_cycle": "hours sailed before the forecast cycle's init time",
     "honest_baseline_rpm": "the one constant rpm (between the vessel's limits) at which the base route arrives at the RTA",
