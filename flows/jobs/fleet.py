@@ -27,7 +27,7 @@ from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.export.bundle import SUFFIX
 from pipeline.performance.model import model_from_stored
-from pipeline.export.paths import ExportPathError, export_name
+from pipeline.export.paths import ExportPathError, voyage_export_key
 from pipeline.export.voyage import utc_datetime
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
@@ -117,8 +117,8 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
             for kind, data in res.get("exports", {}).items():
-                try:  # the voyage ID makes the file name: one plain name in the run folder, or refused naming the voyage
-                    run_exports.stage(r["run_id"], export_name(r["voyage_id"], SUFFIX[kind]), data)
+                try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
+                    run_exports.stage(r["run_id"], voyage_export_key(r["voyage_id"], SUFFIX[kind]), data)
                 except (OSError, ExportPathError) as exc:
                     export_errors.append(f"{r['voyage_id']}: {kind}: {exc}")
                     LOG.error("voyage %s: %s export not written: %s", r["voyage_id"], kind, exc)
