@@ -70,8 +70,9 @@ def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, ke
     rej = pd.DataFrame({k: rejected[k] if k in rejected else None for k in keys})
     if "imo" in rej:
         rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
-    if "voyage_id" in rej:
-        rej["voyage_id"] = rej["voyage_id"].astype("string")
+    for k in ("voyage_id", "bill_no"):
+        if k in rej:
+            rej[k] = rej[k].astype("string")
     rej["raw"] = rejected["raw"].astype("string")
     rej["reason"] = rejected["reason"].astype("string")
     rej["source_file"] = rejected["source_file"].astype("string") if "source_file" in rejected else None
@@ -140,9 +141,11 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
 BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]
 
 
-def import_bunkers(db_path: Path, good: pd.DataFrame) -> dict[str, int]:
+def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | None = None) -> dict[str, int]:
     """Insert validated bunker-log rows; a row identical to a stored one is a no-op, one that differs from the
-    stored row of the same (imo, bill_no, fuel_type) is not stored. Returns counts and the conflicting rows."""
+    stored row of the same (imo, bill_no, fuel_type) is not stored. Rows refused by validation go to
+    `bunker_logs_rejected` with their reason and raw text. Returns counts and the conflicting rows."""
+    _store_rejected(db_path, "bunker_logs_rejected", rejected, ["imo", "bill_no"])
     good = good.reindex(columns=BUNKER_COLUMNS)
     key = "imo, bill_no, fuel_type"
     same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))

@@ -218,6 +218,9 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
         "fuel_type": "fuel grade, upper case: HFO | LFO | MGO | MDO | DO | LNG | ...",
         "received_t": "fuel received, tonnes", "rob_t": "fuel of this grade remaining on board before receiving, tonnes",
         "source_file": _NOON["source_file"]}),
+    "bunker_logs_rejected": ("rows of bunker-log files refused on import, with the reason and the raw row", {
+        "imo": "IMO number of the vessel, when readable", "bill_no": "bunker delivery note number, as written",
+        **_REJECTED, "source_file": _NOON["source_file"]}),
     "ingest_log": ("weather files fetched: one row per file and attempt", _INGEST),
     "cycles": ("weather forecast cycles: complete or what is missing", _CYCLES),
     "route_runs": ("fleet routing runs: one row per run", _RUNS),

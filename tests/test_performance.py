@@ -627,8 +627,9 @@ def test_bunker_logs_import_with_validation_from_the_command_line(tmp_path, monk
     res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
     assert res.exit_code == 0, res.output
     assert "14 rows → 7 imported, 0 already present, 7 rejected" in res.output
-    for reason in ("negative received_t", "received looks like kg", "bad date", "unknown vessel", "missing fuel_type",
-                   "not a number in received_t", "duplicate bill and fuel in file"):
+    for reason in ("negative received_t", "received looks like kg", "date_utc: ambiguous timestamp",
+                   "IMO number fails its check digit", "missing fuel_type", "not a number in received_t",
+                   "duplicate bill and fuel in file"):
         assert f"1 × {reason}" in res.output
     with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
         rows = con.execute("SELECT fuel_type, sum(received_t) FROM bunker_logs GROUP BY 1 ORDER BY 1").fetchall()
@@ -670,3 +671,60 @@ def test_voyage_performance_sets_plan_beside_actual(tmp_path):
     assert v1.fuel_error_pct == pytest.approx(-5.0) and v1.arrival_error_h == pytest.approx(6.0) and v1.late_h == 0.0
     v2 = vp.loc["voy20200002"]  # sailed, never planned: actuals without a plan
     assert v2.n_reports == 5 and v2.actual_fuel_t == 100.0 and pd.isna(v2.planned_fuel_t) and pd.isna(v2.fuel_error_pct)
+
+
+def test_bunker_import_is_as_strict_as_noon_import_and_keeps_every_refused_row(tmp_path, monkeypatch):
+    """The attacks on the old import: a date-only first row no longer decides the format of the others; day/month
+    dates are refused, not guessed; inf, a date in 2031, IMO 9140607.9 and 17,000 t for a 3,500 dwt ship are refused;
+    every refused row is in bunker_logs_rejected with its reason and raw text."""
+    import logging
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "300")
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    monkeypatch.setattr(logging, "raiseExceptions", False)
+    data = tmp_path / "data"
+    data.mkdir()
+    fleet_store.import_vessels(data / "warehouse.duckdb", GAS_NIRVANA_VESSEL)
+    row = dict(imo="9140607", port="Hai Phong", supplier="PV Oil", fuel_type="DO", received_t="50", rob_t="0")
+    rows = pd.DataFrame([
+        dict(row, bill_no="g1", date_utc="2020-12-06"),  # date only, first: fine, and says nothing about the others
+        dict(row, bill_no="g2", date_utc="2020-12-07T08:30:00Z"),
+        dict(row, bill_no="g3", date_utc="2020-12-08T08:30:00+07:00"),
+        dict(row, bill_no="g4", date_utc="2020-12-09 10:00"),
+        dict(row, bill_no="a1", date_utc="01/02/2025"),
+        dict(row, bill_no="a2", date_utc="13/02/2025"),
+        dict(row, bill_no="f1", date_utc="2020-12-10", rob_t="inf"),
+        dict(row, bill_no="f2", date_utc="2031-01-01"),
+        dict(row, bill_no="f3", date_utc="2020-12-10", imo="9140607.9"),
+        dict(row, bill_no="f4", date_utc="2020-12-10", received_t="17000"),
+        dict(row, bill_no="f5", date_utc="2020-12-10", port="Hai Phong\n\x1b[31mfake"),
+    ])
+    path = tmp_path / "bunkers.csv"
+    rows.to_csv(path, index=False)
+    res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    assert res.exit_code == 0, res.output
+    assert "11 rows → 4 imported, 0 already present, 7 rejected" in res.output
+    assert "bunker_logs_rejected" in res.output
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        stored = con.execute("SELECT bill_no, date_utc FROM bunker_logs ORDER BY bill_no").fetchall()
+        refused = dict(con.execute("SELECT bill_no, reason FROM bunker_logs_rejected").fetchall())
+        raw = dict(con.execute("SELECT bill_no, raw FROM bunker_logs_rejected").fetchall())
+    assert [b for b, _ in stored] == ["g1", "g2", "g3", "g4"]
+    assert [str(d) for _, d in stored] == ["2020-12-06 00:00:00", "2020-12-07 08:30:00", "2020-12-08 01:30:00",
+                                           "2020-12-09 10:00:00"]
+    assert refused["a1"].startswith("date_utc: ambiguous timestamp") and refused["a2"].startswith("date_utc: ambiguous")
+    assert refused["f1"] == "not a finite number in rob_t"
+    assert refused["f2"] == "date in the future"
+    assert refused["f3"] == "not an integer in imo"
+    assert refused["f4"] == "received more than the vessel's deadweight (3500 t)"
+    assert refused["f5"] == "control characters or a line break in port"
+    assert "01/02/2025" in raw["a1"] and "9140607.9" in raw["f3"] and "17000" in raw["f4"]
+    assert len(stored) + len(refused) == len(rows)  # nothing lost
+    # a re-import stores no refused row twice
+    CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        assert con.execute("SELECT count(*) FROM bunker_logs_rejected").fetchone()[0] == 7

@@ -74,8 +74,10 @@ def import_bunker_file(path: str, data_root: str | None = None, *, run=PLAIN) ->
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     raw = read_table(Path(path))
-    good, bad = validate_bunker(raw, fleet_store.known_imos(db), source=Path(path).name)
-    counts = fleet_store.import_bunkers(db, good)
+    vessels = fleet_store.load_vessels(db) if db.exists() else None
+    dwt_t = dict(zip(vessels["imo"].astype(int), vessels["dwt"])) if vessels is not None and len(vessels) else {}
+    good, bad = validate_bunker(raw, set(dwt_t) if vessels is not None else set(), source=Path(path).name, dwt_t=dwt_t)
+    counts = fleet_store.import_bunkers(db, good, bad)
     conflicts = counts.pop("conflicts")
     counts.update(rows=len(raw), rejected=len(bad) + len(conflicts), reasons=reason_counts(bad),
                   conflicts=[f"{r.imo} {r.bill_no} {r.fuel_type}" for r in conflicts.itertuples()])
