@@ -12,7 +12,7 @@ import logging
 
 # By class name (any base class counts), so this module imports none of the layers below.
 USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
-               "WarehouseBusyError", "WarehouseCorruptError", "RoutingInputError", "VoyageGeometryError", "ServeError",
+               "WarehouseBusyError", "WarehouseCorruptError", "WarehouseWriteError", "RoutingInputError", "VoyageGeometryError", "ServeError",
                "TimeoutError", "CubeError", "ExportPathError", "WeatherMapError", "FleetFileError", "SettingsError"}
 
 

@@ -36,8 +36,11 @@ import duckdb
 # SNAPSHOT_STORAGE_NUMBER, in the file header).
 SNAPSHOT_STORAGE_VERSION = "v1.1.0"
 SNAPSHOT_STORAGE_NUMBER = 64
-# Verified snapshots kept: the newest (`warehouse.snapshot.duckdb`, the analysts' copy) and older ones.
+# Verified snapshots kept: the newest (`warehouse.snapshot.duckdb`, the analysts' copy) and older ones. A command
+# writes several times within seconds; the newest snapshot becomes an older generation only once it is this old,
+# so the older generations stay copies from earlier commands rather than from the same one.
 SNAPSHOT_GENERATIONS = 3
+SNAPSHOT_MIN_AGE_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -48,6 +51,11 @@ class Migration:
 
 class WarehouseBusyError(RuntimeError):
     pass
+
+
+class WarehouseWriteError(RuntimeError):
+    """The warehouse (or its snapshot) cannot be written: disk full, read-only or immutable; the message names the
+    file and what to do."""
 
 
 class WarehouseCorruptError(RuntimeError):
@@ -73,6 +81,24 @@ def _is_corrupt(exc: Exception) -> bool:
     return any(sign in str(exc).lower() for sign in _CORRUPT_SIGNS)
 
 
+_NO_SPACE_SIGNS = ("no space left", "file too large", "disk quota")
+_NO_WRITE_SIGNS = ("operation not permitted", "permission denied", "read-only file system")
+
+
+def _unwritable(path: Path, exc: Exception) -> WarehouseWriteError | None:
+    """The one-line error for a write the file system refused (full, read-only, immutable); None for other errors."""
+    text = str(exc).lower()
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if any(sign in text for sign in _NO_SPACE_SIGNS):
+        return WarehouseWriteError(f"no space to write warehouse {path} ({first}): free space on its disk and re-run "
+                                   "(what this command had not committed is not in the warehouse)")
+    if any(sign in text for sign in _NO_WRITE_SIGNS):
+        return WarehouseWriteError(f"warehouse {path} cannot be written ({first}): make it writable (permissions, "
+                                   f"`chattr -i`, a read-write mount) and re-run; analysts can still read "
+                                   f"{snapshot_path(path)}")
+    return None
+
+
 def _all_migrations() -> list[Migration]:
     # Imported here so each schema module can be edited on its own.
     from storage import schema_docs, schema_fleet, schema_ingest, schema_routes
@@ -96,6 +122,9 @@ def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnecti
                 raise _corrupt(path, exc) from exc
             if not isinstance(exc, duckdb.IOException):
                 raise
+            refused = _unwritable(path, exc)
+            if refused is not None:  # not another process's lock: waiting would not help
+                raise refused from exc
             # another process holds the file lock
             if "lock" not in str(exc).lower() or time.monotonic() >= deadline:
                 raise WarehouseBusyError(
@@ -151,6 +180,9 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
     except duckdb.Error as exc:
         if _is_corrupt(exc):  # a damaged block met while reading or writing
             raise _corrupt(path, exc) from exc
+        refused = _unwritable(path, exc)
+        if refused is not None:
+            raise refused from exc
         raise
     finally:
         con.close()
@@ -223,24 +255,31 @@ def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
     during the copy and a newer snapshot is never replaced by an older one.
 
     The copy is published only if it passes `check_file`; otherwise WarehouseCorruptError is raised and every
-    snapshot is left as it was. The snapshot it replaces becomes `<name>.snapshot.1.duckdb` (and so on, up to
-    SNAPSHOT_GENERATIONS files), so the last few verified copies stay.
+    snapshot is left as it was. The snapshot it replaces, once SNAPSHOT_MIN_AGE_S old, becomes
+    `<name>.snapshot.1.duckdb` (and so on, up to SNAPSHOT_GENERATIONS files), so the last few verified copies stay.
     """
     path = Path(path)
     snap = snapshot_path(path)
     tmp = snap.with_name(snap.name + f".tmp{os.getpid()}")
     tmp.unlink(missing_ok=True)
     try:
-        if storage_version_number(path) == SNAPSHOT_STORAGE_NUMBER:
-            shutil.copyfile(path, tmp)
-        else:
-            _copy_in_snapshot_format(con, tmp)
+        try:
+            if storage_version_number(path) == SNAPSHOT_STORAGE_NUMBER:
+                shutil.copyfile(path, tmp)
+            else:
+                _copy_in_snapshot_format(con, tmp)
+        except OSError as exc:
+            raise WarehouseWriteError(
+                f"the snapshot {tmp} could not be written ({exc.strerror or exc}): free space (or make {snap.parent} "
+                f"writable) and re-run; warehouse {path} holds this command's writes and the snapshots are as they were"
+            ) from exc
         problem = check_file(tmp)
         if problem is not None:
             raise WarehouseCorruptError(
                 f"the snapshot copy of warehouse {path} fails the check ({problem}), so it was not published and the "
                 f"snapshots {snap.name} … are as they were; check the disk (space, errors) and re-run")
-        _keep_older_generations(path)
+        if snap.exists() and time.time() - snap.stat().st_mtime >= SNAPSHOT_MIN_AGE_S:
+            _keep_older_generations(path)
         os.replace(tmp, snap)
     finally:
         tmp.unlink(missing_ok=True)
