@@ -171,3 +171,35 @@ def test_currents_in_unknown_units_are_refused(tmp_path):
     path = _oscar_in(tmp_path, "knots", 1.0)
     with pytest.raises(DecodeError, match="u is in 'knots', expected a speed"):
         decode_oscar(path)
+
+
+def test_an_oscar_file_in_a_360_day_calendar_is_refused_naming_the_calendar(tmp_path):
+    import netCDF4
+
+    path = tmp_path / "oscar_currents_nrt_20201201.nc"
+    with netCDF4.Dataset(path, "w") as nc:
+        for name, n in (("time", 1), ("latitude", 3), ("longitude", 4)):
+            nc.createDimension(name, n)
+        t = nc.createVariable("time", "f8", ("time",))
+        t.units, t.calendar = "days since 1990-01-01", "360_day"
+        t[:] = [11000.0]
+        nc.createVariable("latitude", "f4", ("latitude",))[:] = [-1.0, 0.0, 1.0]
+        nc.createVariable("longitude", "f4", ("longitude",))[:] = [0.0, 90.0, 180.0, 270.0]
+        for name in ("u", "v"):
+            var = nc.createVariable(name, "f4", ("time", "latitude", "longitude"))
+            var.units = "m/s"
+            var[:] = np.full((1, 3, 4), 0.3)
+    with pytest.raises(DecodeError, match="time axis in the '360_day' calendar, not the standard calendar"):
+        decode_oscar(path)
+
+
+def test_a_redirect_to_a_file_url_is_refused_naming_the_scheme(tmp_path):
+    from pipeline.sources.fetch import FetchOptions, fetch
+    from tests.http_mirror import serve
+
+    (tmp_path / "f.nc").write_bytes(b"x")
+    with serve(tmp_path, {"f.nc": "redirect:file:///etc/passwd"}) as (url, handler):
+        result = fetch(url + "f.nc", tmp_path / "out" / "f.nc", FetchOptions(retries=0))
+    assert result.status in ("error", "missing") and not (tmp_path / "out" / "f.nc").exists()
+    assert "redirect to a file: URL refused (only http and https redirects are followed" in result.error
+    assert "None" not in result.error

@@ -49,6 +49,8 @@ def decode_oscar(path: Path) -> xr.Dataset:
         if "u" not in raw or "v" not in raw:
             raise DecodeError(path, f"no u/v current variables (has {sorted(raw.data_vars)})")
         factors = {"uo": _to_ms_factor(raw["u"], path), "vo": _to_ms_factor(raw["v"], path)}
+        calendar = str(raw["time"].encoding.get("calendar") or raw["time"].attrs.get("calendar") or "standard") \
+            if "time" in raw.variables else "standard"
         ds = raw[["u", "v"]].load()
         lat_name = next((n for n in ("latitude", "lat") if n in ds.dims), None)
         lon_name = next((n for n in ("longitude", "lon") if n in ds.dims), None)
@@ -67,6 +69,9 @@ def decode_oscar(path: Path) -> xr.Dataset:
     _, first = np.unique(lon, return_index=True)  # drop the repeated band (first occurrence kept)
     ds = ds.assign_coords(lon=lon).isel(lon=np.sort(first)).sortby("lon").sortby("lat")
     if not np.issubdtype(ds["time"].dtype, np.datetime64):
+        if calendar.lower() not in ("standard", "gregorian", "proleptic_gregorian"):
+            raise DecodeError(path, f"time axis in the {calendar!r} calendar, not the standard calendar OSCAR uses: "
+                                    "its dates are not real UTC dates")
         raise DecodeError(path, "time axis has no decodable units")
     for k in ("uo", "vo"):
         v = ds[k].values.astype(np.float32)

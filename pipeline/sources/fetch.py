@@ -273,6 +273,10 @@ def _get_following(client: httpx.Client, url: str, opts: FetchOptions, stream: b
             target = urljoin(url, resp.headers.get("location", ""))
             resp.close()
             new_host = urlparse(target).hostname
+            scheme = urlparse(target).scheme
+            if scheme not in ("http", "https"):
+                raise PermissionError(f"{url}: redirect to a {scheme or 'relative'}: URL refused (only http and https "
+                                      "redirects are followed; fix the mirror or point jitroute at the final URL)")
             if new_host != host and new_host not in opts.allowed_redirect_hosts:
                 raise PermissionError(f"{url}: redirect to another host {new_host!r} refused (allow it with JITROUTE_ALLOWED_REDIRECT_HOSTS)")
             url = target
