@@ -251,7 +251,8 @@ VIEWS: dict[str, tuple[str, dict[str, str]]] = {
         "planned_eta_utc": f"planned arrival {UTC}", "n_reports": "noon reports at sea on the voyage",
         "actual_fuel_t": "fuel burnt in tonnes, from the noon reports", "actual_hours": "hours steamed, from the noon reports",
         "actual_dist_nm": "distance sailed, nautical miles, from the noon reports",
-        "actual_arrival_utc": f"last noon report of the voyage, standing for the arrival {UTC}",
+        "actual_arrival_utc": f"the arrival: the first noon report within 10 NM of the destination, else the last report at "
+                              f"sea before the next voyage (at most RTA + 30 days) {UTC}",
         "fuel_error_pct": "planned minus actual fuel, percent of actual",
         "arrival_error_h": "actual minus planned arrival, hours", "late_h": "actual arrival minus RTA, hours"}),
 }

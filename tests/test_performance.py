@@ -728,3 +728,36 @@ def test_bunker_import_is_as_strict_as_noon_import_and_keeps_every_refused_row(t
     CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
     with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
         assert con.execute("SELECT count(*) FROM bunker_logs_rejected").fetchone()[0] == 7
+
+
+def test_plan_against_actual_ends_a_late_voyage_at_its_arrival_not_at_rta_plus_3_days(tmp_path):
+    """A voyage arriving four days late is measured to its arrival report (within 10 NM of the destination), and a
+    shifting-to-berth report after arrival is not sea time."""
+    from storage import warehouse
+
+    db = tmp_path / "w.duckdb"
+    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
+    fleet_store.import_voyages(db, pd.DataFrame([dict(
+        voyage_id="voy20200001", imo=9140607, dep_name="Hai Phong", arr_name="Sai Gon", dep_lat=20.8, dep_lon=106.8,
+        arr_lat=10.7, arr_lon=106.8, depart_utc="2020-12-06T00:00Z", rta_utc="2020-12-10T12:00Z", draft_m=6.0, trim_m=2.0,
+        rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)]))
+    days = pd.date_range("2020-12-06T12:00", "2020-12-14T12:00", freq="D")  # 9 reports, the last at the destination
+    lat = np.linspace(19.6, 10.72, len(days))
+    sea = pd.DataFrame({"imo": "9140607", "ts_utc": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "lat": lat.round(3).astype(str),
+                        "lon": "106.8", "rpm": "120", "draft_m": "6", "stw_kn": "5", "sog_kn": "5", "dist_nm": "120",
+                        "hours": "24", "fuel_t": "20"})
+    berth = pd.DataFrame([{"imo": "9140607", "ts_utc": "2020-12-15T10:00:00Z", "lat": "10.77", "lon": "106.74", "rpm": "40",
+                           "draft_m": "6", "stw_kn": "0.2", "sog_kn": "0.2", "dist_nm": "5", "hours": "22", "fuel_t": "1.5"}])
+    good, bad = validate_noon(pd.concat([sea, berth], ignore_index=True), {9140607})
+    assert len(good) == 10 and len(bad) == 0
+    fleet_store.import_noon(db, good, bad)
+    with warehouse.connect(db) as con:
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', '2020-12-05', 'ok')")
+        con.execute("INSERT INTO routes (run_id, voyage_id, imo, status, depart_utc, eta_utc, rta_utc, fuel_t, model_version) "
+                    "VALUES ('r1', 'voy20200001', 9140607, 'ok', '2020-12-06', '2020-12-10 06:00', '2020-12-10 12:00', 95.0, 3)")
+    with duckdb.connect(str(db), read_only=True) as con:
+        v = con.execute("SELECT * FROM voyage_performance").fetchdf().iloc[0]
+    assert v.n_reports == 9 and v.actual_fuel_t == 180.0 and v.actual_hours == 216.0  # the berth report left out
+    assert str(v.actual_arrival_utc) == "2020-12-14 12:00:00"
+    assert v.fuel_error_pct == pytest.approx(100 * (95 - 180) / 180)  # -47.2 %, not cut at RTA + 3 days
+    assert v.arrival_error_h == pytest.approx(4 * 24 + 6) and v.late_h == pytest.approx(96.0)
