@@ -761,3 +761,32 @@ def test_plan_against_actual_ends_a_late_voyage_at_its_arrival_not_at_rta_plus_3
     assert str(v.actual_arrival_utc) == "2020-12-14 12:00:00"
     assert v.fuel_error_pct == pytest.approx(100 * (95 - 180) / 180)  # -47.2 %, not cut at RTA + 3 days
     assert v.arrival_error_h == pytest.approx(4 * 24 + 6) and v.late_h == pytest.approx(96.0)
+
+
+def test_a_noon_file_imported_in_chunks_stores_what_a_whole_file_import_stores(fleet, tmp_path, monkeypatch):
+    """Read, validated and stored 500 rows at a time (in one transaction): the same rows, rejected rows and reasons as
+    one chunk, including a (vessel, time) repeated in another chunk of the file (a duplicate, not a second report)."""
+    import flows.jobs.refit as refit_job
+
+    noon = _as_text(fleet.noon)
+    repeat = noon.iloc[[10]].copy()
+    repeat["fuel_t"] = "99"  # the same vessel and time 2,000 rows later, with other values
+    path = tmp_path / "noon.csv"
+    pd.concat([noon.iloc[:2000], repeat, noon.iloc[2000:]], ignore_index=True).to_csv(path, index=False)
+    results = {}
+    for rows in (10**9, 500):
+        monkeypatch.setattr(refit_job, "NOON_CHUNK_ROWS", rows)
+        monkeypatch.setattr(refit_job.read_table_chunks, "__defaults__", (rows,))
+        root = tmp_path / f"data{rows}"
+        root.mkdir()
+        fleet_store.import_vessels(root / "warehouse.duckdb", fleet.vessels)
+        counts = refit_job.import_noon_file(str(path), data_root=str(root))
+        with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+            stored = con.execute("SELECT * FROM noon_reports ORDER BY imo, ts_utc").fetchdf()
+            rejected = con.execute("SELECT reason, count(*) FROM noon_reports_rejected GROUP BY 1 ORDER BY 1").fetchall()
+        results[rows] = counts, stored, rejected
+    (whole, stored_whole, rej_whole), (chunked, stored_chunked, rej_chunked) = results[10**9], results[500]
+    assert chunked == whole and chunked["reasons"].get("duplicate timestamp in file", 0) >= 1
+    assert chunked["rows"] == len(noon) + 1 == chunked["inserted"] + chunked["rejected"]  # nothing lost
+    pd.testing.assert_frame_equal(stored_chunked, stored_whole)
+    assert rej_chunked == rej_whole
