@@ -148,4 +148,12 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE perf_models_new RENAME TO perf_models;
         """,
     ),
+    Migration(
+        "fleet_006_bunker_logs_rejected",
+        # bunker-log rows refused on import, kept with the reason and their raw text (as for noon reports)
+        """
+        CREATE TABLE bunker_logs_rejected (imo BIGINT, bill_no VARCHAR, raw VARCHAR, reason VARCHAR NOT NULL,
+                                           source_file VARCHAR, rejected_at TIMESTAMP);
+        """,
+    ),
 ]

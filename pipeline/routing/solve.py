@@ -70,6 +70,12 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                 n = plan.n_beyond_forecast
                 notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({n} leg{'s' if n != 1 else ''}) beyond "
                              f"the forecast horizon {inst.weather.horizon_utc} (its last step persisted)")
+            no_wind = [leg["leg"] for leg in plan.legs if leg.get("hours_without_wind", 0.0) > 1e-9]
+            if no_wind:
+                hours = sum(leg.get("hours_without_wind", 0.0) for leg in plan.legs)
+                notes.append(f"weather missing: no wind data for {hours:.1f} h on leg{'s' if len(no_wind) != 1 else ''} "
+                             f"{', '.join(map(str, no_wind))} (a hole in cycle {inst.weather.cycle}, sailed as calm; "
+                             "re-ingest the cycle)")
             if plan.hours_before_cycle > 1e-9:
                 notes.append(f"{plan.hours_before_cycle:.1f} h of the voyage before the forecast cycle "
                              f"{inst.weather.cycle} (its first step used)")
