@@ -232,12 +232,26 @@ def active_models(db_path: Path) -> dict[int, dict]:
         return _active_models(con)
 
 
-def _active_models(con) -> dict[int, dict]:
-    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd, data_to_utc FROM perf_models "
-                       "WHERE active").fetchall()
+def model_version(db_path: Path, imo: int, version: int | None = None) -> dict | None:
+    """Vessel `imo`'s model `version` (None: the active one) as `active_models` gives models, with its "status"; None
+    if there is no such model."""
+    with warehouse.connect(db_path, write=False) as con:
+        if version is None:
+            return _active_models(con).get(int(imo))
+        found = _active_models(con, "imo = ? AND version = ?", [int(imo), int(version)]).get(int(imo))
+        if found:
+            found["status"] = con.execute("SELECT any_value(status) FROM perf_models WHERE imo = ? AND version = ?",
+                                          [int(imo), int(version)]).fetchone()[0]
+        return found
+
+
+def _active_models(con, where: str = "active", params: list | None = None) -> dict[int, dict]:
+    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd, data_to_utc, envelope FROM perf_models "
+                       f"WHERE {where}", params or []).fetchall()
     out: dict[int, dict] = {}
-    for imo, version, form, target, coefs, months, data_to in rows:
-        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0, "data_to_utc": data_to})
+    for imo, version, form, target, coefs, months, data_to, envelope in rows:
+        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0, "data_to_utc": data_to,
+                                      "envelope": envelope})
         d[target] = json.loads(coefs)
     return out
 
@@ -263,7 +277,7 @@ def _next_versions(con) -> dict[int, int]:
 
 
 FIT_COLUMNS = ["imo", "version", "fitted_at", "form", "target", "coefficients", "n_rows", "r2", "rmse", "cv_rmse", "holdout_rmse",
-               "n_holdout", "status", "reason", "active", "months_dd", "data_hash", "data_to_utc"]
+               "n_holdout", "status", "reason", "active", "months_dd", "data_hash", "data_to_utc", "envelope", "gate"]
 
 
 def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[int, str]] | None = None,

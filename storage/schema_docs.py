@@ -131,7 +131,7 @@ _MODELS = {
     "imo": "IMO number of the vessel",
     "version": "model version, per vessel and target",
     "fitted_at": f"when the model was fitted {UTC}",
-    "form": "model form: thesis | physical | fuzzy",
+    "form": "model form: thesis | physical | mlp",
     "target": "what the model predicts: speed (knots through water) | fuel (tonnes per hour)",
     "coefficients": "JSON {regressor: value}",
     "n_rows": "noon reports fitted on",
@@ -147,6 +147,9 @@ _MODELS = {
     "data_hash": "digest of the rows, form and fit settings (the same inputs give the same model)",
     "data_to_utc": f"newest report the coefficients were fitted on {UTC}",
     "flag": "why new reports contradict this active model",
+    "envelope": "JSON of the conditions fitted on: rpm and draft_m [least, largest], largest wind_kn and hs_m; routing "
+                "clips rpm settings to it and evaluates the model inside it",
+    "gate": "the gate the refit applied: 'default' or the settings that differed (jitroute refit --gate NAME=VALUE)",
 }
 _VOYAGES = {
     "voyage_id": "voyage id", "imo": "IMO number of the vessel",

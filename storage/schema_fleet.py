@@ -148,4 +148,13 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE perf_models_new RENAME TO perf_models;
         """,
     ),
+    Migration(
+        "fleet_006_model_envelope_gate",
+        # the conditions a model was fitted on (routing clips rpm settings and guards the inputs to them) and the
+        # gate its refit applied ('default' or the settings that differed)
+        """
+        ALTER TABLE perf_models ADD COLUMN envelope VARCHAR;  -- JSON {rpm: [lo, hi], draft_m: [lo, hi], wind_kn, hs_m, ...}
+        ALTER TABLE perf_models ADD COLUMN gate VARCHAR;      -- 'default' or the gate settings that differed
+        """,
+    ),
 ]

@@ -14,8 +14,11 @@ from an explicit seeded generator: the same rows and seed give the same network,
 Plain numpy (a 256-parameter network on a few hundred reports needs no framework); the forward
 pass is also a numba function so routing kernels evaluate it like the linear forms.
 
-A network is one flat parameter vector (`N_PARAMS` values, layout in `_unpack`), stored as the
-model's speed and its fuel coefficients alike.
+A network is one flat parameter vector (`N_PARAMS` values, layout in `_unpack`, then the least and the
+largest value of each input in the training rows), stored as the model's speed and its fuel
+coefficients alike. The network is evaluated at its inputs clamped to that range: outside the
+conditions it was trained on it answers as at their edge instead of extrapolating (a tanh network
+extrapolates anything: fuel falling to 0 below the lowest rpm it saw, speed rising in heavier seas).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numba
 import numpy as np
 
 N_IN, N_HIDDEN, N_OUT = 5, 30, 2
-N_PARAMS = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT
+N_PARAMS = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT + 2 * N_IN
 PARAM_NAMES = tuple(f"p{i:03d}" for i in range(N_PARAMS))
 VAL_FRAC = 0.2
 MAX_EPOCHS = 1500
@@ -43,12 +46,20 @@ _W2 = _B1 + N_HIDDEN
 _B2 = _W2 + N_HIDDEN * N_OUT
 _YM = _B2 + N_OUT
 _YS = _YM + N_OUT
+_LO = _YS + N_OUT  # least and largest value of each input in the training rows: the network is evaluated
+_HI = _LO + N_IN  # at inputs clamped to them (flat outside what it saw, never extrapolated)
 
 
 def _unpack(p: np.ndarray):
     """(x_mean, x_std, W1 (5×30), b1, W2 (30×2), b2, y_mean, y_std) views of a parameter vector."""
     return (p[_XM:_XS], p[_XS:_W1], p[_W1:_B1].reshape(N_IN, N_HIDDEN), p[_B1:_W2], p[_W2:_B2].reshape(N_HIDDEN, N_OUT),
-            p[_B2:_YM], p[_YM:_YS], p[_YS:])
+            p[_B2:_YM], p[_YM:_YS], p[_YS:_LO])
+
+
+def input_bounds(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(least, largest) of each network input (rpm, draft, trim, wind·w, waves·w) in the rows it was trained on."""
+    p = np.asarray(p, dtype=np.float64)
+    return p[_LO:_HI], p[_HI:]
 
 
 def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> np.ndarray:
@@ -64,7 +75,9 @@ def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> n
 
 def forward(p: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(n × 2) outputs — speed (kn), fuel rate (t/h) — of the network p at the rows of X (n × 5)."""
-    xm, xs, W1, b1, W2, b2, ym, ys = _unpack(np.asarray(p, dtype=np.float64))
+    p = np.asarray(p, dtype=np.float64)
+    xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
+    X = np.minimum(np.maximum(X, p[_LO:_HI]), p[_HI:])
     return (np.tanh(((X - xm) / xs) @ W1 + b1) @ W2 + b2) * ys + ym
 
 
@@ -74,7 +87,7 @@ def forward_nb(p, x0, x1, x2, x3, x4, out_index):
     x = (x0, x1, x2, x3, x4)
     z = np.empty(N_IN)
     for i in range(N_IN):
-        z[i] = (x[i] - p[_XM + i]) / p[_XS + i]
+        z[i] = (min(max(x[i], p[_LO + i]), p[_HI + i]) - p[_XM + i]) / p[_XS + i]
     o = p[_B2 + out_index]
     for j in range(N_HIDDEN):
         a = p[_B1 + j]
@@ -98,9 +111,11 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
     xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
     if n == 0:
         xs[:], ys[:] = 1.0, 1.0
+        p[_LO:_HI], p[_HI:] = -np.inf, np.inf
         return p, {"n_train": 0, "n_val": 0, "best_epoch": 0, "epochs": 0, "val_mse": float("nan")}
     n_val = min(max(int(round(n * val_frac)), 1), n - 1) if n >= 2 else 0
     n_fit = n - n_val
+    p[_LO:_HI], p[_HI:] = X.min(axis=0), X.max(axis=0)
     xm[:], ym[:] = X[:n_fit].mean(axis=0), Y[:n_fit].mean(axis=0)
     xs[:] = np.where(X[:n_fit].std(axis=0) > 1e-12, X[:n_fit].std(axis=0), 1.0)
     ys[:] = np.where(Y[:n_fit].std(axis=0) > 1e-12, Y[:n_fit].std(axis=0), 1.0)
