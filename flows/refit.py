@@ -33,6 +33,6 @@ def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
 @register_flow
 @flow(name="refit-performance")
 def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
-                      robust: bool | None = None) -> list[dict]:
+                      robust: bool | None = None, gate: list[str] | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; activation only for a model that is not worse."""
-    return refit_job(imos, data_root=data_root, form=form, robust=robust, run=InPrefect())
+    return refit_job(imos, data_root=data_root, form=form, robust=robust, gate=gate, run=InPrefect())

@@ -12,7 +12,8 @@ from flows.runner import PLAIN
 from flows.settings import load_settings
 from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.performance.bunker import validate_bunker
-from pipeline.performance.refit import REPORT_COLUMNS, Gate, check_form, fitted_from_rows, refit_fleet, storage_actions
+from pipeline.performance.refit import (REPORT_COLUMNS, Gate, check_form, fitted_from_rows, gate_with, refit_fleet,
+                                        storage_actions)
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -94,12 +95,14 @@ def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, fo
 
 
 def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
-              robust: bool | None = None, *, run=PLAIN) -> list[dict]:
-    """Refit every (or the given) vessel's speed and fuel model ("best": every form, the best on held-out
-    reports proposed); a model becomes active only if it passes the gate (settings.performance) and is
-    not worse than the active one on the same held-out reports."""
+              robust: bool | None = None, gate: list[str] | None = None, *, run=PLAIN) -> list[dict]:
+    """Refit every (or the given) vessel's speed and fuel model ("best": every form, the physical one kept
+    unless another is significantly better on held-out reports); a model becomes active only if it passes
+    the gate (settings.performance, with `gate` "NAME=VALUE" overrides) and is not worse than the active
+    one on the same held-out reports."""
     check_form(form)  # before anything is read
     s = load_settings(data_root=Path(data_root) if data_root else None)
+    s = s.with_overrides(performance=gate_with(s.performance, gate))
     db = s.layout.ensure().warehouse
     known = fleet_store.known_imos(db)
     unknown = sorted(set(imos or ()) - set(known))
