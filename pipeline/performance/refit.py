@@ -289,7 +289,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
 
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
-    train_env = [sanity.envelope_of(inp, a, b) for a, b in zip(bounds[:-1].tolist(), hold_from.tolist())]
+    train_env = sanity.envelopes(inp, bounds[:-1], hold_from)
     cands = {}
     for form in forms:
         X = _designs(form, inp)
@@ -571,7 +571,7 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
-        env = [sanity.envelope_of(inp, int(bounds[g]), int(bounds[g + 1])) for g in gs]
+        env = sanity.envelopes(inp, bounds[gs], bounds[gs + 1])
         active = [j for j, g in enumerate(gs) if any(p[3] for p in plans if p[0] == g)]
         sane = [None] * gs.size
         if gate.sanity and active:

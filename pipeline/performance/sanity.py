@@ -24,7 +24,7 @@ import numpy as np
 
 from pipeline.performance import features
 
-N_RPM, N_DRAFT, N_WIND, N_WAVE = 6, 2, 4, 4
+N_RPM, N_DRAFT, N_WIND, N_WAVE = 5, 2, 3, 3
 DIRECTIONS_DEG = (0.0, 45.0, 90.0, 135.0, 180.0)
 AHEAD = (0, 1)  # indices of DIRECTIONS_DEG counted as "from ahead"
 CHECKS = ("head_weather_speed", "weather_fuel", "rpm_speed", "rpm_fuel")
@@ -38,7 +38,7 @@ class Envelope:
     draft_m: tuple[float, float]
     wind_kn: float  # largest true wind seen
     hs_m: float  # largest significant wave height seen
-    trim_m: float = 0.0  # median trim (held fixed on the grid)
+    trim_m: float = 0.0  # mean trim (held fixed on the grid)
     months_dd: float = 0.0  # months since dry dock of the newest report (held fixed on the grid)
 
     def to_json(self) -> str:
@@ -67,14 +67,37 @@ class Envelope:
 
 def envelope_of(inp: dict[str, np.ndarray], start: int, stop: int) -> Envelope:
     """The envelope of rows start:stop of model inputs (`fit.inputs_from_reports`); NaNs left out."""
-    def finite(c):
-        v = np.asarray(inp[c][start:stop], dtype=np.float64)
-        return v[np.isfinite(v)]
+    return envelopes(inp, np.array([start]), np.array([stop]))[0]
 
-    rpm, draft, wind, hs, trim, months = (finite(c) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m", "months_dd"))
-    rng = lambda v: (float(v.min()), float(v.max())) if v.size else (0.0, 0.0)  # noqa: E731
-    return Envelope(rng(rpm), rng(draft), float(wind.max()) if wind.size else 0.0, float(hs.max()) if hs.size else 0.0,
-                    float(np.median(trim)) if trim.size else 0.0, float(months[-1]) if months.size else 0.0)
+
+def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
+    """`envelope_of` of the row ranges starts[g]:stops[g] (non-empty ones), in one pass per column: least and
+    largest rpm and draft, largest wind and waves, mean trim, months since dry dock of the last row."""
+    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
+    G = starts.size
+    if G == 0:
+        return []
+    n = stops - starts
+    which = np.repeat(np.arange(G), n)
+    rows = np.repeat(starts - np.r_[0, np.cumsum(n)[:-1]], n) + np.arange(int(n.sum()))
+
+    def red(col, fn, fill):
+        v = np.asarray(inp[col], dtype=np.float64)[rows]
+        out = np.full(G, fill)
+        fn.at(out, which, np.where(np.isfinite(v), v, fill))
+        return out
+
+    rpm_lo, rpm_hi = red("rpm", np.minimum, np.inf), red("rpm", np.maximum, -np.inf)
+    d_lo, d_hi = red("draft_m", np.minimum, np.inf), red("draft_m", np.maximum, -np.inf)
+    wind, hs = red("wind_kn", np.maximum, 0.0), red("hs_m", np.maximum, 0.0)
+    trim = np.asarray(inp["trim_m"], dtype=np.float64)[rows]
+    ok = np.isfinite(trim)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        trim_mean = np.bincount(which, np.where(ok, trim, 0.0), G) / np.bincount(which, ok, G)
+    months = np.asarray(inp["months_dd"], dtype=np.float64)[np.maximum(stops - 1, 0)]
+    fin = lambda x: float(x) if np.isfinite(x) else 0.0  # noqa: E731
+    return [Envelope((fin(rpm_lo[g]), fin(rpm_hi[g])), (fin(d_lo[g]), fin(d_hi[g])), fin(wind[g]), fin(hs[g]),
+                     fin(trim_mean[g]), fin(months[g]) if n[g] else 0.0) for g in range(G)]
 
 
 @dataclass(frozen=True)
@@ -86,28 +109,33 @@ class Limits:
     fuel_tol_share: float = 0.005
 
 
-def _grid(env: Envelope) -> tuple[np.ndarray, ...]:
-    """Inputs (features.MODEL_INPUTS order) on the (rpm, draft, wind, wave, direction) grid, flattened."""
-    rpm = np.linspace(env.rpm[0], env.rpm[1], N_RPM)
-    draft = np.linspace(env.draft_m[0], env.draft_m[1], N_DRAFT)
-    wind = np.linspace(0.0, max(env.wind_kn, 0.0), N_WIND)
-    wave = np.linspace(0.0, max(env.hs_m, 0.0), N_WAVE)
-    dirs = np.asarray(DIRECTIONS_DEG)
-    R, D, W, H, A = np.meshgrid(rpm, draft, wind, wave, dirs, indexing="ij")
-    n = R.size
-    return (R.ravel(), D.ravel(), np.full(n, env.trim_m), W.ravel(), A.ravel(), H.ravel(), A.ravel(),
-            np.full(n, env.months_dd))
-
-
 GRID_SHAPE = (N_RPM, N_DRAFT, N_WIND, N_WAVE, len(DIRECTIONS_DEG))
+# the grid in units of each envelope's ranges (0..1), and the directions, flattened in GRID_SHAPE order
+_U = np.meshgrid(np.linspace(0.0, 1.0, N_RPM), np.linspace(0.0, 1.0, N_DRAFT), np.linspace(0.0, 1.0, N_WIND),
+                 np.linspace(0.0, 1.0, N_WAVE), np.asarray(DIRECTIONS_DEG), indexing="ij")
+_U = [u.ravel() for u in _U]
+
+
+def _grids(envelopes: list[Envelope]) -> list[np.ndarray]:
+    """Inputs (features.MODEL_INPUTS order) on each envelope's (rpm, draft, wind, wave, direction) grid: arrays
+    (G, grid points)."""
+    e = np.array([(v.rpm[0], v.rpm[1], v.draft_m[0], v.draft_m[1], max(v.wind_kn, 0.0), max(v.hs_m, 0.0), v.trim_m, v.months_dd)
+                  for v in envelopes], dtype=np.float64).reshape(-1, 8)
+    m = _U[0].size
+    rpm = e[:, :1] + (e[:, 1:2] - e[:, :1]) * _U[0]
+    draft = e[:, 2:3] + (e[:, 3:4] - e[:, 2:3]) * _U[1]
+    wind, wave = e[:, 4:5] * _U[2], e[:, 5:6] * _U[3]
+    rel = np.broadcast_to(_U[4], (len(e), m))
+    return [rpm, draft, np.repeat(e[:, 6:7], m, axis=1), wind, rel, wave, rel, np.repeat(e[:, 7:8], m, axis=1)]
 
 
 def evaluate(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: list[Envelope]
-             ) -> tuple[np.ndarray, np.ndarray, list[tuple[np.ndarray, ...]]]:
-    """(STW, fuel rate) of model g (coefficient rows g) on envelope g's grid: arrays (G, *GRID_SHAPE), and the grids."""
-    grids = [_grid(e) for e in envelopes]
-    G, m = len(envelopes), int(np.prod(GRID_SHAPE))
-    cols = [np.ascontiguousarray(np.concatenate([g[j] for g in grids])) if G else np.zeros(0) for j in range(8)]
+             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """(STW, fuel rate) of model g (coefficient rows g) on envelope g's grid: arrays (G, *GRID_SHAPE), and the grid
+    inputs (arrays (G, grid points), features.MODEL_INPUTS order)."""
+    grid = _grids(envelopes)
+    G, m = len(envelopes), _U[0].size
+    cols = [np.ascontiguousarray(c, dtype=np.float64).ravel() for c in grid]
     starts = np.arange(G, dtype=np.int64) * m
     out = []
     for target, coefs in (("speed", speed_coefs), ("fuel", fuel_coefs)):
@@ -115,7 +143,7 @@ def evaluate(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelop
         features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
                                    starts, starts + m, *cols, o)
         out.append(o.reshape(G, *GRID_SHAPE))
-    return out[0], out[1], grids
+    return out[0], out[1], grid
 
 
 def _point(grid, g_idx: tuple[int, ...]) -> str:
@@ -169,11 +197,27 @@ def check_one(S: np.ndarray, F: np.ndarray, grid, limits: Limits = Limits()) -> 
 
 def check_models(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: list[Envelope],
                  limits: Limits = Limits()) -> list[str | None]:
-    """Per model g (coefficient rows g, envelope g): why it fails the sanity checks (check and worst point), or None."""
+    """Per model g (coefficient rows g, envelope g): why it fails the sanity checks (check and worst point), or None.
+    The checks run on all models at once; only a failing one is looked at again (`check_one`) for its message."""
     if not envelopes:
         return []
     S, F, grids = evaluate(form, speed_coefs, fuel_coefs, envelopes)
-    return [check_one(S[g], F[g], grids[g], limits) for g in range(len(envelopes))]
+    G = len(envelopes)
+    flat = lambda a: a.reshape(G, -1)  # noqa: E731
+    tol = limits.speed_tol_kn
+    bad = ~(np.isfinite(flat(S)).all(axis=1) & np.isfinite(flat(F)).all(axis=1))
+    ahead = S[..., list(AHEAD)]
+    bad |= flat(np.diff(ahead, axis=3)).max(axis=1, initial=-np.inf) > tol
+    bad |= flat(np.diff(ahead, axis=4)).max(axis=1, initial=-np.inf) > tol
+    calm = F[:, :, :, :1, :1, :1]
+    bad |= flat((calm - F) - limits.fuel_allowance_share * np.abs(calm)).max(axis=1) > 1e-9
+    if N_RPM >= 2:
+        bad |= flat(-np.diff(S, axis=1)).max(axis=1) > tol
+        bad |= flat(-np.diff(F, axis=1)).max(axis=1) > limits.fuel_tol_share * flat(np.abs(F)).max(axis=1)
+        span = np.array([e.rpm[1] - e.rpm[0] > 1e-6 for e in envelopes])
+        bad |= span & ~((S[:, -1, :, 0, 0, 0] - S[:, 0, :, 0, 0, 0]) > 0).all(axis=1)
+        bad |= span & ~((F[:, -1, :, 0, 0, 0] - F[:, 0, :, 0, 0, 0]) > 0).all(axis=1)
+    return [check_one(S[g], F[g], [c[g] for c in grids], limits) if bad[g] else None for g in range(G)]
 
 
 def check_model(model, envelope: Envelope, limits: Limits = Limits()) -> str | None:
