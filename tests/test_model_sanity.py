@@ -28,7 +28,7 @@ def test_a_sane_model_passes_and_each_check_fails_on_a_model_made_to_fail_it():
     assert sanity.check_model(_thesis(), ENV) is None
     # waves from ahead speed the ship up (the published fit's positive wave coefficient, e.g.)
     why = sanity.check_model(_thesis(speed=THESIS_OK_SPEED + [0, 0, 0, 0, 0, 0, 0.5]), ENV)
-    assert why.startswith("physical sanity (head_weather_speed): STW rises by 0.333 kn") and "from 0° relative" in why
+    assert why.startswith("physical sanity (head_weather_speed): STW rises by 0.500 kn") and "from 0° relative" in why
     # wind lowers fuel below calm water at the same rpm: worst at the strongest wind
     why = sanity.check_model(_thesis(fuel=THESIS_OK_FUEL - [0, 0, 0, 0, 0.004, 0, 0]), ENV)
     assert why.startswith("physical sanity (weather_fuel): fuel") and "wind 40 kn" in why
@@ -38,7 +38,7 @@ def test_a_sane_model_passes_and_each_check_fails_on_a_model_made_to_fail_it():
     assert sanity.check_model(small, ENV, sanity.Limits(fuel_allowance_share=0.0)).startswith("physical sanity (weather_fuel)")
     # STW falls as rpm rises (the published Gas Nirvana fit: a3 = −0.131)
     why = sanity.check_model(_thesis(speed=THESIS_OK_SPEED * [1, 1, -1, 1, 1, 1, 1] + [3.0, 0, 0, 0, 0, 0, 0]), ENV)
-    assert why.startswith("physical sanity (rpm_speed): STW falls by 1.12 kn as rpm rises") and "at rpm 60," in why
+    assert why.startswith("physical sanity (rpm_speed): STW falls by 1.4 kn as rpm rises") and "at rpm 60," in why
     # fuel falls as rpm rises
     why = sanity.check_model(_thesis(fuel=THESIS_OK_FUEL * [1, 1, -1, 1, 1, 1, 1] + [0.2, 0, 0, 0, 0, 0, 0]), ENV)
     assert why.startswith("physical sanity (rpm_fuel): fuel rate falls by")
@@ -61,6 +61,30 @@ def test_a_network_is_flat_outside_its_training_range():
     np.testing.assert_array_equal(mlp.forward(p, beyond), mlp.forward(p, edge))
     for out in (0, 1):
         assert mlp.forward_nb(p, *beyond[0], out) == pytest.approx(mlp.forward(p, edge)[0, out], rel=1e-12)
+
+
+def test_the_network_is_monotone_by_construction_and_an_unconstrained_one_fails_the_gate():
+    """Trained on rows of a truth that is monotone, with the heaviest weather rare: the unconstrained network learns
+    a speed gain somewhere in its envelope; the monotone one (the default) cannot."""
+    from tests.test_performance import _nonlinear_reports
+
+    cols, X, Y, _ = _nonlinear_reports(n=360)
+    inp = dict(zip(features.MODEL_INPUTS, (*cols, np.zeros(360))))
+    env = sanity.envelope_of(inp, 0, 288)
+    free, _ = mlp.train(X[:288], Y[:288], seed=1, monotone=False)
+    mono, _ = mlp.train(X[:288], Y[:288], seed=1)
+    why = sanity.check_models("mlp", free[None, :], free[None, :], [env])[0]
+    assert why is not None and why.startswith("physical sanity (")
+    assert sanity.check_models("mlp", mono[None, :], mono[None, :], [env]) == [None]
+    # and on random points, beyond the envelope too: speed never rises with weather, fuel never falls
+    rng = np.random.default_rng(0)
+    Z = np.column_stack([rng.uniform(30, 140, 500), rng.uniform(4, 14, 500), rng.uniform(-1, 2, 500),
+                         rng.uniform(0, 70, 500), rng.uniform(0, 10, 500)])
+    base = mlp.forward(mono, Z)
+    for k, step in ((0, 5.0), (3, 5.0), (4, 0.5)):
+        more = mlp.forward(mono, Z + np.eye(5)[k] * step)
+        d = more - base
+        assert (d[:, 1] >= -1e-12).all() and ((d[:, 0] >= -1e-12).all() if k == 0 else (d[:, 0] <= 1e-12).all())
 
 
 def _cand(form, pred_speed, pred_fuel):

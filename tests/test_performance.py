@@ -538,10 +538,11 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
     p4, info4 = mlp.train(X[fit_rows], spoiled, seed=3)
     np.testing.assert_array_equal(p4[: 2 * mlp.N_IN], p1[: 2 * mlp.N_IN])  # input scaling from the older rows only
     assert info4["best_epoch"] != info["best_epoch"]
-    # on rows it never saw, speed within 25 % of the noise and fuel within 3 %
+    # on rows it never saw, speed within the noise and fuel within 2 % (the monotone shape costs a little speed
+    # accuracy here, 0.147 kn against 0.092 unconstrained, and gains fuel accuracy, 1.2 % against 2.4 %)
     pred = mlp.forward(p1, X[300:])
-    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.25 * 0.15 + 0.1
-    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.03
+    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.15
+    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.02
     # routing's compiled forward pass is the same network
     for i in range(300, 310):
         for out in (0, 1):
@@ -556,16 +557,14 @@ def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
                             "draft_m": cols[1], "trim_m": cols[2], "wind_kn": cols[3], "wind_dir_rel_deg": cols[4], "wave_m": cols[5],
                             "wave_dir_rel_deg": cols[6], "months_since_drydock": 0.0, "stw_kn": Y[:, 0], "fuel_t": Y[:, 1] * 24,
                             "hours": 24.0})
-    # this network learns a speed gain in the heaviest head weather of its envelope (where its rows are few):
-    # the sanity gate refuses it, so "best" keeps the physical form although the network scores better
+    # "best" keeps the physical form: the (monotone) network is not better on the held-out rows here
     rows, s = refit_vessel(9140607, reports, None, 1, form="best")
     assert s["changed"] and s["form"] == "physical" and "mlp speed" in s["reason"] and "thesis speed" in s["reason"]
     rows, s = refit_vessel(9140607, reports, None, 1, form="mlp")
-    assert not s["changed"] and s["why"].startswith("physical sanity (head_weather_speed): STW rises by")
-    assert [r["status"] for r in rows] == ["rejected", "rejected"]
-    rows, s = refit_vessel(9140607, reports, None, 1, form="mlp", gate=Gate(sanity=False))
-    assert s["changed"] and s["form"] == "mlp" and s["gate"] == "sanity=False"
-    assert s["speed_holdout_rmse"] < 0.25 and [r["form"] for r in rows] == ["mlp", "mlp"]
+    assert s["changed"] and s["form"] == "mlp" and s["gate"] == "default"
+    # monotone by construction, the network is about as good as the physical form here (0.297 against 0.316 kn;
+    # unconstrained it scored 0.199 but learnt speed gains in heavy head seas, which the gate refuses)
+    assert s["speed_holdout_rmse"] < 0.30 and [r["form"] for r in rows] == ["mlp", "mlp"]
     coef = np.array(list(json.loads(rows[0]["coefficients"]).values()))
     assert np.array_equal(coef, list(json.loads(rows[1]["coefficients"]).values()))  # one network, two outputs
     m = PerformanceModel("mlp", coef, coef)

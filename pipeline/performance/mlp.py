@@ -37,6 +37,12 @@ PATIENCE = 100
 LEARNING_RATE = 0.01
 L2 = 1e-4
 DEFAULT_SEED = 1
+# Monotone by construction: the first N_HIDDEN // 2 hidden units feed only the speed output, the others only the
+# fuel output, each with an output weight ≥ 0, and the weights of rpm, wind and waves into a unit have the sign
+# its output needs (projected after every training step; tanh rises and the standardisation keeps signs): speed
+# never falls with rpm nor rises with wind or waves, fuel never falls with any of them — also where rows are few.
+MONO_INPUTS = (0, 3, 4)  # rpm, wind·w, waves·w
+MONO_SIGN = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])  # (input, output): required sign of d output / d input
 
 # offsets of the parts of a parameter vector
 _XM, _XS = 0, N_IN
@@ -97,12 +103,27 @@ def forward_nb(p, x0, x1, x2, x3, x4, out_index):
     return o * p[_YS + out_index] + p[_YM + out_index]
 
 
+def _project_monotone(W1: np.ndarray, W2: np.ndarray) -> None:
+    """In place: each hidden unit feeds one output (speed: the first half, fuel: the rest) with a weight ≥ 0, and the
+    weight of a monotone input into it has the sign MONO_SIGN asks for that output (else 0)."""
+    half = N_HIDDEN // 2
+    W2[:half, 1] = 0.0
+    W2[half:, 0] = 0.0
+    np.maximum(W2, 0.0, out=W2)
+    which = (np.arange(N_HIDDEN) >= half).astype(int)
+    for r, k in enumerate(MONO_INPUTS):
+        want = MONO_SIGN[r, which]
+        W1[k] = np.where(W1[k] * want < 0.0, 0.0, W1[k])
+
+
 def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: float = VAL_FRAC, max_epochs: int = MAX_EPOCHS,
-          patience: int = PATIENCE, lr: float = LEARNING_RATE, l2: float = L2) -> tuple[np.ndarray, dict]:
+          patience: int = PATIENCE, lr: float = LEARNING_RATE, l2: float = L2, monotone: bool = True
+          ) -> tuple[np.ndarray, dict]:
     """(parameter vector, info) of a network fitted to time-ordered rows X (n × 5) → Y (n × 2), non-finite rows left out.
 
     The newest `val_frac` of the rows (at least one, if there are two or more) are the validation rows
-    of early stopping; info: n_train, n_val, best_epoch, epochs, val_mse (standardised units).
+    of early stopping; `monotone`: keep the network monotone (see MONO_*); info: n_train,
+    n_val, best_epoch, epochs, val_mse (standardised units).
     """
     ok = np.isfinite(X).all(axis=1) & np.isfinite(Y).all(axis=1)
     X, Y = X[ok], Y[ok]
@@ -125,6 +146,12 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
     W1[:] = rng.normal(0.0, 1.0 / math.sqrt(N_IN), W1.shape)
     W2[:] = rng.normal(0.0, 1.0 / math.sqrt(N_HIDDEN), W2.shape)
     params = (W1, b1, W2, b2)
+    if monotone:  # start inside the constraints: signs flipped rather than weights zeroed
+        half = N_HIDDEN // 2
+        W2[:] = np.abs(W2)
+        for r, k in enumerate(MONO_INPUTS):
+            W1[k] = np.abs(W1[k]) * MONO_SIGN[r, (np.arange(N_HIDDEN) >= half).astype(int)]
+        _project_monotone(W1, W2)
     m = [np.zeros_like(a) for a in params]
     v = [np.zeros_like(a) for a in params]
     b_1, b_2, eps = 0.9, 0.999, 1e-8
@@ -142,6 +169,8 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
             vi *= b_2
             vi += (1 - b_2) * g * g
             a -= lr * (mi / (1 - b_1 ** epoch)) / (np.sqrt(vi / (1 - b_2 ** epoch)) + eps)
+        if monotone:
+            _project_monotone(W1, W2)
         if n_val:
             val = float(np.mean((np.tanh(Zv @ W1 + b1) @ W2 + b2 - Tv) ** 2))
         else:
