@@ -39,14 +39,19 @@ def register(app: typer.Typer) -> None:
 
     @noon.command("import")
     def noon_import(file: Path = typer.Argument(..., help="CSV or Parquet of noon reports (one or many vessels)."),
+                    replace: bool = typer.Option(False, "--replace", help="Corrected reports: a row differing from the "
+                                                 "stored report of the same vessel and time replaces it (the old one is "
+                                                 "kept in noon_reports_history) instead of being refused."),
                     data: Optional[Path] = DataOpt):
         """Validate and import noon reports; bad rows go to noon_reports_rejected with a reason."""
         from flows.jobs.refit import import_noon_file
 
+        kw = {"replace": True} if replace else {}
         c = run_job("flows.refit", "import_noon_reports", import_noon_file, path=str(file),
-                    data_root=str(data) if data else None)
+                    data_root=str(data) if data else None, **kw)
         console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
-                      f"{c['rejected']} rejected")
+                      + (f"{c['replaced']} replaced (old ones in noon_reports_history), " if c.get("replaced") else "")
+                      + f"{c['rejected']} rejected")
         if c["reasons"] or c["conflicts"]:
             t = Table(title="Rejected rows by reason")
             t.add_column("reason")
@@ -54,8 +59,36 @@ def register(app: typer.Typer) -> None:
             for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
                 t.add_row(reason, str(n))
             if c["conflicts"]:
-                t.add_row("conflicts with a stored report", str(c["conflicts"]))
+                t.add_row("conflicts with a stored report (corrected reports: import with --replace)", str(c["conflicts"]))
             console.print(t)
+
+    @noon.command("exclude")
+    def noon_exclude(imo: int = typer.Option(..., "--imo", help="Vessel IMO number."),
+                     from_: str = typer.Option(..., "--from", help="First report time to exclude (UTC, e.g. 2021-03-01T00)."),
+                     to: str = typer.Option(..., "--to", help="Last report time to exclude (UTC), inclusive."),
+                     reason: str = typer.Option(..., "--reason", help="Why (kept with the reports), e.g. 'speed log broken'."),
+                     data: Optional[Path] = DataOpt):
+        """Take a vessel's reports of a period out of the refit (e.g. a broken speed log); they are kept in
+        noon_reports_history with the reason."""
+        import pandas as pd
+
+        from flows.jobs.refit import UnknownVesselError, exclude_noon_period
+
+        try:
+            t0, t1 = (pd.Timestamp(x.strip()) for x in (from_, to))
+        except ValueError:
+            fail(f"--from {from_!r} / --to {to!r}: not times; use ISO 8601 such as 2021-03-01T00")
+        t0, t1 = (t.tz_convert("UTC").tz_localize(None) if t.tzinfo else t for t in (t0, t1))
+        if t1 < t0:
+            fail(f"--to {to} is before --from {from_}")
+        if not reason.strip():
+            fail("--reason must say why the reports are excluded")
+        try:
+            n = exclude_noon_period(imo, str(t0), str(t1), reason.strip(), data_root=str(data) if data else None)
+        except UnknownVesselError as exc:
+            fail(str(exc))
+        console.print(f"vessel {imo}: {n} reports from {t0} to {t1} excluded ({reason.strip()}); kept in noon_reports_history. "
+                      "Run `jitroute refit` to refit without them.", highlight=False)
 
     @app.command()
     def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),

@@ -11,9 +11,9 @@ from flows.runner import InPrefect, register_flow
 
 @register_flow
 @flow(name="import-noon-reports")
-def import_noon_reports(path: str, data_root: str | None = None) -> dict:
+def import_noon_reports(path: str, data_root: str | None = None, replace: bool = False) -> dict:
     """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
-    return import_noon_file(path, data_root=data_root, run=InPrefect())
+    return import_noon_file(path, data_root=data_root, replace=replace, run=InPrefect())
 
 
 @register_flow

@@ -91,10 +91,11 @@ def known_imos(db_path: Path) -> set[int]:
         return {int(r[0]) for r in con.execute("SELECT imo FROM vessels").fetchall()}
 
 
-def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> dict[str, int]:
-    """Insert validated rows; rows identical to stored ones are no-ops, conflicting ones are rejected.
+def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame, *, replace: bool = False) -> dict[str, int]:
+    """Insert validated rows; rows identical to stored ones are no-ops, conflicting ones are rejected — or, with
+    `replace`, replace the stored ones, which are kept in `noon_reports_history` ("replaced by <source_file>").
 
-    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts.
+    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts, replaced.
     """
     good = good.reindex(columns=NOON_COLUMNS)
     value_cols = [c for c in NOON_COLUMNS if c not in ("imo", "ts_utc", "source_file")]
@@ -107,10 +108,18 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
             present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchone()[0]
             conflicts = con.execute(
                 f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
+            replaced = 0
+            if replace and len(conflicts):
+                cols = ", ".join(f"n.{c}" for c in NOON_COLUMNS)
+                con.execute(f"INSERT INTO noon_reports_history SELECT {cols}, ?, 'replaced by ' || coalesce(nullif(g.source_file, ''), "
+                            f"'a corrected report') FROM noon_reports n JOIN g USING (imo, ts_utc) WHERE NOT ({same})",
+                            [_utcnow()])
+                con.execute(f"DELETE FROM noon_reports n USING g WHERE n.imo = g.imo AND n.ts_utc = g.ts_utc AND NOT ({same})")
+                replaced, conflicts = len(conflicts), conflicts.head(0)
             # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
             con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
                         "ORDER BY g.imo, g.ts_utc")
-            inserted = len(good) - present - len(conflicts)
+            inserted = len(good) - present - len(conflicts) - replaced
             if len(conflicts):
                 conflicts["raw"] = _raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
                 conflicts["reason"] = "conflicts with a stored report for the same vessel and time"
@@ -134,7 +143,26 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
         except Exception:
             con.execute("ROLLBACK")
             raise
-    return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)), "conflicts": int(len(conflicts))}
+    return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)),
+            "conflicts": int(len(conflicts)), "replaced": int(replaced)}
+
+
+def exclude_noon(db_path: Path, imo: int, from_utc, to_utc, reason: str) -> int:
+    """Move vessel `imo`'s stored reports with from_utc ≤ ts_utc ≤ to_utc (naive UTC) to `noon_reports_history`
+    ("excluded: <reason>"): refits no longer see them. Returns how many."""
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            args = [int(imo), pd.Timestamp(from_utc).to_pydatetime(), pd.Timestamp(to_utc).to_pydatetime()]
+            n = con.execute("SELECT count(*) FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args).fetchone()[0]
+            con.execute(f"INSERT INTO noon_reports_history SELECT {', '.join(NOON_COLUMNS)}, ?, ? FROM noon_reports "
+                        "WHERE imo = ? AND ts_utc BETWEEN ? AND ?", [_utcnow(), f"excluded: {reason}", *args])
+            con.execute("DELETE FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args)
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return int(n)
 
 
 BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]

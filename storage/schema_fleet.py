@@ -157,4 +157,11 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE perf_models ADD COLUMN gate VARCHAR;      -- 'default' or the gate settings that differed
         """,
     ),
+    Migration(
+        "fleet_007_noon_history",
+        # stored reports replaced by corrected ones, or excluded for a period, are kept here with why and when
+        f"""
+        CREATE TABLE noon_reports_history ({NOON_COLUMNS}, removed_at TIMESTAMP NOT NULL, reason VARCHAR NOT NULL);
+        """,
+    ),
 ]

@@ -12,7 +12,7 @@ from pipeline.performance import features, mlp, sanity
 from pipeline.performance.model import PerformanceModel, reference_model
 from pipeline.performance.refit import Gate, _Candidate, _choose, describe_gate, gate_with
 from pipeline.performance.validate import validate_noon
-from tests.test_performance import GAS_NIRVANA_VESSEL, gas_nirvana
+from tests.test_performance import GAS_NIRVANA_VESSEL, gas_nirvana, history  # noqa: F401 (a fixture)
 
 ENV = sanity.Envelope(rpm=(60.0, 100.0), draft_m=(8.0, 12.0), wind_kn=40.0, hs_m=5.0, trim_m=0.5)
 THESIS_OK_SPEED = np.array([0.0, 0.0, 0.14, 0.0, -0.03, 0.0, -0.3])  # draft, trim, rpm, wind dir, wind, wave dir, waves
@@ -245,3 +245,72 @@ def test_model_predict_from_the_command_line(tmp_path, monkeypatch):
     assert out["out_of_envelope"] and out["outside"] == ["rpm 100 < 118", "hs_m 2 > 0"] and out["draft_m"] == pytest.approx(6.0)
     res = r.invoke(app, ["model", "predict", "--imo", "9140607", "--version", "1", "--rpm", "130", "--data", str(data)])
     assert res.exit_code == 0 and "outside the conditions the model was fitted on: rpm 130 > 122" in res.output
+
+
+def test_corrected_reports_replace_stored_ones_and_clear_the_flag(history):
+    from storage import fleet_store
+    from tests.test_performance import _models, _store_refit
+
+    db, later, imos = history
+    _store_refit(db)
+    batch = later[later.groupby("imo").cumcount() < 30].copy()
+    broken = batch.copy()
+    mask = broken.imo == imos[1]
+    broken.loc[mask, "stw_kn"] = (broken.loc[mask, "stw_kn"] * 0.6).round(3)  # the log under-reads by 40 %
+    fleet_store.import_noon(db, broken, broken.head(0))
+    assert "speed log" in {s["imo"]: s for s in _store_refit(db)}[imos[1]]["flag"]
+    fixed = batch[batch.imo == imos[1]].assign(source_file="fixed.csv")
+    c = fleet_store.import_noon(db, fixed, fixed.head(0))
+    assert (c["conflicts"], c["replaced"], c["inserted"]) == (30, 0, 0)  # refused without --replace
+    c = fleet_store.import_noon(db, fixed, fixed.head(0), replace=True)
+    assert (c["conflicts"], c["replaced"], c["inserted"], c["already_present"]) == (0, 30, 0, 0)
+    with duckdb.connect(str(db), read_only=True) as con:
+        hist = con.execute("SELECT count(*), any_value(reason), min(stw_kn) FROM noon_reports_history").fetchone()
+        stored = con.execute("SELECT stw_kn FROM noon_reports WHERE imo = ? ORDER BY ts_utc DESC LIMIT 30", [imos[1]]).fetchall()
+    assert hist[:2] == (30, "replaced by fixed.csv") and hist[2] == broken.loc[mask, "stw_kn"].min()
+    np.testing.assert_array_equal(sorted(r[0] for r in stored), sorted(fixed.stw_kn))
+    out = {s["imo"]: s for s in _store_refit(db)}
+    assert out[imos[1]]["changed"] and out[imos[1]]["flag"] is None
+    assert [(m[1], m[3]) for m in _models(db) if m[0] == imos[1]] == [(1, "superseded"), (2, "rejected"), (3, "active")]
+    with duckdb.connect(str(db), read_only=True) as con:
+        assert con.execute("SELECT flag FROM model_quality WHERE imo = ? AND target = 'speed'", [imos[1]]).fetchone() == (None,)
+
+
+def test_excluding_a_period_takes_it_out_of_the_refit_and_clears_the_flag(history):
+    from storage import fleet_store
+    from tests.test_performance import _store_refit
+
+    db, later, imos = history
+    _store_refit(db)
+    broken = later[(later.groupby("imo").cumcount() < 30) & (later.imo == imos[1])].copy()
+    broken["stw_kn"] = (broken["stw_kn"] * 0.6).round(3)
+    fleet_store.import_noon(db, broken, broken.head(0))
+    assert {s["imo"]: s for s in _store_refit(db)}[imos[1]]["flag"]
+    with duckdb.connect(str(db), read_only=True) as con:
+        assert con.execute("SELECT flag FROM model_quality WHERE imo = ? AND target = 'speed'", [imos[1]]).fetchone()[0]
+    n = fleet_store.exclude_noon(db, imos[1], broken.ts_utc.min(), broken.ts_utc.max(), "speed log broken")
+    assert n == 30
+    out = {s["imo"]: s for s in _store_refit(db)}[imos[1]]
+    assert out["why"] == "same as the active model" and out["flag"] is None  # the rows v1 was fitted on, nothing new
+    with duckdb.connect(str(db), read_only=True) as con:
+        assert con.execute("SELECT flag FROM model_quality WHERE imo = ? AND target = 'speed'", [imos[1]]).fetchone() == (None,)
+        assert con.execute("SELECT count(*), any_value(reason) FROM noon_reports_history").fetchone() == (30, "excluded: speed log broken")
+
+
+def test_noon_exclude_from_the_command_line(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "400")
+    data, csv = _gas_nirvana_warehouse(tmp_path)
+    r = CliRunner()
+    assert r.invoke(app, ["noon", "import", str(csv), "--data", str(data)]).exit_code == 0
+    res = r.invoke(app, ["noon", "exclude", "--imo", "9140607", "--from", "2020-01-31T20:00Z", "--to", "2020-01-31T23:00Z",
+                         "--reason", "speed log broken", "--data", str(data)])
+    assert res.exit_code == 0 and "vessel 9140607: 4 reports" in res.output, res.output
+    res = r.invoke(app, ["noon", "exclude", "--imo", "9140607", "--from", "2020-02-01", "--to", "2020-01-01",
+                         "--reason", "x", "--data", str(data)])
+    assert res.exit_code == 2 and "before --from" in res.output
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        assert con.execute("SELECT count(*) FROM noon_reports").fetchone() == (18,)

@@ -40,16 +40,28 @@ def read_table(path: Path) -> pd.DataFrame:
     return df
 
 
-def import_noon_file(path: str, data_root: str | None = None, *, run=PLAIN) -> dict:
-    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
+def import_noon_file(path: str, data_root: str | None = None, replace: bool = False, *, run=PLAIN) -> dict:
+    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason.
+    `replace`: a row differing from the stored report of the same vessel and time replaces it (the stored one is
+    kept in noon_reports_history) instead of being refused."""
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     raw = read_table(Path(path))
     good, bad = validate_noon(raw, fleet_store.known_imos(db), source=Path(path).name)
-    counts = fleet_store.import_noon(db, good, bad)
+    counts = fleet_store.import_noon(db, good, bad, replace=replace)
     counts["rows"] = len(raw)
     counts["reasons"] = reason_counts(bad)
     return counts
+
+
+def exclude_noon_period(imo: int, from_utc: str, to_utc: str, reason: str, data_root: str | None = None, *, run=PLAIN) -> int:
+    """Move vessel `imo`'s reports from `from_utc` to `to_utc` (inclusive) out of the refit's reach into
+    noon_reports_history with `reason`; returns how many."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    if int(imo) not in fleet_store.known_imos(db):
+        raise UnknownVesselError(f"vessel {imo} not in {db}: import it with `jitroute fleet import`")
+    return fleet_store.exclude_noon(db, int(imo), from_utc, to_utc, reason)
 
 
 def import_fleet_folder(folder: str, data_root: str | None = None, *, run=PLAIN) -> dict:
@@ -119,6 +131,7 @@ def refit_job(imos: list[int] | None = None, data_root: str | None = None, form:
                                name="fit-vessels")
     reactivate, flags = storage_actions(summaries)
     for imo, text in flags.items():
-        LOG.warning("vessel %s: %s", imo, text)
+        if text:
+            LOG.warning("vessel %s: %s", imo, text)
     run.step(fleet_store.save_fits, db, rows, reactivate=reactivate, flags=flags, name="save-fits")
     return sorted(summaries + summaries_missing, key=lambda d: d["imo"])

@@ -167,9 +167,10 @@ def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, f
 
 def storage_actions(summaries: list[dict]) -> tuple[dict[int, tuple[int, str]], dict[int, str]]:
     """(imo → (version to re-activate, reason), imo → flag on its active model) from refit summaries,
-    as `fleet_store.save_fits` takes them beside the new rows."""
+    as `fleet_store.save_fits` takes them beside the new rows. Every refitted vessel gets its flag: None clears
+    one set before (its contradicting reports were replaced or excluded)."""
     return ({s["imo"]: (s["reactivate"], s["reason"]) for s in summaries if s.get("reactivate")},
-            {s["imo"]: s["flag"] for s in summaries if s.get("flag")})
+            {s["imo"]: s.get("flag") for s in summaries if "flag" in s})
 
 
 def fitted_from_rows(rows) -> dict[int, dict]:
