@@ -68,6 +68,7 @@ class Gate:
     switch_margin: float = 0.05  # best: another form replaces the physical one only if its held-out score is lower by
     switch_sigmas: float = 2.0  # this share, by more than this many standard errors (paired over held-out rows),
     switch_blocks: int = 3  # and lower in each of this many consecutive blocks of held-out rows (repeatable)
+    hull_flag_pct: float = 5.0  # hull performance: a month's speed loss against a clean hull above this is flagged
 
     @property
     def limits(self) -> sanity.Limits:
@@ -349,7 +350,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         reason = f"{best}: {why}; held-out ({n_hold_list[g]} newest rows): {scores}" + (f"; {choice}" if choice else "")
         dropped = sorted({d for t in TARGETS for d in c.train[t][g].dropped})
         if dropped:
-            reason += f"; left out (constant, or weather that came out as a gain): {', '.join(dropped)}"
+            reason += f"; left out (constant, or weather or fouling that came out as a gain): {', '.join(dropped)}"
         summary = {"imo": imo, "n": n_list[g], "n_holdout": n_hold_list[g], "form": best, "changed": False,
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
                    "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
