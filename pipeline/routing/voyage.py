@@ -37,6 +37,7 @@ def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float
             raise RoutingInputError(f"voyage {vid}: {k} is missing")
     # the model is consulted only at engine speeds it was fitted on: settings beyond them are clipped (said on the plan)
     rpm_options, rpm_note = model.clip_rpm_options(rpm_options_of(voyage, rpm_max), f"voyage {vid}")
+    model = model.fouled_at(np.datetime64(voyage["depart_utc"], "s"))  # the hull as it will be on the voyage
     return RoutingProblem(
         dep=(float(voyage["dep_lat"]), float(voyage["dep_lon"])), arr=(float(voyage["arr_lat"]), float(voyage["arr_lon"])),
         depart_utc=np.datetime64(voyage["depart_utc"], "s"), rta_utc=np.datetime64(voyage["rta_utc"], "s"), model=model,
