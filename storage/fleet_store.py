@@ -372,3 +372,29 @@ def _raw_text(df: pd.DataFrame) -> pd.Series:
     for c in cols[1:]:
         out = out + "|" + c
     return out.astype(object)
+
+
+HULL_COLUMNS = ["imo", "month", "n_reports", "speed_loss_pct", "flag", "model_version", "computed_at"]
+
+
+def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd.DataFrame]]) -> None:
+    """Replace the hull-performance months of each vessel in `monthly` (imo → (model version, months from
+    `pipeline.performance.hull.monthly_speed_loss`)). One transaction."""
+    if not monthly:
+        return
+    frames = [df.assign(imo=int(imo), model_version=version) for imo, (version, df) in monthly.items() if len(df)]
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("DELETE FROM hull_performance_monthly WHERE imo IN (SELECT unnest(?))", [[int(i) for i in monthly]])
+            if frames:
+                df = pd.concat(frames, ignore_index=True)
+                df["computed_at"] = _utcnow()
+                df["month"] = pd.to_datetime(df["month"]).dt.date
+                con.register("hull_df", df.reindex(columns=HULL_COLUMNS))
+                con.execute(f"INSERT INTO hull_performance_monthly ({', '.join(HULL_COLUMNS)}) "
+                            f"SELECT {', '.join(HULL_COLUMNS)} FROM hull_df")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise

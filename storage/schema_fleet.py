@@ -164,4 +164,25 @@ MIGRATIONS: list[Migration] = [
         CREATE TABLE noon_reports_history ({NOON_COLUMNS}, removed_at TIMESTAMP NOT NULL, reason VARCHAR NOT NULL);
         """,
     ),
+    Migration(
+        "fleet_008_hull_performance",
+        # speed loss against a clean hull per vessel and month (pipeline.performance.hull), rewritten at every refit
+        """
+        CREATE TABLE hull_performance_monthly (
+            imo BIGINT NOT NULL,
+            month DATE NOT NULL,
+            n_reports INTEGER NOT NULL,
+            speed_loss_pct DOUBLE,
+            flag BOOLEAN NOT NULL,
+            model_version INTEGER,
+            computed_at TIMESTAMP NOT NULL,
+            PRIMARY KEY (imo, month)
+        );
+        CREATE VIEW hull_performance AS
+        SELECT h.imo, v.name AS vessel_name, h.month, h.n_reports, h.speed_loss_pct, h.flag, h.model_version,
+               regr_slope(h.speed_loss_pct, year(h.month) * 12 + month(h.month)) OVER (PARTITION BY h.imo)
+                   AS trend_pct_per_month
+        FROM hull_performance_monthly h LEFT JOIN vessels v USING (imo);
+        """,
+    ),
 ]

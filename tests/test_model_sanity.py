@@ -314,3 +314,72 @@ def test_noon_exclude_from_the_command_line(tmp_path, monkeypatch):
     assert res.exit_code == 2 and "before --from" in res.output
     with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
         assert con.execute("SELECT count(*) FROM noon_reports").fetchone() == (18,)
+
+
+def test_fouling_never_comes_out_as_a_gain():
+    """Reports in which the hull seems to get faster and cheaper with age (e.g. a speed log drifting up): the fit
+    leaves fouling out (β = 0) rather than learn that fouling helps; a real fouling loss is kept."""
+    from pipeline.performance import fit
+
+    rng = np.random.default_rng(1)
+    n = 300
+    inp = {"rpm": rng.uniform(60, 100, n), "draft_m": rng.uniform(8, 12, n), "trim_m": rng.normal(0.5, 0.3, n),
+           "wind_kn": rng.uniform(0, 30, n), "wind_rel_deg": rng.uniform(0, 180, n), "hs_m": rng.uniform(0, 4, n),
+           "wave_rel_deg": rng.uniform(0, 180, n), "months_dd": np.linspace(0, 30, n)}
+    X = fit.designs("physical", inp)
+    for sign, kept in ((+1, False), (-1, True)):
+        stw = 0.14 * inp["rpm"] + sign * 0.02 * inp["months_dd"] + rng.normal(0, 0.1, n)
+        fuel = 1.5 * (inp["rpm"] / 100) ** 3 * (1 - sign * 0.004 * inp["months_dd"]) + rng.normal(0, 0.01, n)
+        s = fit.fit_target("physical", "speed", X["speed"], stw, robust=True)
+        f = fit.fit_target("physical", "fuel", X["fuel"], fuel, robust=True)
+        c_s, c_f = s.coefficients()["months_dd"], f.coefficients()["r3_months"]
+        if kept:
+            assert c_s == pytest.approx(-0.02, abs=0.002) and c_f == pytest.approx(0.006, abs=0.001)
+        else:
+            assert c_s == 0.0 and "months_dd" in s.dropped and c_f == 0.0 and "r3_months" in f.dropped
+
+
+def test_routing_uses_the_fouling_at_the_voyage_date():
+    from pipeline.routing.voyage import problem_from_voyage
+
+    ref = reference_model()
+    speed = ref.speed_coef.copy()
+    speed[6] = -0.02  # kn per month since dry dock
+    m = PerformanceModel("physical", speed, ref.fuel_coef, months_dd=6.0, data_to_utc="2020-06-01T00:00:00")
+    v = {"voyage_id": "V1", "imo": 9140607, "dep_lat": 35.0, "dep_lon": 140.0, "arr_lat": 30.0, "arr_lon": 145.0,
+         "depart_utc": "2020-12-01T00:00", "rta_utc": "2020-12-03T00:00", "rpm_options": [80.0]}
+    p = problem_from_voyage(v, m)
+    assert p.model.months_dd == pytest.approx(6.0 + 183 / (365.25 / 12))
+    assert float(p.model.stw_kn(80, 10, 0)) == pytest.approx(float(m.stw_kn(80, 10, 0)) - 0.02 * 183 / (365.25 / 12))
+    assert m.fouled_at(np.datetime64("2020-05-01")).months_dd == 6.0  # never younger than its newest report
+
+
+def test_hull_performance_per_month_with_trend_and_flag(tmp_path):
+    """A year of reports of ships whose hull fouls at 0.012 kn a month (6 to 18 months since dry dock): the
+    speed loss against the clean-hull model grows month by month (0.07–0.1 % a month in truth; the fitted
+    fouling term and monthly medians give a positive trend of a few hundredths of a % a month)."""
+    from flows.jobs.refit import refit_job
+    from pipeline.synthetic.fleet import generate_fleet
+    from storage import fleet_store
+
+    fl = generate_fleet("2020-12-01T00", n_vessels=2, days=365, seed=21)
+    data = tmp_path / "d"
+    data.mkdir()
+    db = data / "warehouse.duckdb"
+    fleet_store.import_vessels(db, fl.vessels)
+    good, _ = validate_noon(fl.noon.astype(str).replace({"nan": ""}), set(fl.vessels.imo))
+    fleet_store.import_noon(db, good, good.head(0))
+    refit_job(data_root=str(data), form="physical")
+    with duckdb.connect(str(db), read_only=True) as con:
+        rows = con.execute("SELECT imo, month, n_reports, speed_loss_pct, flag, trend_pct_per_month, vessel_name "
+                           "FROM hull_performance ORDER BY imo, month").fetchdf()
+    assert set(rows.imo) == set(fl.vessels.imo) and rows.groupby("imo").size().min() >= 12
+    assert rows.n_reports.sum() == len(good)
+    for imo, g in rows.groupby("imo"):
+        assert 0.02 < g.trend_pct_per_month.iloc[0] < 0.2, g
+        assert g.speed_loss_pct.iloc[-3:].mean() > g.speed_loss_pct.iloc[:3].mean() + 0.3
+        assert not g.flag.any()  # about 1–2 %, below the 5 % threshold
+    refit_job(data_root=str(data), form="physical", gate=["hull_flag_pct=0.5"])  # nothing new to fit: months rewritten
+    with duckdb.connect(str(db), read_only=True) as con:
+        flags = con.execute("SELECT flag, speed_loss_pct > 0.5 FROM hull_performance").fetchall()
+    assert all(f == over for f, over in flags) and any(f for f, _ in flags)

@@ -106,6 +106,29 @@ def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, fo
     return refit_fleet(reports, active, versions, form=form, robust=robust, gate=gate, fitted=fitted)
 
 
+HULL_REPORT_COLUMNS = ("imo", "ts_utc", "rpm", "draft_m", "trim_m", "wind_kn", "wind_dir_rel_deg", "wave_m",
+                       "wave_dir_rel_deg", "stw_kn")
+
+
+def update_hull_performance(db: Path, imos: list[int], flag_pct: float) -> int:
+    """Speed loss against a clean hull, per month, of each vessel's reports under its active model (stored in
+    hull_performance_monthly); returns the number of vessels with a model."""
+    from pipeline.performance.hull import monthly_speed_loss
+    from pipeline.performance.model import model_from_stored
+
+    if not imos:
+        return 0
+    active = fleet_store.active_models(db)
+    reports = fleet_store.load_reports(db, imos, columns=HULL_REPORT_COLUMNS)
+    out = {}
+    for imo, rows in reports.groupby("imo", sort=True):
+        m = model_from_stored(active.get(int(imo)), int(imo))
+        if m is not None:
+            out[int(imo)] = (m.version, monthly_speed_loss(m, rows, flag_pct))
+    fleet_store.save_hull_performance(db, out)
+    return len(out)
+
+
 def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
               robust: bool | None = None, gate: list[str] | None = None, *, run=PLAIN) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model ("best": every form, the physical one kept
@@ -134,4 +157,6 @@ def refit_job(imos: list[int] | None = None, data_root: str | None = None, form:
         if text:
             LOG.warning("vessel %s: %s", imo, text)
     run.step(fleet_store.save_fits, db, rows, reactivate=reactivate, flags=flags, name="save-fits")
+    run.step(update_hull_performance, db, sorted({int(x["imo"]) for x in summaries}), s.performance.hull_flag_pct,
+             name="hull-performance")
     return sorted(summaries + summaries_missing, key=lambda d: d["imo"])
