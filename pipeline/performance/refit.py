@@ -4,15 +4,17 @@ Per vessel, its reports in time order:
   1. the older rows train, the newest `Gate.holdout_frac` are held out and never fitted on;
   2. every candidate form is fitted on the training rows and scored on the held-out rows (RMSE of
      speed and fuel rate) — the same rows for every form and for the active model;
-  3. the best form is proposed: the smallest held-out RMSE relative to the held-out mean, speed and
-     fuel added, among the forms that pass the gate (the best of all if none does);
+  3. a form is proposed among those that pass the gate (all, if none does): the physical form, unless
+     another is better on the held-out rows by a margin, significantly (paired) and in every block of
+     them (`_choose`: ties and chance wins go to the simpler form);
   4. it is activated only if it passes the absolute gate (enough rows per coefficient, fit R² of
-     speed and fuel ≥ `min_r2`, held-out RMSE ≤ a share of the held-out mean), is not worse than
-     the active model on the same held-out rows (whatever the active model's form), and the
-     reports newer than the active model do not contradict it (a step change in its residuals,
-     e.g. a broken speed log: the vessel is flagged and nothing is activated);
-  5. an accepted model is refitted on all rows and stored active; a refused one is stored
-     `rejected` with the reason.
+     speed and fuel ≥ `min_r2`, held-out RMSE ≤ a share of the held-out mean, physical sanity over the
+     envelope of its reports — see `sanity`), is not worse than the active model on the same held-out
+     rows (whatever the active model's form), and the reports newer than the active model do not
+     contradict it (a step change in its residuals, e.g. a broken speed log: the vessel is flagged and
+     nothing is activated);
+  5. the proposed model is refitted on all rows and that fit is stored — active if accepted and it
+     passes the sanity checks again over the envelope of all rows, else `rejected` with the reason.
 Nothing is stored twice: the same rows fitted with the same form and settings (`data_hash`) give
 the same model, so a refit with nothing new stores nothing, and a form switched back to re-activates
 the version it gave before (if it wins the comparison) instead of storing a copy.
