@@ -125,7 +125,8 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     warm = start is not None
     beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
     if flip.any():
-        X = np.ascontiguousarray(np.where(flip, -X, X))
+        X = X.copy()
+        X[:, flip] *= -1.0
         nonneg = nonneg | flip
         beta0 = np.ascontiguousarray(np.where(flip, -beta0, beta0))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1

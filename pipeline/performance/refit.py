@@ -305,11 +305,6 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
             coefs = np.array([r.coef for r in c.train[t]])
             c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
             c.hold_rmse[t] = _rmse_by_group(y[t][hold_rows], c.hold_pred[t], hold_which, G)
-        if gate.sanity:
-            c.sane = sanity.check_models(form, np.array([r.coef for r in c.train["speed"]]),
-                                         np.array([r.coef for r in c.train["fuel"]]), train_env, gate.limits)
-        else:
-            c.sane = [None] * G
         cands[form] = c
     hashes = _data_hashes(inp, ts, bounds, forms, robust_of, gate)
     hold_bounds = np.r_[0, np.cumsum(n_hold)]
@@ -322,8 +317,19 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     mean_of = {t: hold_mean[t].tolist() for t in TARGETS}
     n_list, n_hold_list = n.tolist(), n_hold.tolist()
     plans, summaries = [], []
+    # the absolute gate, then physical sanity (`sanity`) of the training fits that pass it, all vessels at once
+    gated = {f: [_gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for g in range(G)] for f, c in cands.items()}
+    for f, c in cands.items():
+        c.sane = [None] * G
+        todo = [g for g in range(G) if gated[f][g] is None] if gate.sanity else []
+        if todo:
+            why = sanity.check_models(f, np.array([c.train["speed"][g].coef for g in todo]),
+                                      np.array([c.train["fuel"][g].coef for g in todo]), [train_env[g] for g in todo],
+                                      gate.limits)
+            for g, w in zip(todo, why):
+                c.sane[g] = w
     for g, imo in enumerate(imos.tolist()):
-        verdicts = {f: _gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for f, c in cands.items()}
+        verdicts = {f: gated[f][g] or cands[f].sane[g] for f in cands}
         score = {f: scores_of[f][g] for f in forms}
         passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
         pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
@@ -448,7 +454,7 @@ def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, 
         rmse, mean = hold_rmse[t][g], hold_mean[t][g]
         if not (rmse <= share * mean):
             return f"held-out {t} RMSE {rmse:.4g} above {100 * share:g} % of its mean {mean:.4g}"
-    return c.sane[g] if c.sane else None
+    return None
 
 
 def _choose(pool, score, forms, cands, sl, hold_rows, y, mean_of, g, gate: Gate) -> tuple[str, str]:
@@ -568,6 +574,7 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
     rows (what is stored, active or not); an accepted one is activated only if that fit passes the sanity checks
     over the envelope of all the rows."""
     full, envs = {}, {}
+    accepted = {p[0] for p in plans if p[3]}
     for form in {p[2] for p in plans}:
         gs = np.array([p[0] for p in plans if p[2] == form])
         c = cands[form]
@@ -576,7 +583,7 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
         env = sanity.envelopes(inp, bounds[gs], bounds[gs + 1])
-        active = [j for j, g in enumerate(gs) if any(p[3] for p in plans if p[0] == g)]
+        active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
         sane = [None] * gs.size
         if gate.sanity and active:
             why = sanity.check_models(form, np.array([res["speed"][j].coef for j in active]),

@@ -78,22 +78,23 @@ def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
     if G == 0:
         return []
     n = stops - starts
-    which = np.repeat(np.arange(G), n)
-    rows = np.repeat(starts - np.r_[0, np.cumsum(n)[:-1]], n) + np.arange(int(n.sum()))
+    # reduceat over [start, stop) pairs: every other result; a sentinel element lets a stop equal the length
+    idx = np.column_stack([starts, stops]).ravel()
 
     def red(col, fn, fill):
-        v = np.asarray(inp[col], dtype=np.float64)[rows]
-        out = np.full(G, fill)
-        fn.at(out, which, np.where(np.isfinite(v), v, fill))
-        return out
+        v = np.asarray(inp[col], dtype=np.float64)
+        v = np.append(np.where(np.isfinite(v), v, fill), fill)
+        return np.where(n > 0, fn.reduceat(v, idx)[::2], fill)
 
     rpm_lo, rpm_hi = red("rpm", np.minimum, np.inf), red("rpm", np.maximum, -np.inf)
     d_lo, d_hi = red("draft_m", np.minimum, np.inf), red("draft_m", np.maximum, -np.inf)
     wind, hs = red("wind_kn", np.maximum, 0.0), red("hs_m", np.maximum, 0.0)
-    trim = np.asarray(inp["trim_m"], dtype=np.float64)[rows]
+    trim = np.asarray(inp["trim_m"], dtype=np.float64)
     ok = np.isfinite(trim)
     with np.errstate(invalid="ignore", divide="ignore"):
-        trim_mean = np.bincount(which, np.where(ok, trim, 0.0), G) / np.bincount(which, ok, G)
+        trim_mean = (np.add.reduceat(np.append(np.where(ok, trim, 0.0), 0.0), idx)[::2]
+                     / np.add.reduceat(np.append(ok.astype(np.float64), 0.0), idx)[::2])
+    trim_mean = np.where(n > 0, trim_mean, 0.0)
     months = np.asarray(inp["months_dd"], dtype=np.float64)[np.maximum(stops - 1, 0)]
     fin = lambda x: float(x) if np.isfinite(x) else 0.0  # noqa: E731
     return [Envelope((fin(rpm_lo[g]), fin(rpm_hi[g])), (fin(d_lo[g]), fin(d_hi[g])), fin(wind[g]), fin(hs[g]),
