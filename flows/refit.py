@@ -12,10 +12,10 @@ from flows.settings import refuse_served_overrides
 
 @register_flow
 @flow(name="import-noon-reports")
-def import_noon_reports(path: str, data_root: str | None = None) -> dict:
+def import_noon_reports(path: str, data_root: str | None = None, replace: bool = False) -> dict:
     """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
     refuse_served_overrides(data_root=data_root)
-    return import_noon_file(path, data_root=data_root, run=InPrefect())
+    return import_noon_file(path, data_root=data_root, replace=replace, run=InPrefect())
 
 
 @register_flow
@@ -37,7 +37,7 @@ def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
 @register_flow
 @flow(name="refit-performance")
 def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
-                      robust: bool | None = None) -> list[dict]:
+                      robust: bool | None = None, gate: list[str] | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; activation only for a model that is not worse."""
     refuse_served_overrides(data_root=data_root)
-    return refit_job(imos, data_root=data_root, form=form, robust=robust, run=InPrefect())
+    return refit_job(imos, data_root=data_root, form=form, robust=robust, gate=gate, run=InPrefect())

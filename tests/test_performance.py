@@ -230,9 +230,15 @@ def test_versions_nothing_new_new_batch_worse_form_and_switching_back(history):
     again = _store_refit(db)
     assert _models(db) == [(i, 1, "physical", "active", True, None) for i in imos]
     assert all(not s["changed"] and s["why"] == "same as the active model" for s in again)
+    # the thesis form learns weather gains on these ships: the sanity gate refuses it, naming the check and the point
+    insane = _store_refit(db, "thesis", gate=Gate(max_speed_rmse_share=1.0, max_fuel_rmse_share=1.0))
+    assert all(not s["changed"] and s["why"].startswith("physical sanity (") and " at rpm " in s["why"] for s in insane)
+    assert [(m[1], m[2], m[3]) for m in _models(db)] == [(1, "physical", "active"), (2, "thesis", "rejected")] * 2
+    with duckdb.connect(str(db)) as con:
+        con.execute("DELETE FROM perf_models WHERE version = 2")
     # a worse form is compared with the active model on the same held-out rows, and stored rejected
     # (with a gate it passes on its own)
-    worse = _store_refit(db, "thesis", gate=Gate(max_speed_rmse_share=1.0, max_fuel_rmse_share=1.0))
+    worse = _store_refit(db, "thesis", gate=Gate(max_speed_rmse_share=1.0, max_fuel_rmse_share=1.0, sanity=False))
     assert [(m[1], m[2], m[3]) for m in _models(db)] == [(1, "physical", "active"), (2, "thesis", "rejected")] * 2
     assert all(not s["changed"] and s["why"].startswith("worse than the active model on the 50 held-out rows") for s in worse)
     # switching back and forth with nothing new stores nothing
@@ -257,7 +263,7 @@ def test_switching_forms_compares_and_reactivates_instead_of_storing_a_copy(hist
     db, _, imos = history
     _store_refit(db, "physical")
     # a gate that lets anything through activates the thesis form over the physical one ...
-    loose = Gate(min_r2=-1e9, max_speed_rmse_share=1e9, max_fuel_rmse_share=1e9, not_worse=1e9)
+    loose = Gate(min_r2=-1e9, max_speed_rmse_share=1e9, max_fuel_rmse_share=1e9, not_worse=1e9, sanity=False)
     _store_refit(db, "thesis", gate=loose)
     assert [(m[1], m[2], m[3]) for m in _models(db) if m[0] == imos[0]] == [(1, "physical", "superseded"), (2, "thesis", "active")]
     # ... and switching back compares the physical fit with it on the same rows: better, so v1 is active again
@@ -357,7 +363,10 @@ def test_batched_robust_fit_equals_each_vessel_fitted_alone(fleet):
             alone = fit.fit_target("physical", target, X[s], y[s], robust=True)
             np.testing.assert_allclose(res.coef, alone.coef, rtol=1e-12, atol=1e-15)
             assert (res.rmse, res.cv_rmse, res.dropped) == (alone.rmse, alone.cv_rmse, alone.dropped)
-            coef, rmse, cv = _reference_fit(X[s], y[s], robust=True)
+            # a fouling or weather term that came out as a gain is left out: the reference fits without it
+            Xr = X[s].copy()
+            Xr[:, [res.names.index(d) for d in res.dropped if d in features.NON_NEGATIVE | features.NON_POSITIVE_SPEED]] = 0.0
+            coef, rmse, cv = _reference_fit(Xr, y[s], robust=True)
             np.testing.assert_allclose(res.coef, coef, rtol=1e-8, atol=1e-12 * np.abs(coef).max())
             assert res.rmse == pytest.approx(rmse, rel=1e-9) and res.cv_rmse == pytest.approx(cv, rel=1e-8)
     assert fit.fit_targets("physical", "speed", fit.design("physical", "speed", inp), inp["stw_kn"], bounds,
@@ -524,7 +533,7 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
     p1, info = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
     p2, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
     p3, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=4)
-    assert p1.shape == (mlp.N_PARAMS,) == (256,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
+    assert p1.shape == (mlp.N_PARAMS,) == (266,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
     assert (info["n_train"], info["n_val"]) == (240, 60) and info["best_epoch"] < info["epochs"] <= mlp.MAX_EPOCHS
     # the validation rows are the newest: spoiling them changes where training stops, not what it learns from
     spoiled = Y[fit_rows].copy()
@@ -532,10 +541,11 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
     p4, info4 = mlp.train(X[fit_rows], spoiled, seed=3)
     np.testing.assert_array_equal(p4[: 2 * mlp.N_IN], p1[: 2 * mlp.N_IN])  # input scaling from the older rows only
     assert info4["best_epoch"] != info["best_epoch"]
-    # on rows it never saw, speed within 25 % of the noise and fuel within 3 %
+    # on rows it never saw, speed within the noise and fuel within 2 % (the monotone shape costs a little speed
+    # accuracy here, 0.147 kn against 0.092 unconstrained, and gains fuel accuracy, 1.2 % against 2.4 %)
     pred = mlp.forward(p1, X[300:])
-    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.25 * 0.15 + 0.1
-    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.03
+    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.15
+    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.02
     # routing's compiled forward pass is the same network
     for i in range(300, 310):
         for out in (0, 1):
@@ -550,9 +560,14 @@ def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
                             "draft_m": cols[1], "trim_m": cols[2], "wind_kn": cols[3], "wind_dir_rel_deg": cols[4], "wave_m": cols[5],
                             "wave_dir_rel_deg": cols[6], "months_since_drydock": 0.0, "stw_kn": Y[:, 0], "fuel_t": Y[:, 1] * 24,
                             "hours": 24.0})
+    # "best" keeps the physical form: the (monotone) network is not better on the held-out rows here
     rows, s = refit_vessel(9140607, reports, None, 1, form="best")
-    assert s["changed"] and s["form"] == "mlp" and "physical speed" in s["reason"] and "thesis speed" in s["reason"]
-    assert s["speed_holdout_rmse"] < 0.25 and [r["form"] for r in rows] == ["mlp", "mlp"]
+    assert s["changed"] and s["form"] == "physical" and "mlp speed" in s["reason"] and "thesis speed" in s["reason"]
+    rows, s = refit_vessel(9140607, reports, None, 1, form="mlp")
+    assert s["changed"] and s["form"] == "mlp" and s["gate"] == "default"
+    # monotone by construction, the network is about as good as the physical form here (0.297 against 0.316 kn;
+    # unconstrained it scored 0.199 but learnt speed gains in heavy head seas, which the gate refuses)
+    assert s["speed_holdout_rmse"] < 0.30 and [r["form"] for r in rows] == ["mlp", "mlp"]
     coef = np.array(list(json.loads(rows[0]["coefficients"]).values()))
     assert np.array_equal(coef, list(json.loads(rows[1]["coefficients"]).values()))  # one network, two outputs
     m = PerformanceModel("mlp", coef, coef)

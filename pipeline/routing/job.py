@@ -73,5 +73,8 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
     weather = calm_weather(problem) if weather_for is None else weather_for(problem, space)
     o = job.options
     options = solver_spec(o.solver).make_options(o.solver_overrides())
-    return solve(problem, weather, solver=o.solver, seed=o.seed, options=options, space=space, limits=o.limits,
-                 savings=True), weather
+    plan = solve(problem, weather, solver=o.solver, seed=o.seed, options=options, space=space, limits=o.limits,
+                 savings=True)
+    if problem.rpm_note:
+        plan.reason = f"{plan.reason}; {problem.rpm_note}" if plan.reason else problem.rpm_note
+    return plan, weather

@@ -78,6 +78,7 @@ class RoutingProblem:
     max_step_h: float = 1.0
     land_clearance_nm: float = 2.0  # legs keep this far from land, except within port_approach_nm of a port
     port_approach_nm: float = 10.0
+    rpm_note: str | None = None  # why allowed rpm settings were clipped to the model's range (said on the plan)
 
     def __post_init__(self):
         object.__setattr__(self, "depart_utc", np.datetime64(self.depart_utc, "s"))
