@@ -10,6 +10,7 @@ from rich.table import Table
 
 from cli.console import console
 from cli.launch import run_job
+DEMO_AT_SEA = (0, 4)  # demo voyages that sailed the day before: re-planned at sea from their noon positions
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 
 
@@ -21,7 +22,9 @@ def run_table(summary: dict) -> Table:
     t = Table(title=f"Route run {summary.get('run_id')} · cycle {summary.get('cycle')}")
     t.add_column("")
     t.add_column("", justify="right")
+    t.add_row("cycle age at the run's time", _f(summary.get("cycle_age_h"), "{:.0f} h"))
     t.add_row("voyages routed", str(summary.get("n")))
+    t.add_row("  planned from port / re-planned at sea", f"{summary.get('n_from_port')} / {summary.get('n_replanned')}")
     t.add_row("on time / late / not routed", f"{summary.get('n_ok')} / {summary.get('n_late')} / {summary.get('n_failed')}")
     t.add_row("exports failed", str(len(summary.get("export_failures") or [])))
     t.add_row("fuel (t)", _f(summary.get("fuel_t")))
@@ -35,7 +38,7 @@ def run_table(summary: dict) -> Table:
 
 
 def problems_table(summary: dict) -> Table | None:
-    rows = summary.get("problems") or []
+    rows = (summary.get("problems") or []) + (summary.get("stale") or [])
     exports = summary.get("export_failures") or []
     if not rows and not exports:
         return None
@@ -134,7 +137,7 @@ def register(app: typer.Typer) -> None:
             (mirror / ".complete").write_text("ok\n")
         log.info("[demo 2/3] generating the demo fleet (%d vessels, a year of noon reports) and importing it", vessels)
         fleet_dir = root / "demo_fleet"
-        write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7), fleet_dir)
+        write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7, at_sea=DEMO_AT_SEA), fleet_dir)
         _import_fleet(fleet_dir, root)
         log.info("[demo 3/3] the nightly job on %s: ingest → refit → route", date)
         summary = run_job("flows.fleet", "nightly", nightly_job, date=date, data_root=str(root),
@@ -185,5 +188,6 @@ def _show_nightly(s: dict, root: Path) -> None:
     console.print(f"models: {s['models_changed']} of {s['vessels']} vessels changed")
     if s.get("routing"):
         show_run(s["routing"], Path(root))
-    else:
-        console.print("[yellow]routing skipped: no complete forecast cycle among those ingested")
+    if s.get("cycles_missing"):
+        console.print(f"[yellow]nightly {s.get('state', 'Incomplete')}: targeted cycles not complete: "
+                      f"{', '.join(s['cycles_missing'])}")

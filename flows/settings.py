@@ -76,6 +76,12 @@ class RoutingSettings(RoutingOptions):
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
     voyages_per_task: int | None = None  # None: about three batches per dask worker thread, ≤ 16 voyages each
     task_timeout_s: float = 6 * 3600.0  # Prefect task timeout of a fleet's routing
+    # voyages at sea (pipeline/enroute.py): re-planned from their latest position; a report older than this at the
+    # run's time is advanced along the current plan; a position this close to the destination means arrived
+    max_report_age_h: float = 30.0
+    arrived_within_nm: float = 5.0
+    # routing on a cycle older than this at the run's nominal time is refused (the nightly fails naming it)
+    max_cycle_age_h: float = 36.0
 
 
 @dataclass(frozen=True)

@@ -330,3 +330,30 @@ def _raw_text(df: pd.DataFrame) -> pd.Series:
     for c in cols[1:]:
         out = out + "|" + c
     return out.astype(object)
+
+
+def positions_after(db_path: Path, imos: list[int], since_utc) -> pd.DataFrame:
+    """Positions of these vessels reported after `since_utc` (noon reports with a position), ordered by vessel and
+    time: imo, ts_utc, lat, lon."""
+    if not imos:
+        return pd.DataFrame(columns=["imo", "ts_utc", "lat", "lon"])
+    since = pd.Timestamp(since_utc)
+    since = since.tz_convert(None) if since.tzinfo else since
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute(
+            "SELECT imo, ts_utc, lat, lon FROM noon_reports WHERE imo IN (SELECT unnest(?)) AND ts_utc > ? "
+            "AND lat IS NOT NULL AND lon IS NOT NULL ORDER BY imo, ts_utc",
+            [[int(i) for i in imos], since.to_pydatetime()]).fetchdf()
+
+
+def voyage_fingerprints(db_path: Path, voyage_ids: list[str]) -> dict[str, str]:
+    """voyage_id → digest of what a plan depends on (storage.schema_routes.VOYAGE_FINGERPRINT_SQL), as stored with
+    each plan so `latest_routes` can tell a plan made for a voyage since changed."""
+    from storage.schema_routes import VOYAGE_FINGERPRINT_SQL
+
+    if not voyage_ids:
+        return {}
+    with warehouse.connect(db_path, write=False) as con:
+        rows = con.execute(f"SELECT v.voyage_id, {VOYAGE_FINGERPRINT_SQL} FROM voyages v "
+                           "WHERE v.voyage_id IN (SELECT unnest(?))", [list(voyage_ids)]).fetchall()
+    return {str(k): str(f) for k, f in rows}
