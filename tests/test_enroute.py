@@ -130,3 +130,58 @@ def test_routing_on_a_cycle_too_old_at_the_runs_time_is_refused_and_recorded(at_
     status, age, reason = _sql(at_sea_root, "SELECT status, cycle_age_h, reason FROM route_runs "
                                             "ORDER BY started_at DESC LIMIT 1")[0]
     assert status == "failed" and age == 48.0 and "weather too old" in reason
+
+
+def test_a_nightly_whose_cycles_are_missing_refuses_the_old_cycle_and_says_which_are_missing(at_sea_root, demo_mirror):
+    from conftest import mirror_urls
+    from flows.jobs.fleet import StaleWeatherError, nightly_job, nightly_markdown
+
+    published = {}
+
+    class Recorder:  # the plain runner, keeping what the nightly publishes
+        prefect = False
+
+        def step(self, fn, *a, name, **kw):
+            return fn(*a, **{k: v for k, v in kw.items() if k not in ("retries", "retry_delay_s", "timeout_s")})
+
+        def subflow(self, name, job, **kw):
+            return job(run=self, **kw)
+
+        def publish(self, *, key, markdown, table=None, description=""):
+            published[key] = markdown
+
+    with pytest.raises(StaleWeatherError, match=r"2020-12-01T00 is 48 h old at 2020-12-03T00"):
+        nightly_job(date="2020-12-03", cycles="00", data_root=str(at_sea_root), run=Recorder(), **mirror_urls(demo_mirror))
+    text = published["nightly-summary"]
+    assert text.startswith("# jitroute nightly 2020-12-03: Failed")
+    assert "**Targeted cycles not complete:** 2020-12-03T00" in text and "**Routing refused:** weather too old" in text
+    assert _sql(at_sea_root, "SELECT complete FROM cycles WHERE cycle = '2020-12-03 00:00'") == [(False,)]
+    assert nightly_markdown  # the same function renders the summary shown by the CLI and Prefect
+
+
+def test_an_unreachable_rish_listing_records_the_cycle_incomplete_and_files_missing(tmp_path):
+    from flows.jobs.ingest import backfill_range, ingest_cycle
+    from tests.processes import free_port
+
+    root = tmp_path / "data"
+    url = f"http://127.0.0.1:{free_port()}/rish/"  # nothing listens there
+    r = ingest_cycle("2020-12-01T00", data_root=str(root), rish_url=url, oscar_url=url)
+    assert r["complete"] is False and "GSM listing unreachable" in r["missing"][0]
+    rows = _sql(root, "SELECT source, status FROM ingest_log ORDER BY source")
+    assert rows == [("GSM", "missing"), ("GWM", "missing")]
+    assert _sql(root, "SELECT complete, missing LIKE '%unreachable%' FROM cycles") == [(False, True)]
+    reports = backfill_range("2020-12-01", "2020-12-02", cycles="00", data_root=str(root), rish_url=url, oscar_url=url)
+    assert [x["cycle"] for x in reports] == ["2020-12-01T00", "2020-12-02T00"] and not any(x["complete"] for x in reports)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["ingest", "--cycle", "2020-12-01T03"], "is at 03 UTC; GSM/GWM cycles are at 00/06/12/18 UTC"),
+    (["backfill", "--start", "1900-01-01", "--end", "2100-12-31"], "outside 2000-01-01"),
+    (["backfill", "--start", "2020-01-01", "--end", "2021-06-01"], "at most 366 days"),
+    (["backfill", "--start", "2020-12-01", "--end", "2020-12-01", "--cycles", "03"], "GSM/GWM cycles are at"),
+])
+def test_bad_cycles_and_ranges_are_refused_in_one_line(args, message, tmp_path):
+    from tests.processes import jitroute, new_tag, tagged_env
+
+    r = jitroute(*args, "--data", str(tmp_path / "data"), env=tagged_env(new_tag()), timeout_s=120)
+    assert r.returncode == 2 and message in r.stderr and r.stderr.count("error:") == 1 and "Traceback" not in r.stderr

@@ -171,10 +171,10 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     """Route every upcoming voyage and every voyage at sea (or the given ones) on one cube cycle (default: the
     newest complete one).
 
-    The run records the cycle's age at its nominal time (`nominal_utc`, default now). Routing on the newest cycle
-    when it is older than `routing.max_cycle_age_h` is refused (StaleWeatherError), and so is any cycle when a
-    nominal time is given (the nightly's); a cycle named by the operator without one is routed on, its age kept.
-    Voyages at sea start from their latest position at the nominal time (at the cycle's time when it is stale).
+    The run records the cycle's age at its nominal time (`nominal_utc`, default now). With a nominal time given
+    (the nightly's) routing on a cycle older than `routing.max_cycle_age_h` is refused (StaleWeatherError, the run
+    recorded failed with the reason); without one (an operator's run) it goes on with a warning. Voyages at sea start
+    from their latest position at the nominal time (at the cycle's time when the cycle is that old).
     """
     s = load_settings(data_root=Path(data_root) if data_root else None,
                       **{"routing.solver": solver, "routing.seed": seed, "routing.voyages_per_task": batch_size})
@@ -185,24 +185,24 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     if c not in cube.cycle_states(layout.cube_store, layout.cube_lock_dir):
         raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube_url}: ingest it first")
     run_id = f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:6]}"
-    nominal = np.datetime64(parse_cycle(nominal_utc) if nominal_utc else utcnow_h(), "s")
+    nominal = np.datetime64(str(nominal_utc).rstrip("Z"), "s") if nominal_utc else utcnow_h()
     age_h = cycle_age_h(c, nominal)
     stale = age_h > s.routing.max_cycle_age_h
-    if stale and (nominal_utc or not cycle):
+    if stale and nominal_utc:
         newest = cube.latest_complete_cycle(layout.cube_store)
         why = (f"weather too old: the newest complete cycle {cycle_label(newest)} is {cycle_age_h(newest, nominal):.0f} h "
                f"old at {str(nominal)[:16]}Z" if newest is not None and newest != c else
                f"weather too old: cycle {cycle_label(c)} is {age_h:.0f} h old at {str(nominal)[:16]}Z")
         why += (f" (more than routing.max_cycle_age_h = {s.routing.max_cycle_age_h:g} h); routing refused: ingest a newer "
-                "cycle (`jitroute ingest --cycle latest`)" + ("" if nominal_utc else ", or name a cycle with --cycle "
-                                                              "to route on it anyway"))
+                "cycle (`jitroute ingest --cycle latest`), or route on this one by hand (`jitroute route-fleet`)")
         route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=s.routing.solver, trigger=trigger, n_voyages=0,
                               nominal_utc=nominal, cycle_age_h=age_h)
         route_store.fail_run(layout.warehouse, run_id, why)
         LOG.error("%s", why)
         raise StaleWeatherError(why)
     if stale:
-        LOG.warning("cycle %s is %.0f h old at %sZ (more than %g h): routing on it as asked", cycle_label(c), age_h,
+        LOG.warning("cycle %s is %.0f h old at %sZ (more than routing.max_cycle_age_h = %g h): routing on it as asked; "
+                    "voyages at sea start from their position at the cycle's time", cycle_label(c), age_h,
                     str(nominal)[:16], s.routing.max_cycle_age_h)
     options = RoutingOptions.from_settings(s.routing)
     jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports,
