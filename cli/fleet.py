@@ -147,6 +147,24 @@ def register(app: typer.Typer) -> None:
         console.print(f"demo finished in {time.monotonic() - t0:.0f} s")
 
     @app.command()
+    def warm(solver: Optional[list[str]] = typer.Option(None, "--solver",
+                                                       help="Solvers to compile (default bfoa, the fleet's; repeat "
+                                                            "for more: dp, astar, gc, rhumb).")):
+        """Compile the routing kernels into numba's cache (in the checkout's __pycache__) before the first fleet run;
+        `make install` runs it. Quick when the cache is already warm."""
+        from flows.jobs.warm import warm_job
+        from pipeline.routing.solvers import SOLVERS
+
+        unknown = sorted(set(solver or []) - set(SOLVERS))
+        if unknown:
+            from cli.console import fail
+
+            fail(f"unknown solver(s) {', '.join(unknown)}; use {', '.join(SOLVERS)}")
+        out = warm_job(solver or None)
+        console.print("routing kernels ready: " + ", ".join(f"{k} {v:.0f} s" for k, v in out["seconds"].items())
+                      + (" (compiled)" if out["compiled"] else " (from the cache)"))
+
+    @app.command()
     def serve(timezone: str = typer.Option("UTC", help="Time zone of the nightly cron (e.g. Europe/Oslo)."),
               nightly_cron: str = typer.Option("30 2 * * *", help="Cron of the nightly deployment (in --timezone)."),
               ingest_cron: Optional[str] = typer.Option(None, help="Cron (UTC) of the ingest deployment; default: when "

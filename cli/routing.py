@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from cli.console import console, fail
+from cli.console import console, err_console, fail
 
 
 def _latlon(text: str, what: str) -> tuple[float, float]:
@@ -170,6 +170,10 @@ def register(app: typer.Typer) -> None:
                 console.print(f"[red]{kind} export failed:[/] {err}")
             if made.errors:
                 raise typer.Exit(1)
+        if not plan.legs and any(wanted.values()):
+            err_console.print("no plan, so these files were not written: "
+                              + ", ".join(f"{path} (--{kind})" for kind, path in wanted.items()
+                                          if path), highlight=False)
         if plan.status in ("infeasible", "failed"):
             raise typer.Exit(3)
 

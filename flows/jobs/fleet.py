@@ -211,6 +211,11 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                           nominal_utc=nominal, cycle_age_h=age_h)
     run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
     run_exports.discard_stale(route_store.running_run_ids(layout.warehouse))
+    from flows.jobs.warm import cold_cache_warning
+
+    cold = cold_cache_warning(options.solver) if jobs and not s.dask_address else None
+    if cold:
+        LOG.warning("%s", cold)
     n_at_sea = sum(j.voyage.get("start_kind") not in (None, enroute.START_PORT) for j in jobs)
     LOG.info("run %s: routing %d voyages (%d from port, %d at sea re-planned) on cycle %s, %.0f h old (%s)", run_id,
              len(jobs), len(jobs) - n_at_sea, n_at_sea, cycle_label(c), age_h,
