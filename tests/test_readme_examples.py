@@ -58,7 +58,7 @@ def test_every_analyst_query_of_the_readme_runs_and_the_numbered_ones_answer(rou
     finally:
         con.close()
     numbered = re.findall(r"-- (\d+)\. ", "\n".join(_blocks("sql")))
-    intro = re.search(r"(\w+) questions the demo output answers", README)
+    intro = re.search(r"(\w+) questions for analysts", README)
     words = {3: "Three", 4: "Four", 5: "Five", 6: "Six", 7: "Seven", 8: "Eight"}
     assert intro and intro.group(1) == words[len(numbered)], "the README's count of questions matches its list"
     empty = [s.split("\n")[0] for s, rows in results.items() if not rows]

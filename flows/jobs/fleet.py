@@ -198,7 +198,6 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
         route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=s.routing.solver, trigger=trigger, n_voyages=0,
                               nominal_utc=nominal, cycle_age_h=age_h)
         route_store.fail_run(layout.warehouse, run_id, why)
-        LOG.error("%s", why)
         raise StaleWeatherError(why)
     if stale:
         LOG.warning("cycle %s is %.0f h old at %sZ (more than routing.max_cycle_age_h = %g h): routing on it as asked; "
@@ -307,7 +306,6 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
         if c is None:
             refused = (f"no complete forecast cycle up to {labels[-1]} in {layout.weather_cube_url}: routing refused; "
                        "ingest a cycle (`jitroute ingest --cycle latest`)")
-            LOG.error("%s", refused)
         else:
             LOG.info("[nightly 3/3] route the fleet on cycle %s (%.0f h old)", cycle_label(c), cycle_age_h(c, nominal))
             try:

@@ -79,8 +79,8 @@ def warm_job(solvers: list[str] | None = None) -> dict:
     solvers = list(solvers or ["bfoa"])
     cold = [s for s in solvers if not is_warm(s)]
     if cold:
-        LOG.info("compiling the routing kernels (%s) into numba's cache under %s: a few minutes on 2 cores, once",
-                 ", ".join(cold), PIPELINE)
+        LOG.info("compiling the routing kernels (%s) into numba's cache under %s unless they are there already: "
+                 "a few minutes on 2 cores the first time", ", ".join(cold), os.environ.get("NUMBA_CACHE_DIR") or PIPELINE)
     seconds = {}
     for solver in solvers:
         t0 = time.monotonic()
