@@ -159,10 +159,12 @@ class Selection:
 
 def select_starts(voyages: list[dict], positions: dict[int, list[Position]], plans: dict[str, list[dict]], *,
                   cycle_utc, ref_utc, lookahead_h: float, max_report_age_h: float, arrived_within_nm: float,
-                  max_voyage_h: float, explicit: bool = False) -> list[Selection]:
+                  max_voyage_h: float, explicit: bool = False,
+                  given: dict[str, list[Position]] | None = None) -> list[Selection]:
     """Each voyage's plan start for a run on the cycle `cycle_utc` at the reference time `ref_utc` (≥ the cycle).
 
-    - a voyage with a position after its departure (not after `ref_utc`) is at sea: re-planned from it (see
+    - a voyage with a position after its departure (its vessel's reports in `positions` by IMO, an operator's in
+      `given` by voyage ID) (not after `ref_utc`) is at sea: re-planned from it (see
       `replan_start`), unless it has arrived (a position within `arrived_within_nm` of its destination, or
       its status) or its RTA has passed;
     - else a voyage departing within `lookahead_h` after the cycle with status `planned` is planned from its port;
@@ -176,7 +178,7 @@ def select_starts(voyages: list[dict], positions: dict[int, list[Position]], pla
     for v in voyages:
         vid, dep, rta = str(v.get("voyage_id")), _t(v["depart_utc"]), _t(v["rta_utc"])
         status = str(v.get("status") or "planned").strip().lower()
-        mine = positions.get(int(v["imo"]), []) if v.get("imo") is not None else []
+        mine = (positions.get(int(v["imo"]), []) if v.get("imo") is not None else []) + (given or {}).get(vid, [])
         legs = plans.get(vid, [])
         if has_arrived(v, mine, arrived_within_nm):
             if explicit:

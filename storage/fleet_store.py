@@ -357,3 +357,19 @@ def voyage_fingerprints(db_path: Path, voyage_ids: list[str]) -> dict[str, str]:
         rows = con.execute(f"SELECT v.voyage_id, {VOYAGE_FINGERPRINT_SQL} FROM voyages v "
                            "WHERE v.voyage_id IN (SELECT unnest(?))", [list(voyage_ids)]).fetchall()
     return {str(k): str(f) for k, f in rows}
+
+
+def add_position(db_path: Path, voyage_id: str, ts_utc, lat: float, lon: float, note: str | None = None) -> None:
+    """Store an operator's position of a voyage at sea (the same voyage and time again replaces it)."""
+    t = pd.Timestamp(ts_utc)
+    t = t.tz_convert(None) if t.tzinfo else t
+    with warehouse.connect(db_path) as con:
+        con.execute("INSERT OR REPLACE INTO voyage_positions VALUES (?, ?, ?, ?, ?, ?)",
+                    [voyage_id, t.to_pydatetime(), float(lat), float(lon), note, _utcnow()])
+
+
+def voyage_positions(db_path: Path, voyage_ids: list[str]) -> pd.DataFrame:
+    """Operators' positions of these voyages: voyage_id, ts_utc, lat, lon, ordered by voyage and time."""
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute("SELECT voyage_id, ts_utc, lat, lon FROM voyage_positions WHERE voyage_id IN (SELECT unnest(?)) "
+                           "ORDER BY voyage_id, ts_utc", [list(voyage_ids)]).fetchdf()

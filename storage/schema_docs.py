@@ -228,6 +228,10 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
         "fuel_type": "fuel grade, upper case: HFO | LFO | MGO | MDO | DO | LNG | ...",
         "received_t": "fuel received, tonnes", "rob_t": "fuel of this grade remaining on board before receiving, tonnes",
         "source_file": _NOON["source_file"]}),
+    "voyage_positions": ("positions of voyages at sea given by an operator; re-planning starts from the newest", {
+        "voyage_id": _VOYAGES["voyage_id"], "ts_utc": f"time of the position {UTC}",
+        "lat": "latitude, degrees north", "lon": "longitude, degrees east", "note": "who or what gave it",
+        "entered_at": f"when it was entered {UTC}"}),
     "ingest_log": ("weather files fetched: one row per file and attempt", _INGEST),
     "cycles": ("weather forecast cycles: complete or what is missing", _CYCLES),
     "route_runs": ("fleet routing runs: one row per run", _RUNS),

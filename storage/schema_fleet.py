@@ -148,4 +148,20 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE perf_models_new RENAME TO perf_models;
         """,
     ),
+    Migration(
+        "fleet_006_voyage_positions",
+        # positions of voyages at sea given by an operator (`jitroute position add`): re-planning starts from the
+        # newest of these and the vessel's noon reports
+        """
+        CREATE TABLE IF NOT EXISTS voyage_positions (
+            voyage_id VARCHAR NOT NULL,
+            ts_utc TIMESTAMP NOT NULL,
+            lat DOUBLE NOT NULL CHECK (lat BETWEEN -90 AND 90),
+            lon DOUBLE NOT NULL CHECK (lon BETWEEN -180 AND 360),
+            note VARCHAR,
+            entered_at TIMESTAMP,
+            PRIMARY KEY (voyage_id, ts_utc)
+        );
+        """,
+    ),
 ]

@@ -185,3 +185,25 @@ def test_bad_cycles_and_ranges_are_refused_in_one_line(args, message, tmp_path):
 
     r = jitroute(*args, "--data", str(tmp_path / "data"), env=tagged_env(new_tag()), timeout_s=120)
     assert r.returncode == 2 and message in r.stderr and r.stderr.count("error:") == 1 and "Traceback" not in r.stderr
+
+
+def test_an_operators_newer_position_wins_over_the_noon_report():
+    report = enroute.Position(T("2020-11-30T12:00"), 31.0, 140.8)
+    given = enroute.Position(T("2020-11-30T20:00"), 28.0, 141.5, enroute.START_OPERATOR)
+    got = enroute.select_starts([VOYAGE], {VOYAGE["imo"]: [report]}, {}, cycle_utc=T("2020-12-01T00"),
+                                ref_utc=T("2020-12-01T00"), lookahead_h=120, max_report_age_h=30, arrived_within_nm=5,
+                                max_voyage_h=2160, given={"V1": [given]})
+    assert [(s.start.kind, s.start.lat, s.start.utc) for s in got] == [("operator position", 28.0, given.utc)]
+
+
+def test_jitroute_position_stores_an_operators_position(at_sea_root):
+    from tests.processes import jitroute, new_tag, tagged_env
+
+    r = jitroute("position", "V20001", "--at", "2020-12-01T18", "--pos", "24.5,142.0", "--data", str(at_sea_root),
+                 env=tagged_env(new_tag()), timeout_s=120)
+    assert r.returncode == 0, r.stderr
+    assert _sql(at_sea_root, "SELECT voyage_id, ts_utc, lat, lon FROM voyage_positions") == [
+        ("V20001", pd.Timestamp("2020-12-01T18:00").to_pydatetime(), 24.5, 142.0)]
+    bad = jitroute("position", "NOPE", "--at", "2020-12-01T18", "--pos", "24.5,142.0", "--data", str(at_sea_root),
+                   env=tagged_env(new_tag()), timeout_s=120)
+    assert bad.returncode == 2 and "voyage NOPE is not in" in bad.stderr

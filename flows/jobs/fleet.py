@@ -101,8 +101,13 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     for p in (reports.to_dict("records") if reports is not None else []):
         positions.setdefault(int(p["imo"]), []).append(
             enroute.Position(np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"])))
+    given: dict[str, list[enroute.Position]] = {}
+    for p in fleet_store.voyage_positions(db, [x["voyage_id"] for x in rows]).to_dict("records"):
+        given.setdefault(str(p["voyage_id"]), []).append(enroute.Position(
+            np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"]), enroute.START_OPERATOR))
     r = s.routing
     chosen = enroute.select_starts(rows, positions, route_store.current_plan_legs(db, [x["voyage_id"] for x in rows]),
+                                   given=given,
                                    cycle_utc=cycle, ref_utc=ref, lookahead_h=r.lookahead_h,
                                    max_report_age_h=r.max_report_age_h, arrived_within_nm=r.arrived_within_nm,
                                    max_voyage_h=MAX_VOYAGE_H, explicit=bool(voyage_ids))
