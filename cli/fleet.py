@@ -75,7 +75,8 @@ def register(app: typer.Typer) -> None:
                                                                       "tasks per worker thread of the live cluster, "
                                                                       "at most 16 voyages each)."),
                         data: Optional[Path] = DataOpt):
-        """Route every upcoming voyage on a local dask cluster (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
+        """Route every upcoming voyage, and re-plan every ship at sea from its latest position, on a local dask cluster
+        (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
         from flows.jobs.fleet import route_fleet_job
         from flows.settings import load_settings
         from pipeline.sources.cycles import parse_cycle
@@ -93,7 +94,8 @@ def register(app: typer.Typer) -> None:
                 rish_url: Optional[str] = typer.Option(None, help="RISH base URL (default $JITROUTE_RISH_URL)."),
                 oscar_url: Optional[str] = typer.Option(None, help="OSCAR base URL (default $JITROUTE_OSCAR_URL)."),
                 data: Optional[Path] = DataOpt):
-        """The nightly job: ingest the newest published cycles (or a date's), refit models, route the fleet."""
+        """The nightly job: ingest the newest published cycles (or a date's), refit models, route the fleet (ships at sea
+        from their latest positions). Exit 4 when the newest cycle is older than routing.max_cycle_age_h (36 h)."""
         from flows.jobs.fleet import nightly_job
         from flows.settings import load_settings
         from pipeline.sources.cycles import parse_day, parse_hours
