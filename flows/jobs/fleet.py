@@ -17,7 +17,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from flows.jobs import dask_pool, weather_maps
 from flows.jobs.ingest import ingest_cycle
@@ -52,12 +51,6 @@ class StaleWeatherError(RuntimeError):
 def cycle_age_h(cycle: np.datetime64, nominal_utc: np.datetime64) -> float:
     """Hours from the cycle's init time to the run's nominal time."""
     return float((np.datetime64(nominal_utc, "s") - np.datetime64(cycle, "s")) / np.timedelta64(1, "s")) / 3600.0
-
-
-def upcoming(voyages: pd.DataFrame, cycle: np.datetime64, lookahead_h: float) -> pd.DataFrame:
-    c = pd.Timestamp(cycle)
-    keep = (voyages["depart_utc"] >= c) & (voyages["depart_utc"] < c + pd.Timedelta(hours=lookahead_h))
-    return voyages[keep & (voyages["status"].fillna("planned") == "planned")]
 
 
 def plain(v):
