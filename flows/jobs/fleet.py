@@ -88,8 +88,10 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
             raise FleetRunError(f"voyage(s) {', '.join(unknown)} not in {db}: import them with `jitroute fleet import`")
     ref = np.datetime64(ref_utc if ref_utc is not None else cycle, "s")
     rows = [{k: plain(x) for k, x in v.items()} for v in table.to_dict("records")]
-    since = min((r["depart_utc"] for r in rows), default=None)
-    reports = fleet_store.positions_after(db, sorted({int(r["imo"]) for r in rows}), since) if since else None
+    # reports of the last MAX_VOYAGE_H only (a voyage is never at sea longer): not every report ever made
+    since = max(min((np.datetime64(r["depart_utc"], "s") for r in rows), default=ref),
+                ref - np.timedelta64(int(MAX_VOYAGE_H * 3600), "s")) if rows else None
+    reports = fleet_store.positions_after(db, sorted({int(r["imo"]) for r in rows}), since) if rows else None
     positions: dict[int, list[enroute.Position]] = {}
     for p in (reports.to_dict("records") if reports is not None else []):
         positions.setdefault(int(p["imo"]), []).append(
