@@ -262,7 +262,7 @@ def nightly_cycles(s: Settings, date: str | None, cycles) -> list[np.datetime64]
     """The cycles a nightly ingests: the date's (at `cycles` hours) when a date is given, else the newest published."""
     if date:
         day = parse_day(date)
-        hours = parse_hours(cycles) if cycles else list(s.sources.cycles_utc)
+        hours = parse_hours(cycles) if cycles not in (None, "", []) else list(s.sources.cycles_utc)  # 0 is hour 00
         return [np.datetime64(day, "ns") + np.timedelta64(h, "h") for h in hours]
     return newest_published_cycles(utcnow_h(), s.sources.cycles_utc, s.sources.publish_delay_h, n=s.sources.nightly_cycles)
 
