@@ -1,9 +1,9 @@
-"""`jitroute warm`: compile the routing kernels into numba's cache ahead of the first fleet run.
+"""`jitroute warm`: compile the refit and routing kernels into numba's cache ahead of the first nightly.
 
 numba compiles each kernel on its first call and keeps the machine code in the `__pycache__` folders beside the
 sources (inside the checkout), so later processes load it in milliseconds. Without this step the first voyage on
-every dask worker pays the compilation (minutes on 2 cores) in silence. `make install` runs it; it routes one
-short demo voyage in calm water with each solver asked for, through the same code as a fleet run's worker (exports
+every dask worker pays the compilation (minutes on 2 cores) in silence. `make install` runs it; it refits a small
+generated fleet in a throw-away data root and routes one short demo voyage in calm water with each solver asked for, through the same code as a fleet run's worker (exports
 too), then records a stamp of the sources it compiled, so a fleet run can tell (and say) when the cache is cold.
 """
 
@@ -71,6 +71,22 @@ def _warm_job(solver: str):
                     options=RoutingOptions(solver=solver))
 
 
+def _warm_refit() -> None:
+    """Import a small generated fleet into a throw-away data root and refit it: compiles the fit kernels
+    (pipeline/performance) a nightly's refit needs."""
+    import tempfile
+
+    from flows.jobs.refit import import_fleet_folder, import_noon_file, refit_job
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+    with tempfile.TemporaryDirectory(prefix="jitroute-warm-") as tmp:
+        root = Path(tmp) / "data"
+        write_fleet(generate_fleet("2020-12-01T00", n_vessels=2, days=120, seed=1), Path(tmp) / "fleet")
+        import_fleet_folder(folder=str(Path(tmp) / "fleet"), data_root=str(root))
+        import_noon_file(path=str(Path(tmp) / "fleet" / "noon_reports.csv"), data_root=str(root))
+        refit_job(data_root=str(root))
+
+
 def warm_job(solvers: list[str] | None = None) -> dict:
     """Route one short voyage with each solver (default the fleet's, bfoa) so numba compiles and caches every kernel
     a fleet run needs; returns {solver: seconds} and whether anything had to be compiled."""
@@ -82,6 +98,10 @@ def warm_job(solvers: list[str] | None = None) -> dict:
         LOG.info("compiling the routing kernels (%s) into numba's cache under %s unless they are there already: "
                  "a few minutes on 2 cores the first time", ", ".join(cold), os.environ.get("NUMBA_CACHE_DIR") or PIPELINE)
     seconds = {}
+    t0 = time.monotonic()
+    _warm_refit()
+    seconds["refit"] = round(time.monotonic() - t0, 1)
+    LOG.info("refit ready (%.1f s)", seconds["refit"])
     for solver in solvers:
         t0 = time.monotonic()
         res = route_one(_warm_job(solver), None)
