@@ -361,6 +361,8 @@ def voyage_fingerprints(db_path: Path, voyage_ids: list[str]) -> dict[str, str]:
 
 def add_position(db_path: Path, voyage_id: str, ts_utc, lat: float, lon: float, note: str | None = None) -> None:
     """Store an operator's position of a voyage at sea (the same voyage and time again replaces it)."""
+    if not (-90.0 <= float(lat) <= 90.0 and -180.0 <= float(lon) <= 360.0):
+        raise ValueError(f"voyage {voyage_id}: position {lat},{lon} is not a latitude, longitude in degrees")
     t = pd.Timestamp(ts_utc)
     t = t.tz_convert(None) if t.tzinfo else t
     with warehouse.connect(db_path) as con:

@@ -156,8 +156,8 @@ MIGRATIONS: list[Migration] = [
         CREATE TABLE IF NOT EXISTS voyage_positions (
             voyage_id VARCHAR NOT NULL,
             ts_utc TIMESTAMP NOT NULL,
-            lat DOUBLE NOT NULL CHECK (lat BETWEEN -90 AND 90),
-            lon DOUBLE NOT NULL CHECK (lon BETWEEN -180 AND 360),
+            lat DOUBLE NOT NULL,
+            lon DOUBLE NOT NULL,
             note VARCHAR,
             entered_at TIMESTAMP,
             PRIMARY KEY (voyage_id, ts_utc)
