@@ -89,7 +89,9 @@ def register(app: typer.Typer) -> None:
         console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
                       f"{c['rejected']} rejected")
         for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
-            console.print(f"  {n} × {reason}")
+            console.print(f"  {n} × {reason}", highlight=False, markup=False)
+        if c["reasons"]:
+            console.print("  refused rows, with their reason and raw text: table bunker_logs_rejected")
         for key in c["conflicts"]:
             console.print(f"  conflicts with the stored row: {key} (delete it first to correct it)")
 

@@ -8,6 +8,7 @@ import flows.ingest  # noqa: F401  (registers the sub-flows the nightly runs)
 import flows.refit  # noqa: F401
 from flows.jobs.fleet import nightly_job, route_fleet_job
 from flows.runner import InPrefect, register_flow
+from flows.settings import refuse_served_overrides
 
 
 @register_flow
@@ -17,6 +18,7 @@ def route_fleet(cycle: str | None = None, voyages: list[str] | None = None, data
                 batch_size: int | None = None, nominal_utc: str | None = None) -> dict:
     """Route every upcoming voyage and every voyage at sea (or the given ones) on one cube cycle (default: the
     newest complete one)."""
+    refuse_served_overrides(data_root=data_root)
     return route_fleet_job(cycle, voyages, data_root=data_root, solver=solver, seed=seed, trigger=trigger,
                            exports=exports, batch_size=batch_size, nominal_utc=nominal_utc, run=InPrefect())
 
@@ -29,6 +31,7 @@ def nightly(date: str | None = None, data_root: str | None = None, rish_url: str
 
     Ends Failed when the weather is too old to route on (StaleWeatherError names the newest cycle and its age), and
     in a Completed state named "Incomplete" when a targeted cycle is not complete (the summary lists them)."""
+    refuse_served_overrides(data_root=data_root, rish_url=rish_url, oscar_url=oscar_url)
     summary = nightly_job(date, data_root=data_root, rish_url=rish_url, oscar_url=oscar_url, cycles=cycles,
                           run=InPrefect())
     if summary.get("cycles_missing"):

@@ -7,12 +7,14 @@ from prefect import flow
 
 from flows.jobs.refit import import_bunker_file, import_fleet_folder, import_noon_file, refit_job
 from flows.runner import InPrefect, register_flow
+from flows.settings import refuse_served_overrides
 
 
 @register_flow
 @flow(name="import-noon-reports")
 def import_noon_reports(path: str, data_root: str | None = None) -> dict:
     """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
+    refuse_served_overrides(data_root=data_root)
     return import_noon_file(path, data_root=data_root, run=InPrefect())
 
 
@@ -20,6 +22,7 @@ def import_noon_reports(path: str, data_root: str | None = None) -> dict:
 @flow(name="import-fleet")
 def import_fleet(folder: str, data_root: str | None = None) -> dict:
     """Validate and store vessels.csv and voyages.csv of a folder; refused rows go to *_rejected with their reason."""
+    refuse_served_overrides(data_root=data_root)
     return import_fleet_folder(folder, data_root=data_root, run=InPrefect())
 
 
@@ -27,6 +30,7 @@ def import_fleet(folder: str, data_root: str | None = None) -> dict:
 @flow(name="import-bunker-logs")
 def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
     """Validate a bunker-log file and store good rows; rejected and conflicting rows are returned with a reason."""
+    refuse_served_overrides(data_root=data_root)
     return import_bunker_file(path, data_root=data_root, run=InPrefect())
 
 
@@ -35,4 +39,5 @@ def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
 def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
                       robust: bool | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; activation only for a model that is not worse."""
+    refuse_served_overrides(data_root=data_root)
     return refit_job(imos, data_root=data_root, form=form, robust=robust, run=InPrefect())

@@ -7,7 +7,7 @@ pipeline's job (`pipeline.performance.model.model_from_stored`).
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -70,8 +70,9 @@ def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, ke
     rej = pd.DataFrame({k: rejected[k] if k in rejected else None for k in keys})
     if "imo" in rej:
         rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
-    if "voyage_id" in rej:
-        rej["voyage_id"] = rej["voyage_id"].astype("string")
+    for k in ("voyage_id", "bill_no"):
+        if k in rej:
+            rej[k] = rej[k].astype("string")
     rej["raw"] = rejected["raw"].astype("string")
     rej["reason"] = rejected["reason"].astype("string")
     rej["source_file"] = rejected["source_file"].astype("string") if "source_file" in rejected else None
@@ -96,53 +97,92 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> di
 
     Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts.
     """
-    good = good.reindex(columns=NOON_COLUMNS)
+    return import_noon_chunks(db_path, [(good, rejected)])
+
+
+IMPORT_MEMORY_LIMIT = "128MB"  # DuckDB's memory while a noon file is imported (it spills the rest to temp files)
+
+
+def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.DataFrame]]) -> dict[str, int]:
+    """`import_noon` for a file read and validated chunk by chunk: one connection and ONE transaction (a file
+    that fails half-way stores nothing), so memory follows the chunk, not the file. A (vessel, time) already
+    taken by an earlier chunk of the same file is rejected as `duplicate timestamp in file`, as within a chunk.
+
+    Returns counts: inserted, already_present, rejected (incl. conflicts and duplicates), conflicts,
+    duplicates_in_file.
+    """
     value_cols = [c for c in NOON_COLUMNS if c not in ("imo", "ts_utc", "source_file")]
     same = " AND ".join(f"(n.{c} IS NOT DISTINCT FROM g.{c})" for c in value_cols)
+    counts = {"inserted": 0, "already_present": 0, "rejected": 0, "conflicts": 0, "duplicates_in_file": 0}
     with warehouse.connect(db_path) as con:
-        con.register("g_df", good)
+        # a large file's uncommitted rows spill to disk instead of growing the process (this connection only)
+        con.execute(f"SET memory_limit = '{IMPORT_MEMORY_LIMIT}'")
         con.execute("BEGIN TRANSACTION")
         try:
-            con.execute("CREATE TEMP TABLE g AS SELECT * FROM g_df")
-            present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchone()[0]
-            conflicts = con.execute(
-                f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
-            # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
-            con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
-                        "ORDER BY g.imo, g.ts_utc")
-            inserted = len(good) - present - len(conflicts)
-            if len(conflicts):
-                conflicts["raw"] = _raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
-                conflicts["reason"] = "conflicts with a stored report for the same vessel and time"
-                rejected = pd.concat([rejected, conflicts], ignore_index=True)
-            rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
-            for c in ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
-                      "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
-                      "current_dir_rel_deg", "months_since_drydock"):
-                rej[c] = pd.to_numeric(rej[c], errors="coerce")
-            rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
-            rej["ts_utc"] = pd.to_datetime(rej["ts_utc"], errors="coerce")
-            rej["rejected_at"] = _utcnow()
-            con.register("rej_df", rej)
-            # the same raw row rejected for the same reason is stored once: re-imports add nothing
-            con.execute(
-                "INSERT INTO noon_reports_rejected SELECT r.* FROM rej_df r "
-                "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason)"
-            )
-            con.execute("DROP TABLE g")
+            con.execute("CREATE TEMP TABLE file_keys (imo BIGINT, ts_utc TIMESTAMP)")
+            for good, rejected in chunks:
+                good = good.reindex(columns=NOON_COLUMNS)
+                con.register("g_df", good)
+                con.execute("CREATE TEMP TABLE g AS SELECT * FROM g_df")
+                con.unregister("g_df")
+                dups = con.execute("SELECT g.* FROM g SEMI JOIN file_keys k USING (imo, ts_utc)").fetchdf()
+                if len(dups):
+                    con.execute("DELETE FROM g USING file_keys k WHERE g.imo = k.imo AND g.ts_utc = k.ts_utc")
+                con.execute("INSERT INTO file_keys SELECT imo, ts_utc FROM g")
+                present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchall()[0][0]
+                conflicts = con.execute(
+                    f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
+                # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
+                con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
+                            "ORDER BY g.imo, g.ts_utc")
+                n_good = con.execute("SELECT count(*) FROM g").fetchall()[0][0]
+                counts["inserted"] += int(n_good - present - len(conflicts))
+                counts["already_present"] += int(present)
+                counts["conflicts"] += len(conflicts)
+                counts["duplicates_in_file"] += len(dups)
+                for extra, why in ((conflicts, "conflicts with a stored report for the same vessel and time"),
+                                   (dups, "duplicate timestamp in file")):
+                    if len(extra):
+                        extra["raw"] = _raw_text(extra[[c for c in NOON_COLUMNS if c != "source_file"]])
+                        extra["reason"] = why
+                        rejected = pd.concat([rejected, extra], ignore_index=True)
+                counts["rejected"] += len(rejected)
+                _insert_noon_rejected(con, rejected)
+                con.execute("DROP TABLE g")
+            con.execute("DROP TABLE file_keys")
             con.execute("COMMIT")
         except Exception:
             con.execute("ROLLBACK")
             raise
-    return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)), "conflicts": int(len(conflicts))}
+    return counts
+
+
+def _insert_noon_rejected(con, rejected: pd.DataFrame) -> None:
+    rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
+    for c in ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
+              "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
+              "current_dir_rel_deg", "months_since_drydock"):
+        rej[c] = pd.to_numeric(rej[c], errors="coerce")
+    rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
+    rej["ts_utc"] = pd.to_datetime(rej["ts_utc"], errors="coerce")
+    rej["rejected_at"] = _utcnow()
+    con.register("rej_df", rej)
+    # the same raw row rejected for the same reason is stored once: re-imports add nothing
+    con.execute(
+        "INSERT INTO noon_reports_rejected SELECT r.* FROM rej_df r "
+        "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason)"
+    )
+    con.unregister("rej_df")
 
 
 BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]
 
 
-def import_bunkers(db_path: Path, good: pd.DataFrame) -> dict[str, int]:
+def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | None = None) -> dict[str, int]:
     """Insert validated bunker-log rows; a row identical to a stored one is a no-op, one that differs from the
-    stored row of the same (imo, bill_no, fuel_type) is not stored. Returns counts and the conflicting rows."""
+    stored row of the same (imo, bill_no, fuel_type) is not stored. Rows refused by validation go to
+    `bunker_logs_rejected` with their reason and raw text. Returns counts and the conflicting rows."""
+    _store_rejected(db_path, "bunker_logs_rejected", rejected, ["imo", "bill_no"])
     good = good.reindex(columns=BUNKER_COLUMNS)
     key = "imo, bill_no, fuel_type"
     same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))

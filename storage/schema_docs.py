@@ -65,7 +65,7 @@ _ROUTES = {
     "runtime_s": "solver run time, seconds",
     "n_legs": "number of legs of the plan",
     "n_legs_beyond_forecast": "number of legs sailed past the forecast horizon (weather of the last step persisted)",
-    "forecast_flag": "'beyond horizon', 'before cycle', both (comma separated) or empty when the voyage lies in the forecast",
+    "forecast_flag": "'beyond horizon', 'before cycle', 'weather missing' (a hole in the cube's wind, sailed as calm; the reason names the legs), comma separated, or empty when the voyage lies in the forecast",
     "hours_beyond_forecast": "hours sailed past the last forecast step",
     "hours_before_cycle": "hours sailed before the forecast cycle's init time",
     "honest_baseline_rpm": "the one constant rpm (between the vessel's limits) at which the base route arrives at the RTA",
@@ -228,6 +228,9 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
         "fuel_type": "fuel grade, upper case: HFO | LFO | MGO | MDO | DO | LNG | ...",
         "received_t": "fuel received, tonnes", "rob_t": "fuel of this grade remaining on board before receiving, tonnes",
         "source_file": _NOON["source_file"]}),
+    "bunker_logs_rejected": ("rows of bunker-log files refused on import, with the reason and the raw row", {
+        "imo": "IMO number of the vessel, when readable", "bill_no": "bunker delivery note number, as written",
+        **_REJECTED, "source_file": _NOON["source_file"]}),
     "voyage_positions": ("positions of voyages at sea given by an operator; re-planning starts from the newest", {
         "voyage_id": _VOYAGES["voyage_id"], "ts_utc": f"time of the position {UTC}",
         "lat": "latitude, degrees north", "lon": "longitude, degrees east", "note": "who or what gave it",
@@ -264,7 +267,8 @@ VIEWS: dict[str, tuple[str, dict[str, str]]] = {
         "planned_eta_utc": f"planned arrival {UTC}", "n_reports": "noon reports at sea on the voyage",
         "actual_fuel_t": "fuel burnt in tonnes, from the noon reports", "actual_hours": "hours steamed, from the noon reports",
         "actual_dist_nm": "distance sailed, nautical miles, from the noon reports",
-        "actual_arrival_utc": f"last noon report of the voyage, standing for the arrival {UTC}",
+        "actual_arrival_utc": f"the arrival: the first noon report within 10 NM of the destination, else the last report at "
+                              f"sea before the next voyage (at most RTA + 30 days) {UTC}",
         "fuel_error_pct": "planned minus actual fuel, percent of actual",
         "arrival_error_h": "actual minus planned arrival, hours", "late_h": "actual arrival minus RTA, hours"}),
 }

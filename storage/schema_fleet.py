@@ -149,7 +149,15 @@ MIGRATIONS: list[Migration] = [
         """,
     ),
     Migration(
-        "fleet_006_voyage_positions",
+        "fleet_006_bunker_logs_rejected",
+        # bunker-log rows refused on import, kept with the reason and their raw text (as for noon reports)
+        """
+        CREATE TABLE bunker_logs_rejected (imo BIGINT, bill_no VARCHAR, raw VARCHAR, reason VARCHAR NOT NULL,
+                                           source_file VARCHAR, rejected_at TIMESTAMP);
+        """,
+    ),
+    Migration(
+        "fleet_007_voyage_positions",
         # positions of voyages at sea given by an operator (`jitroute position add`): re-planning starts from the
         # newest of these and the vessel's noon reports
         """

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -39,15 +40,58 @@ def read_table(path: Path) -> pd.DataFrame:
     return df
 
 
+NOON_CHUNK_ROWS = 20_000  # rows read, validated and stored at a time: memory follows this, not the file
+
+
+def read_table_chunks(path: Path, rows: int = NOON_CHUNK_ROWS) -> Iterator[pd.DataFrame]:
+    """`read_table`, `rows` at a time (CSV by pandas' chunked reader, Parquet by row batches)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            for batch in pq.ParquetFile(path).iter_batches(batch_size=rows):
+                yield batch.to_pandas().astype("string").astype(object)
+            return
+        first = True
+        with pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""], chunksize=rows) as reader:
+            for df in reader:
+                if first and not isinstance(df.index, pd.RangeIndex):  # surplus leading fields became an index
+                    raise NoonFileError(f"{path}: line 2 has more fields than the header's {len(df.columns)} columns; "
+                                        "fix the file and re-import")
+                first = False
+                yield df.reset_index(drop=True)
+    except (ValueError, OSError, pd.errors.ParserError) as exc:
+        if isinstance(exc, NoonFileError):
+            raise
+        raise NoonFileError(f"{path}: cannot be read as CSV/Parquet ({exc})") from exc
+
+
 def import_noon_file(path: str, data_root: str | None = None, *, run=PLAIN) -> dict:
-    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
+    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason.
+    The file is read, validated and stored NOON_CHUNK_ROWS rows at a time, in one transaction."""
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
-    raw = read_table(Path(path))
-    good, bad = validate_noon(raw, fleet_store.known_imos(db), source=Path(path).name)
-    counts = fleet_store.import_noon(db, good, bad)
-    counts["rows"] = len(raw)
-    counts["reasons"] = reason_counts(bad)
+    known = fleet_store.known_imos(db)
+    n_rows, reasons = 0, {}
+
+    def validated():
+        nonlocal n_rows
+        for raw in read_table_chunks(Path(path)):
+            good, bad = validate_noon(raw, known, source=Path(path).name)
+            n_rows += len(raw)
+            for reason, n in reason_counts(bad).items():
+                reasons[reason] = reasons.get(reason, 0) + n
+            yield good, bad
+
+    counts = fleet_store.import_noon_chunks(db, validated())
+    across = counts.pop("duplicates_in_file")  # a (vessel, time) repeated in another chunk of the file
+    if across:
+        reasons["duplicate timestamp in file"] = reasons.get("duplicate timestamp in file", 0) + across
+    counts["rows"] = n_rows
+    counts["reasons"] = reasons
     return counts
 
 
@@ -74,8 +118,10 @@ def import_bunker_file(path: str, data_root: str | None = None, *, run=PLAIN) ->
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     raw = read_table(Path(path))
-    good, bad = validate_bunker(raw, fleet_store.known_imos(db), source=Path(path).name)
-    counts = fleet_store.import_bunkers(db, good)
+    vessels = fleet_store.load_vessels(db) if db.exists() else None
+    dwt_t = dict(zip(vessels["imo"].astype(int), vessels["dwt"])) if vessels is not None and len(vessels) else {}
+    good, bad = validate_bunker(raw, set(dwt_t) if vessels is not None else set(), source=Path(path).name, dwt_t=dwt_t)
+    counts = fleet_store.import_bunkers(db, good, bad)
     conflicts = counts.pop("conflicts")
     counts.update(rows=len(raw), rejected=len(bad) + len(conflicts), reasons=reason_counts(bad),
                   conflicts=[f"{r.imo} {r.bill_no} {r.fuel_type}" for r in conflicts.itertuples()])

@@ -3,7 +3,7 @@ weather and objective as named structures)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -157,7 +157,13 @@ class Instance:
 
     @property
     def rpm_options(self) -> np.ndarray:
+        """The engine settings the solvers choose from (the voyage's, plus what solve.py adds)."""
         return self.vessel.rpm_options
+
+    def with_rpm_options(self, rpm_options) -> "Instance":
+        """The same voyage with other engine settings (sorted, rpm)."""
+        rpm = np.ascontiguousarray(np.sort(np.asarray(rpm_options, np.float64)))
+        return replace(self, vessel=self.vessel._replace(rpm_options=rpm))
 
     @property
     def t_dep_h(self) -> float:
