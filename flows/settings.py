@@ -21,6 +21,7 @@ from pathlib import Path
 from pipeline.performance.refit import Gate
 from pipeline.routing.options import RoutingOptions
 from storage.layout import DataLayout
+from storage.schema_routes import ARRIVAL_NM
 
 RISH_URL_DEFAULT = "https://database.rish.kyoto-u.ac.jp/arch/jmadata/data/gpv/original/"
 OSCAR_URL_DEFAULT = "https://podaac-opendap.jpl.nasa.gov/opendap/allData/oscar/"
@@ -79,7 +80,7 @@ class RoutingSettings(RoutingOptions):
     # voyages at sea (pipeline/enroute.py): re-planned from their latest position; a report older than this at the
     # run's time is advanced along the current plan; a position this close to the destination means arrived
     max_report_age_h: float = 30.0
-    arrived_within_nm: float = 5.0
+    arrived_within_nm: float = ARRIVAL_NM  # the arrival voyage_performance counts plan against actual to
     # routing on a cycle older than this at the run's nominal time is refused (the nightly fails naming it)
     max_cycle_age_h: float = 36.0
 
