@@ -17,6 +17,22 @@ USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileErr
                "FleetFileError", "SettingsError", "UnknownSolverError"}
 
 
+# Errors that are not the user's input but the state of the data, one line each with their own exit code:
+# weather too old (or none) to route on.
+EXIT_CODES = {"StaleWeatherError": 4}
+
+
+def exit_code_of(exc: BaseException | None) -> int | None:
+    """The exit code of `exc` (or an exception it was raised from) when it is one of EXIT_CODES, else None."""
+    seen = 0
+    while exc is not None and seen < 10:
+        for cls in type(exc).__mro__:
+            if cls.__name__ in EXIT_CODES:
+                return EXIT_CODES[cls.__name__]
+        exc, seen = exc.__cause__ or exc.__context__, seen + 1
+    return None
+
+
 def is_user_error(exc: BaseException | None) -> bool:
     """`exc` (or an exception it was raised from) is one the user can act on from its message alone."""
     seen = 0
@@ -31,7 +47,7 @@ def user_error_of(exc: BaseException) -> BaseException:
     """The user error in `exc`'s chain (the one whose message to show)."""
     seen, cur = 0, exc
     while cur is not None and seen < 10:
-        if any(cls.__name__ in USER_ERRORS for cls in type(cur).__mro__):
+        if any(cls.__name__ in USER_ERRORS or cls.__name__ in EXIT_CODES for cls in type(cur).__mro__):
             return cur
         cur, seen = cur.__cause__ or cur.__context__, seen + 1
     return exc
@@ -39,7 +55,7 @@ def user_error_of(exc: BaseException) -> BaseException:
 
 class _NoUserErrorTracebacks(logging.Filter):
     def filter(self, record: logging.LogRecord) -> bool:
-        if record.exc_info and is_user_error(record.exc_info[1]):
+        if record.exc_info and (is_user_error(record.exc_info[1]) or exit_code_of(record.exc_info[1]) is not None):
             record.exc_info, record.exc_text = None, None
         return True
 

@@ -10,6 +10,7 @@ from rich.table import Table
 
 from cli.console import console
 from cli.launch import run_job
+DEMO_AT_SEA = (0, 4)  # demo voyages that sailed the day before: re-planned at sea from their noon positions
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 
 
@@ -21,7 +22,9 @@ def run_table(summary: dict) -> Table:
     t = Table(title=f"Route run {summary.get('run_id')} · cycle {summary.get('cycle')}")
     t.add_column("")
     t.add_column("", justify="right")
+    t.add_row("cycle age at the run's time", _f(summary.get("cycle_age_h"), "{:.0f} h"))
     t.add_row("voyages routed", str(summary.get("n")))
+    t.add_row("  planned from port / re-planned at sea", f"{summary.get('n_from_port')} / {summary.get('n_replanned')}")
     t.add_row("on time / late / not routed", f"{summary.get('n_ok')} / {summary.get('n_late')} / {summary.get('n_failed')}")
     t.add_row("exports failed", str(len(summary.get("export_failures") or [])))
     t.add_row("fuel (t)", _f(summary.get("fuel_t")))
@@ -35,7 +38,7 @@ def run_table(summary: dict) -> Table:
 
 
 def problems_table(summary: dict) -> Table | None:
-    rows = summary.get("problems") or []
+    rows = (summary.get("problems") or []) + (summary.get("stale") or [])
     exports = summary.get("export_failures") or []
     if not rows and not exports:
         return None
@@ -79,7 +82,8 @@ def register(app: typer.Typer) -> None:
                                                                       "tasks per worker thread of the live cluster, "
                                                                       "at most 16 voyages each)."),
                         data: Optional[Path] = DataOpt):
-        """Route every upcoming voyage on a local dask cluster (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
+        """Route every upcoming voyage, and re-plan every ship at sea from its latest position, on a local dask cluster
+        (or $JITROUTE_DASK_ADDRESS); write tables and exports."""
         from flows.jobs.fleet import route_fleet_job
         from flows.settings import load_settings
         from pipeline.sources.cycles import parse_cycle
@@ -97,7 +101,8 @@ def register(app: typer.Typer) -> None:
                 rish_url: Optional[str] = typer.Option(None, help="RISH base URL (default $JITROUTE_RISH_URL)."),
                 oscar_url: Optional[str] = typer.Option(None, help="OSCAR base URL (default $JITROUTE_OSCAR_URL)."),
                 data: Optional[Path] = DataOpt):
-        """The nightly job: ingest the newest published cycles (or a date's), refit models, route the fleet."""
+        """The nightly job: ingest the newest published cycles (or a date's), refit models, route the fleet (ships at sea
+        from their latest positions). Exit 4 when the newest cycle is older than routing.max_cycle_age_h (36 h)."""
         from flows.jobs.fleet import nightly_job
         from flows.settings import load_settings
         from pipeline.sources.cycles import parse_day, parse_hours
@@ -141,7 +146,7 @@ def register(app: typer.Typer) -> None:
             (mirror / ".complete").write_text("ok\n")
         log.info("[demo 2/3] generating the demo fleet (%d vessels, a year of noon reports) and importing it", vessels)
         fleet_dir = root / "demo_fleet"
-        write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7), fleet_dir)
+        write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7, at_sea=DEMO_AT_SEA), fleet_dir)
         _import_fleet(fleet_dir, root)
         log.info("[demo 3/3] the nightly job on %s: ingest → refit → route", date)
         summary = run_job("flows.fleet", "nightly", nightly_job, date=date, data_root=str(root),
@@ -149,6 +154,24 @@ def register(app: typer.Typer) -> None:
                           cycles="00,12")
         _show_nightly(summary, root)
         console.print(f"demo finished in {time.monotonic() - t0:.0f} s")
+
+    @app.command()
+    def warm(solver: Optional[list[str]] = typer.Option(None, "--solver",
+                                                       help="Solvers to compile (default bfoa, the fleet's; repeat "
+                                                            "for more: dp, astar, gc, rhumb).")):
+        """Compile the routing kernels into numba's cache (in the checkout's __pycache__) before the first fleet run;
+        `make install` runs it. Quick when the cache is already warm."""
+        from flows.jobs.warm import warm_job
+        from pipeline.routing.solvers import SOLVERS
+
+        unknown = sorted(set(solver or []) - set(SOLVERS))
+        if unknown:
+            from cli.console import fail
+
+            fail(f"unknown solver(s) {', '.join(unknown)}; use {', '.join(SOLVERS)}")
+        out = warm_job(solver or None)
+        console.print("routing kernels ready: " + ", ".join(f"{k} {v:.0f} s" for k, v in out["seconds"].items())
+                      + (" (compiled)" if out["compiled"] else " (from the cache)"))
 
     @app.command()
     def serve(timezone: str = typer.Option("UTC", help="Time zone of the nightly cron (e.g. Europe/Oslo)."),
@@ -192,5 +215,6 @@ def _show_nightly(s: dict, root: Path) -> None:
     console.print(f"models: {s['models_changed']} of {s['vessels']} vessels changed")
     if s.get("routing"):
         show_run(s["routing"], Path(root))
-    else:
-        console.print("[yellow]routing skipped: no complete forecast cycle among those ingested")
+    if s.get("cycles_missing"):
+        console.print(f"[yellow]nightly {s.get('state', 'Incomplete')}: targeted cycles not complete: "
+                      f"{', '.join(s['cycles_missing'])}")

@@ -39,10 +39,10 @@ def register(app: typer.Typer) -> None:
     ):
         """Fetch, decode and write one forecast cycle (GSM wind, GWM waves, OSCAR currents) into the cube."""
         from flows.jobs.ingest import ingest_cycle
-        from pipeline.sources.cycles import parse_cycle
+        from pipeline.sources.cycles import check_cycle_hour, parse_cycle
 
         if cycle.strip().lower() != "latest":
-            parse_cycle(cycle)  # a bad cycle is refused before anything starts
+            check_cycle_hour(parse_cycle(cycle), cycle)  # a bad cycle is refused before anything starts
         report = run_job("flows.ingest", "ingest_weather", ingest_cycle, cycle=cycle, data_root=str(data) if data else None,
                          rish_url=rish_url, oscar_url=oscar_url, force=force)
         console.print(_report_table([report]))

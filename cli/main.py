@@ -15,13 +15,14 @@ class Commands(TyperGroup):
         try:
             return super().invoke(ctx)
         except Exception as exc:
-            if not errors.is_user_error(exc):
+            code = errors.exit_code_of(exc)
+            if code is None and not errors.is_user_error(exc):
                 raise
             from cli.console import err_console
 
             msg = str(errors.user_error_of(exc)).strip(chr(39) + chr(34))
             err_console.print(f"[red]error:[/] {msg}", highlight=False)
-            raise typer.Exit(2) from None
+            raise typer.Exit(code or 2) from None
 
 
 app = typer.Typer(

@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from cli.console import console, fail
+from cli.console import console, err_console, fail
 
 
 def _latlon(text: str, what: str) -> tuple[float, float]:
@@ -62,6 +62,26 @@ def comparison_table(plan) -> Table:
 
 
 def register(app: typer.Typer) -> None:
+    @app.command("position")
+    def position_cmd(voyage: str = typer.Argument(..., help="Voyage ID (at sea)."),
+                     at: str = typer.Option(..., "--at", help="Time of the position, UTC, e.g. 2020-12-01T18."),
+                     pos: str = typer.Option(..., "--pos", help="LAT,LON of the ship then."),
+                     note: Optional[str] = typer.Option(None, help="Who or what gave it."),
+                     data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")):
+        """Give the position of a voyage at sea; the next route-fleet or nightly re-plans it from there (if it is
+        newer than the vessel's noon reports)."""
+        from flows.settings import load_settings
+        from storage import fleet_store
+
+        lat, lon = _latlon(pos, "--pos")
+        t = _utc(at, "--at")
+        lay = load_settings(data_root=data).layout
+        if not lay.warehouse.exists() or fleet_store.load_voyages(lay.warehouse, voyage_ids=[voyage]).empty:
+            fail(f"voyage {voyage} is not in {lay.warehouse}: import it with `jitroute fleet import`")
+        fleet_store.add_position(lay.warehouse, voyage, t, lat, lon, note)
+        console.print(f"voyage {voyage}: position {lat:.4f},{lon:.4f} at {str(t)[:16]} UTC stored; the next fleet run "
+                      "re-plans it from there")
+
     @app.command()
     def route(
         from_: Optional[str] = typer.Option(None, "--from", help="Departure LAT,LON (at sea)."),
@@ -185,6 +205,10 @@ def register(app: typer.Typer) -> None:
                 console.print(f"[red]{kind} export failed:[/] {err}")
             if made.errors:
                 raise typer.Exit(1)
+        if not plan.legs and any(wanted.values()):
+            err_console.print("no plan, so these files were not written: "
+                              + ", ".join(f"{path} (--{kind})" for kind, path in wanted.items()
+                                          if path), highlight=False)
         if plan.status in ("infeasible", "failed"):
             raise typer.Exit(3)
 

@@ -15,17 +15,29 @@ from flows.settings import refuse_served_overrides
 @flow(name="route-fleet")
 def route_fleet(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
                 solver: str | None = None, seed: int | None = None, trigger: str = "manual", exports: bool = True,
-                batch_size: int | None = None) -> dict:
-    """Route every upcoming voyage (or the given ones) on one cube cycle (default: the newest complete one)."""
+                batch_size: int | None = None, nominal_utc: str | None = None) -> dict:
+    """Route every upcoming voyage and every voyage at sea (or the given ones) on one cube cycle (default: the
+    newest complete one)."""
     refuse_served_overrides(data_root=data_root)
     return route_fleet_job(cycle, voyages, data_root=data_root, solver=solver, seed=seed, trigger=trigger,
-                           exports=exports, batch_size=batch_size, run=InPrefect())
+                           exports=exports, batch_size=batch_size, nominal_utc=nominal_utc, run=InPrefect())
 
 
 @register_flow
 @flow(name="nightly")
 def nightly(date: str | None = None, data_root: str | None = None, rish_url: str | None = None,
             oscar_url: str | None = None, cycles: str | int | list[int] | None = None) -> dict:
-    """Ingest the newest published cycles (or a date's) → refit → route the fleet on the newest complete cycle."""
+    """Ingest the newest published cycles (or a date's) → refit → route the fleet on the newest complete cycle.
+
+    Ends Failed when the weather is too old to route on (StaleWeatherError names the newest cycle and its age), and
+    in a Completed state named "Incomplete" when a targeted cycle is not complete (the summary lists them)."""
     refuse_served_overrides(data_root=data_root, rish_url=rish_url, oscar_url=oscar_url)
-    return nightly_job(date, data_root=data_root, rish_url=rish_url, oscar_url=oscar_url, cycles=cycles, run=InPrefect())
+    summary = nightly_job(date, data_root=data_root, rish_url=rish_url, oscar_url=oscar_url, cycles=cycles,
+                          run=InPrefect())
+    if summary.get("cycles_missing"):
+        from prefect.states import Completed
+
+        return Completed(name="Incomplete", data=summary,
+                         message=f"targeted cycles not complete: {', '.join(summary['cycles_missing'])}; "
+                                 f"routed on {summary.get('cycle_used')}")
+    return summary

@@ -21,6 +21,7 @@ from pathlib import Path
 from pipeline.performance.refit import Gate
 from pipeline.routing.options import RoutingOptions
 from storage.layout import DataLayout
+from storage.schema_routes import ARRIVAL_NM
 
 RISH_URL_DEFAULT = "https://database.rish.kyoto-u.ac.jp/arch/jmadata/data/gpv/original/"
 OSCAR_URL_DEFAULT = "https://podaac-opendap.jpl.nasa.gov/opendap/allData/oscar/"
@@ -76,6 +77,12 @@ class RoutingSettings(RoutingOptions):
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
     voyages_per_task: int | None = None  # None: about three batches per dask worker thread, ≤ 16 voyages each
     task_timeout_s: float = 6 * 3600.0  # Prefect task timeout of a fleet's routing
+    # voyages at sea (pipeline/enroute.py): re-planned from their latest position; a report older than this at the
+    # run's time is advanced along the current plan; a position this close to the destination means arrived
+    max_report_age_h: float = 30.0
+    arrived_within_nm: float = ARRIVAL_NM  # the arrival voyage_performance counts plan against actual to
+    # routing on a cycle older than this at the run's nominal time is refused (the nightly fails naming it)
+    max_cycle_age_h: float = 36.0
 
 
 @dataclass(frozen=True)

@@ -443,3 +443,48 @@ def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd
         except Exception:
             con.execute("ROLLBACK")
             raise
+
+
+def positions_after(db_path: Path, imos: list[int], since_utc) -> pd.DataFrame:
+    """Positions of these vessels reported after `since_utc` (noon reports with a position), ordered by vessel and
+    time: imo, ts_utc, lat, lon."""
+    if not imos:
+        return pd.DataFrame(columns=["imo", "ts_utc", "lat", "lon"])
+    since = pd.Timestamp(since_utc)
+    since = since.tz_convert(None) if since.tzinfo else since
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute(
+            "SELECT imo, ts_utc, lat, lon FROM noon_reports WHERE imo IN (SELECT unnest(?)) AND ts_utc > ? "
+            "AND lat IS NOT NULL AND lon IS NOT NULL ORDER BY imo, ts_utc",
+            [[int(i) for i in imos], since.to_pydatetime()]).fetchdf()
+
+
+def voyage_fingerprints(db_path: Path, voyage_ids: list[str]) -> dict[str, str]:
+    """voyage_id → digest of what a plan depends on (storage.schema_routes.VOYAGE_FINGERPRINT_SQL), as stored with
+    each plan so `latest_routes` can tell a plan made for a voyage since changed."""
+    from storage.schema_routes import VOYAGE_FINGERPRINT_SQL
+
+    if not voyage_ids:
+        return {}
+    with warehouse.connect(db_path, write=False) as con:
+        rows = con.execute(f"SELECT v.voyage_id, {VOYAGE_FINGERPRINT_SQL} FROM voyages v "
+                           "WHERE v.voyage_id IN (SELECT unnest(?))", [list(voyage_ids)]).fetchall()
+    return {str(k): str(f) for k, f in rows}
+
+
+def add_position(db_path: Path, voyage_id: str, ts_utc, lat: float, lon: float, note: str | None = None) -> None:
+    """Store an operator's position of a voyage at sea (the same voyage and time again replaces it)."""
+    if not (-90.0 <= float(lat) <= 90.0 and -180.0 <= float(lon) <= 360.0):
+        raise ValueError(f"voyage {voyage_id}: position {lat},{lon} is not a latitude, longitude in degrees")
+    t = pd.Timestamp(ts_utc)
+    t = t.tz_convert(None) if t.tzinfo else t
+    with warehouse.connect(db_path) as con:
+        con.execute("INSERT OR REPLACE INTO voyage_positions VALUES (?, ?, ?, ?, ?, ?)",
+                    [voyage_id, t.to_pydatetime(), float(lat), float(lon), note, _utcnow()])
+
+
+def voyage_positions(db_path: Path, voyage_ids: list[str]) -> pd.DataFrame:
+    """Operators' positions of these voyages: voyage_id, ts_utc, lat, lon, ordered by voyage and time."""
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute("SELECT voyage_id, ts_utc, lat, lon FROM voyage_positions WHERE voyage_id IN (SELECT unnest(?)) "
+                           "ORDER BY voyage_id, ts_utc", [list(voyage_ids)]).fetchdf()

@@ -37,6 +37,8 @@ ROUTE_ARROW = pa.schema([
     ("profile_fuel_t", _F64), ("savings_total_pct", _F64), ("savings_speed_profile_pct", _F64),
     ("savings_route_pct", _F64), ("min_engine_hold_h", _F64), ("engine_change_cost_t", _F64),
     ("n_engine_changes", _I32), ("unlimited_fuel_t", _F64), ("limits_fuel_t", _F64),
+    ("start_kind", _STR), ("start_lat", _F64), ("start_lon", _F64), ("start_utc", _UTC), ("start_position_utc", _UTC),
+    ("start_advanced_h", _F64), ("start_note", _STR), ("voyage_fingerprint", _STR),
 ])
 LEG_ARROW = pa.schema([
     ("voyage_id", _STR), ("leg", _I32), ("lat0", _F64), ("lon0", _F64), ("lat1", _F64), ("lon1", _F64),
@@ -132,16 +134,44 @@ def process_alive(pid: int | None, started: str | None) -> bool:
     return now is not None and (started is None or now == started)
 
 
-def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n_voyages: int) -> None:
-    """Record a run as `running`, owned by this host and process (see `reap_dead_runs`)."""
+def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n_voyages: int,
+              nominal_utc=None, cycle_age_h: float | None = None) -> None:
+    """Record a run as `running`, owned by this host and process (see `reap_dead_runs`), with the cycle's age
+    (hours) at the run's nominal time."""
     pid = os.getpid()
     with warehouse.connect(db_path) as con:
         con.execute(
-            "INSERT INTO route_runs (run_id, started_at, cycle, n_voyages, status, solver, trigger, host, pid, pid_started) "
-            "VALUES (?, ?, ?, ?, 'running', ?, ?, ?, ?, ?)",
+            "INSERT INTO route_runs (run_id, started_at, cycle, n_voyages, status, solver, trigger, host, pid, pid_started, "
+            "nominal_utc, cycle_age_h) VALUES (?, ?, ?, ?, 'running', ?, ?, ?, ?, ?, ?, ?)",
             [run_id, _utcnow(), pd.Timestamp(cycle).to_pydatetime() if cycle is not None else None,
-             n_voyages, solver, trigger, socket.gethostname(), pid, process_started(pid)],
+             n_voyages, solver, trigger, socket.gethostname(), pid, process_started(pid),
+             pd.Timestamp(nominal_utc).to_pydatetime() if nominal_utc is not None else None, cycle_age_h],
         )
+
+
+def current_plan_legs(db_path: Path, voyage_ids: list[str]) -> dict[str, list[dict]]:
+    """voyage_id → the legs (lat0, lon0, lat1, lon1, etd_utc, eta_utc) of its current plan in `latest_routes`
+    (voyages without a plan are absent)."""
+    if not voyage_ids:
+        return {}
+    with warehouse.connect(db_path, write=False) as con:
+        df = con.execute(
+            "SELECT l.voyage_id, l.leg, l.lat0, l.lon0, l.lat1, l.lon1, l.etd_utc, l.eta_utc "
+            "FROM route_legs l JOIN latest_routes r USING (run_id, voyage_id) "
+            "WHERE r.status IN ('ok', 'late') AND l.voyage_id IN (SELECT unnest(?)) ORDER BY l.voyage_id, l.leg",
+            [list(voyage_ids)]).fetchdf()
+    out: dict[str, list[dict]] = {}
+    for rec in df.to_dict("records"):
+        out.setdefault(str(rec["voyage_id"]), []).append(rec)
+    return out
+
+
+def stale_plans(db_path: Path) -> list[dict]:
+    """Current plans (latest_routes) made for a voyage that has changed since: voyage_id, imo, status, reason."""
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute(
+            "SELECT voyage_id, imo, 'stale' AS status, stale_reason AS reason FROM latest_routes WHERE stale "
+            "ORDER BY voyage_id").fetchdf().to_dict("records")
 
 
 def reap_dead_runs(con) -> list[str]:
@@ -214,6 +244,8 @@ def run_summary(db_path: Path, run_id: str) -> dict:
             """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
                       count(*) FILTER (WHERE status = 'late') AS n_late,
                       count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
+                      count(*) FILTER (WHERE coalesce(start_kind, 'port') = 'port') AS n_from_port,
+                      count(*) FILTER (WHERE coalesce(start_kind, 'port') <> 'port') AS n_replanned,
                       sum(fuel_t) AS fuel_t
                FROM routes WHERE run_id = ?""",
             [run_id],
@@ -235,6 +267,7 @@ def run_summary(db_path: Path, run_id: str) -> dict:
         out.update({k: (None if v is None or v != v else (int(v) if k.startswith("n_") else float(v)))
                     for k, v in savings.iloc[0].to_dict().items()})
     out["problems"] = problems.to_dict("records")
+    out["stale"] = stale_plans(db_path)
     errors = out.get("export_errors")
     out["export_failures"] = errors.splitlines() if isinstance(errors, str) and errors else []
     if out.get("cycle") is not None and out.get("cycle") == out.get("cycle"):

@@ -81,6 +81,14 @@ _ROUTES = {
     "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plan on the same route without engine-change limits",
     "limits_fuel_t": "what the engine-change limits cost, tonnes (fuel_t minus unlimited_fuel_t)",
     "min_land_clearance_nm": "least distance to land along the plan outside its port approaches, nautical miles (0.1 NM sampling; 25 means at least 25)",
+    "start_kind": "where the plan starts: port (the departure) | noon report | operator position | advanced along plan "
+                  "(an old report moved on along the previous plan)",
+    "start_lat": "latitude the plan starts at, degrees north", "start_lon": "longitude the plan starts at, degrees east",
+    "start_utc": f"time the plan starts at {UTC}",
+    "start_position_utc": f"time of the position report the plan starts from {UTC}; empty from the port",
+    "start_advanced_h": "hours an old position report was moved on along the previous plan (0: used as reported)",
+    "start_note": "how the start was chosen when the report was old or missing",
+    "voyage_fingerprint": "digest of the voyage (vessel, ports, RTA, draft) the plan was made for; latest_routes.stale compares it",
 }
 _LEGS = {
     "run_id": _ROUTES["run_id"], "voyage_id": _ROUTES["voyage_id"],
@@ -120,6 +128,8 @@ _RUNS = {
     "reason": "why the run failed",
     "n_export_failed": "exports (RTZ, GeoJSON, PNG) that failed",
     "export_errors": "one line per failed export: voyage, kind, error",
+    "nominal_utc": f"the run's nominal time (the nightly's scheduled time, or the newest cycle it targeted) {UTC}",
+    "cycle_age_h": "hours from the routed cycle's init time to nominal_utc",
 }
 _VESSELS = {
     "imo": "IMO number of the vessel", "name": "vessel name", "type": "vessel type",
@@ -238,6 +248,10 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
     "bunker_logs_rejected": ("rows of bunker-log files refused on import, with the reason and the raw row", {
         "imo": "IMO number of the vessel, when readable", "bill_no": "bunker delivery note number, as written",
         **_REJECTED, "source_file": _NOON["source_file"]}),
+    "voyage_positions": ("positions of voyages at sea given by an operator; re-planning starts from the newest", {
+        "voyage_id": _VOYAGES["voyage_id"], "ts_utc": f"time of the position {UTC}",
+        "lat": "latitude, degrees north", "lon": "longitude, degrees east", "note": "who or what gave it",
+        "entered_at": f"when it was entered {UTC}"}),
     "ingest_log": ("weather files fetched: one row per file and attempt", _INGEST),
     "cycles": ("weather forecast cycles: complete or what is missing", _CYCLES),
     "route_runs": ("fleet routing runs: one row per run", _RUNS),
@@ -253,7 +267,9 @@ VIEWS: dict[str, tuple[str, dict[str, str]]] = {
         newer_attempt_failed="true when a newer attempt made no plan (this one is still the plan)",
         newer_attempt_run_id="run of that newer attempt", newer_attempt_status="status of that newer attempt",
         newer_attempt_reason="why that newer attempt made no plan",
-        newer_attempt_at=f"when that newer attempt's run started {UTC}")),
+        newer_attempt_at=f"when that newer attempt's run started {UTC}",
+        stale="true when the voyage changed (RTA, ports, vessel, draft) since this plan was made: re-plan it",
+        stale_reason="what changed, when stale")),
     "fleet_savings": ("fuel and savings per routing run", _SAVINGS),
     "model_quality": ("fit quality of each vessel's active models", _view_of(
         {k: _MODELS[k] for k in ("imo", "target", "form", "version", "fitted_at", "n_rows", "r2", "rmse", "cv_rmse",

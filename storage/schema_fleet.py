@@ -193,4 +193,20 @@ MIGRATIONS: list[Migration] = [
         FROM hull_performance_monthly h LEFT JOIN vessels v USING (imo);
         """,
     ),
+    Migration(
+        "fleet_010_voyage_positions",
+        # positions of voyages at sea given by an operator (`jitroute position add`): re-planning starts from the
+        # newest of these and the vessel's noon reports
+        """
+        CREATE TABLE IF NOT EXISTS voyage_positions (
+            voyage_id VARCHAR NOT NULL,
+            ts_utc TIMESTAMP NOT NULL,
+            lat DOUBLE NOT NULL,
+            lon DOUBLE NOT NULL,
+            note VARCHAR,
+            entered_at TIMESTAMP,
+            PRIMARY KEY (voyage_id, ts_utc)
+        );
+        """,
+    ),
 ]

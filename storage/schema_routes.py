@@ -8,9 +8,50 @@ import hashlib
 
 from storage.warehouse import Migration
 
+# What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
+# (storage.fleet_store.voyage_fingerprints) and latest_routes compares it with the voyage of today, so a plan made
+# for an RTA, port, vessel or draft since changed shows as `stale`. One expression for both, over a voyages row `v`.
+VOYAGE_FINGERPRINT_SQL = (
+    "md5(concat_ws('|', v.imo, v.dep_name, v.dep_lat, v.dep_lon, v.arr_name, v.arr_lat, v.arr_lon, "
+    "strftime(v.rta_utc, '%Y-%m-%dT%H:%M:%S'), v.draft_m))")
+
 # The view of the plan to sail per voyage. A view made with `r.*` keeps the columns routes had when it was made,
 # so it is made again after every migration (views_migration) and always lists the routes columns of today.
 LATEST_ROUTES_VIEW = """
+        CREATE OR REPLACE VIEW latest_routes AS
+        WITH attempts AS (
+            SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
+                   row_number() OVER (PARTITION BY r.voyage_id ORDER BY u.started_at DESC, r.run_id DESC) AS newest_rank
+            FROM routes r JOIN route_runs u USING (run_id)
+        ),
+        newest AS (SELECT * FROM attempts WHERE newest_rank = 1),
+        shown AS (  -- the newest attempt with a plan; a voyage never planned shows its newest attempt
+            SELECT * FROM attempts
+            QUALIFY row_number() OVER (PARTITION BY voyage_id ORDER BY has_plan DESC, run_started_at DESC, run_id DESC) = 1
+        )
+        SELECT s.* EXCLUDE (run_started_at, has_plan, newest_rank), v.dep_name, v.arr_name, x.name AS vessel_name,
+               n.run_id <> s.run_id AS newer_attempt_failed,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_id END AS newer_attempt_run_id,
+               CASE WHEN n.run_id <> s.run_id THEN n.status END AS newer_attempt_status,
+               CASE WHEN n.run_id <> s.run_id THEN n.reason END AS newer_attempt_reason,
+               CASE WHEN n.run_id <> s.run_id THEN n.run_started_at END AS newer_attempt_at,
+               CASE WHEN s.status NOT IN ('ok', 'late') OR s.voyage_fingerprint IS NULL OR v.voyage_id IS NULL THEN false
+                    ELSE s.voyage_fingerprint <> """ + VOYAGE_FINGERPRINT_SQL + """ END AS stale,
+               CASE WHEN s.status NOT IN ('ok', 'late') OR s.voyage_fingerprint IS NULL OR v.voyage_id IS NULL
+                         OR s.voyage_fingerprint = """ + VOYAGE_FINGERPRINT_SQL + """ THEN NULL
+                    ELSE concat_ws(', ', CASE WHEN v.rta_utc IS DISTINCT FROM s.rta_utc THEN 'RTA changed' END,
+                                   CASE WHEN v.imo IS DISTINCT FROM s.imo THEN 'vessel changed' END,
+                                   'voyage changed since the plan was made (RTA, ports, vessel or draft): re-plan it') END
+                   AS stale_reason
+        FROM shown s
+        JOIN newest n USING (voyage_id)
+        LEFT JOIN voyages v USING (voyage_id)
+        LEFT JOIN vessels x ON x.imo = s.imo;
+"""
+
+
+# latest_routes as migration routes_006 made it (before the plan-start and staleness columns existed)
+_LATEST_ROUTES_VIEW_006 = """
         CREATE OR REPLACE VIEW latest_routes AS
         WITH attempts AS (
             SELECT r.*, u.started_at AS run_started_at, r.status IN ('ok', 'late') AS has_plan,
@@ -322,7 +363,7 @@ MIGRATIONS: list[Migration] = [
         DROP TABLE routes;
         ALTER TABLE routes_new RENAME TO routes;
 
-        """ + LATEST_ROUTES_VIEW + """
+        """ + _LATEST_ROUTES_VIEW_006 + """
         """,
     ),
     Migration(
@@ -428,6 +469,24 @@ MIGRATIONS: list[Migration] = [
         LEFT JOIN vessels s USING (imo)
         LEFT JOIN latest_routes p USING (voyage_id)
         LEFT JOIN sailed a USING (voyage_id);
+        """,
+    ),
+    Migration(
+        "routes_009_plan_start_and_cycle_age",
+        """
+        -- where a plan starts: the departure port, or a position at sea (a noon report, an operator's position, or
+        -- an old report advanced along the current plan), and what of the voyage it was made for
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_kind VARCHAR;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_lat DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_lon DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_utc TIMESTAMP;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_position_utc TIMESTAMP;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_advanced_h DOUBLE;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS start_note VARCHAR;
+        ALTER TABLE routes ADD COLUMN IF NOT EXISTS voyage_fingerprint VARCHAR;
+        -- how old the routed cycle was at the run's nominal time
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS nominal_utc TIMESTAMP;
+        ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS cycle_age_h DOUBLE;
         """,
     ),
 ]

@@ -55,7 +55,8 @@ def mirror_urls(mirror: Path) -> dict[str, str]:
     return {"rish_url": (mirror / "rish").as_uri() + "/", "oscar_url": (mirror / "oscar").as_uri() + "/"}
 
 
-def fleet_data_root(base: Path, mirror: Path, *, n_vessels: int, days: int, seed: int, refit: bool) -> Path:
+def fleet_data_root(base: Path, mirror: Path, *, n_vessels: int, days: int, seed: int, refit: bool,
+                    at_sea: tuple[int, ...] = ()) -> Path:
     """`base/data`: the mirror's 2020-12-01T00 cycle ingested and a generated fleet imported (optionally refitted),
     all through the plain jobs (no Prefect)."""
     from cli.fleet import _import_fleet
@@ -65,7 +66,7 @@ def fleet_data_root(base: Path, mirror: Path, *, n_vessels: int, days: int, seed
 
     root = base / "data"
     assert ingest_cycle("2020-12-01T00", data_root=str(root), **mirror_urls(mirror))["complete"]
-    write_fleet(generate_fleet("2020-12-01T00", n_vessels=n_vessels, days=days, seed=seed), base / "fleet")
+    write_fleet(generate_fleet("2020-12-01T00", n_vessels=n_vessels, days=days, seed=seed, at_sea=at_sea), base / "fleet")
     _import_fleet(base / "fleet", root)
     if refit:
         refit_job(data_root=str(root))

@@ -1,5 +1,8 @@
 """The product as it runs unattended: a real `prefect server start`, `jitroute serve` with a one-minute
-nightly cron, and the server's scheduler (no manual trigger) starting the run that routes the fleet.
+nightly cron, and the server's scheduler (no manual trigger) starting the nightly. The mirror holds only
+2020-12-01, so the scheduled nightly (today's cycles) refuses to route on weather years old and ends Failed naming
+the cycle and its age; the same deployment run for 2020-12-01 routes the fleet, re-planning its ship at sea from
+its noon report.
 
 Then everything is stopped and no process of the test may be left behind.
 """
@@ -8,6 +11,7 @@ from __future__ import annotations
 
 import json
 import signal
+from datetime import datetime, timezone
 import subprocess
 from pathlib import Path
 
@@ -23,8 +27,10 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture
 def scheduled_root(tmp_path, demo_mirror):
-    """A data root with one complete cycle (2020-12-01T00) and a 2-vessel fleet, prepared without Prefect."""
-    return fleet_data_root(tmp_path, demo_mirror, n_vessels=2, days=120, seed=5, refit=False), mirror_urls(demo_mirror)
+    """A data root with one complete cycle (2020-12-01T00) and a 2-vessel fleet (the first voyage at sea), prepared
+    without Prefect."""
+    return (fleet_data_root(tmp_path, demo_mirror, n_vessels=2, days=120, seed=5, refit=False, at_sea=(0,)),
+            mirror_urls(demo_mirror))
 
 
 def _runs(api: str) -> list[dict]:
@@ -65,16 +71,24 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
                                  env=client_env, cwd=tmp_path, stdout=open(logs / "serve.log", "w"),
                                  stderr=subprocess.STDOUT, start_new_session=True)
 
-        def completed_scheduled_nightly():
+        def refused_scheduled_nightly():
             assert serve.poll() is None, (logs / "serve.log").read_text()[-3000:]
-            runs = [r for r in _runs(api) if r.get("auto_scheduled")]
-            failed = [r for r in runs if r["state_type"] in ("FAILED", "CRASHED")]
-            assert not failed, (json.dumps(failed, indent=1)[:2000], (logs / "serve.log").read_text()[-5000:])
-            return [r for r in runs if r["state_type"] == "COMPLETED" and r["name"] and r.get("deployment_id")]
+            runs = [r for r in _runs(api) if r.get("auto_scheduled") and r.get("deployment_id")]
+            ended = [r for r in runs if r["state_type"] in ("COMPLETED", "FAILED", "CRASHED")]
+            assert all(r["state_type"] == "FAILED" for r in ended), json.dumps(ended, indent=1)[:3000]
+            return ended
 
-        done = poll("a scheduled nightly run to complete", completed_scheduled_nightly, 240, 2)
+        done = poll("a scheduled nightly run to end", refused_scheduled_nightly, 300, 2)
         deployments = {d["id"]: d["name"] for d in httpx.post(f"{api}/deployments/filter", json={}, timeout=10).json()}
         assert "nightly" in {deployments.get(r["deployment_id"]) for r in done}
+        message = done[0]["state"]["message"]  # weather too old: cycle 2020-12-01T00 is 52000 h old at …
+        assert "weather too old" in message and "2020-12-01T00" in message and "h old at" in message, message
+
+        # The same deployment for the mirror's day: routes the fleet, the ship at sea from its noon report
+        since = datetime.now(timezone.utc).isoformat()  # the logs of this run and later ones
+        night = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "run", "nightly/nightly", "-p", "date=2020-12-01",
+                                "-p", "cycles=0", "--watch"], env=client_env, capture_output=True, text=True, timeout=600)
+        assert night.returncode == 0 and "Completed" in night.stdout, (night.stdout[-2000:], night.stderr[-2000:])
 
         ls = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "ls"], env=client_env, capture_output=True,
                             text=True, timeout=120)
@@ -84,14 +98,17 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
                             timeout=120)
         assert fr.returncode == 0, fr.stderr[-2000:]
 
-        logs_api = httpx.post(f"{api}/logs/filter", json={"limit": 200, "sort": "TIMESTAMP_ASC"}, timeout=10).json()
+        logs_api = httpx.post(f"{api}/logs/filter", json={"logs": {"timestamp": {"after_": since}}, "limit": 200,
+                                                          "sort": "TIMESTAMP_ASC"}, timeout=10).json()
         messages = [entry["message"] for entry in logs_api]
         assert any("routed 1/2" in m for m in messages), messages[:50]  # jitroute.* loggers reach the run's logs
+        assert any("(1 from port, 1 at sea re-planned)" in m for m in messages), messages[:50]
         artifacts = httpx.post(f"{api}/artifacts/filter", json={"limit": 50}, timeout=10).json()
         keys = {(a["key"], a["type"]) for a in artifacts}
         assert ("nightly-summary", "markdown") in keys and ("nightly-summary-table", "table") in keys, keys
-        summary_md = next(a["data"] for a in artifacts if a["key"] == "nightly-summary")
-        assert "fleet_map.png" in summary_md and "2020-12-01T00" in summary_md
+        summaries = [a["data"] for a in artifacts if a["key"] == "nightly-summary"]
+        assert any("fleet_map.png" in md and "2020-12-01T00" in md for md in summaries), summaries
+        assert any(": Failed" in md and "**Routing refused:** weather too old" in md for md in summaries), summaries
 
         # An operator's backfill with a bare number for the cycle hours (arrives as a JSON integer)
         bf = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "run", "backfill/backfill", "-p", "start=2020-12-01",
@@ -100,9 +117,13 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
         assert bf.returncode == 0 and "Completed" in bf.stdout, (bf.stdout[-2000:], bf.stderr[-2000:])
 
         with duckdb.connect(str(root / "warehouse.snapshot.duckdb"), read_only=True) as con:
-            runs = con.execute("SELECT status, trigger, n_voyages, cycle FROM route_runs WHERE trigger = 'nightly'").fetchall()
-        assert runs and runs[0][0] in ("ok", "partial") and runs[0][2] == 2, runs
-        assert str(runs[0][3]).startswith("2020-12-01 00:00")
+            runs = con.execute("SELECT status, n_voyages, cycle, cycle_age_h, reason FROM route_runs "
+                               "WHERE trigger = 'nightly' ORDER BY started_at").fetchall()
+            starts = dict(con.execute("SELECT voyage_id, start_kind FROM latest_routes").fetchall())
+        routed = [r for r in runs if r[0] in ("ok", "partial")]
+        assert routed and routed[0][1] == 2 and str(routed[0][2]).startswith("2020-12-01 00:00") and routed[0][3] == 0.0
+        assert any(r[0] == "failed" and "weather too old" in r[4] for r in runs), runs
+        assert starts == {"V20001": "noon report", "V20002": "port"}
     finally:
         for proc in (serve, server):
             if proc is not None and proc.poll() is None:

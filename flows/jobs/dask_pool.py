@@ -34,6 +34,14 @@ def voyages_per_batch(n_jobs: int, n_slots: int, setting: int | None) -> int:
     return max(1, min(MAX_VOYAGES_PER_BATCH, math.ceil(n_jobs / (3 * max(1, n_slots)))))
 
 
+def dashboard_of(client, address: str | None) -> str:
+    """The dashboard link, or says there is none (an external scheduler started without one, e.g. no bokeh)."""
+    if address is None:
+        return client.dashboard_link
+    services = (client.scheduler_info() or {}).get("services", {})
+    return client.dashboard_link if "dashboard" in services else "none (the scheduler at this address serves no dashboard)"
+
+
 @contextlib.contextmanager
 def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
     """A client of the scheduler at `address`, or of a local cluster of `n_workers` single-threaded processes
@@ -54,7 +62,7 @@ def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
                                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
             client = Client(cluster)
         try:
-            LOG.info("dask: %s, dashboard %s", address or f"local cluster of {n_workers} workers", client.dashboard_link)
+            LOG.info("dask: %s, dashboard %s", address or f"local cluster of {n_workers} workers", dashboard_of(client, address))
             yield client
         finally:
             client.close()

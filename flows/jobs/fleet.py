@@ -17,7 +17,6 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from flows.jobs import dask_pool, weather_maps
 from flows.jobs.ingest import ingest_cycle
@@ -25,6 +24,7 @@ from flows.jobs.refit import refit_job
 from flows.jobs.route_worker import failed_result, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
+from pipeline import enroute
 from pipeline.export.bundle import SUFFIX
 from pipeline.performance.model import model_from_stored
 from pipeline.export.paths import ExportPathError, voyage_export_key
@@ -32,6 +32,7 @@ from pipeline.validate_ids import markdown_cell, printable
 from pipeline.export.voyage import utc_datetime
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
+from pipeline.routing.problem import MAX_VOYAGE_H
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
 from storage import cube, export_store, fleet_store, route_store
 from storage.run_lock import job_lock
@@ -43,10 +44,14 @@ class FleetRunError(RuntimeError):
     """A fleet run that cannot start (no cube, unknown cycle); the message says what to do."""
 
 
-def upcoming(voyages: pd.DataFrame, cycle: np.datetime64, lookahead_h: float) -> pd.DataFrame:
-    c = pd.Timestamp(cycle)
-    keep = (voyages["depart_utc"] >= c) & (voyages["depart_utc"] < c + pd.Timedelta(hours=lookahead_h))
-    return voyages[keep & (voyages["status"].fillna("planned") == "planned")]
+class StaleWeatherError(RuntimeError):
+    """The newest cycle is older than `routing.max_cycle_age_h` at the run's nominal time: routing on it is refused
+    (the message names the cycle and its age)."""
+
+
+def cycle_age_h(cycle: np.datetime64, nominal_utc: np.datetime64) -> float:
+    """Hours from the cycle's init time to the run's nominal time."""
+    return float((np.datetime64(nominal_utc, "s") - np.datetime64(cycle, "s")) / np.timedelta64(1, "s")) / 3600.0
 
 
 def plain(v):
@@ -72,25 +77,51 @@ def _length_nm(job: RouteJob) -> float:
 
 
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
-               options: RoutingOptions, exports: bool, cycle_version: int | None = None) -> list[RouteJob]:
-    """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle;
-    each carries the cycle's content version read at the start of the run."""
+               options: RoutingOptions, exports: bool, cycle_version: int | None = None,
+               ref_utc: np.datetime64 | None = None) -> list[RouteJob]:
+    """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle
+    and those at sea (pipeline/enroute.py), each from where its plan starts (its port, or its latest position at
+    `ref_utc`, default the cycle's time); each carries the cycle's content version read at the start of the run."""
     table = fleet_store.load_voyages(db, voyage_ids=voyage_ids)
     if voyage_ids:
         unknown = sorted(set(voyage_ids) - set(table["voyage_id"].astype(str)))
         if unknown:
             raise FleetRunError(f"voyage(s) {', '.join(unknown)} not in {db}: import them with `jitroute fleet import`")
-    else:
-        table = upcoming(table, cycle, s.routing.lookahead_h)
+    ref = np.datetime64(ref_utc if ref_utc is not None else cycle, "s")
+    rows = [{k: plain(x) for k, x in v.items()} for v in table.to_dict("records")]
+    # reports of the last MAX_VOYAGE_H only (a voyage is never at sea longer): not every report ever made
+    since = max(min((np.datetime64(r["depart_utc"], "s") for r in rows), default=ref),
+                ref - np.timedelta64(int(MAX_VOYAGE_H * 3600), "s")) if rows else None
+    reports = fleet_store.positions_after(db, sorted({int(r["imo"]) for r in rows}), since) if rows else None
+    positions: dict[int, list[enroute.Position]] = {}
+    for p in (reports.to_dict("records") if reports is not None else []):
+        positions.setdefault(int(p["imo"]), []).append(
+            enroute.Position(np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"])))
+    given: dict[str, list[enroute.Position]] = {}
+    for p in fleet_store.voyage_positions(db, [x["voyage_id"] for x in rows]).to_dict("records"):
+        given.setdefault(str(p["voyage_id"]), []).append(enroute.Position(
+            np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"]), enroute.START_OPERATOR))
+    r = s.routing
+    chosen = enroute.select_starts(rows, positions, route_store.current_plan_legs(db, [x["voyage_id"] for x in rows]),
+                                   given=given,
+                                   cycle_utc=cycle, ref_utc=ref, lookahead_h=r.lookahead_h,
+                                   max_report_age_h=r.max_report_age_h, arrived_within_nm=r.arrived_within_nm,
+                                   max_voyage_h=MAX_VOYAGE_H, explicit=bool(voyage_ids))
+    for sel in chosen:
+        if sel.start is None:
+            LOG.warning("%s", sel.why)
+    chosen = [sel for sel in chosen if sel.start is not None]
+    fingerprints = fleet_store.voyage_fingerprints(db, [sel.voyage["voyage_id"] for sel in chosen])
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
     models = {}
-    for imo in set(table["imo"].astype(int)):
+    for imo in {int(sel.voyage["imo"]) for sel in chosen}:
         m = model_from_stored(fleet_store.active_model(db, imo), imo)
         models[imo] = m.to_json() if m is not None else None
     cyc = str(np.datetime_as_string(cycle, unit="s"))
     jobs = []
-    for v in table.to_dict("records"):
-        v = {k: plain(x) for k, x in v.items()}
+    for sel in chosen:
+        v = enroute.voyage_from(sel.voyage, sel.start)
+        v["voyage_fingerprint"] = fingerprints.get(str(v["voyage_id"]))
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
                              run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version))
     return jobs
@@ -137,8 +168,15 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
 
 def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
                     solver: str | None = None, seed: int | None = None, trigger: str = "manual", exports: bool = True,
-                    batch_size: int | None = None, *, run=PLAIN) -> dict:
-    """Route every upcoming voyage (or the given ones) on one cube cycle (default: the newest complete one)."""
+                    batch_size: int | None = None, nominal_utc: str | None = None, *, run=PLAIN) -> dict:
+    """Route every upcoming voyage and every voyage at sea (or the given ones) on one cube cycle (default: the
+    newest complete one).
+
+    The run records the cycle's age at its nominal time (`nominal_utc`, default now). With a nominal time given
+    (the nightly's) routing on a cycle older than `routing.max_cycle_age_h` is refused (StaleWeatherError, the run
+    recorded failed with the reason); without one (an operator's run) it goes on with a warning. Voyages at sea start
+    from their latest position at the nominal time (at the cycle's time when the cycle is that old).
+    """
     s = load_settings(data_root=Path(data_root) if data_root else None,
                       **{"routing.solver": solver, "routing.seed": seed, "routing.voyages_per_task": batch_size})
     layout = s.layout.ensure()
@@ -148,13 +186,39 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     if c not in cube.cycle_states(layout.cube_store, layout.cube_lock_dir):
         raise FleetRunError(f"cycle {cycle_label(c)} is not in the cube {layout.weather_cube_url}: ingest it first")
     run_id = f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:6]}"
+    nominal = np.datetime64(str(nominal_utc).rstrip("Z"), "s") if nominal_utc else utcnow_h()
+    age_h = cycle_age_h(c, nominal)
+    stale = age_h > s.routing.max_cycle_age_h
+    if stale and nominal_utc:
+        newest = cube.latest_complete_cycle(layout.cube_store)
+        why = (f"weather too old: the newest complete cycle {cycle_label(newest)} is {cycle_age_h(newest, nominal):.0f} h "
+               f"old at {str(nominal)[:16]}Z" if newest is not None and newest != c else
+               f"weather too old: cycle {cycle_label(c)} is {age_h:.0f} h old at {str(nominal)[:16]}Z")
+        why += (f" (more than routing.max_cycle_age_h = {s.routing.max_cycle_age_h:g} h); routing refused: ingest a newer "
+                "cycle (`jitroute ingest --cycle latest`), or route on this one by hand (`jitroute route-fleet`)")
+        route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=s.routing.solver, trigger=trigger, n_voyages=0,
+                              nominal_utc=nominal, cycle_age_h=age_h)
+        route_store.fail_run(layout.warehouse, run_id, why)
+        raise StaleWeatherError(why)
+    if stale:
+        LOG.warning("cycle %s is %.0f h old at %sZ (more than routing.max_cycle_age_h = %g h): routing on it as asked; "
+                    "voyages at sea start from their position at the cycle's time", cycle_label(c), age_h,
+                    str(nominal)[:16], s.routing.max_cycle_age_h)
     options = RoutingOptions.from_settings(s.routing)
     jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports,
-                      cube.cycle_versions(layout.cube_store).get(c))
-    route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger, n_voyages=len(jobs))
+                      cube.cycle_versions(layout.cube_store).get(c), ref_utc=c if stale else max(nominal, np.datetime64(c, "s")))
+    route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger, n_voyages=len(jobs),
+                          nominal_utc=nominal, cycle_age_h=age_h)
     run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
     run_exports.discard_stale(route_store.running_run_ids(layout.warehouse))
-    LOG.info("run %s: routing %d voyages on cycle %s (%s)", run_id, len(jobs), cycle_label(c),
+    from flows.jobs.warm import cold_cache_warning
+
+    cold = cold_cache_warning(options.solver) if jobs and not s.dask_address else None
+    if cold:
+        LOG.warning("%s", cold)
+    n_at_sea = sum(j.voyage.get("start_kind") not in (None, enroute.START_PORT) for j in jobs)
+    LOG.info("run %s: routing %d voyages (%d from port, %d at sea re-planned) on cycle %s, %.0f h old (%s)", run_id,
+             len(jobs), len(jobs) - n_at_sea, n_at_sea, cycle_label(c), age_h,
              f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
@@ -199,41 +263,65 @@ def nightly_cycles(s: Settings, date: str | None, cycles) -> list[np.datetime64]
     """The cycles a nightly ingests: the date's (at `cycles` hours) when a date is given, else the newest published."""
     if date:
         day = parse_day(date)
-        hours = parse_hours(cycles) if cycles else list(s.sources.cycles_utc)
+        hours = parse_hours(cycles) if cycles not in (None, "", []) else list(s.sources.cycles_utc)  # 0 is hour 00
         return [np.datetime64(day, "ns") + np.timedelta64(h, "h") for h in hours]
     return newest_published_cycles(utcnow_h(), s.sources.cycles_utc, s.sources.publish_delay_h, n=s.sources.nightly_cycles)
 
 
 def nightly_job(date: str | None = None, data_root: str | None = None, rish_url: str | None = None,
                 oscar_url: str | None = None, cycles: str | int | list[int] | None = None, *, run=PLAIN) -> dict:
-    """Ingest the cycles (the date's, or the newest published) → refit → route the fleet on the newest complete one."""
+    """Ingest the cycles (the date's, or the newest published) → refit → route the fleet on the newest complete one.
+
+    An ingest that fails is recorded as its cycle incomplete and the nightly goes on. The summary's `state` is
+    "Completed", or "Incomplete" when a targeted cycle is not complete (`cycles_missing` lists them). Routing on a
+    cycle older than `routing.max_cycle_age_h` at the nightly's nominal time (now, or the newest targeted cycle of
+    a `date`), or on none, raises StaleWeatherError after the summary is published."""
     s = load_settings(data_root=Path(data_root) if data_root else None)
     layout = s.layout.ensure()
     targets = nightly_cycles(s, date, cycles)
     labels = [cycle_label(c) for c in targets]
+    nominal = max(targets) if date else utcnow_h()
+    refused = None
     with job_lock(layout.locks, f"nightly ({', '.join(labels)})", say=LOG.info):
         LOG.info("[nightly 1/3] ingest: %d cycles (%s)", len(labels), ", ".join(labels))
         ingests = []
         for k, lab in enumerate(labels, 1):
             LOG.info("[nightly 1/3] ingest %d/%d: cycle %s", k, len(labels), lab)
-            ingests.append(run.subflow("ingest-weather", ingest_cycle, cycle=lab, data_root=data_root, rish_url=rish_url,
-                                       oscar_url=oscar_url))
+            try:
+                ingests.append(run.subflow("ingest-weather", ingest_cycle, cycle=lab, data_root=data_root,
+                                           rish_url=rish_url, oscar_url=oscar_url))
+            except Exception as exc:  # one cycle's ingest failing leaves it incomplete; the nightly goes on
+                LOG.error("ingest of cycle %s failed: %s: %s; going on with the cycles the cube has", lab,
+                          type(exc).__name__, exc)
+                ingests.append({"cycle": lab, "complete": False, "n_ok": 0, "n_expected": 0,
+                                "missing": [f"ingest failed: {type(exc).__name__}: {exc}"]})
         LOG.info("[nightly 2/3] refit: speed and fuel models from noon reports")
         fits = run.subflow("refit-performance", refit_job, data_root=data_root)
         c = cube.latest_complete_cycle(layout.cube_store, at_or_before=max(targets))
+        missing = [i["cycle"] for i in ingests if not i.get("complete")]
         summary = {"date": date or str(np.datetime64(utcnow_h(), "D")), "cycles_targeted": labels, "ingest": ingests,
                    "models_changed": sum(bool(f.get("changed")) for f in fits), "vessels": len(fits),
-                   "cycle_used": cycle_label(c) if c is not None else None}
+                   "cycle_used": cycle_label(c) if c is not None else None, "nominal_utc": str(nominal)[:16] + "Z",
+                   "cycle_age_h": round(cycle_age_h(c, nominal), 1) if c is not None else None,
+                   "cycles_missing": missing, "state": "Incomplete" if missing else "Completed", "routing": None}
         if c is None:
-            LOG.warning("no complete cycle up to %s: routing skipped", labels[-1])
-            summary["routing"] = None
+            refused = (f"no complete forecast cycle up to {labels[-1]} in {layout.weather_cube_url}: routing refused; "
+                       "ingest a cycle (`jitroute ingest --cycle latest`)")
         else:
-            LOG.info("[nightly 3/3] route the fleet on cycle %s", cycle_label(c))
-            summary["routing"] = run.subflow("route-fleet", route_fleet_job, cycle=cycle_label(c), data_root=data_root,
-                                             trigger="nightly")
+            LOG.info("[nightly 3/3] route the fleet on cycle %s (%.0f h old)", cycle_label(c), cycle_age_h(c, nominal))
+            try:
+                summary["routing"] = run.subflow("route-fleet", route_fleet_job, cycle=cycle_label(c),
+                                                 data_root=data_root, trigger="nightly",
+                                                 nominal_utc=str(np.datetime64(nominal, "m")))
+            except StaleWeatherError as exc:
+                refused = str(exc)
+        if refused:
+            summary.update(state="Failed", refused=refused)
     run.publish(key="nightly-summary", markdown=nightly_markdown(summary),
                 table=summary_table(summary["routing"]) if summary["routing"] else None,
                 description=f"jitroute nightly {summary['date']}")
+    if refused:
+        raise StaleWeatherError(refused)
     return summary
 
 
@@ -244,7 +332,9 @@ def _r(x, nd=1):
 def summary_table(r: dict) -> list[dict]:
     """One row per voyage needing attention plus the run's totals, rounded for people."""
     rows = [{"what": "run", "value": r.get("run_id")}, {"what": "cycle", "value": r.get("cycle")},
-            {"what": "voyages", "value": r.get("n")}, {"what": "on time", "value": r.get("n_ok")},
+            {"what": "cycle age h", "value": _r(r.get("cycle_age_h"))},
+            {"what": "voyages", "value": r.get("n")}, {"what": "planned from port", "value": r.get("n_from_port")},
+            {"what": "re-planned at sea", "value": r.get("n_replanned")}, {"what": "on time", "value": r.get("n_ok")},
             {"what": "late", "value": r.get("n_late")}, {"what": "not routed", "value": r.get("n_failed")},
             {"what": "exports failed", "value": len(r.get("export_failures") or [])},
             {"what": "fuel t", "value": _r(r.get("fuel_t"))},
@@ -282,7 +372,7 @@ def run_markdown(r: dict) -> str:
     if r.get("fleet_map"):
         lines += [f"Fleet map: [{r['fleet_map']}]({_link(r['fleet_map'])})"]
     lines += [f"Weather: [{p.rsplit('/', 1)[-1]}]({_link(p)})" for p in r.get("weather_maps") or []]
-    problems = r.get("problems") or []
+    problems = (r.get("problems") or []) + (r.get("stale") or [])
     if problems or r.get("export_failures"):
         lines += ["", "## Needing attention", "", "| voyage | status | reason |", "|---|---|---|"]
         lines += [f"| {markdown_cell(p['voyage_id'])} | {markdown_cell(p['status'])} | {markdown_cell(p['reason'] or '')} |"
@@ -293,9 +383,15 @@ def run_markdown(r: dict) -> str:
 
 
 def nightly_markdown(summary: dict) -> str:
-    lines = [f"# jitroute nightly {summary['date']}", "",
-             f"Cycles targeted: {', '.join(summary['cycles_targeted'])}; routed on: {summary.get('cycle_used') or 'none'}",
+    age = summary.get("cycle_age_h")
+    lines = [f"# jitroute nightly {summary['date']}: {summary.get('state', 'Completed')}", "",
+             f"Cycles targeted: {', '.join(summary['cycles_targeted'])}; routed on: {summary.get('cycle_used') or 'none'}"
+             + (f" ({age:g} h old at {summary.get('nominal_utc')})" if age is not None else ""),
              f"Models changed: {summary['models_changed']} of {summary['vessels']} vessels", ""]
+    if summary.get("refused"):
+        lines += [f"**Routing refused:** {summary['refused']}", ""]
+    if summary.get("cycles_missing"):
+        lines += [f"**Targeted cycles not complete:** {', '.join(summary['cycles_missing'])}", ""]
     lines += ["| cycle | complete | files ok | problems |", "|---|---|---|---|"]
     for i in summary["ingest"]:
         lines.append(f"| {i['cycle']} | {'yes' if i['complete'] else 'no'} | {i['n_ok']}/{i['n_expected']} | "

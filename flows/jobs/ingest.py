@@ -16,6 +16,7 @@ import uuid
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from urllib.parse import unquote, urlparse
 
 import numpy as np
 import xarray as xr
@@ -24,7 +25,8 @@ from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.decode.errors import DecodeError
 from pipeline.sources import rish
-from pipeline.sources.cycles import cycles_between, label as cycle_label, newest_published_cycles, parse_cycle, utcnow_h
+from pipeline.sources.cycles import (check_cycle_hour, cycles_between, label as cycle_label, newest_published_cycles,
+                                     parse_cycle, utcnow_h)
 from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text, token_may_go_to
 from pipeline.sources.registry import BY_NAME, SOURCES
 from pipeline.sources.source import ROLES
@@ -108,7 +110,8 @@ class Listing:
     problems: list[str] = field(default_factory=list)
 
     def nothing_listed(self) -> str:
-        return f"no {'/'.join(s.name for s in SOURCES if s.primary)} files listed at {', '.join(self.index_urls)}"
+        what = f"no {'/'.join(s.name for s in SOURCES if s.primary)} files listed at {', '.join(self.index_urls)}"
+        return "; ".join([what, *self.problems])
 
 
 def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[int], opts: dict[str, FetchOptions]) -> Listing:
@@ -124,9 +127,10 @@ def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[in
                 pages[url] = rish.parse_index(read_text(url, opts[src.name]))
             except FileNotFoundError:
                 pages[url] = [], []
-            except ConnectionError as exc:
-                if not src.listing_may_fail:
-                    raise
+                root = base_urls[src.name]
+                if root.startswith("file://") and not Path(unquote(urlparse(root).path)).is_dir():
+                    problems.append(f"{src.name} mirror root {root} does not exist (check the URL)")
+            except ConnectionError as exc:  # unreachable, failing, too large or too slow: the cycle is incomplete
                 problems.append(f"{src.name} listing unreachable ({exc})")
                 return url, []
         return url, pages[url][0]
@@ -145,7 +149,7 @@ def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[in
             gaps[src.name] = chosen.gaps_h
     rejected = [(name, url) for url, (_, bad) in pages.items() for name in bad]
     if not items:
-        return Listing([], rejected, index_urls, {}, 0)
+        return Listing([], rejected, index_urls, {}, 0, list(dict.fromkeys(problems)))
     return Listing(items, rejected, index_urls, gaps, n_expected, problems)
 
 
@@ -225,6 +229,25 @@ def write_cycle(layout, cycle: np.datetime64, ds, items: list[Download], complet
                                 n_ok=n_ok, missing="; ".join(problems)[:2000])
 
 
+def record_nothing_listed(layout, cycle: np.datetime64, listing: Listing, why: str) -> None:
+    """A cycle whose sources listed no file (unpublished, listing unreachable): one `missing` row per primary source
+    in the ingest log (its index URL, the reason) and the cycle's status incomplete; the cube is not touched."""
+    now = ingest_log.utcnow()
+    run_id = uuid.uuid4().hex[:12]
+    primary = [src for src in SOURCES if src.primary]
+    ingest_log.record_files(layout.warehouse, [
+        {"run_id": run_id, "source": src.name, "cycle": cycle, "file_name": f"{src.name} files of {cycle_label(cycle)}",
+         "url": url, "bytes": None, "sha256": None, "status": "missing", "error": why[:2000], "started_at": now,
+         "finished_at": now} for src, url in zip(primary, listing.index_urls + listing.index_urls[-1:] * len(primary))
+    ])
+    if not cube_complete_in_warehouse(layout.warehouse, cycle):  # never overwrite a complete cycle's status
+        ingest_log.set_cycle_status(layout.warehouse, cycle, complete=False, n_expected=0, n_ok=0, missing=why[:2000])
+
+
+def cube_complete_in_warehouse(db: Path, c: np.datetime64) -> bool:
+    return Path(db).exists() and _recorded_complete(db, c)
+
+
 def ingest_cycle(cycle: str | None = None, data_root: str | None = None, rish_url: str | None = None,
                  oscar_url: str | None = None, force: bool = False, *, run=PLAIN) -> dict:
     """Fetch, decode, regrid and write one forecast cycle into the cube; returns a CycleReport dict.
@@ -237,7 +260,7 @@ def ingest_cycle(cycle: str | None = None, data_root: str | None = None, rish_ur
     if cycle is None or str(cycle).strip().lower() == "latest":
         c = newest_published_cycles(utcnow_h(), s.sources.cycles_utc, s.sources.publish_delay_h)[-1]
     else:
-        c = parse_cycle(cycle)
+        c = check_cycle_hour(parse_cycle(cycle), cycle)
     label = cycle_label(c)
     with job_lock(layout.locks, f"ingest {label}", say=LOG.info):
         return _ingest_locked(s, layout, c, label, force, run)
@@ -259,9 +282,11 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
     listing = run.step(list_sources, base_urls, c, steps, opts, name="list-sources", retries=2, timeout_s=timeout)
     for name, url in listing.rejected:
         LOG.warning("ignored unsafe name %r listed at %s", name, url)
-    if not listing.items:
-        LOG.warning("cycle %s: %s; nothing written", label, listing.nothing_listed())
-        return CycleReport(label, False, 0, 0, missing=[listing.nothing_listed()]).__dict__
+    if not listing.items:  # unpublished, or the listing unreachable: recorded missing, the cycle incomplete
+        why = listing.nothing_listed()
+        LOG.warning("cycle %s: %s; the cycle is recorded incomplete", label, why)
+        run.step(record_nothing_listed, layout, c, listing, why, name="write-cycle", timeout_s=timeout)
+        return CycleReport(label, False, 0, 0, missing=[why]).__dict__
     known = ingest_log.known_checksums(layout.warehouse, [it.name for it in listing.items])
     items = run.step(download_all, listing.items, layout.raw, c, opts, known, name="download", timeout_s=timeout)
     grid = routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg)
@@ -298,8 +323,12 @@ def backfill_range(start: str, end: str, cycles: str | int | list[int] = "00,12"
     with job_lock(s.layout.ensure().locks, f"backfill {start}..{end}", say=LOG.info):
         for c in todo:
             label = cycle_label(c)
-            reports.append(run.subflow("ingest-weather", ingest_cycle, cycle=label, data_root=data_root,
-                                       rish_url=rish_url, oscar_url=oscar_url))
+            try:
+                reports.append(run.subflow("ingest-weather", ingest_cycle, cycle=label, data_root=data_root,
+                                           rish_url=rish_url, oscar_url=oscar_url))
+            except Exception as exc:  # one cycle failing is reported; the backfill goes on with the next
+                LOG.error("backfill: cycle %s failed: %s: %s", label, type(exc).__name__, exc)
+                reports.append(CycleReport(label, False, 0, 0, missing=[f"ingest failed: {type(exc).__name__}: {exc}"]).__dict__)
             LOG.info("backfill: %d/%d cycles done (%s)", len(reports), len(todo), label)
             if progress is not None:
                 progress(len(reports), len(todo), label)

@@ -38,9 +38,20 @@ def failed_row(run_id: str, voyage: dict, cycle, reason: str, status: str = "fai
     return row
 
 
+# what a fleet run adds to a voyage's job (pipeline/enroute.py, storage.fleet_store.voyage_fingerprints) and keeps
+# in its route row: where the plan starts and the voyage it was made for
+START_COLUMNS = ("start_kind", "start_lat", "start_lon", "start_utc", "start_position_utc", "start_advanced_h",
+                 "start_note", "voyage_fingerprint")
+
+
+def start_columns(job: RouteJob) -> dict:
+    return {k: job.voyage.get(k) for k in START_COLUMNS if k in job.voyage}
+
+
 def failed_result(job: RouteJob, reason: str, log: list | None = None) -> dict:
-    return {"route": failed_row(job.run_id, job.voyage, job.cycle, reason), "legs": [], "exports": {},
-            "export_errors": {}, "log": log or []}
+    row = failed_row(job.run_id, job.voyage, job.cycle, reason)
+    row.update(start_columns(job))
+    return {"route": row, "legs": [], "exports": {}, "export_errors": {}, "log": log or []}
 
 
 WINDOWS_CACHED = 4  # a few MB each for an ocean crossing; voyages on one route and departure share theirs
@@ -84,8 +95,8 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
     except Exception as exc:  # a bug or bad data: record it, keep the rest of the fleet going
         return failed_result(job, f"unexpected error: {type(exc).__name__}: {exc}",
                              log=[("error", f"voyage {job.voyage_id} failed:\n{traceback.format_exc()}")])
-    out = {"route": plan.route_row(job.run_id), "legs": plan.leg_rows(job.run_id), "exports": {}, "export_errors": {},
-           "log": []}
+    out = {"route": {**plan.route_row(job.run_id), **start_columns(job)}, "legs": plan.leg_rows(job.run_id),
+           "exports": {}, "export_errors": {}, "log": []}
     if job.exports and plan.legs:
         from pipeline.export.bundle import export_plan  # matplotlib and pandas: only workers that export load them
 

@@ -15,6 +15,20 @@ class CycleError(ValueError):
     """Text that is not a cycle; the message says what was given and what is expected."""
 
 
+CYCLE_HOURS = (0, 6, 12, 18)  # JMA GSM/GWM init hours (UTC)
+EARLIEST_DAY = np.datetime64("2000-01-01")  # a backfill range starts no earlier (older days are a typing mistake)
+MAX_RANGE_DAYS = 366  # a backfill covers at most this many days; longer ranges are run in pieces
+
+
+def check_cycle_hour(cycle: np.datetime64, text: str | None = None) -> np.datetime64:
+    """The cycle, if its hour is a JMA init hour (00/06/12/18 UTC); a CycleError saying so otherwise."""
+    hour = int((np.datetime64(cycle, "h") - np.datetime64(cycle, "D")) / np.timedelta64(1, "h"))
+    if hour not in CYCLE_HOURS:
+        raise CycleError(f"cycle {text or label(cycle)} is at {hour:02d} UTC; GSM/GWM cycles are at "
+                         f"{'/'.join(f'{h:02d}' for h in CYCLE_HOURS)} UTC, e.g. {str(np.datetime64(cycle, 'D'))}T00")
+    return cycle
+
+
 def parse_cycle(text: str) -> np.datetime64:
     """'2020-12-01T00', '2020-12-01T12:00', '2020120112' → datetime64[ns] on a whole hour."""
     t = str(text).strip()
@@ -53,6 +67,9 @@ def parse_hours(text) -> list[int]:
         raise CycleError(f"cannot read cycle hours {text!r}; use e.g. 00,12") from None
     if not hours or any(h < 0 or h > 23 for h in hours):
         raise CycleError(f"cycle hours {text!r} must be hours 00..23, e.g. 00,12")
+    if any(h not in CYCLE_HOURS for h in hours):
+        raise CycleError(f"cycle hours {text!r}: GSM/GWM cycles are at {'/'.join(f'{h:02d}' for h in CYCLE_HOURS)} UTC, "
+                         "e.g. 00,12")
     return hours
 
 
@@ -61,6 +78,12 @@ def cycles_between(start: str, end: str, hours: list[int]) -> list[np.datetime64
     d0, d1 = parse_day(start, "start"), parse_day(end, "end")
     if d1 < d0:
         raise CycleError(f"end {end} is before start {start}")
+    tomorrow = np.datetime64(utcnow_h(), "D") + 1
+    if d0 < EARLIEST_DAY or d1 > tomorrow:
+        raise CycleError(f"days {start}..{end} are outside {EARLIEST_DAY}..{tomorrow} (today + 1): check the years")
+    if (d1 - d0).astype(int) + 1 > MAX_RANGE_DAYS:
+        raise CycleError(f"{start}..{end} is {(d1 - d0).astype(int) + 1} days; a backfill covers at most "
+                         f"{MAX_RANGE_DAYS} days: run it in pieces")
     days = np.arange(d0, d1 + 1)
     return [np.datetime64(d, "ns") + np.timedelta64(int(h), "h") for d in days for h in sorted(hours)]
 

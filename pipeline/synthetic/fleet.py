@@ -109,8 +109,30 @@ def _gc_nm(a, b) -> float:
     return float(2 * np.arcsin(np.sqrt(h)) * 3440.065)
 
 
-def generate_fleet(start, *, n_vessels: int = 12, days: int = 365, seed: int = 7) -> DemoFleet:
-    """Fleet whose reports end at `start` and whose voyages depart 6–30 h after `start`."""
+AT_SEA_DEPART_H = -20  # voyages at sea departed this many hours after `start` (before it)
+
+
+def _at_sea_reports(reports: pd.DataFrame, dep, arr, depart, speed_kn: float, start) -> pd.DataFrame:
+    """The vessel's noon reports after departure moved onto its great circle at `speed_kn`, plus one at `start` + 12 h
+    (a copy of its last report at the position then): a ship at sea, 32 h out, for the en-route re-planning."""
+    from pipeline.routing.geodesy import gc_interpolate
+
+    extra = reports.iloc[[-1]].copy()
+    extra["ts_utc"] = pd.Timestamp(start + np.timedelta64(12, "h")).strftime("%Y-%m-%dT%H:%M:%SZ")
+    out = pd.concat([reports, extra], ignore_index=True)
+    dist = _gc_nm(dep, arr)
+    ts = pd.to_datetime(out["ts_utc"]).dt.tz_localize(None)
+    for k in np.flatnonzero((ts > pd.Timestamp(depart)).to_numpy()):
+        frac = min(0.9, (ts.iloc[k] - pd.Timestamp(depart)).total_seconds() / 3600.0 * speed_kn / dist)
+        lat, lon = gc_interpolate(dep[0], dep[1], arr[0], arr[1], frac)
+        out.loc[k, "lat"], out.loc[k, "lon"] = round(float(lat), 3), round(float(lon) % 360.0, 3)
+    return out
+
+
+def generate_fleet(start, *, n_vessels: int = 12, days: int = 365, seed: int = 7, at_sea: tuple[int, ...] = ()) -> DemoFleet:
+    """Fleet whose reports end at `start` and whose voyages depart 13–35 h after `start`; the voyages numbered in
+    `at_sea` (0-based) instead departed 20 h before `start` and are at sea, their vessels' reports after departure
+    on their way (the last at `start` + 12 h)."""
     rng = np.random.default_rng(seed)
     start = np.datetime64(start, "h")
     vessels, noon, voyages, truths = [], [], [], {}
@@ -125,11 +147,14 @@ def generate_fleet(start, *, n_vessels: int = 12, days: int = 365, seed: int = 7
         vessels.append({"imo": imo, "name": name, "type": vt[0], "dwt": round(dwt), "design_speed_kn": vt[2],
                         "mcr_kw": round(dwt * 0.35 + 4000), "rpm_max": vt[3], "design_fuel_tph": round(design_fuel, 3)})
         reports = _reports(imo, vt, truth, start, days, rng)
-        noon.append(_spoil(reports, rng) if i % 3 == 0 else reports)
         dep, arr = ROUTES[i % len(ROUTES)]
         dist = _gc_nm(PORTS[dep], PORTS[arr])
         depart = start + np.timedelta64(int(13 + 2 * i), "h")  # after the 12 UTC cycle of the start day
         speed = vt[2] * (0.80 if i != n_vessels - 1 else 1.9)  # the last voyage's RTA is impossibly tight
+        if i in at_sea:
+            depart = start + np.timedelta64(AT_SEA_DEPART_H, "h")
+            reports = _at_sea_reports(reports, PORTS[dep], PORTS[arr], depart, speed * 0.95, start)
+        noon.append(_spoil(reports, rng) if i % 3 == 0 else reports)
         hours = dist * 1.08 / speed
         rpm_opts = [round(vt[3] * f, 1) for f in (0.6, 0.7, 0.8, 0.9, 1.0)]
         voyages.append({"voyage_id": f"V{int(str(start)[:4]) % 100:02d}{i + 1:03d}", "imo": imo, "dep_name": dep,

@@ -1,0 +1,94 @@
+"""The README's examples run as written on demo data: its analyst SQL, its Python snippets and its `route` lines."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import duckdb
+import pytest
+
+README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+
+
+def _blocks(lang: str) -> list[str]:
+    return re.findall(rf"```{lang}\n(.*?)```", README, flags=re.S)
+
+
+def _statements(sql: str) -> list[str]:
+    text = "\n".join(line for line in sql.splitlines() if not line.strip().startswith("--"))
+    return [s.strip() for s in text.split(";") if s.strip()]
+
+
+@pytest.fixture(scope="module")
+def routed(tmp_path_factory, demo_mirror):
+    """Demo data: the 2020-12-01T00 cycle, a 12-vessel demo fleet (two ships at sea) refitted and routed (gc, fast)."""
+    import os
+
+    from cli.fleet import DEMO_AT_SEA, _import_fleet
+    from conftest import mirror_urls
+    from flows.jobs.fleet import route_fleet_job
+    from flows.jobs.ingest import ingest_cycle
+    from flows.jobs.refit import refit_job
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+    base = tmp_path_factory.mktemp("readme")
+    root = base / "data"
+    assert ingest_cycle("2020-12-01T00", data_root=str(root), **mirror_urls(demo_mirror))["complete"]
+    write_fleet(generate_fleet("2020-12-01T00", n_vessels=12, days=120, seed=7, at_sea=DEMO_AT_SEA), base / "fleet")
+    _import_fleet(base / "fleet", root)
+    refit_job(data_root=str(root))
+    old = os.environ.get("JITROUTE_DASK_WORKERS")
+    os.environ["JITROUTE_DASK_WORKERS"] = "1"
+    try:
+        route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc", exports=False,
+                        nominal_utc="2020-12-01T06")
+    finally:
+        os.environ.pop("JITROUTE_DASK_WORKERS") if old is None else os.environ.__setitem__("JITROUTE_DASK_WORKERS", old)
+    return root
+
+
+def test_every_analyst_query_of_the_readme_runs_and_the_numbered_ones_answer(routed):
+    statements = [s for block in _blocks("sql") for s in _statements(block)]
+    assert len(statements) >= 9
+    con = duckdb.connect(str(routed / "warehouse.duckdb"), read_only=True)
+    try:
+        results = {s: con.execute(s).fetchall() for s in statements}
+    finally:
+        con.close()
+    numbered = re.findall(r"-- (\d+)\. ", "\n".join(_blocks("sql")))
+    intro = re.search(r"(\w+) questions for analysts", README)
+    words = {3: "Three", 4: "Four", 5: "Five", 6: "Six", 7: "Seven", 8: "Eight"}
+    assert intro and intro.group(1) == words[len(numbered)], "the README's count of questions matches its list"
+    empty = [s.split("\n")[0] for s, rows in results.items() if not rows]
+    allowed = [s for s in empty if "bunker_logs" in s or "status = 'rejected'" in s or "flag IS NOT NULL" in s]
+    assert empty == allowed, f"queries answering nothing on demo data: {empty}"
+
+
+def test_the_readme_python_snippets_run_on_the_demo_data(routed, monkeypatch):
+    import subprocess
+    import sys
+
+    monkeypatch.chdir(routed.parent)
+    for block in _blocks("python"):
+        code = "\n".join(line for line in block.splitlines() if "import polars" not in line and "pl." not in line)
+        code = code.replace("import pyarrow.dataset as ds, polars as pl, duckdb", "import pyarrow.dataset as ds, duckdb")
+        exec(compile(code, "README.md", "exec"), {})
+    for block in _blocks("sh"):
+        for line in block.splitlines():
+            if line.startswith(".venv/bin/python -c"):
+                r = subprocess.run([sys.executable, *shlex.split(line)[1:]], capture_output=True, text=True, timeout=60)
+                assert r.returncode == 0, r.stderr
+
+
+def test_the_readme_route_example_runs_as_written(routed):
+    from tests.processes import jitroute, new_tag, tagged_env
+
+    lines = [ln for block in _blocks("sh") for ln in block.replace("\\\n", " ").splitlines()
+             if ln.startswith("jitroute route --from")]
+    assert len(lines) == 1
+    args = shlex.split(re.sub(r"\[[^\]]*\]", "", lines[0].split("#")[0]))[1:]
+    r = jitroute(*args, "--solver", "gc", "--data", str(routed), env=tagged_env(new_tag()), timeout_s=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert "status ok" in r.stdout or "status late" in r.stdout
