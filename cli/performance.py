@@ -243,4 +243,4 @@ def register(app: typer.Typer) -> None:
                     t.add_row(f"{k}.csv", reason, str(n))
             console.print(t)
         if (folder / "noon_reports.csv").exists():
-            noon_import(folder / "noon_reports.csv", data)
+            noon_import(folder / "noon_reports.csv", replace=False, data=data)
