@@ -315,12 +315,26 @@ def _set_state(loc: Location, index: int, state: int) -> None:
 def _publish(loc: Location, cycle: np.datetime64) -> None:
     """Make the store's present shape the published view: give the cycle a new content version (root attribute
     `cycle_versions`, ISO cycle → int, nanoseconds since 1970 at publication, always increasing), then rewrite the
-    consolidated metadata. Each is one atomic write of the root `zarr.json`."""
+    consolidated metadata. Each is one atomic write of the root `zarr.json`. The root attribute `cycle_rows`
+    (ISO cycle → row) lets readers open the newest cycle without reading the `cycle` coordinate (one chunk per
+    cycle: its cost would grow with the archive). `cycle` None republishes without a new version (retention)."""
     group = zarr.open_group(loc.zarr_store(), mode="r+")
     versions = dict(group.attrs.get("cycle_versions", {}))
-    label = _version_label(cycle)
-    versions[label] = max(time.time_ns(), int(versions.get(label, 0)) + 1)
-    group.attrs.update({"cycle_versions": versions})
+    if cycle is not None:
+        label = _version_label(cycle)
+        versions[label] = max(time.time_ns(), int(versions.get(label, 0)) + 1)
+    group.attrs.update({"cycle_versions": versions, "cycle_rows": _cycle_rows(loc, versions)})
+    _consolidate(loc)
+
+
+def _cycle_rows(loc: Location, versions: dict) -> dict:
+    """ISO cycle → its row along `cycle`, for the cycles that have a content version (published, not retired):
+    readers find a cycle's row from the root metadata without reading the `cycle` coordinate."""
+    labels = [_version_label(c) for c in _cycles_in_store(loc)]
+    return {lab: row for row, lab in enumerate(labels) if lab in versions}
+
+
+def _consolidate(loc: Location) -> None:
     with warnings.catch_warnings():  # zarr notes that consolidated metadata is not in the Zarr 3 spec (yet)
         warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part", category=UserWarning)
         zarr.consolidate_metadata(loc.zarr_store())
@@ -498,3 +512,53 @@ def hide_cycles(path: Path, cycles: list, lock_dir: Path | None = None) -> None:
         for c in cycles:
             for i in np.flatnonzero(times == np.datetime64(c, "ns")):
                 _set_state(loc, int(i), STATE_HIDDEN)
+
+
+def retire_cycles(path, keep_days: float, lock_dir: Path | None = None, storage_options: dict | None = None) -> list:
+    """Retention: retire every cycle initialised more than `keep_days` days before the newest cycle in the store.
+
+    Under the writer lock a retired cycle is hidden (`cycle_state` 0), its data chunks are deleted (the space they
+    held is freed; its row stays, reading as the fill value, as arrays cannot lose a leading row without rewriting
+    every chunk) and it leaves the published `cycle_versions` and `cycle_rows`, so routing workers and `open_cube`
+    no longer see it; a plain `xr.open_zarr` still lists the row, all NaN. A retired cycle ingested again is
+    written back into its row. Returns the retired cycles (datetime64[ns]), oldest first."""
+    loc = locate(path, storage_options)
+    if keep_days < 0:
+        raise ValueError(f"cube retention of {keep_days} days: give a number of days ≥ 0")
+    if not loc.has("zarr.json"):
+        return []
+    with writer_lock(lock_dir, loc):
+        _repair(loc)
+        group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+        cycles = _cycles_in_store(loc)
+        state = np.asarray(group["cycle_state"][:])
+        versions = dict(group.attrs.get("cycle_versions", {}))
+        if not cycles.size:
+            return []
+        limit = cycles.max() - np.timedelta64(int(round(keep_days * 86400)), "s")
+        old = [i for i, c in enumerate(cycles) if c < limit and (state[i] != STATE_HIDDEN or _version_label(c) in versions)]
+        if not old:
+            return []
+        for i in old:
+            _set_state(loc, i, STATE_HIDDEN)
+            versions.pop(_version_label(cycles[i]), None)
+        group.attrs.update({"cycle_versions": versions})
+        _publish(loc, None)  # readers stop seeing them before their chunks go
+        for i in old:
+            for v in DATA_VARS:
+                _delete_prefix(loc, f"{v}/c/{i}")
+        return [cycles[i] for i in old]
+
+
+def _delete_prefix(loc: Location, prefix: str) -> None:
+    """Delete every object under `prefix` of the store (nothing there is fine)."""
+    if loc.local is not None:
+        shutil.rmtree(loc.local / prefix, ignore_errors=True)
+        return
+    import fsspec
+
+    fs, root = fsspec.core.url_to_fs(loc.url, **loc.options)
+    try:
+        fs.rm(f"{root}/{prefix}", recursive=True)
+    except FileNotFoundError:
+        pass
