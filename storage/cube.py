@@ -117,12 +117,12 @@ def spatial_chunks(nlat: int, nlon: int) -> tuple[int, int]:
     return -(-nlat // SPATIAL_SPLITS), -(-nlon // SPATIAL_SPLITS)
 
 
-def _template(cycle_ds: xr.Dataset, cycle: np.datetime64, chunks_latlon: tuple[int, int] | None = None) -> xr.Dataset:
+def _template(cycle_ds: xr.Dataset, cycle: np.datetime64, chunks: tuple[int, int, int] | None = None) -> xr.Dataset:
     """One hidden all-NaN cycle. The data variables are lazy and written with `compute=False`: only their
     metadata goes to the store, and chunks never written read as the NaN fill value."""
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
     nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32,
-                          chunks=(1, nstep, *(chunks_latlon or spatial_chunks(nlat, nlon))))
+                          chunks=(1, *(chunks or (nstep, *spatial_chunks(nlat, nlon)))))
     data = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
     age, state = cv.CURRENT_AGE, cv.CYCLE_STATE
     data[age.name] = (age.dims, np.full((1, nstep), np.nan, age.dtype), cv.attrs(age.name))
@@ -144,8 +144,8 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64, chunks_latlon: tuple[i
 
 def _encoding(ds: xr.Dataset) -> dict:
     nstep = ds.sizes["step"]
-    latlon = tuple(ds[DATA_VARS[0]].data.chunksize[2:])  # the template's chunks
-    enc = {v: {"chunks": (1, nstep, *latlon), "compressors": (DATA_CODEC,)} for v in DATA_VARS}
+    chunks = tuple(ds[DATA_VARS[0]].data.chunksize)  # the template's: (1, steps, lat, lon)
+    enc = {v: {"chunks": chunks, "compressors": (DATA_CODEC,)} for v in DATA_VARS}
     enc["cycle"] = CYCLE_ENCODING | NO_FILL
     enc["step"] = STEP_ENCODING | NO_FILL
     enc["valid_time"] = CYCLE_ENCODING | NO_FILL | {"chunks": (1, nstep)}
@@ -181,17 +181,17 @@ def _check_grid(loc: Location, cycle_ds: xr.Dataset) -> None:
 
 
 def write_cycle(path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None = None,
-                storage_options: dict | None = None, chunks_latlon: tuple[int, int] | None = None) -> None:
+                storage_options: dict | None = None, chunks: tuple[int, int, int] | None = None) -> None:
     """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely, then publish it.
 
     `path` is a local path or a URL (`s3://bucket/…/weather.zarr`, with fsspec `storage_options`; its writer lock
     then lives in `lock_dir`). A failed write (e.g. a full disk) raises CubeError naming the store; the cycle stays
-    hidden. `chunks_latlon`: the (lat, lon) chunk shape of a store this write creates (default spatial_chunks);
-    a store keeps the chunking it was created with.
+    hidden. `chunks`: the (step, lat, lon) chunk shape of a store this write creates (default: all steps,
+    spatial_chunks); a store keeps the chunking it was created with.
     """
     loc = locate(path, storage_options)
     try:
-        _write_cycle(loc, cycle_ds, complete=complete, lock_dir=lock_dir, chunks_latlon=chunks_latlon)
+        _write_cycle(loc, cycle_ds, complete=complete, lock_dir=lock_dir, chunks=chunks)
     except OSError as exc:
         label = np.datetime_as_string(np.datetime64(cycle_ds["cycle"].values, "h"), unit="h")
         raise CubeError(f"{loc.url}: writing cycle {label} failed ({exc}); no part of it is visible. "
@@ -239,7 +239,7 @@ def _encoded_times(values: np.ndarray, arr) -> np.ndarray:
 
 
 def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None,
-                 chunks_latlon: tuple[int, int] | None = None) -> None:
+                 chunks: tuple[int, int, int] | None = None) -> None:
     cycle = np.datetime64(cycle_ds["cycle"].values, "ns")
     missing = [v for v in DATA_VARS if v not in cycle_ds]
     if missing:
@@ -251,7 +251,7 @@ def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_di
             raise CubeError(f"{loc.url}: the store is damaged ({'; '.join(damaged)}); nothing was written. Run "
                             "`jitroute cube check`, then `jitroute cube repair` (moves the store aside) and re-ingest")
         if not loc.has("zarr.json"):
-            _create_store(loc, _template(cycle_ds, cycle, chunks_latlon))
+            _create_store(loc, _template(cycle_ds, cycle, chunks))
             index = 0
         else:
             _repair(loc)
