@@ -169,8 +169,10 @@ def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_reader
         cube.write_cycle(url, cycle_ds(), complete=True, storage_options=s3_options)
     cube.write_cycle(url, cycle_ds(), complete=True, lock_dir=locks, storage_options=s3_options)
     assert (locks / "weather.zarr.lock").exists()
+    before = cube_window.CHUNK_CACHE.fetched_bytes
     on_s3 = window(url, (20, 50), (170, 200), storage_options=s3_options)
     fetched = cube_window.CHUNK_CACHE.fetched_bytes
+    assert fetched > before  # the chunks came from S3 through the cache
     window(url, (25, 45), (175, 195), storage_options=s3_options)  # a second voyage in the same chunks: no GET of a chunk
     assert cube_window.CHUNK_CACHE.fetched_bytes == fetched
     local = window(store, (20, 50), (170, 200))
