@@ -258,3 +258,25 @@ def test_retention_retires_old_cycles_and_frees_their_chunks(store):
     assert cube.retire_cycles(store, keep_days=0.9) == []  # nothing more to retire
     cube.write_cycle(store, cycle_ds(), complete=True)  # ingested again: back in its row
     assert window(store, (10, 30), (140, 160)).values.size > 0 and cube.retire_cycles(store, keep_days=2) == []
+
+
+def test_cube_retire_takes_its_retention_from_the_option_or_the_setting(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+    from flows.settings import SettingsError, load_settings
+
+    store = tmp_path / "data" / "cubes" / "weather.zarr"
+    for c in (CYCLE, CYCLE2):
+        cube.write_cycle(store, cycle_ds(c), complete=True)
+    monkeypatch.delenv("JITROUTE_CUBE_RETENTION_DAYS", raising=False)
+    res = CliRunner().invoke(app, ["cube", "retire", "--data", str(tmp_path / "data")])
+    assert res.exit_code == 2 and "--keep-days" in res.output
+    monkeypatch.setenv("JITROUTE_CUBE_RETENTION_DAYS", "0.1")  # 2.4 h: the 00 UTC cycle is 6 h older than the newest
+    assert load_settings().cube_retention_days == 0.1
+    res = CliRunner().invoke(app, ["cube", "retire", "--data", str(tmp_path / "data")])
+    assert res.exit_code == 0 and "retired 1 cycle(s)" in res.output and "2020-12-01T00" in res.output, res.output
+    assert cube.complete_cycles(store) == [CYCLE2]
+    monkeypatch.setenv("JITROUTE_CUBE_RETENTION_DAYS", "a week")
+    with pytest.raises(SettingsError, match="JITROUTE_CUBE_RETENTION_DAYS"):
+        load_settings()
