@@ -97,8 +97,8 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
 
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None) -> dict:
-    """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves); stage export
-    files as results arrive. Returns rows, legs, export errors and the names of the staged files."""
+    """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves and stage their
+    export files under `run_exports`). Returns rows, legs, export errors and the names of the staged files."""
     rows, legs, export_errors, staged = [], [], [], set()
     done = 0
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
