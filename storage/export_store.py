@@ -7,6 +7,10 @@ LAST, `runs/<run_id>/_SUCCESS` is written: a JSON manifest listing every file wi
 move is one rename of the staging folder; on an object store a move is a copy per object, issued concurrently,
 so a reader may see a run folder fill up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run
 never publishes: its staging prefix is removed (by the run itself, or by the next run when the process died).
+
+A run's files are named by keys of one to three plain names joined by `/`: the run's own files at the top
+(`fleet_map.png`, `weather_waves_<cycle>.png`, the manifest), each voyage's under `voyages/<voyage_id>/`, so no
+voyage ID can overwrite a run file or another voyage's file.
 """
 
 from __future__ import annotations
@@ -30,6 +34,16 @@ def check_file_name(name: str) -> str:
             or any(ord(ch) < 32 for ch in name) or len(name) > 255):
         raise ExportPathError(f"export file name {name!r} is not a plain file name; nothing written")
     return name
+
+
+def check_key(key: str) -> str:
+    """`key` if it is one to three plain file names joined by `/` (a file of the run or of one of its voyages)."""
+    parts = key.split("/") if isinstance(key, str) else [key]
+    if not 1 <= len(parts) <= 3:
+        raise ExportPathError(f"export file name {key!r} is not a plain name in the run folder; nothing written")
+    for part in parts:
+        check_file_name(part)
+    return key
 
 
 def child_path(folder: Path, name: str) -> Path:
@@ -89,10 +103,11 @@ class RunExports:
         return f"{self.url.rstrip('/')}/runs/{check_file_name(run_id)}"
 
     def stage(self, run_id: str, name: str, data: bytes) -> str:
-        """Write one file of the run under its staging prefix; returns the file name."""
+        """Write one file of the run (`name`: a key, see `check_key`) under its staging prefix; returns the key."""
         fs, folder = self.fs, self._staging(run_id)
-        fs.makedirs(folder, exist_ok=True)
-        fs.pipe_file(f"{folder}/{check_file_name(name)}", data)
+        path = f"{folder}/{check_key(name)}"
+        fs.makedirs(path.rsplit("/", 1)[0], exist_ok=True)
+        fs.pipe_file(path, data)
         return name
 
     def publish(self, run_id: str, only: set[str] | None = None) -> dict | None:
@@ -102,14 +117,16 @@ class RunExports:
         fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
         if not fs.exists(src):
             return None
-        sizes = {p.rsplit("/", 1)[1]: int(info["size"]) for p, info in fs.find(src, detail=True).items()}
+        base = fs._strip_protocol(src).rstrip("/") + "/"
+        sizes = {fs._strip_protocol(p)[len(base):]: int(info["size"]) for p, info in fs.find(src, detail=True).items()}
         if only is not None:
             sizes = {n: b for n, b in sizes.items() if n in only}
         names = sorted(sizes)
         if _is_local(fs) and not fs.exists(dst):
             fs.mv(src, dst, recursive=True)  # one rename of the folder, however many files it holds
         elif names:
-            fs.makedirs(dst, exist_ok=True)
+            for folder in sorted({dst} | {f"{dst}/{n.rsplit('/', 1)[0]}" for n in names if "/" in n}):
+                fs.makedirs(folder, exist_ok=True)
             # one call for all files: an async filesystem (s3fs) copies them concurrently, then deletes in batches
             fs.copy([f"{src}/{n}" for n in names], [f"{dst}/{n}" for n in names])
         manifest = {"run_id": run_id, "files": [{"name": n, "bytes": sizes[n]} for n in sorted(sizes)]}

@@ -85,14 +85,14 @@ def stage_exports(exports_to: tuple[str, dict], run_id: str, voyage_id: str, fil
     """Write a voyage's export files (kind → bytes) to the run's staging area under the exports root
     `exports_to` = (URL or path, fsspec options). Returns (manifest entries {"name", "bytes"}, kind → error)."""
     from pipeline.export.bundle import SUFFIX
-    from pipeline.export.paths import ExportPathError, export_name
+    from pipeline.export.paths import ExportPathError, voyage_export_key
     from storage.export_store import ExportPathError as StoreNameError
 
     root = run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True))
     staged, errors = [], {}
     for kind, data in files.items():
-        try:  # the voyage ID makes the file name: one plain name in the run folder, or refused naming the voyage
-            name = export_name(voyage_id, SUFFIX[kind])
+        try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
+            name = voyage_export_key(voyage_id, SUFFIX[kind])
             root.stage(run_id, name, data)
             staged.append({"name": name, "bytes": len(data)})
         except (OSError, ExportPathError, StoreNameError) as exc:
