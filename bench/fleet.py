@@ -13,6 +13,16 @@ to judge the voyages' share, what a fresh interpreter holds with the routing cod
 Targets: scaling 1 → 2 workers ≥ 1.7×; peak worker memory ≤ 300 MB.
 
     .venv/bin/python bench/fleet.py [--voyages 200] [--workers 1,2] [--exports]
+
+`--s3`: as in production instead: the cube and the exports on a local S3 server (moto, as the test suite's S3
+fixture; bench/s3_counting_server.py counts what it serves), a `dask scheduler` and `dask worker --nthreads 1
+--no-nanny` processes started in an empty folder with no data root. The numba caches are compiled in this process
+before the workers start. Prints besides voyages/min and peak worker MB: cube bytes and GETs per voyage (what
+the S3 server served under `cubes/`), export requests per voyage, and the flow host's CPU per voyage (this
+process: user + system time over the timed run). `--code DIR` runs another checkout's code (e.g. an export of
+the main branch) in this process and in the workers, so before/after figures come from one sitting.
+
+    .venv/bin/python bench/fleet.py --s3 [--exports] [--voyages 60] [--code /tmp/main-export]
 """
 
 from __future__ import annotations
@@ -25,7 +35,9 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+CODE = Path(sys.argv[sys.argv.index("--code") + 1]).resolve() if "--code" in sys.argv[:-1] else REPO
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(CODE))  # the code under test comes first
 OUT = REPO / "bench" / "out" / "fleet"
 
 
@@ -103,6 +115,209 @@ def baseline_mb() -> tuple[float, float]:
     return float(out[0]), float(out[1])
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sk:
+        sk.bind(("127.0.0.1", 0))
+        return sk.getsockname()[1]
+
+
+def _wait_port(port: int, proc, what: str, timeout_s: float = 120.0) -> None:
+    import socket
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"{what} exited with {proc.returncode}")
+        with socket.socket() as sk:
+            if sk.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.2)
+    raise RuntimeError(f"{what} did not listen on port {port} within {timeout_s:.0f} s")
+
+
+def _start(args: list[str], env: dict, log: Path, cwd: Path):
+    return subprocess.Popen(args, env=env, cwd=cwd, stdout=open(log, "w"), stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+def _stop(procs: list) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    for p in procs:
+        try:
+            p.wait(20)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def _s3_counts(endpoint: str, reset: bool = False) -> dict:
+    import json
+    import urllib.request
+
+    req = urllib.request.Request(f"{endpoint}/__reset" if reset else f"{endpoint}/__counts",
+                                 method="POST" if reset else "GET")
+    with urllib.request.urlopen(req, timeout=30) as r:
+        return {} if reset else json.loads(r.read())
+
+
+def _host_cpu_s() -> float:
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime
+
+
+def _warm_numba(root: Path, cube_url: str, options: dict, ids: list[str], exports: bool) -> None:
+    """Route one voyage in this process so the numba caches (in the code's __pycache__) exist before workers start."""
+    import inspect
+
+    import numpy as np
+
+    from flows.jobs.fleet import fleet_jobs
+    from flows.jobs.route_worker import route_one
+    from flows.settings import load_settings
+    from pipeline.routing.job import RoutingOptions
+
+    s = load_settings(data_root=root)
+    job = fleet_jobs(s, s.layout.warehouse, np.datetime64("2020-12-01T00", "ns"), "warm", ids[:1],
+                     RoutingOptions.from_settings(s.routing), exports)[0]
+    if "exports_to" in inspect.signature(route_one).parameters:
+        route_one(job, cube_url, options, (str(OUT / "warm-exports"), {}))
+    else:
+        route_one(job, cube_url, options)
+
+
+def worker_cube_reads(reset: bool = False) -> dict:
+    """In a worker: the cube GETs (with their bytes) and HEADs this process made through s3fs since the last reset.
+    Counted by wrapping s3fs's two calls zarr reads with (a bench instrument: the S3 server cannot tell a worker's
+    requests from the flow host's)."""
+    import s3fs
+
+    cls = s3fs.S3FileSystem
+    counts = getattr(cls, "_bench_cube_reads", None)
+    if counts is None:
+        counts = cls._bench_cube_reads = {"get": 0, "bytes": 0, "head": 0}
+        cat, info = cls._cat_file, cls._info
+
+        async def _cat_file(self, path, *a, **k):
+            out = await cat(self, path, *a, **k)
+            if "/cubes/" in path:
+                counts["get"] += 1
+                counts["bytes"] += len(out)
+            return out
+
+        async def _info(self, path, *a, **k):
+            if "/cubes/" in path:
+                counts["head"] += 1
+            return await info(self, path, *a, **k)
+
+        cls._cat_file, cls._info = _cat_file, _info
+    out = dict(counts)
+    if reset:
+        counts.update(get=0, bytes=0, head=0)
+    return out
+
+
+def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
+    """The bench on a scheduler and worker processes, with the cube and exports on a local S3 server."""
+    import json
+    import shutil
+
+    import boto3
+    import numpy as np
+
+    root0 = prepare(max(n_voyages, 200))  # the data root bench/fleet.py builds; the first n voyages are timed
+    ids = [f"B{k:04d}" for k in range(n_voyages)]
+    work = OUT / "s3"
+    shutil.rmtree(work, ignore_errors=True)
+    (work / "elsewhere").mkdir(parents=True)
+    root = work / "data"
+    root.mkdir()
+    shutil.copy(root0 / "warehouse.duckdb", root / "warehouse.duckdb")
+    py, bin_ = sys.executable, Path(sys.executable).parent
+    s3_port = _free_port()
+    procs = [_start([py, str(REPO / "bench" / "s3_counting_server.py"), str(s3_port)], dict(os.environ),
+                    work / "s3.log", work)]
+    try:
+        _wait_port(s3_port, procs[0], "the S3 server")
+        endpoint = f"http://127.0.0.1:{s3_port}"
+        boto3.client("s3", endpoint_url=endpoint, aws_access_key_id="testing", aws_secret_access_key="testing",
+                     region_name="us-east-1").create_bucket(Bucket="jitroute")
+        options = {"endpoint_url": endpoint, "key": "testing", "secret": "testing"}
+        os.environ.update(JITROUTE_OBJECT_ROOT="s3://jitroute/bench", JITROUTE_STORAGE_OPTIONS=json.dumps(options))
+        from flows.settings import load_settings
+        from storage import cube
+
+        layout = load_settings(data_root=root).layout.ensure()
+        cycle_ds = cube.load_cycle(root0 / "cubes" / "weather.zarr", np.datetime64("2020-12-01T00", "ns"))
+        cube.write_cycle(layout.cube_store, cycle_ds, complete=True, lock_dir=layout.cube_lock_dir,
+                         storage_options=options)
+        del cycle_ds
+        _warm_numba(root, layout.weather_cube_url, options, ids, exports)
+        import flows
+
+        print(f"code: {Path(flows.__file__).parents[1]}; cube {layout.weather_cube_url} on {endpoint}")
+        env = {k: v for k, v in os.environ.items() if not k.startswith("JITROUTE_")}
+        env.update(PYTHONPATH=str(CODE), AWS_ENDPOINT_URL=endpoint, AWS_ACCESS_KEY_ID="testing",
+                   AWS_SECRET_ACCESS_KEY="testing", NUMBA_NUM_THREADS="1")
+        rows = {}
+        for workers in sizes:
+            port = _free_port()
+            address = f"tcp://127.0.0.1:{port}"
+            cluster = [_start([str(bin_ / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], env, work / "scheduler.log", work / "elsewhere")]
+            try:
+                _wait_port(port, cluster[0], "the dask scheduler")
+                for k in range(workers):
+                    cluster.append(_start([str(bin_ / "dask"), "worker", address, "--nthreads", "1", "--no-nanny",
+                                           "--no-dashboard", "--name", f"w{k}", "--local-directory",
+                                           str(work / "elsewhere")], env, work / f"worker{k}.log", work / "elsewhere"))
+                from distributed import Client
+
+                # not the default client: the flow host's own dask computations (xarray in the weather maps) stay
+                # in its process, as in production
+                with Client(address, set_as_default=False) as client:
+                    client.wait_for_workers(workers, timeout=300)
+                    where = set(client.run(lambda: __import__("flows").__file__).values())
+                    client.run(worker_cube_reads)  # counts from here: the warm-up meets the cube first
+                    run(root, address, ids[: 2 * workers], exports)  # warm-up: imports in the workers
+                    _s3_counts(endpoint, reset=True)
+                    cpu0 = _host_cpu_s()
+                    seconds = run(root, address, ids, exports)
+                    cpu = _host_cpu_s() - cpu0
+                    counts = _s3_counts(endpoint)
+                    reads = list(client.run(worker_cube_reads).values())
+                    peak = max(client.run(peak_rss_mb).values())
+                rows[workers] = (seconds, peak, counts, cpu, where, reads)
+            finally:
+                _stop(cluster[::-1])
+    finally:
+        _stop(procs)
+    n = n_voyages
+    print(f"exports {'on' if exports else 'off'}, {n} voyages, workers `dask worker --nthreads 1 --no-nanny`, cube and exports on S3 (moto)")
+    print("worker cube: what the workers fetched from the cube (GET bytes and requests, HEADs) per voyage routed, over "
+          "the warm-up and the timed run (every fetch of the cycle); all cube: what the S3 server served under cubes/ "
+          "in the timed run to everyone (the flow host's weather maps and cycle checks too) per voyage")
+    print(f"{'workers':>7} {'seconds':>8} {'voy/min':>8} {'peak worker MB':>14} {'worker cube MB/voy':>18} {'GET/voy':>8} "
+          f"{'HEAD/voy':>8} {'all cube MB/voy':>15} {'export req/voy':>14} {'host CPU s/voy':>14}")
+    for w, (seconds, peak, counts, cpu, where, reads) in rows.items():
+        routed = n + 2 * w
+        cube_get = counts.get("GET cubes", {"requests": 0, "bytes": 0})
+        export_req = sum(v["requests"] for k, v in counts.items() if k.endswith("exports"))
+        print(f"{w:>7} {seconds:>8.1f} {n / seconds * 60:>8.1f} {peak:>14.0f} "
+              f"{sum(r['bytes'] for r in reads) / 1e6 / routed:>18.3f} {sum(r['get'] for r in reads) / routed:>8.1f} "
+              f"{sum(r['head'] for r in reads) / routed:>8.1f} {cube_get['bytes'] / 1e6 / n:>15.3f} {export_req / n:>14.1f} "
+              f"{cpu / n:>14.4f}")
+    if 1 in rows and 2 in rows:
+        print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
+    print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))
+    print("workers imported the code from:", ", ".join(sorted({str(Path(p).parents[1]) for r in rows.values() for p in r[4]})))
+
+
 def main() -> None:
     import logging
 
@@ -113,6 +328,8 @@ def main() -> None:
     ap.add_argument("--workers", default="1,2", help="cluster sizes to time, comma separated")
     ap.add_argument("--exports", action="store_true",
                     help="workers also render each voyage's RTZ, GeoJSON and PNGs, as the demo and the nightly do")
+    ap.add_argument("--s3", action="store_true", help="scheduler and worker processes, cube and exports on a local S3")
+    ap.add_argument("--code", default=str(REPO), help="checkout whose code runs (default this one)")
     args = ap.parse_args()
     sizes = [int(w) for w in args.workers.split(",")]
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
@@ -120,6 +337,9 @@ def main() -> None:
     os.environ.setdefault("PREFECT_HOME", str(OUT / "prefect"))
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
+    if args.s3:
+        s3_processes(args.voyages, sizes, args.exports)
+        return
     root = prepare(args.voyages)
     ids = [f"B{k:04d}" for k in range(args.voyages)]
     times, peaks = {}, {}

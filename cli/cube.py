@@ -1,4 +1,5 @@
-"""`jitroute cube check`, `jitroute cube repair`: find and fix a weather cube damaged on disk."""
+"""`jitroute cube check`, `jitroute cube repair`: find and fix a weather cube damaged on disk; `jitroute cube retire`:
+drop old cycles (retention)."""
 
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ def _recorded_cycles(warehouse: Path) -> list[str]:
 
 
 def register(app: typer.Typer) -> None:
-    cube_app = typer.Typer(help="The weather cube: check it for damage, repair it.", no_args_is_help=True)
+    cube_app = typer.Typer(help="The weather cube: check it for damage, repair it, retire old cycles.",
+                           no_args_is_help=True)
     app.add_typer(cube_app, name="cube")
 
     @cube_app.command("check")
@@ -93,3 +95,23 @@ def register(app: typer.Typer) -> None:
         for c in cycles:
             r = ingest_weather(c, data_root=str(s.data_root), rish_url=rish_url, oscar_url=oscar_url, force=True)
             console.print(f"re-ingested {c}: {'complete' if r['complete'] else 'incomplete: ' + '; '.join(r['missing'])[:200]}")
+
+    @cube_app.command("retire")
+    def retire(data: Optional[Path] = DataOpt,
+               keep_days: Optional[float] = typer.Option(
+                   None, "--keep-days", min=0.0,
+                   help="Keep the cycles initialised at most this many days before the newest one "
+                        "(default: the setting JITROUTE_CUBE_RETENTION_DAYS).")):
+        """Retire old cycles: hide them and delete their chunks (routing no longer sees them; re-ingest brings one back)."""
+        from flows.settings import load_settings
+        from storage import cube
+
+        s = load_settings(data_root=data)
+        days = keep_days if keep_days is not None else s.cube_retention_days
+        if days is None:
+            console.print("no retention given: pass --keep-days N or set JITROUTE_CUBE_RETENTION_DAYS")
+            raise typer.Exit(2)
+        layout = s.layout
+        retired = cube.retire_cycles(layout.cube_store, days, lock_dir=layout.cube_lock_dir)
+        console.print(f"retired {len(retired)} cycle(s) older than {days:g} days before the newest"
+                      + (f": {', '.join(_cycle_label(c) for c in retired)}" if retired else ""))

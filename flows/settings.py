@@ -2,7 +2,8 @@
 
 Values come from (lowest to highest priority) the defaults below, environment variables
 (`JITROUTE_DATA`, `JITROUTE_OBJECT_ROOT`, `JITROUTE_STORAGE_OPTIONS`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`,
-`JITROUTE_ALLOWED_REDIRECT_HOSTS`, `JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`) and
+`JITROUTE_ALLOWED_REDIRECT_HOSTS`, `JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`,
+`JITROUTE_CUBE_RETENTION_DAYS`) and
 explicit overrides from the CLI. Lower layers never read this object; flows pass the values they need as plain arguments.
 
 Object storage: `JITROUTE_OBJECT_ROOT` (e.g. `s3://bucket/jitroute`) puts the cube and the run exports there.
@@ -97,6 +98,9 @@ class Settings:
     dask_address: str | None = None  # None: a local cluster
     dask_workers: int = 2
     timezone: str = "UTC"
+    # Retention of the weather cube: after each ingest, cycles initialised more than this many days before the
+    # newest one are retired (storage.cube.retire_cycles: hidden, their chunks deleted). None keeps every cycle.
+    cube_retention_days: float | None = None
 
     @property
     def layout(self) -> DataLayout:
@@ -132,6 +136,20 @@ def storage_options_from_env(text: str | None) -> dict | None:
         raise SettingsError("JITROUTE_STORAGE_OPTIONS is not a JSON object of fsspec storage options, "
                             'e.g. {"endpoint_url": "http://127.0.0.1:9000"}')
     return value
+
+
+def _days(env, name: str) -> float | None:
+    """A number of days ≥ 0 from the environment (unset or empty: None)."""
+    text = env.get(name, "").strip()
+    if not text:
+        return None
+    try:
+        days = float(text)
+    except ValueError:
+        days = -1.0
+    if not days >= 0:
+        raise SettingsError(f"{name}={text!r} is not a number of days ≥ 0 (unset it to keep every cycle)")
+    return days
 
 
 SERVED_ENV = "JITROUTE_SERVED"  # set by `jitroute serve` for the flow runs it starts
@@ -177,6 +195,7 @@ def load_settings(**overrides) -> Settings:
         storage_options=storage_options_from_env(env.get("JITROUTE_STORAGE_OPTIONS")),
         dask_address=env.get("JITROUTE_DASK_ADDRESS") or None,
         dask_workers=int(env["JITROUTE_DASK_WORKERS"]) if env.get("JITROUTE_DASK_WORKERS") else None,
+        cube_retention_days=_days(env, "JITROUTE_CUBE_RETENTION_DAYS"),
         **{
             "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
             "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,

@@ -81,7 +81,11 @@ TIME_EPOCH = np.datetime64("2000-01-01T00", "ns")  # of CYCLE_ENCODING
 STEP_ENCODING = {"units": "hours", "dtype": "int32"}
 NO_FILL = {"_FillValue": None}  # CF: coordinates have no missing values
 WRITE_WORKERS = 2
-SPATIAL_SPLITS = 3  # chunks per spatial axis: (1, all steps, ≈ nlat/3, ≈ nlon/3), e.g. 107 × 240 on the 0.5° grid
+# Chunks per spatial axis: (1, all steps, ≈ nlat/8, ≈ nlon/8), e.g. 41 × 90 (20.5° × 45°) on the 0.5° grid.
+# Chosen by bench/cube_chunks.py on the demo fleet's 200 voyage windows: against 3 splits (107 × 240) a voyage's
+# first read fetches 0.71 MB instead of 4.6 MB in as many chunk files (12) and costs 6.7 instead of 20.5 ms CPU;
+# 16 splits fetch a little less (0.42 MB) but in twice the files (22 GETs on S3) for no less CPU.
+SPATIAL_SPLITS = 8
 # LZ4 after byte shuffle: about as small as zstd on smooth float32 fields, faster to write and ~3× faster to
 # read (routing workers read the cube). Fixed when the store is created; appended cycles inherit it.
 DATA_CODEC = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
@@ -113,11 +117,12 @@ def spatial_chunks(nlat: int, nlon: int) -> tuple[int, int]:
     return -(-nlat // SPATIAL_SPLITS), -(-nlon // SPATIAL_SPLITS)
 
 
-def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
+def _template(cycle_ds: xr.Dataset, cycle: np.datetime64, chunks: tuple[int, int, int] | None = None) -> xr.Dataset:
     """One hidden all-NaN cycle. The data variables are lazy and written with `compute=False`: only their
     metadata goes to the store, and chunks never written read as the NaN fill value."""
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
-    nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32, chunks=(1, nstep, *spatial_chunks(nlat, nlon)))
+    nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32,
+                          chunks=(1, *(chunks or (nstep, *spatial_chunks(nlat, nlon)))))
     data = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
     age, state = cv.CURRENT_AGE, cv.CYCLE_STATE
     data[age.name] = (age.dims, np.full((1, nstep), np.nan, age.dtype), cv.attrs(age.name))
@@ -139,7 +144,8 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64) -> xr.Dataset:
 
 def _encoding(ds: xr.Dataset) -> dict:
     nstep = ds.sizes["step"]
-    enc = {v: {"chunks": (1, nstep, *spatial_chunks(ds.sizes["lat"], ds.sizes["lon"])), "compressors": (DATA_CODEC,)} for v in DATA_VARS}
+    chunks = tuple(ds[DATA_VARS[0]].data.chunksize)  # the template's: (1, steps, lat, lon)
+    enc = {v: {"chunks": chunks, "compressors": (DATA_CODEC,)} for v in DATA_VARS}
     enc["cycle"] = CYCLE_ENCODING | NO_FILL
     enc["step"] = STEP_ENCODING | NO_FILL
     enc["valid_time"] = CYCLE_ENCODING | NO_FILL | {"chunks": (1, nstep)}
@@ -175,16 +181,17 @@ def _check_grid(loc: Location, cycle_ds: xr.Dataset) -> None:
 
 
 def write_cycle(path, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None = None,
-                storage_options: dict | None = None) -> None:
+                storage_options: dict | None = None, chunks: tuple[int, int, int] | None = None) -> None:
     """Write one cycle (dims (step, lat, lon) + scalar `cycle`) idempotently and crash-safely, then publish it.
 
     `path` is a local path or a URL (`s3://bucket/…/weather.zarr`, with fsspec `storage_options`; its writer lock
     then lives in `lock_dir`). A failed write (e.g. a full disk) raises CubeError naming the store; the cycle stays
-    hidden.
+    hidden. `chunks`: the (step, lat, lon) chunk shape of a store this write creates (default: all steps,
+    spatial_chunks); a store keeps the chunking it was created with.
     """
     loc = locate(path, storage_options)
     try:
-        _write_cycle(loc, cycle_ds, complete=complete, lock_dir=lock_dir)
+        _write_cycle(loc, cycle_ds, complete=complete, lock_dir=lock_dir, chunks=chunks)
     except OSError as exc:
         label = np.datetime_as_string(np.datetime64(cycle_ds["cycle"].values, "h"), unit="h")
         raise CubeError(f"{loc.url}: writing cycle {label} failed ({exc}); no part of it is visible. "
@@ -231,7 +238,8 @@ def _encoded_times(values: np.ndarray, arr) -> np.ndarray:
     return encoded
 
 
-def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None) -> None:
+def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_dir: Path | None,
+                 chunks: tuple[int, int, int] | None = None) -> None:
     cycle = np.datetime64(cycle_ds["cycle"].values, "ns")
     missing = [v for v in DATA_VARS if v not in cycle_ds]
     if missing:
@@ -243,7 +251,7 @@ def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_di
             raise CubeError(f"{loc.url}: the store is damaged ({'; '.join(damaged)}); nothing was written. Run "
                             "`jitroute cube check`, then `jitroute cube repair` (moves the store aside) and re-ingest")
         if not loc.has("zarr.json"):
-            _create_store(loc, _template(cycle_ds, cycle))
+            _create_store(loc, _template(cycle_ds, cycle, chunks))
             index = 0
         else:
             _repair(loc)
@@ -315,12 +323,26 @@ def _set_state(loc: Location, index: int, state: int) -> None:
 def _publish(loc: Location, cycle: np.datetime64) -> None:
     """Make the store's present shape the published view: give the cycle a new content version (root attribute
     `cycle_versions`, ISO cycle → int, nanoseconds since 1970 at publication, always increasing), then rewrite the
-    consolidated metadata. Each is one atomic write of the root `zarr.json`."""
+    consolidated metadata. Each is one atomic write of the root `zarr.json`. The root attribute `cycle_rows`
+    (ISO cycle → row) lets readers open the newest cycle without reading the `cycle` coordinate (one chunk per
+    cycle: its cost would grow with the archive). `cycle` None republishes without a new version (retention)."""
     group = zarr.open_group(loc.zarr_store(), mode="r+")
     versions = dict(group.attrs.get("cycle_versions", {}))
-    label = _version_label(cycle)
-    versions[label] = max(time.time_ns(), int(versions.get(label, 0)) + 1)
-    group.attrs.update({"cycle_versions": versions})
+    if cycle is not None:
+        label = _version_label(cycle)
+        versions[label] = max(time.time_ns(), int(versions.get(label, 0)) + 1)
+    group.attrs.update({"cycle_versions": versions, "cycle_rows": _cycle_rows(loc, versions)})
+    _consolidate(loc)
+
+
+def _cycle_rows(loc: Location, versions: dict) -> dict:
+    """ISO cycle → its row along `cycle`, for the cycles that have a content version (published, not retired):
+    readers find a cycle's row from the root metadata without reading the `cycle` coordinate."""
+    labels = [_version_label(c) for c in _cycles_in_store(loc)]
+    return {lab: row for row, lab in enumerate(labels) if lab in versions}
+
+
+def _consolidate(loc: Location) -> None:
     with warnings.catch_warnings():  # zarr notes that consolidated metadata is not in the Zarr 3 spec (yet)
         warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part", category=UserWarning)
         zarr.consolidate_metadata(loc.zarr_store())
@@ -498,3 +520,53 @@ def hide_cycles(path: Path, cycles: list, lock_dir: Path | None = None) -> None:
         for c in cycles:
             for i in np.flatnonzero(times == np.datetime64(c, "ns")):
                 _set_state(loc, int(i), STATE_HIDDEN)
+
+
+def retire_cycles(path, keep_days: float, lock_dir: Path | None = None, storage_options: dict | None = None) -> list:
+    """Retention: retire every cycle initialised more than `keep_days` days before the newest cycle in the store.
+
+    Under the writer lock a retired cycle is hidden (`cycle_state` 0), its data chunks are deleted (the space they
+    held is freed; its row stays, reading as the fill value, as arrays cannot lose a leading row without rewriting
+    every chunk) and it leaves the published `cycle_versions` and `cycle_rows`, so routing workers and `open_cube`
+    no longer see it; a plain `xr.open_zarr` still lists the row, all NaN. A retired cycle ingested again is
+    written back into its row. Returns the retired cycles (datetime64[ns]), oldest first."""
+    loc = locate(path, storage_options)
+    if keep_days < 0:
+        raise ValueError(f"cube retention of {keep_days} days: give a number of days ≥ 0")
+    if not loc.has("zarr.json"):
+        return []
+    with writer_lock(lock_dir, loc):
+        _repair(loc)
+        group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+        cycles = _cycles_in_store(loc)
+        state = np.asarray(group["cycle_state"][:])
+        versions = dict(group.attrs.get("cycle_versions", {}))
+        if not cycles.size:
+            return []
+        limit = cycles.max() - np.timedelta64(int(round(keep_days * 86400)), "s")
+        old = [i for i, c in enumerate(cycles) if c < limit and (state[i] != STATE_HIDDEN or _version_label(c) in versions)]
+        if not old:
+            return []
+        for i in old:
+            _set_state(loc, i, STATE_HIDDEN)
+            versions.pop(_version_label(cycles[i]), None)
+        group.attrs.update({"cycle_versions": versions})
+        _publish(loc, None)  # readers stop seeing them before their chunks go
+        for i in old:
+            for v in DATA_VARS:
+                _delete_prefix(loc, f"{v}/c/{i}")
+        return [cycles[i] for i in old]
+
+
+def _delete_prefix(loc: Location, prefix: str) -> None:
+    """Delete every object under `prefix` of the store (nothing there is fine)."""
+    if loc.local is not None:
+        shutil.rmtree(loc.local / prefix, ignore_errors=True)
+        return
+    import fsspec
+
+    fs, root = fsspec.core.url_to_fs(loc.url, **loc.options)
+    try:
+        fs.rm(f"{root}/{prefix}", recursive=True)
+    except FileNotFoundError:
+        pass

@@ -33,7 +33,12 @@ class Location(NamedTuple):
             return str(self.local)
         from zarr.storage import FsspecStore
 
-        return FsspecStore.from_url(self.url, storage_options=self.options, read_only=read_only)
+        options = self.options
+        if self.url.startswith(("s3://", "s3a://")):
+            # s3fs asks every whole-object read for its size first (a HEAD) to split large objects into
+            # concurrent ranges; cube chunks are small, so one GET per chunk, half the requests
+            options = {"max_concurrency": 1, **options}
+        return FsspecStore.from_url(self.url, storage_options=options, read_only=read_only)
 
     def has(self, key: str) -> bool:
         """Whether the object `key` (e.g. "zarr.json") exists in the store."""

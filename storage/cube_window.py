@@ -5,15 +5,29 @@ worker reads, so its process stays small.
 the coordinates; `read_window` reads the steps and the lat/lon box a voyage can meet, only the chunks inside it.
 The coordinates are decoded from their CF attributes as storage/cube.py writes them: `cycle` in "<unit> since
 <epoch>", `step` in hours.
+
+Opening costs the same whatever the archive's length: the published cycles, their rows and content versions are
+root attributes of the consolidated metadata (`cycle_rows`, `cycle_versions`, written at publication), so the
+`cycle` coordinate (one chunk per cycle) is not read. A store published before `cycle_rows` existed is read the
+old way (the whole `cycle` coordinate) until its next publication.
+
+Chunk cache: every data chunk a process reads goes through one process-wide cache (CHUNK_CACHE), bounded in bytes
+(`JITROUTE_CUBE_CACHE_MB`, default 64) and keyed by store, variable, cycle, the cycle's content version and chunk:
+a worker fetches each chunk of a cycle version once, however many voyages need it; a re-ingested cycle has a new
+version, so its new chunks are fetched afresh. It holds the chunks as stored (compressed).
 """
 
 from __future__ import annotations
 
+import os
 import re
+import threading
+from collections import OrderedDict
 from typing import NamedTuple
 
 import numpy as np
 import zarr
+from zarr.storage import WrapperStore
 
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, step_hours
 from storage.cube_location import DECODE_ERRORS, CubeError, Location, locate
@@ -22,13 +36,86 @@ _UNITS = {"days": "D", "hours": "h", "minutes": "m", "seconds": "s"}
 
 
 class Published(NamedTuple):
-    """The published view of a store: its zarr group and decoded coordinates."""
+    """The published view of a store: its zarr group (reading data chunks through CHUNK_CACHE), where each published
+    cycle lies, and the decoded coordinates."""
 
     group: zarr.Group
-    cycle: np.ndarray  # datetime64[ns], one per cycle row (published and hidden)
+    rows: dict  # datetime64[ns] cycle → its row along `cycle`
     step_h: np.ndarray  # int64 lead times in hours
     lat: np.ndarray  # degrees north, as stored
     lon: np.ndarray  # degrees east, as stored
+
+
+class ChunkCache:
+    """Chunks as stored (compressed bytes), least recently used dropped first once `max_bytes` is passed; safe
+    across threads. `fetched_bytes`/`fetched_chunks` count what came from the store, `hit_chunks` what did not."""
+
+    def __init__(self, max_bytes: int):
+        self.max_bytes = int(max_bytes)
+        self._items: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
+        self.held_bytes = self.fetched_bytes = self.fetched_chunks = self.hit_chunks = 0
+
+    def get(self, key) -> bytes | None:
+        with self._lock:
+            data = self._items.get(key)
+            if data is not None:
+                self._items.move_to_end(key)
+                self.hit_chunks += 1
+            return data
+
+    def put(self, key, data: bytes) -> None:
+        with self._lock:
+            self.fetched_bytes += len(data)
+            self.fetched_chunks += 1
+            if len(data) > self.max_bytes or key in self._items:
+                return
+            self._items[key] = data
+            self.held_bytes += len(data)
+            while self.held_bytes > self.max_bytes:
+                _, old = self._items.popitem(last=False)
+                self.held_bytes -= len(old)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._items.clear()
+            self.held_bytes = self.fetched_bytes = self.fetched_chunks = self.hit_chunks = 0
+
+
+CHUNK_CACHE = ChunkCache(float(os.environ.get("JITROUTE_CUBE_CACHE_MB", "64")) * (1 << 20))
+
+
+class _CachedChunks(WrapperStore):
+    """A read-only store whose data chunks (`<variable>/c/<row>/…`) of published cycles go through CHUNK_CACHE,
+    keyed by (store URL, variable, cycle, content version, chunk); everything else (metadata, `cycle_state`, read
+    live) goes straight to the store."""
+
+    def __init__(self, store, url: str = "", by_row: dict | None = None):
+        super().__init__(store)
+        self._url = url
+        self._by_row = by_row if by_row is not None else {}  # row → (cycle label, content version); shared, filled after open
+
+    def _with_store(self, store):
+        return type(self)(store, self._url, self._by_row)
+
+    def _cache_key(self, key: str):
+        parts = key.split("/")
+        if len(parts) < 4 or parts[0] not in DATA_VARS or parts[1] != "c" or not parts[2].isdigit():
+            return None
+        known = self._by_row.get(int(parts[2]))
+        return None if known is None else (self._url, parts[0], *known, "/".join(parts[3:]))
+
+    async def get(self, key, prototype, byte_range=None):
+        ck = self._cache_key(key) if byte_range is None else None
+        if ck is None:
+            return await self._store.get(key, prototype, byte_range)
+        data = CHUNK_CACHE.get(ck)
+        if data is not None:
+            return prototype.buffer.from_bytes(data)
+        buf = await self._store.get(key, prototype, byte_range)
+        if buf is not None:
+            CHUNK_CACHE.put(ck, buf.to_bytes())
+        return buf
 
 
 class Window(NamedTuple):
@@ -66,16 +153,35 @@ def open_published(path, storage_options: dict | None = None) -> Published:
         from storage.cube import require_store  # names what is damaged, or says the store is missing
 
         require_store(loc)
+    by_row: dict = {}
+    store = _CachedChunks(_store_object(loc), loc.url, by_row)
     try:
-        group = zarr.open_consolidated(loc.zarr_store(read_only=True), mode="r")
+        group = zarr.open_consolidated(store, mode="r")
     except (FileNotFoundError, ValueError, KeyError, TypeError) as exc:
         if loc.local is not None and loc.has("zarr.json"):
-            group = zarr.open_group(loc.zarr_store(read_only=True), mode="r")
+            group = zarr.open_group(store, mode="r")
         else:
             raise FileNotFoundError(f"no published weather cube at {loc.url} ({type(exc).__name__}: {exc}): "
                                     "run `jitroute ingest` (or `jitroute demo`) first") from exc
-    return Published(group, _times(group["cycle"]), _lead_hours(group["step"]), np.asarray(group["lat"][:]),
-                     np.asarray(group["lon"][:]))
+    attrs = group.attrs.asdict()
+    if "cycle_rows" in attrs:  # written at publication: no read of the `cycle` coordinate, whatever its length
+        n = group["cycle_state"].shape[0]  # rows past the published shapes are a publication under way
+        rows = {np.datetime64(k, "ns"): int(r) for k, r in dict(attrs["cycle_rows"]).items() if int(r) < n}
+    else:  # published before `cycle_rows` existed (or opened without consolidated metadata)
+        rows = {c: i for i, c in enumerate(_times(group["cycle"]))}
+    versions = {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
+    by_row.update({r: (str(np.datetime64(c, "s")), versions[c]) for c, r in rows.items() if c in versions})
+    return Published(group, rows, _lead_hours(group["step"]), np.asarray(group["lat"][:]), np.asarray(group["lon"][:]))
+
+
+def _store_object(loc: Location):
+    """The zarr Store of `loc`, read-only (zarr opens a local path given as a string itself)."""
+    store = loc.zarr_store(read_only=True)
+    if isinstance(store, str):
+        from zarr.storage import LocalStore
+
+        return LocalStore(store, read_only=True)
+    return store
 
 
 def cycle_versions(path, storage_options: dict | None = None) -> dict[np.datetime64, int]:
@@ -95,9 +201,11 @@ def newest_complete_cycle(path, storage_options: dict | None = None) -> np.datet
     if not loc.has("zarr.json"):
         return None
     pub = open_published(loc)
-    state = np.asarray(pub.group["cycle_state"][:])[:pub.cycle.size]
-    done = pub.cycle[state == STATE_COMPLETE]
-    return done.max() if done.size else None
+    state = pub.group["cycle_state"]
+    for c in sorted(pub.rows, reverse=True):  # newest first: one read of its state, most often the only one
+        if int(state[pub.rows[c]]) == STATE_COMPLETE:
+            return c
+    return None
 
 
 def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:
@@ -151,10 +259,9 @@ def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], 
     loc = locate(path, storage_options)
     pub = published if published is not None else open_published(loc)
     c = np.datetime64(cycle, "ns")
-    hits = np.flatnonzero(pub.cycle == c)
-    if not hits.size or int(pub.group["cycle_state"][int(hits[0])]) == STATE_HIDDEN:  # the state is read live
+    ci = pub.rows.get(c)
+    if ci is None or int(pub.group["cycle_state"][ci]) == STATE_HIDDEN:  # the state is read live
         raise KeyError(f"cycle {c} is not in the cube at {loc.url} (or is being re-written)")
-    ci = int(hits[0])
     steps = _step_slice(c + pub.step_h.astype("timedelta64[h]"), *valid_utc)
     lats = _lat_slice(pub.lat, lat_deg, margin_cells * abs(float(pub.lat[1] - pub.lat[0])))
     lon_parts, lon_out = _lon_slices(pub.lon, lon_deg, margin_cells * float(pub.lon[1] - pub.lon[0]))

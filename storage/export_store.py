@@ -1,10 +1,11 @@
 """Export files: single files written in place, and a run's files (RTZ, GeoJSON, PNG) published whole or not at all.
 
 A run's files go under an exports root that is a local folder or an object-store URL (`s3://bucket/prefix/exports`,
-through fsspec). While the run routes they are written under `runs/.staging-<run_id>/`; after the warehouse
-commit each is moved to `runs/<run_id>/` and then, LAST, `runs/<run_id>/_SUCCESS` is written: a JSON manifest
-listing every file with its size. On an object store a move is a copy per object, so a reader may see a run
-folder fill up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run
+through fsspec). While the run routes they are written under `runs/.staging-<run_id>/` (by the routing workers
+themselves, each its own voyages' files); after the warehouse commit they are moved to `runs/<run_id>/` and then,
+LAST, `runs/<run_id>/_SUCCESS` is written: a JSON manifest listing every file with its size. On a local disk the
+move is one rename of the staging folder; on an object store a move is a copy per object, issued concurrently,
+so a reader may see a run folder fill up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run
 never publishes: its staging prefix is removed (by the run itself, or by the next run when the process died).
 
 A run's files are named by keys of one to three plain names joined by `/`: the run's own files at the top
@@ -64,6 +65,12 @@ def write_file(folder: Path, name: str, data: bytes) -> Path:
     return path
 
 
+def _is_local(fs) -> bool:
+    from fsspec.implementations.local import LocalFileSystem
+
+    return isinstance(fs, LocalFileSystem)
+
+
 @dataclass(frozen=True)
 class RunExports:
     """The runs under one exports root: a local folder or an fsspec URL (`s3://bucket/prefix/exports`)."""
@@ -103,19 +110,25 @@ class RunExports:
         fs.pipe_file(path, data)
         return name
 
-    def publish(self, run_id: str) -> dict | None:
+    def publish(self, run_id: str, only: set[str] | None = None) -> dict | None:
         """Move the staged files to `runs/<run_id>/`, then write the manifest last; returns the manifest
-        (None when nothing was staged)."""
+        (None when nothing was staged). `only`: the names the run vouches for (e.g. not those a lost worker staged
+        before its voyages were given up); others are left out of the manifest."""
         fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
         if not fs.exists(src):
             return None
         base = fs._strip_protocol(src).rstrip("/") + "/"
         sizes = {fs._strip_protocol(p)[len(base):]: int(info["size"]) for p, info in fs.find(src, detail=True).items()}
-        fs.makedirs(dst, exist_ok=True)
-        for name in sorted(sizes):
-            if "/" in name:
-                fs.makedirs(f"{dst}/{name.rsplit('/', 1)[0]}", exist_ok=True)
-            fs.mv(f"{src}/{name}", f"{dst}/{name}")
+        if only is not None:
+            sizes = {n: b for n, b in sizes.items() if n in only}
+        names = sorted(sizes)
+        if _is_local(fs) and not fs.exists(dst):
+            fs.mv(src, dst, recursive=True)  # one rename of the folder, however many files it holds
+        elif names:
+            for folder in sorted({dst} | {f"{dst}/{n.rsplit('/', 1)[0]}" for n in names if "/" in n}):
+                fs.makedirs(folder, exist_ok=True)
+            # one call for all files: an async filesystem (s3fs) copies them concurrently, then deletes in batches
+            fs.copy([f"{src}/{n}" for n in names], [f"{dst}/{n}" for n in names])
         manifest = {"run_id": run_id, "files": [{"name": n, "bytes": sizes[n]} for n in sorted(sizes)]}
         fs.pipe_file(f"{dst}/{MANIFEST}", json.dumps(manifest, indent=1).encode())
         self.discard(run_id)

@@ -169,7 +169,12 @@ def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_reader
         cube.write_cycle(url, cycle_ds(), complete=True, storage_options=s3_options)
     cube.write_cycle(url, cycle_ds(), complete=True, lock_dir=locks, storage_options=s3_options)
     assert (locks / "weather.zarr.lock").exists()
+    before = cube_window.CHUNK_CACHE.fetched_bytes
     on_s3 = window(url, (20, 50), (170, 200), storage_options=s3_options)
+    fetched = cube_window.CHUNK_CACHE.fetched_bytes
+    assert fetched > before  # the chunks came from S3 through the cache
+    window(url, (25, 45), (175, 195), storage_options=s3_options)  # a second voyage in the same chunks: no GET of a chunk
+    assert cube_window.CHUNK_CACHE.fetched_bytes == fetched
     local = window(store, (20, 50), (170, 200))
     np.testing.assert_array_equal(on_s3.values, local.values)
     assert on_s3.grid == local.grid
@@ -186,3 +191,92 @@ def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_reader
         cube._set_state(loc, index, cube.STATE_COMPLETE)
         cube._publish(loc, CYCLE2)
     assert list(xr.open_zarr(url, storage_options=s3_options)["cycle"].values) == [CYCLE, CYCLE2]
+
+
+# --- the chunk cache, constant-time opening, retention ----------------------------------------------------------
+
+
+def _chunk_files_bytes(store: Path, rows: slice, cols: slice, variables=wf.CUBE_VARIABLES) -> int:
+    """Bytes on disk of the chunk files of cycle row 0 that hold grid rows `rows` × columns `cols`."""
+    clat, clon = cube.spatial_chunks(LAT.size, LON.size)
+    return sum((store / v / "c" / "0" / "0" / str(j) / str(k)).stat().st_size for v in variables
+               for j in range(rows.start // clat, (rows.stop - 1) // clat + 1)
+               for k in range(cols.start // clon, (cols.stop - 1) // clon + 1))
+
+
+def test_a_second_voyage_in_the_same_window_fetches_no_chunk_again(store):
+    cache = cube_window.CHUNK_CACHE
+    cache.clear()
+    first = window(store, (10, 30), (140, 160))
+    rows = slice(int(np.searchsorted(LAT, first.grid.lat0)), int(np.searchsorted(LAT, first.grid.lat0)) + first.grid.nlat)
+    col0 = int(np.searchsorted(LON, first.grid.lon0))
+    assert cache.fetched_bytes == _chunk_files_bytes(store, rows, slice(col0, col0 + first.grid.nlon)) > 0
+    fetched, n = cache.fetched_bytes, cache.fetched_chunks
+    again = window(store, (12, 28), (142, 158))  # another voyage inside the same chunks, its own published view
+    assert (cache.fetched_bytes, cache.fetched_chunks) == (fetched, n) and cache.hit_chunks >= n
+    np.testing.assert_array_equal(again.values, window(store, (12, 28), (142, 158)).values)
+    cube.write_cycle(store, cycle_ds(wind_ms=15.0), complete=True)  # re-ingested: a new content version
+    windy = window(store, (12, 28), (142, 158))
+    assert cache.fetched_bytes > fetched  # its chunks are fetched afresh …
+    assert windy.values[wf.U10].mean() > again.values[wf.U10].mean() + 14  # … and give the new values
+    assert cache.fetched_bytes <= fetched + sum(f.stat().st_size for v in wf.CUBE_VARIABLES
+                                                for f in (store / v / "c" / "0").rglob("*") if f.is_file())
+
+
+def test_the_cache_keeps_to_its_byte_bound():
+    cache = cube_window.ChunkCache(max_bytes=250)
+    for k in range(5):
+        cache.put(k, bytes(100))
+    assert cache.held_bytes == 200 and cache.get(0) is None and cache.get(4) == bytes(100)
+    assert cache.fetched_bytes == 500
+
+
+def test_opening_the_newest_cycle_reads_no_chunk_of_the_cycle_coordinate(store):
+    cube.write_cycle(store, cycle_ds(CYCLE2), complete=True)
+    for f in (store / "cycle" / "c").rglob("*"):  # were any read, opening would fail
+        if f.is_file():
+            f.unlink()
+    assert cube_window.newest_complete_cycle(store) == CYCLE2
+    pub = cube_window.open_published(store)
+    assert pub.rows == {CYCLE: 0, CYCLE2: 1}
+    w = cube_window.read_window(store, CYCLE2, valid_utc=(np.datetime64("2020-12-01T13"), np.datetime64("2020-12-02T05")),
+                                lat_deg=(10, 30), lon_deg=(140, 160), published=pub)
+    assert w.cycle == CYCLE2 and w.data["u10"].size > 0
+
+
+def test_retention_retires_old_cycles_and_frees_their_chunks(store):
+    day2 = CYCLE + np.timedelta64(1, "D")
+    for c in (CYCLE2, day2):
+        cube.write_cycle(store, cycle_ds(c), complete=True)
+    assert cube.retire_cycles(store, keep_days=0.9) == [CYCLE]  # 06 UTC is 18 h before the newest: kept
+    assert not (store / "u10" / "c" / "0").exists() and (store / "u10" / "c" / "1").exists()
+    assert set(cube.cycle_versions(store)) == {CYCLE2, day2} and cube.complete_cycles(store) == [CYCLE2, day2]
+    assert set(cube_window.open_published(store).rows) == {CYCLE2, day2}
+    with pytest.raises(KeyError, match="not in the cube"):
+        window(store, (10, 30), (140, 160))
+    assert xr.open_zarr(store).sizes["cycle"] == 3  # a plain reader still lists the row (all NaN)
+    assert cube.retire_cycles(store, keep_days=0.9) == []  # nothing more to retire
+    cube.write_cycle(store, cycle_ds(), complete=True)  # ingested again: back in its row
+    assert window(store, (10, 30), (140, 160)).values.size > 0 and cube.retire_cycles(store, keep_days=2) == []
+
+
+def test_cube_retire_takes_its_retention_from_the_option_or_the_setting(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+    from flows.settings import SettingsError, load_settings
+
+    store = tmp_path / "data" / "cubes" / "weather.zarr"
+    for c in (CYCLE, CYCLE2):
+        cube.write_cycle(store, cycle_ds(c), complete=True)
+    monkeypatch.delenv("JITROUTE_CUBE_RETENTION_DAYS", raising=False)
+    res = CliRunner().invoke(app, ["cube", "retire", "--data", str(tmp_path / "data")])
+    assert res.exit_code == 2 and "--keep-days" in res.output
+    monkeypatch.setenv("JITROUTE_CUBE_RETENTION_DAYS", "0.1")  # 2.4 h: the 00 UTC cycle is 6 h older than the newest
+    assert load_settings().cube_retention_days == 0.1
+    res = CliRunner().invoke(app, ["cube", "retire", "--data", str(tmp_path / "data")])
+    assert res.exit_code == 0 and "retired 1 cycle(s)" in res.output and "2020-12-01T00" in res.output, res.output
+    assert cube.complete_cycles(store) == [CYCLE2]
+    monkeypatch.setenv("JITROUTE_CUBE_RETENTION_DAYS", "a week")
+    with pytest.raises(SettingsError, match="JITROUTE_CUBE_RETENTION_DAYS"):
+        load_settings()

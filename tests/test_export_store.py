@@ -40,6 +40,46 @@ def test_a_file_name_that_is_not_plain_is_refused(tmp_path, name):
     assert not (tmp_path / "exports").exists() or not any((tmp_path / "exports").rglob("*.rtz"))
 
 
+@pytest.mark.parametrize("where", ["local", "s3"])
+def test_publish_lists_only_the_files_the_run_vouches_for(tmp_path, request, where):
+    if where == "s3":
+        env = request.getfixturevalue("s3_endpoint")
+        runs = RunExports("s3://jitroute/root/exports", {"endpoint_url": env["AWS_ENDPOINT_URL"],
+                                                         "key": env["AWS_ACCESS_KEY_ID"], "secret": env["AWS_SECRET_ACCESS_KEY"]})
+    else:
+        runs = RunExports(str(tmp_path / "exports"))
+    names = [f"V{k}.rtz" for k in range(12)]
+    for n in names:
+        runs.stage("r1", n, n.encode())
+    runs.stage("r1", "LOST.rtz", b"staged by a worker whose voyages were given up")
+    manifest = runs.publish("r1", only=set(names))
+    assert [f["name"] for f in manifest["files"]] == sorted(names) and runs.manifest("r1") == manifest
+    assert all(runs.fs.cat_file(f"{runs.run_url('r1')}/{n}") == n.encode() for n in names)
+    assert not runs.fs.exists(runs._staging("r1"))  # staging gone
+
+
+def test_a_worker_stages_its_voyages_exports_and_returns_only_their_entries(tmp_path):
+    import numpy as np
+
+    from flows.jobs.route_worker import route_one
+    from pipeline.performance.model import reference_model
+    from pipeline.routing.job import RouteJob, RoutingOptions
+
+    voyage = {"voyage_id": "VSTAGE", "imo": 1, "dep_lat": 34.0, "dep_lon": 141.0, "arr_lat": 30.0, "arr_lon": 147.0,
+              "depart_utc": np.datetime64("2020-12-01T02"), "rta_utc": np.datetime64("2020-12-02T18"),
+              "rpm_options": [70, 85, 100]}
+    job = RouteJob(voyage=voyage, vessel={"rpm_max": 100}, model=reference_model(14.0, 100.0, 1.5).to_json(),
+                   run_id="r1", cycle="2020-12-01T00:00:00", exports=True, options=RoutingOptions(n_lines=6, n_points=7))
+    res = route_one(job, None, exports_to=(str(tmp_path / "exports"), {}))
+    staging = tmp_path / "exports" / "runs" / ".staging-r1"
+    files = [p for p in staging.rglob("*") if p.is_file()]
+    assert res["exports"] == {} and res["export_errors"] == {} and res["route"]["status"] == "ok"
+    assert sorted(res["staged"], key=lambda f: f["name"]) == sorted(
+        ({"name": p.relative_to(staging).as_posix(), "bytes": p.stat().st_size} for p in files), key=lambda f: f["name"])
+    assert {p.suffix for p in files} >= {".rtz", ".geojson", ".png"}
+    assert {p.parent.relative_to(staging).as_posix() for p in files} == {"voyages/VSTAGE"}
+
+
 def test_voyage_ids_named_like_run_files_or_like_each_other_s_files_overwrite_nothing(tmp_path):
     """Voyage IDs that pass the ID rule but spell a run file (`fleet_map`, `weather_waves_<cycle>`) or another voyage's
     file (`V20001.convergence` + `.png` = `V20001` + `.convergence.png`): every staged file is published apart."""

@@ -1,10 +1,10 @@
 """The fleet jobs: `route-fleet` (every upcoming voyage on one cube cycle) and `nightly` (ingest → refit → route).
 
-Voyages go out over dask in batches (flows/jobs/dask_pool.py); workers route with plain functions and
-return rows and export bytes, so they write nothing. This process is the one writer: it stages the exports
-as results arrive (under the local data root or the object root, storage/export_store.py), puts the run's
-rows into DuckDB in one transaction, then publishes the staged exports with their manifest (a run that
-fails or is killed publishes nothing). A voyage that fails (bad input, no model, no way through,
+Voyages go out over dask in batches (flows/jobs/dask_pool.py); workers route with plain functions, stage
+their voyages' export files in the run's staging area themselves (under the local data root or the object root,
+storage/export_store.py) and return rows and manifest entries. This process puts the run's rows into DuckDB in
+one transaction, then publishes the staged exports with their manifest (a run that fails or is killed
+publishes nothing). A voyage that fails (bad input, no model, no way through,
 even a lost worker) is recorded with status and reason and never fails the others.
 """
 
@@ -129,9 +129,9 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
 
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None) -> dict:
-    """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves); stage export
-    files as results arrive. Returns rows, legs and export errors."""
-    rows, legs, export_errors = [], [], []
+    """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves and stage their
+    export files under `run_exports`). Returns rows, legs, export errors and the names of the staged files."""
+    rows, legs, export_errors, staged = [], [], [], set()
     done = 0
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
 
@@ -145,12 +145,13 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
                 LOG.log(level.get(lvl, logging.INFO), "%s", printable(msg))
             r = res["route"]
             rows.append(r)
+            staged.update(f["name"] for f in res.get("staged", []))
             legs.extend(res["legs"])
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
-            for kind, data in res.get("exports", {}).items():
+            for kind, data in res.get("exports", {}).items():  # only from a worker given no exports root
                 try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
-                    run_exports.stage(r["run_id"], voyage_export_key(r["voyage_id"], SUFFIX[kind]), data)
+                    staged.add(run_exports.stage(r["run_id"], voyage_export_key(r["voyage_id"], SUFFIX[kind]), data))
                 except (OSError, ExportPathError) as exc:
                     export_errors.append(f"{r['voyage_id']}: {kind}: {exc}")
                     LOG.error("voyage %s: %s export not written: %s", r["voyage_id"], kind, exc)
@@ -161,9 +162,10 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
     if jobs:
         with dask_pool.dask_client(dask_address, n_workers) as client:
             per = dask_pool.voyages_per_batch(len(jobs), dask_pool.worker_slots(client), per_batch)
+            exports_to = (run_exports.url, run_exports.storage_options) if run_exports is not None else None
             dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_store.url,
-                                  cube_store.options, on_done=on_done)
-    return {"rows": rows, "legs": legs, "export_errors": export_errors}
+                                  cube_store.options, exports_to, on_done=on_done)
+    return {"rows": rows, "legs": legs, "export_errors": export_errors, "staged": staged}
 
 
 def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
@@ -232,11 +234,11 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                 by_voyage.setdefault(leg["voyage_id"], []).append(leg)
             pairs = [(r, by_voyage.get(r["voyage_id"], [])) for r in out["rows"]]
             fig = plots.fleet_map_figure(pairs, title=f"run {run_id} · cycle {cycle_label(c)}")
-            run_exports.stage(run_id, "fleet_map.png", plots.png_bytes(fig))
+            out["staged"].add(run_exports.stage(run_id, "fleet_map.png", plots.png_bytes(fig)))
             for var in ("waves", "wind"):  # the weather of the cycle at its start, for people to look at
                 try:
-                    run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png",
-                                      weather_maps.step_png(layout.cube_store, c, 0, var))
+                    out["staged"].add(run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png",
+                                                        weather_maps.step_png(layout.cube_store, c, 0, var)))
                 except Exception as exc:  # a picture; the run's data does not depend on it
                     out["export_errors"].append(f"fleet: weather map {var}: {type(exc).__name__}: {exc}")
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
@@ -245,7 +247,7 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
         run_exports.discard(run_id)
         route_store.fail_run(layout.warehouse, run_id, f"{type(exc).__name__}: {exc}")
         raise
-    manifest = run_exports.publish(run_id) if exports else None
+    manifest = run_exports.publish(run_id, only=out["staged"]) if exports else None
     files = [f["name"] for f in manifest["files"]] if manifest else []
     out_url = run_exports.run_url(run_id)
     summary = route_store.run_summary(layout.warehouse, run_id)

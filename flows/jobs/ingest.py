@@ -304,6 +304,11 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
              name="write-cycle", timeout_s=timeout)
     for p in problems:
         LOG.warning("cycle %s: %s", label, p)
+    if s.cube_retention_days is not None:
+        retired = cube.retire_cycles(layout.cube_store, s.cube_retention_days, lock_dir=layout.cube_lock_dir)
+        if retired:
+            LOG.info("retired %d cube cycle(s) older than %g days before the newest: %s", len(retired),
+                     s.cube_retention_days, ", ".join(cycle_label(r) for r in retired))
     return CycleReport(label, complete, len(items), n_ok, missing=problems,
                        corrupt=[it.name for it in items if it.status == "corrupt"]).__dict__
 

@@ -1,8 +1,9 @@
 """What a dask worker runs for a fleet: route a batch of voyages, each on its own, and return plain results.
 
-No Prefect here (workers never start or call a Prefect API) and nothing written where the worker
-runs: each result carries the route row, leg rows, export files as bytes and the log lines the
-parent re-emits (so errors from workers reach the run's logs).
+No Prefect here (workers never start or call a Prefect API). A worker given the run's exports root writes its
+voyages' export files to the run's staging area there itself (storage/export_store.py: a shared folder or an
+object store) and returns only the route row, leg rows, the staged files' manifest entries and the log lines the
+parent re-emits (so errors from workers reach the run's logs); without one, the export files come back as bytes.
 
 Each voyage reads only its window of the cube cycle (the steps and the lat/lon box it can meet), without dask;
 windows are cached per (store, cycle, content version, window), so a re-ingested cycle is read afresh.
@@ -83,8 +84,37 @@ def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | N
                                                problem.weather_window(space))
 
 
-def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None = None) -> dict:
-    """Route one voyage end to end; a voyage that cannot be routed becomes a `failed` row with the reason."""
+@functools.lru_cache(maxsize=2)
+def run_exports(url: str, options_json: str):
+    """The exports root a worker stages into, opened once per process."""
+    from storage.export_store import RunExports
+
+    return RunExports(url, json.loads(options_json))
+
+
+def stage_exports(exports_to: tuple[str, dict], run_id: str, voyage_id: str, files: dict) -> tuple[list[dict], dict]:
+    """Write a voyage's export files (kind → bytes) to the run's staging area under the exports root
+    `exports_to` = (URL or path, fsspec options). Returns (manifest entries {"name", "bytes"}, kind → error)."""
+    from pipeline.export.bundle import SUFFIX
+    from pipeline.export.paths import ExportPathError, voyage_export_key
+    from storage.export_store import ExportPathError as StoreNameError
+
+    root = run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True))
+    staged, errors = [], {}
+    for kind, data in files.items():
+        try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
+            name = voyage_export_key(voyage_id, SUFFIX[kind])
+            root.stage(run_id, name, data)
+            staged.append({"name": name, "bytes": len(data)})
+        except (OSError, ExportPathError, StoreNameError) as exc:
+            errors[kind] = f"not written: {exc}"
+    return staged, errors
+
+
+def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None = None,
+              exports_to: tuple[str, dict] | None = None) -> dict:
+    """Route one voyage end to end; a voyage that cannot be routed becomes a `failed` row with the reason. With
+    `exports_to` (the run's exports root and its fsspec options) the export files are staged there, else returned."""
     from pipeline.routing.problem import RoutingInputError
     from pipeline.routing.search_space import VoyageGeometryError
 
@@ -96,24 +126,29 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
         return failed_result(job, f"unexpected error: {type(exc).__name__}: {exc}",
                              log=[("error", f"voyage {job.voyage_id} failed:\n{traceback.format_exc()}")])
     out = {"route": {**plan.route_row(job.run_id), **start_columns(job)}, "legs": plan.leg_rows(job.run_id),
-           "exports": {}, "export_errors": {}, "log": []}
+           "exports": {}, "export_errors": {}, "staged": [], "log": []}
     if job.exports and plan.legs:
         from pipeline.export.bundle import export_plan  # matplotlib and pandas: only workers that export load them
 
         bundle = export_plan(plan, weather, job.vessel, job.voyage)
-        out["exports"] = dict(bundle.files)  # kind → bytes; the run's process names and writes them
-        out["export_errors"] = bundle.errors
+        out["export_errors"] = dict(bundle.errors)
+        if exports_to is None:
+            out["exports"] = dict(bundle.files)  # kind → bytes; the caller names and writes them
+        else:
+            out["staged"], unwritten = stage_exports(exports_to, job.run_id, job.voyage_id, bundle.files)
+            out["export_errors"].update(unwritten)
         out["log"] += [("error", f"voyage {job.voyage_id}: {kind} export failed: {err}")
-                       for kind, err in bundle.errors.items()]
+                       for kind, err in out["export_errors"].items()]
     return out
 
 
-def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: dict | None = None) -> list[dict]:
+def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: dict | None = None,
+                exports_to: tuple[str, dict] | None = None) -> list[dict]:
     """Route a few voyages one after the other; each is isolated (its own try/except and row). `cube_path` is a
-    local path or a URL (`s3://…`, with fsspec `storage_options`)."""
+    local path or a URL (`s3://…`, with fsspec `storage_options`); `exports_to` as for route_one."""
     out = []
     for job in jobs:
-        out.append(route_one(job, cube_path, storage_options))
+        out.append(route_one(job, cube_path, storage_options, exports_to))
         release_free_memory()
     return out
 
