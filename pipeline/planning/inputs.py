@@ -17,7 +17,7 @@ import pandas as pd
 
 from pipeline.fleet_validate import FleetFileError, _integer_imo, _is_empty, _numbers, _Reasons, _split, raw_rows
 from pipeline.timestamps import parse_iso_column
-from pipeline.validate_ids import voyage_id_problem
+from pipeline.validate_ids import is_valid_imo, voyage_id_problem
 
 PORT_REQUIRED = ("port", "lat", "lon")
 AVAILABILITY_REQUIRED = ("imo", "from_utc", "from_port")
@@ -78,6 +78,7 @@ def validate_availability(raw: pd.DataFrame, *, known_imos: set[int] | None = No
     for c in AVAILABILITY_REQUIRED:
         r.flag(_is_empty(df[c]), f"missing {c}")
     df["imo"] = _integer_imo(df, r)
+    r.flag(~df["imo"].map(lambda i: 0 < i <= 9_999_999 and is_valid_imo(i)), "IMO number fails its check digit")
     if known_imos is not None:
         r.flag(~df["imo"].isin(list(known_imos)), "unknown vessel (import it with vessels.csv first)")
     for c in ("from_utc", "until_utc"):
@@ -119,7 +120,9 @@ def validate_contracts(raw: pd.DataFrame, *, as_of: pd.Timestamp | None = None, 
     _require(raw, CONTRACT_REQUIRED, "contracts file", source)
     df = raw.copy()
     r = _Reasons(df.index)
-    r.flag_each(df["code"].map(voyage_id_problem).map(lambda p: p and p.replace("voyage_id", "code")))
+    problems = [voyage_id_problem(x) for x in df["code"]]  # a code names voyages and files: a plain name
+    r.flag_each(pd.Series([p.replace("voyage_id", "code") if p else pd.NA for p in problems], index=df.index,
+                          dtype=object))
     for c in CONTRACT_REQUIRED:
         r.flag(_is_empty(df[c]), f"missing {c}")
     for c in ("code", "cargo_type", "load_port", "discharge_port"):

@@ -46,9 +46,13 @@ def random_instance(n_vessels: int, n_contracts: int, *, seed: int = 0, n_ports:
     return vessels, contracts, dist
 
 
-def write_demo_planning(vessels, start, out_dir, *, n_contracts: int = 12, seed: int = 11) -> dict[str, str]:
+DEMO_PORTS = ("Busan", "Shanghai", "Qingdao", "Kaohsiung", "Keelung", "Hong Kong", "Manila", "Naha", "Guam")
+
+
+def write_demo_planning(vessels, start, out_dir, *, n_contracts: int = 12, seed: int = 11,
+                        ports: tuple[str, ...] = DEMO_PORTS) -> dict[str, str]:
     """ports.csv, availability.csv and contracts.csv for the demo fleet (`vessels`: its vessels table), between the
-    demo ports (`pipeline.synthetic.fleet.PORTS`), load windows over the 3 weeks from `start` (UTC). One contract is
+    demo `ports` (of `pipeline.synthetic.fleet.PORTS`), load windows over the 3 weeks from `start` (UTC). One contract is
     bad on purpose (its window has zero length) and is refused on import."""
     from pathlib import Path
 
@@ -60,7 +64,7 @@ def write_demo_planning(vessels, start, out_dir, *, n_contracts: int = 12, seed:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     start = pd.Timestamp(start)
-    names = sorted(PORTS)
+    names = sorted(ports)
     pd.DataFrame([{"port": p, "lat": PORTS[p][0], "lon": PORTS[p][1]} for p in names]).to_csv(out / "ports.csv", index=False)
     avail = []
     for r in vessels.to_dict("records"):
