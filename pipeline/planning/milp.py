@@ -1,11 +1,11 @@
 """The fleet planner: mixed-integer programmes solved by HiGHS through `scipy.optimize.milp`.
 
-`solve` — set partitioning: a binary y per column (a vessel lifting a set of contracts in its best feasible order,
+`solve` — set partitioning (with column generation, colgen.py, when enumeration is too big): a binary y per column (a vessel lifting a set of contracts in its best feasible order,
 routes.vessel_columns), each vessel at most one column, each contract in at most one; minimised: Σ column cost
 (fuel + out of service) + Σ penalty of the contracts in no chosen column. With every vessel's sequences
 enumerated this is the exact problem, and its LP relaxation is tight, so HiGHS proves optimality fast.
 
-`arc_lower_bound` — the arc-flow model, kept for a proven bound when the enumeration is capped (large fleets):
+`arc_lower_bound` — the arc-flow model, an independent check of the bound (tests):
 - x[k, a] ∈ {0, 1} for each feasible arc a of vessel k: start → contract j, contract i → j, contract j → end;
 - t[j] ∈ [early_j, late_j]: load start of contract j (shared by the vessels, at most one of which lifts it);
 - e[k] ≥ 0: when vessel k's last leg ends (hours after as_of; 0 when unused).
@@ -27,6 +27,7 @@ from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from pipeline.planning.problem import HOURS_PER_DAY, FleetPlan, PlanData, assemble
+from pipeline.planning import colgen
 from pipeline.planning.routes import vessel_columns
 
 
@@ -124,46 +125,58 @@ def arc_lower_bound(data: PlanData, *, time_limit_s: float = 60.0, integer: bool
 
 
 def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.0,
-          max_labels: int = 200_000) -> FleetPlan:
+          max_labels: int = 20_000, init_labels: int = 100) -> FleetPlan:
     """The least-cost plan of `data`: set partitioning over every vessel's feasible contract sequences
-    (routes.vessel_columns), solved by HiGHS. Proven optimal when every vessel's sequences were enumerated and
-    HiGHS finished; otherwise `gap` is the proven relative gap to the arc-flow lower bound (`arc_lower_bound`)."""
+    (routes.vessel_columns), solved by HiGHS — proven optimal when every vessel's sequences were enumerated (at
+    most `max_labels` partial sequences each) and HiGHS finished. Otherwise the columns are the `init_labels`
+    most promising per vessel plus those column generation prices (colgen.py, up to half the time left), and
+    `gap` is the proven relative gap to colgen's lower bound."""
     t0 = time.perf_counter()
-    n = len(data.contracts)
     columns, complete = [], True
     for k in range(len(data.vessels)):
         cols, done = vessel_columns(data, k, max_labels=max_labels)
         columns += cols
         complete &= done
-    penalty_total = sum(ct.penalty for ct in data.contracts)
+        if not complete:
+            break
+    bound, rounded = -np.inf, None
+    if not complete:
+        columns = [c for k in range(len(data.vessels)) for c in vessel_columns(data, k, max_labels=init_labels)[0]]
+        left = float(time_limit_s) - (time.perf_counter() - t0)
+        columns, bound, _, (pi, mu, y) = colgen.generate(data, columns, time_limit_s=max(1.0, 0.6 * left))
+        rounded = assemble(data, colgen.round_lp(data, columns, y), solver="milp", status="feasible", gap=np.nan,
+                           runtime_s=0.0)
+        # reduced-cost fixing: a column whose reduced cost exceeds (rounded plan − bound) is in no better plan
+        rc = colgen.reduced_costs(data, columns, pi, mu)
+        keep = rc <= rounded.cost - bound + 1e-6 * abs(rounded.cost)
+        columns = [col for col, kept in zip(columns, keep) if kept]
     if not columns:
         return assemble(data, {}, solver="milp", status="optimal", gap=0.0, runtime_s=time.perf_counter() - t0)
-    m = len(columns)
+    n, V, m = len(data.contracts), len(data.vessels), len(columns)
+    penalty_total = sum(ct.penalty for ct in data.contracts)
     c = np.array([col.cost - sum(data.contracts[j].penalty for j in col.sequence) for col in columns] + [penalty_total])
-    V = len(data.vessels)
     rows = [V + j for col in columns for j in col.sequence] + [col.k for col in columns]
     cols_idx = [i for i, col in enumerate(columns) for _ in col.sequence] + list(range(m))
     A = sparse.csr_array((np.ones(len(rows)), (rows, cols_idx)), shape=(V + n, m + 1))
-    integrality = np.concatenate([np.ones(m), [0]])
-    lb = np.concatenate([np.zeros(m), [1.0]])
-    res = milp(c, integrality=integrality, bounds=Bounds(lb, np.ones(m + 1)),
+    res = milp(c, integrality=np.concatenate([np.ones(m), [0]]),
+               bounds=Bounds(np.concatenate([np.zeros(m), [1.0]]), np.ones(m + 1)),
                constraints=LinearConstraint(A, -np.inf, 1.0),
                options={"time_limit": max(1.0, float(time_limit_s) - (time.perf_counter() - t0)),
                         "mip_rel_gap": float(mip_rel_gap), "presolve": True})
-    if res.x is None:
+    if res.x is None and rounded is None:
         return assemble(data, {}, solver="milp", status="no plan", gap=np.inf, runtime_s=time.perf_counter() - t0,
                         n_arcs=m, left_reason=f"the planner found no plan within {time_limit_s:g} s ({res.message})")
-    sequences = {columns[i].k: columns[i].sequence for i in np.flatnonzero(res.x[:m] > 0.5)}
-    if complete and res.status == 0:
-        status, gap = "optimal", 0.0 if mip_rel_gap == 0 else float(getattr(res, "mip_gap", 0.0) or 0.0)
-        plan = assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0,
-                        n_arcs=m)
-        return plan
+    sequences = {} if res.x is None else {columns[i].k: columns[i].sequence for i in np.flatnonzero(res.x[:m] > 0.5)}
+    if rounded is not None and (res.x is None or rounded.cost < assemble(data, sequences, solver="milp", status="",
+                                                                          gap=0.0, runtime_s=0.0).cost):
+        sequences = {s.k: s.sequence for s in rounded.schedules}
+    if complete:
+        dual = getattr(res, "mip_dual_bound", None)
+        bound = float(dual) if dual is not None and np.isfinite(dual) else -np.inf
+        if res.status == 0 and mip_rel_gap == 0:
+            return assemble(data, sequences, solver="milp", status="optimal", gap=0.0,
+                            runtime_s=time.perf_counter() - t0, n_arcs=m)
     plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0, n_arcs=m)
-    left = max(1.0, float(time_limit_s) - (time.perf_counter() - t0))
-    bound = arc_lower_bound(data, time_limit_s=left)
-    if complete:  # HiGHS stopped early on the full column set: its own bound is valid too
-        bound = max(bound, float(getattr(res, "mip_dual_bound", -np.inf) or -np.inf))
     gap = max(0.0, (plan.cost - bound) / abs(plan.cost)) if np.isfinite(bound) and plan.cost else np.inf
-    return assemble(data, sequences, solver="milp", status="feasible", gap=gap, runtime_s=time.perf_counter() - t0,
-                    n_arcs=m)
+    status = "optimal" if gap <= 1e-9 else "feasible"
+    return assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0, n_arcs=m)
