@@ -22,6 +22,8 @@ def run_table(summary: dict) -> Table:
     t.add_column("")
     t.add_column("", justify="right")
     t.add_row("voyages routed", str(summary.get("n")))
+    if summary.get("from_plans"):
+        t.add_row("  of which from fleet plans", ", ".join(f"{n} ({p})" for p, n in summary["from_plans"].items()))
     t.add_row("on time / late / not routed", f"{summary.get('n_ok')} / {summary.get('n_late')} / {summary.get('n_failed')}")
     t.add_row("exports failed", str(len(summary.get("export_failures") or [])))
     t.add_row("fuel (t)", _f(summary.get("fuel_t")))

@@ -48,6 +48,17 @@ def test_the_milp_plan_costs_what_brute_force_finds_on_many_small_random_instanc
     assert n_assigned > 150  # the instances are not trivially "leave everything"
 
 
+def test_column_generation_proves_a_bound_no_higher_than_the_optimum_when_enumeration_is_capped():
+    for seed in range(12):
+        vessels, contracts, dist = random_instance(3, 7, seed=seed, horizon_days=20, n_ports=5)
+        data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+        best = brute.solve(data).cost
+        capped = milp.solve(data, max_labels=3, init_labels=2)  # forces column generation
+        assert capped.cost >= best - 1e-6
+        assert capped.cost * (1 - capped.gap) <= best * (1 + 1e-9) + 1e-6, f"seed {seed}"
+        assert capped.status == ("optimal" if capped.gap <= 1e-9 else "feasible")
+
+
 def test_a_hand_computed_plan():
     # start A at t=0; contract: load B (120 NM from A), discharge C (240 NM), window [24 h, 48 h]; 12 kn both ways
     v = PlanVessel(imo=9074729, name="X", dwt_t=50_000, start_port="A", start_h=0.0, port_h=12.0, daily_cost=2400.0,
@@ -251,3 +262,19 @@ def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of(planned, monkeyp
     bad = CliRunner().invoke(app, ["plan", "fleet", "--contracts", files["contracts"], "--as-of", "01/12/2020",
                                    "--data", str(root)])
     assert bad.exit_code == 2
+
+
+def test_a_routing_run_says_which_voyages_came_from_a_plan(planned, tmp_path):
+    import shutil
+
+    from storage import route_store, warehouse
+
+    root, _, _ = planned
+    db = tmp_path / "w.duckdb"
+    shutil.copyfile(root / "warehouse.duckdb", db)
+    with warehouse.connect(db) as con:
+        plan_id, vid = con.execute("SELECT plan_id, voyage_id FROM voyages WHERE plan_id IS NOT NULL LIMIT 1").fetchone()
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', now(), 'ok')")
+        con.execute("INSERT INTO routes (run_id, voyage_id, status, fuel_t) VALUES ('r1', ?, 'ok', 5.0), "
+                    "('r1', 'V-from-file', 'ok', 3.0)", [vid])
+    assert route_store.run_summary(db, "r1")["from_plans"] == {plan_id: 1}

@@ -243,7 +243,9 @@ def _r(x, nd=1):
 def summary_table(r: dict) -> list[dict]:
     """One row per voyage needing attention plus the run's totals, rounded for people."""
     rows = [{"what": "run", "value": r.get("run_id")}, {"what": "cycle", "value": r.get("cycle")},
-            {"what": "voyages", "value": r.get("n")}, {"what": "on time", "value": r.get("n_ok")},
+            {"what": "voyages", "value": r.get("n")},
+            {"what": "… from fleet plans", "value": sum((r.get("from_plans") or {}).values())},
+            {"what": "on time", "value": r.get("n_ok")},
             {"what": "late", "value": r.get("n_late")}, {"what": "not routed", "value": r.get("n_failed")},
             {"what": "exports failed", "value": len(r.get("export_failures") or [])},
             {"what": "fuel t", "value": _r(r.get("fuel_t"))},
