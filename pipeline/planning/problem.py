@@ -22,6 +22,10 @@ import math
 from dataclasses import dataclass, field
 
 HOURS_PER_DAY = 24.0
+# A ballast leg leaves no earlier than it must to reach the load port when loading starts at this share of the
+# planning speed: the weather routing may slow down that much instead of waiting at anchor; longer waits are
+# spent in port before sailing, not drifting at sea.
+SLOWEST_BALLAST_SHARE = 0.7
 
 
 @dataclass(frozen=True)
@@ -220,7 +224,9 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
             return None
         from_port = v.start_port if prev == "s" else data.contracts[prev].discharge_port
         if from_port != c.load_port:
-            legs.append(Leg(v.imo, len(legs), "ballast", c.code, from_port, c.load_port, va.arcs[arc], ready, t,
+            sail_h = va.arcs[arc] / v.ballast_speed_kn
+            depart = max(ready, t - sail_h / SLOWEST_BALLAST_SHARE)
+            legs.append(Leg(v.imo, len(legs), "ballast", c.code, from_port, c.load_port, va.arcs[arc], depart, t,
                             va.arcs[arc] * v.ballast_fuel_t_per_nm))
         sail_h = va.dur_h[j] - 2 * v.port_h
         legs.append(Leg(v.imo, len(legs), "laden", c.code, c.load_port, c.discharge_port, va.laden_nm[j],

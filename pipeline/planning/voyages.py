@@ -2,8 +2,9 @@
 
 Times: the planner works in hours after `as_of`; rows carry naive-UTC timestamps.
 Each planned leg becomes a voyage (status planned, tagged with the plan): its departure is the leg's planned
-departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading, so the weather routing
-slows down instead of waiting at anchor; for a laden leg, the arrival at the planning speed.
+departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading (the leg leaves early
+enough to make it at `problem.SLOWEST_BALLAST_SHARE` of the planning speed, so the weather routing slows down
+instead of waiting at anchor); for a laden leg, the arrival at the planning speed.
 """
 
 from __future__ import annotations
