@@ -168,3 +168,51 @@ def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.
     if not converged:  # the last LP without the columns priced after it
         z, pi, mu, y = solve_lp(data, columns)
     return columns, bound, converged, (pi, mu, y)
+
+
+def dive(data: PlanData, columns: list[Column], *, time_limit_s: float = 20.0,
+         reprice: bool = True) -> tuple[dict[int, tuple[int, ...]], list[Column]]:
+    """A plan by diving on the LP: fix the columns the LP (nearly) takes — those at ≥ 0.5, else the largest —,
+    drop the vessels and contracts they use, re-solve the LP over what is left (pricing new columns for it when
+    `reprice`), until the LP takes nothing more. Returns (vessel → sequence, columns with those priced added)."""
+    t0 = time.perf_counter()
+    columns = list(columns)
+    have = {(c.k, c.sequence) for c in columns}
+    fixed: dict[int, tuple[int, ...]] = {}
+    taken: set[int] = set()
+    while True:
+        free = [c for c in columns if c.k not in fixed and not taken.intersection(c.sequence)]
+        if not free:
+            break
+        _, pi, mu, y = solve_lp(data, free)
+        if reprice and time.perf_counter() - t0 < time_limit_s:
+            blocked = pi.copy()
+            blocked[list(taken)] = -1e18  # contracts already lifted: no prize
+            added = 0
+            for k in range(len(data.vessels)):
+                if k in fixed:
+                    continue
+                _, new = price(data, k, blocked, float(mu[k]), max_new=5)
+                for col in new:
+                    if (col.k, col.sequence) not in have and not taken.intersection(col.sequence):
+                        have.add((col.k, col.sequence))
+                        columns.append(col)
+                        free.append(col)
+                        added += 1
+            if added:
+                _, pi, mu, y = solve_lp(data, free)
+        order = np.argsort(-y, kind="stable")
+        pick = [i for i in order if y[i] >= 0.5] or ([order[0]] if len(order) and y[order[0]] > 1e-6 else [])
+        progress = False
+        for i in pick:
+            col = free[i]
+            if col.k in fixed or taken.intersection(col.sequence):
+                continue
+            if col.cost - sum(data.contracts[j].penalty for j in col.sequence) >= 0:
+                continue
+            fixed[col.k] = col.sequence
+            taken.update(col.sequence)
+            progress = True
+        if not progress:
+            break
+    return fixed, columns

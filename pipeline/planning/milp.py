@@ -143,9 +143,10 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     if not complete:
         columns = [c for k in range(len(data.vessels)) for c in vessel_columns(data, k, max_labels=init_labels)[0]]
         left = float(time_limit_s) - (time.perf_counter() - t0)
-        columns, bound, _, (pi, mu, y) = colgen.generate(data, columns, time_limit_s=max(1.0, 0.6 * left))
-        rounded = assemble(data, colgen.round_lp(data, columns, y), solver="milp", status="feasible", gap=np.nan,
-                           runtime_s=0.0)
+        columns, bound, _, (pi, mu, y) = colgen.generate(data, columns, time_limit_s=max(1.0, 0.45 * left))
+        left = float(time_limit_s) - (time.perf_counter() - t0)
+        dived, columns = colgen.dive(data, columns, time_limit_s=max(1.0, 0.75 * left))
+        rounded = assemble(data, dived, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
         # reduced-cost fixing: a column whose reduced cost exceeds (rounded plan − bound) is in no better plan
         rc = colgen.reduced_costs(data, columns, pi, mu)
         keep = rc <= rounded.cost - bound + 1e-6 * abs(rounded.cost)
@@ -158,7 +159,10 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     rows = [V + j for col in columns for j in col.sequence] + [col.k for col in columns]
     cols_idx = [i for i, col in enumerate(columns) for _ in col.sequence] + list(range(m))
     A = sparse.csr_array((np.ones(len(rows)), (rows, cols_idx)), shape=(V + n, m + 1))
-    res = milp(c, integrality=np.concatenate([np.ones(m), [0]]),
+    # costs of ~1e7 make HiGHS warn and its heuristics weaker; scaled only for large fleets, as HiGHS's absolute gap
+    # tolerance (1e-6) would then allow a small suboptimality in a plan it calls optimal
+    scale = 1.0 if complete else 1.0 / max(1.0, float(np.abs(c).max()))
+    res = milp(c * scale, integrality=np.concatenate([np.ones(m), [0]]),
                bounds=Bounds(np.concatenate([np.zeros(m), [1.0]]), np.ones(m + 1)),
                constraints=LinearConstraint(A, -np.inf, 1.0),
                options={"time_limit": max(1.0, float(time_limit_s) - (time.perf_counter() - t0)),
@@ -172,7 +176,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         sequences = {s.k: s.sequence for s in rounded.schedules}
     if complete:
         dual = getattr(res, "mip_dual_bound", None)
-        bound = float(dual) if dual is not None and np.isfinite(dual) else -np.inf
+        bound = float(dual) / scale if dual is not None and np.isfinite(dual) else -np.inf
         if res.status == 0 and mip_rel_gap == 0:
             return assemble(data, sequences, solver="milp", status="optimal", gap=0.0,
                             runtime_s=time.perf_counter() - t0, n_arcs=m)
