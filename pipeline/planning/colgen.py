@@ -21,7 +21,7 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import linprog
 
-from pipeline.planning.problem import HOURS_PER_DAY, PlanData
+from pipeline.planning.problem import HOURS_PER_DAY, PlanData, schedule
 from pipeline.planning.routes import Column
 
 EPS = 1e-6
@@ -105,8 +105,6 @@ def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) 
                 found.append((total, seq))
     found.sort()
     out, seen = [], set()
-    from pipeline.planning.problem import schedule
-
     for _, seq in found:
         if seq in seen:
             continue
