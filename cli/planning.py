@@ -43,6 +43,8 @@ def show_plan(s: dict) -> None:
     if s["contracts_refused"]:
         console.print(f"[yellow]{len(s['contracts_refused'])} contract rows refused on import[/] "
                       "(contracts_rejected): " + "; ".join(f"{r['code']}: {r['reason']}" for r in s["contracts_refused"][:10]))
+    for r in s.get("committed") or []:
+        console.print(f"{r['code']}: {r['reason']}")
     for line in s["no_sea_route"]:
         console.print(f"[yellow]no sea route:[/] {line}")
     console.print(f"voyages: {s['voyages_added']} planned voyages added; {s['voyages_replaced']} unsailed voyages of "

@@ -155,6 +155,16 @@ def load_planning_fleet(db_path: Path) -> tuple[pd.DataFrame, dict[int, dict]]:
         return df, _active_models(con)
 
 
+def active_plan_legs(db_path: Path) -> pd.DataFrame:
+    """Legs of the active plan (none: empty), with the vessel's port_hours."""
+    if not Path(db_path).exists():
+        return pd.DataFrame(columns=[*LEG_COLUMNS, "port_hours"])
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute("SELECT l.*, a.port_hours FROM fleet_plan_legs l JOIN fleet_plans p USING (plan_id) "
+                           "LEFT JOIN vessel_availability a USING (imo) WHERE p.status = 'active' "
+                           "ORDER BY l.imo, l.seq").fetchdf()
+
+
 def load_plan(db_path: Path, plan_id: str) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     with warehouse.connect(db_path, write=False) as con:
         plan = con.execute("SELECT * FROM fleet_plans WHERE plan_id = ?", [plan_id]).fetchdf()

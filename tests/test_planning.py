@@ -246,6 +246,19 @@ def test_re_planning_replaces_unsailed_voyages_of_the_old_plan_and_keeps_those_a
     status = dict(con.execute("SELECT plan_id, status FROM fleet_plans").fetchall())
     con.close()
     assert left_of_first == 1 and status == {first["plan_id"]: "superseded", second["plan_id"]: "active"}
+    # the contract under way is not planned again; its vessel plans on from the end of that contract's discharge
+    con = duckdb.connect(str(root / "warehouse.duckdb"), read_only=True)
+    code, imo = con.execute("SELECT l.contract_code, l.imo FROM fleet_plan_legs l JOIN voyages v USING (voyage_id) "
+                            "WHERE l.plan_id = ?", [first["plan_id"]]).fetchone()
+    end = con.execute("SELECT arrive_utc FROM fleet_plan_legs WHERE plan_id = ? AND contract_code = ? AND kind = 'laden'",
+                      [first["plan_id"], code]).fetchone()[0]
+    again = con.execute("SELECT count(*) FROM fleet_plan_legs WHERE plan_id = ? AND contract_code = ?",
+                        [second["plan_id"], code]).fetchone()[0]
+    first_new = con.execute("SELECT min(depart_utc) FROM fleet_plan_legs WHERE plan_id = ? AND imo = ?",
+                            [second["plan_id"], imo]).fetchone()[0]
+    con.close()
+    assert again == 0 and [r["code"] for r in second["committed"]] == [code]
+    assert first_new is None or first_new >= end
 
 
 def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of(planned, monkeypatch):

@@ -16,8 +16,8 @@ from pipeline.export.plan_gantt import plan_gantt_png
 from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
 from pipeline.planning.sea_distances import PortDistance, distance_map, needed_pairs, sea_distance
-from pipeline.planning.voyages import (DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, DEFAULT_PENALTY, plan_contracts,
-                                       plan_rows, plan_vessels)
+from pipeline.planning.voyages import (DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, DEFAULT_PENALTY,
+                                       apply_commitments, committed, plan_contracts, plan_rows, plan_vessels)
 from pipeline.timestamps import parse_iso_utc
 from storage import fleet_store, planning_store, warehouse
 
@@ -118,8 +118,10 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     port_rows = _stored(db, "ports")
     port_pos = {r["port"]: (float(r["lat"]), float(r["lon"])) for r in port_rows.to_dict("records")}
     fleet, models = planning_store.load_planning_fleet(db)
+    done, busy = committed(planning_store.active_plan_legs(db), t_as_of)
+    fleet = apply_commitments(fleet, busy)
     vessels, fuel_source = plan_vessels(fleet, models, t_as_of)
-    cons = plan_contracts(good, t_as_of, penalty)
+    cons = plan_contracts(good[~good["code"].isin(list(done))], t_as_of, penalty)
     pairs = {(c.load_port, c.discharge_port) for c in cons}
     pairs |= {(v.start_port, c.load_port) for v in vessels for c in cons}
     pairs |= {(a.discharge_port, b.load_port) for a in cons for b in cons}
@@ -145,6 +147,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
                "fuel_source": {str(k): v for k, v in fuel_source.items()},
                "no_sea_route": [f"{d.port_a}–{d.port_b}: {d.reason}" for d in dists if d.reason],
                "imported": imported["counts"],
+               "committed": [{"code": k, "reason": v} for k, v in done.items()],
                "contracts_refused": [{"code": r.get("code"), "reason": r["reason"]}
                                      for r in imported["contracts_rejected"].to_dict("records")],
                "vessels": _vessel_lines(legs, plan, data),

@@ -102,3 +102,33 @@ def plan_rows(plan: FleetPlan, data: PlanData, plan_id: str, as_of: pd.Timestamp
            "out_of_service_days": float(sum(s.out_of_service_days for s in plan.schedules)),
            "out_of_service_cost": plan.out_of_service_cost, "penalty_cost": plan.penalty_cost, "total_cost": plan.cost}
     return row, pd.DataFrame(legs), pd.DataFrame(left), pd.DataFrame(voyages)
+
+
+def committed(legs: pd.DataFrame, as_of: pd.Timestamp) -> tuple[dict[str, str], dict[int, tuple[pd.Timestamp, str]]]:
+    """What the active plan has already set going by `as_of`: a contract is committed once a leg serving it has
+    departed (the ballast towards its load port or its laden leg); its vessel is busy until the end of the last
+    committed contract's discharge. `legs`: the active plan's fleet_plan_legs rows with `port_hours` of the vessel.
+    Returns ({contract code: why}, {imo: (free from, at port)})."""
+    out: dict[str, str] = {}
+    busy: dict[int, tuple[pd.Timestamp, str]] = {}
+    if legs is None or not len(legs):
+        return out, busy
+    sailed = legs[(legs["depart_utc"] <= as_of) & legs["contract_code"].notna()]
+    for code, imo, vid in sailed[["contract_code", "imo", "voyage_id"]].drop_duplicates("contract_code").itertuples(index=False):
+        out[str(code)] = f"under way on voyage {vid} (vessel {imo}) of plan {legs['plan_id'].iloc[0]}: not planned again"
+    laden = legs[(legs["kind"] == "laden") & legs["contract_code"].isin(list(out))]
+    for imo, rows in laden.groupby("imo"):
+        last = rows.sort_values("arrive_utc").iloc[-1]
+        port_h = _num(last.get("port_hours"), DEFAULT_PORT_HOURS)
+        busy[int(imo)] = (pd.Timestamp(last["arrive_utc"]) + pd.Timedelta(hours=port_h), str(last["to_port"]))
+    return out, busy
+
+
+def apply_commitments(fleet: pd.DataFrame, busy: dict[int, tuple[pd.Timestamp, str]]) -> pd.DataFrame:
+    """Vessels busy with committed contracts become available where and when those end."""
+    fleet = fleet.copy()
+    for imo, (free_from, port) in busy.items():
+        at = fleet["imo"] == imo
+        fleet.loc[at, "from_utc"] = fleet.loc[at, "from_utc"].map(lambda t: max(pd.Timestamp(t), free_from))
+        fleet.loc[at, "from_port"] = port
+    return fleet
