@@ -24,9 +24,12 @@ def plan_gantt_figure(plan: dict, legs: pd.DataFrame, windows: dict[str, tuple] 
     """`legs`: fleet_plan_legs rows; `windows`: contract code → (early, late) of its load window (UTC)."""
     names = names or {}
     vessels = list(dict.fromkeys(legs["imo"])) if len(legs) else []
-    fig = Figure(figsize=(12, 1.6 + 0.55 * max(1, len(vessels))))
-    fig.subplots_adjust(left=0.16, right=0.98, bottom=0.22 if unassigned is not None and len(unassigned) else 0.14,
-                        top=0.86)
+    has_left = unassigned is not None and len(unassigned)
+    height = 1.9 + 0.55 * max(1, len(vessels))
+    fig = Figure(figsize=(12, height))
+    # fixed margins in inches (as plots.py): ticks and the axis label below, the line of contracts left under them
+    fig.subplots_adjust(left=0.16, right=0.98, bottom=(0.6 + (0.25 if has_left else 0.0)) / height,
+                        top=1.0 - 0.55 / height)
     ax = fig.add_subplot()
     for y, imo in enumerate(vessels):
         mine = legs[legs["imo"] == imo].sort_values("seq")
@@ -56,7 +59,7 @@ def plan_gantt_figure(plan: dict, legs: pd.DataFrame, windows: dict[str, tuple] 
     ax.legend(handles=[Patch(color=KIND_COLOURS[k], label=lab) for k, lab in
                        (("ballast", "ballast"), ("laden", "laden"), ("port", "in port / waiting"),
                         ("window", "load window"))], fontsize=7, loc="upper right", ncols=4)
-    if unassigned is not None and len(unassigned):
+    if has_left:
         codes = ", ".join(str(c) for c in unassigned["contract_code"])
         fig.text(0.01, 0.01, f"left ({len(unassigned)}, reasons in fleet_plan_unassigned): "
                  + (codes[:160] + ("…" if len(codes) > 160 else "")), fontsize=7, va="bottom")

@@ -6,7 +6,9 @@ inputs.py      validation of contracts.csv, vessel availability and ports (rows 
 sea_distances  port-to-port distances along the routing graph's shortest sea route
 fuel.py        fuel per nautical mile laden and in ballast from a vessel's performance model
 problem.py     the planning problem: vessels, contracts, distances → per-vessel arcs, times and costs
-milp.py        the exact planner (scipy.optimize.milp / HiGHS)
+routes.py      every feasible contract sequence per vessel, best order per set (the MILP's columns)
+milp.py        the planner: set partitioning on HiGHS (scipy.optimize.milp); the arc-flow model for a bound
+colgen.py      column generation and an LP dive for fleets too big to enumerate, with a proven lower bound
 brute.py       the brute-force reference for small instances (tests, bench)
 voyages.py     a plan's legs as voyage rows
 """

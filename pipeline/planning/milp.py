@@ -169,7 +169,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
                         "mip_rel_gap": float(mip_rel_gap), "presolve": True})
     if res.x is None and rounded is None:
         return assemble(data, {}, solver="milp", status="no plan", gap=np.inf, runtime_s=time.perf_counter() - t0,
-                        n_arcs=m, left_reason=f"the planner found no plan within {time_limit_s:g} s ({res.message})")
+                        n_columns=m, left_reason=f"the planner found no plan within {time_limit_s:g} s ({res.message})")
     sequences = {} if res.x is None else {columns[i].k: columns[i].sequence for i in np.flatnonzero(res.x[:m] > 0.5)}
     if rounded is not None and (res.x is None or rounded.cost < assemble(data, sequences, solver="milp", status="",
                                                                           gap=0.0, runtime_s=0.0).cost):
@@ -179,8 +179,8 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         bound = float(dual) / scale if dual is not None and np.isfinite(dual) else -np.inf
         if res.status == 0 and mip_rel_gap == 0:
             return assemble(data, sequences, solver="milp", status="optimal", gap=0.0,
-                            runtime_s=time.perf_counter() - t0, n_arcs=m)
-    plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0, n_arcs=m)
+                            runtime_s=time.perf_counter() - t0, n_columns=m)
+    plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0, n_columns=m)
     gap = max(0.0, (plan.cost - bound) / abs(plan.cost)) if np.isfinite(bound) and plan.cost else np.inf
     status = "optimal" if gap <= 1e-9 else "feasible"
-    return assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0, n_arcs=m)
+    return assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0, n_columns=m)

@@ -263,7 +263,7 @@ class FleetPlan:
     status: str  # optimal | feasible (time limit: gap below) | trivial
     gap: float  # proven relative optimality gap (0 when optimal)
     runtime_s: float
-    n_arcs: int = 0
+    n_columns: int = 0  # columns (vessel sequences) the MILP chose among
 
     @property
     def cost(self) -> float:
@@ -271,7 +271,7 @@ class FleetPlan:
 
 
 def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: str, status: str, gap: float,
-             runtime_s: float, n_arcs: int = 0, left_reason: str | None = None) -> FleetPlan:
+             runtime_s: float, n_columns: int = 0, left_reason: str | None = None) -> FleetPlan:
     """The plan of `sequences` (vessel index → contract indices in order), each scheduled earliest."""
     scheds = []
     for k, seq in sorted(sequences.items()):
@@ -289,5 +289,5 @@ def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: s
             f"left to the spot market: lifting it costs more than its penalty "
             f"{data.contracts[j].penalty:.0f}, or its window clashes with contracts that save more")
     return FleetPlan(tuple(scheds), left, sum(s.fuel_cost for s in scheds), sum(s.out_of_service_cost for s in scheds),
-                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_arcs)
+                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_columns)
 
