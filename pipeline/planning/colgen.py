@@ -25,6 +25,7 @@ from pipeline.planning.problem import HOURS_PER_DAY, PlanData, schedule
 from pipeline.planning.routes import Column
 
 EPS = 1e-6
+DIVE_FIX = 0.8  # a dive fixes every column the LP takes at least this much (lower: faster, worse plans)
 
 
 def _master(data: PlanData, columns: list[Column]):
@@ -50,63 +51,86 @@ def solve_lp(data: PlanData, columns: list[Column]) -> tuple[float, np.ndarray, 
     return float(res.fun) + const, duals[:n], duals[n:], res.x
 
 
+def _successors(data: PlanData, k: int) -> dict[object, list[tuple]]:
+    """Per origin ('s' or a contract) of vessel k: (j, ballast hours, fuel cost of the arc and of j's laden leg less
+    the out-of-service credit of j's busy hours, early_j, late_j, dur_j); cached on the vessel's arcs."""
+    va = data.per_vessel[k]
+    if va.successors is None:
+        dc_h = data.vessels[k].daily_cost / HOURS_PER_DAY
+        succ: dict[object, list[tuple]] = {}
+        for (a, b), nm in va.arcs.items():
+            if b != "e":
+                c = data.contracts[b]
+                succ.setdefault(a, []).append((b, va.travel_h[(a, b)], data.fuel_cost(k, nm, va.laden_nm[b])
+                                               - dc_h * va.dur_h[b], c.early_h, c.late_h, va.dur_h[b]))
+        va.successors = succ
+    return va.successors
+
+
+def _sequence(label) -> tuple[int, ...]:
+    seq = []
+    while label is not None:
+        seq.append(label[3])
+        label = label[2]
+    return tuple(reversed(seq))
+
+
 def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) -> tuple[float, list[Column]]:
     """(least reduced cost of a column of vessel k — a lower bound, see the module doc —, up to `max_new` elementary
     columns of negative reduced cost, cheapest first)."""
     v, va = data.vessels[k], data.per_vessel[k]
     dc_h = v.daily_cost / HOURS_PER_DAY
     prize = {j: data.contracts[j].penalty + pi[j] for j in va.contracts}
-    succ: dict[object, list[int]] = {}
-    for (a, b) in va.arcs:
-        if b != "e":
-            succ.setdefault(a, []).append(b)
-    front: dict[int, list[list]] = {j: [] for j in va.contracts}  # label: [ready, rc, seq, alive]
+    succ = _successors(data, k)
+    front: dict[int, list[list]] = {j: [] for j in va.contracts}  # label: [ready, rc, parent label, j, alive]
     queue: deque = deque()
 
-    def offer(j, ready, rc, seq):
+    def offer(j, ready, rc, parent):
         labs = front[j]
         for lab in labs:
-            if lab[3] and lab[0] <= ready + 1e-9 and lab[1] <= rc + 1e-9:
+            if lab[0] <= ready + 1e-9 and lab[1] <= rc + 1e-9:
                 return
+        keep = []
         for lab in labs:
-            if lab[3] and ready <= lab[0] + 1e-9 and rc <= lab[1] + 1e-9:
-                lab[3] = False
-        new = [ready, rc, seq, True]
-        labs[:] = [lab for lab in labs if lab[3]] + [new]
-        queue.append((j, new))
+            if ready <= lab[0] + 1e-9 and rc <= lab[1] + 1e-9:
+                lab[4] = False
+            else:
+                keep.append(lab)
+        new = [ready, rc, parent, j, True]
+        keep.append(new)
+        front[j] = keep
+        queue.append(new)
 
-    for j in succ.get("s", []):
-        c = data.contracts[j]
-        t = max(va.travel_h[("s", j)], c.early_h)
-        offer(j, t + va.dur_h[j], data.fuel_cost(k, va.arcs[("s", j)], va.laden_nm[j]) - dc_h * va.dur_h[j] - prize[j], (j,))
+    for j, travel, cost, early, late, dur in succ.get("s", []):
+        t = max(travel, early)  # start arcs: travel is the arrival time
+        offer(j, t + dur, cost - prize[j], None)
     while queue:
-        i, lab = queue.popleft()
-        if not lab[3]:
+        lab = queue.popleft()
+        if not lab[4]:
             continue
-        ready, rc, seq = lab[0], lab[1], lab[2]
-        for j in succ.get(i, []):
-            c = data.contracts[j]
-            t = max(ready + va.travel_h[(i, j)], c.early_h)
-            if t > c.late_h + 1e-9:
+        ready, rc, i = lab[0], lab[1], lab[3]
+        for j, travel, cost, early, late, dur in succ.get(i, ()):
+            t = ready + travel
+            if t < early:
+                t = early
+            elif t > late + 1e-9:
                 continue
-            offer(j, t + va.dur_h[j], rc + data.fuel_cost(k, va.arcs[(i, j)], va.laden_nm[j]) - dc_h * va.dur_h[j] - prize[j],
-                  seq + (j,))
+            offer(j, t + dur, rc + cost - prize[j], lab)
     best, found = 0.0, []
     for j, labs in front.items():
-        for ready, rc, seq, alive in labs:
-            if not alive:
-                continue
-            end = ready + va.travel_h[(j, "e")]
+        for lab in labs:
+            end = lab[0] + va.travel_h[(j, "e")]
             if end > v.end_h + 1e-9:
                 continue
-            total = rc + data.fuel_cost(k, va.arcs[(j, "e")]) + dc_h * (end - v.start_h) - mu
+            total = lab[1] + data.fuel_cost(k, va.arcs[(j, "e")]) + dc_h * (end - v.start_h) - mu
             best = min(best, total)
-            if total < -EPS and len(set(seq)) == len(seq):
-                found.append((total, seq))
-    found.sort()
+            if total < -EPS:
+                found.append((total, lab))
+    found.sort(key=lambda x: x[0])
     out, seen = [], set()
-    for _, seq in found:
-        if seq in seen:
+    for _, lab in found:
+        seq = _sequence(lab)
+        if seq in seen or len(set(seq)) != len(seq):
             continue
         seen.add(seq)
         s = schedule(data, k, seq)
@@ -170,7 +194,7 @@ def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.
 
 def dive(data: PlanData, columns: list[Column], *, time_limit_s: float = 20.0,
          reprice: bool = True) -> tuple[dict[int, tuple[int, ...]], list[Column]]:
-    """A plan by diving on the LP: fix the columns the LP (nearly) takes — those at ≥ 0.5, else the largest —,
+    """A plan by diving on the LP: fix the columns the LP (nearly) takes — those at ≥ DIVE_FIX, else the largest —,
     drop the vessels and contracts they use, re-solve the LP over what is left (pricing new columns for it when
     `reprice`), until the LP takes nothing more. Returns (vessel → sequence, columns with those priced added)."""
     t0 = time.perf_counter()
@@ -200,7 +224,7 @@ def dive(data: PlanData, columns: list[Column], *, time_limit_s: float = 20.0,
             if added:
                 _, pi, mu, y = solve_lp(data, free)
         order = np.argsort(-y, kind="stable")
-        pick = [i for i in order if y[i] >= 0.5] or ([order[0]] if len(order) and y[order[0]] > 1e-6 else [])
+        pick = [i for i in order if y[i] >= DIVE_FIX] or ([order[0]] if len(order) and y[order[0]] > 1e-6 else [])
         progress = False
         for i in pick:
             col = free[i]

@@ -73,6 +73,7 @@ class VesselArcs:
     lift_t: dict[int, float]
     arcs: dict[tuple, float] = field(default_factory=dict)  # arc → ballast NM
     travel_h: dict[tuple, float] = field(default_factory=dict)  # arc → ballast hours
+    successors: dict | None = None  # colgen's pricing table, built on first use
 
 
 @dataclass
