@@ -129,8 +129,10 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     """The least-cost plan of `data`: set partitioning over every vessel's feasible contract sequences
     (routes.vessel_columns), solved by HiGHS — proven optimal when every vessel's sequences were enumerated (at
     most `max_labels` partial sequences each) and HiGHS finished. Otherwise the columns are the `init_labels`
-    most promising per vessel plus those column generation prices (colgen.py, up to half the time left), and
-    `gap` is the proven relative gap to colgen's lower bound."""
+    most promising per vessel plus those column generation prices (colgen.py, up to 45 % of the time left); a dive
+    on the LP (up to 75 % of what is left then) gives a plan, the restricted MILP gets the rest of the time, the
+    better of the two is returned, and `gap` is its proven relative gap to colgen's lower bound. The time limit
+    covers all of it (HiGHS may overrun it by about a second)."""
     t0 = time.perf_counter()
     columns, complete = [], True
     for k in range(len(data.vessels)):
