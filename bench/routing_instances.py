@@ -95,6 +95,7 @@ def instance_hash(spec: SuiteInstance, problem, space, weather) -> str:
     for a in (space.lat, space.lon, space.edge_ok, weather.values, problem.model.speed_coef, problem.model.fuel_coef):
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(str(problem.rta_utc).encode())
+    h.update(b"settings: listed + the constant-speed rpm")  # the solvers' decision space (solve.solver_instance)
     return h.hexdigest()[:16]
 
 
@@ -113,12 +114,11 @@ def stored_optimum(spec: SuiteInstance, digest: str) -> dict | None:
 
 def plan_cost(problem, space, weather, nodes, rpm_idx) -> float:
     """The cost of a stored plan under today's kernels: the plan sailed through the same solve() path."""
-    from pipeline.routing.baseline import evaluate
-    from pipeline.routing.problem import Instance
-    from pipeline.routing.baseline import baseline as find_baseline
+    from pipeline.routing.baseline import baseline as find_baseline, evaluate
+    from pipeline.routing.solve import solver_instance
 
-    inst = Instance.build(problem, space, weather)
-    base = find_baseline(inst)
+    inst, base_nodes = solver_instance(problem, space, weather)
+    base = find_baseline(inst, base_nodes)
     if base.ok:
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)  # as solve() sets it
     return float(evaluate(inst, np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64))[0])
@@ -138,6 +138,9 @@ def solve_optimum(spec: SuiteInstance, problem, space, weather, gap: float = DP_
            "distance_nm": space.base_distance_nm}
     if plan.legs:
         rec["nodes"] = route_nodes(space, plan)
-        rec["rpm_idx"] = [int(np.searchsorted(problem.rpm_options, leg["rpm"])) for leg in plan.legs]
+        from pipeline.routing.solve import solver_instance
+
+        settings = solver_instance(problem, space, weather)[0].rpm_options  # what the indexes point into
+        rec["rpm_idx"] = [int(np.argmin(np.abs(settings - leg["rpm"]))) for leg in plan.legs]
     return rec, plan
 

@@ -74,7 +74,7 @@ def main() -> int:
             warmed = True
         L2, P = space.lat.shape
         print(f"\n== {spec.name}: {spec.kinds}\n   {space.base_distance_nm:,.0f} NM, {space.n_lines} lines × {P} nodes × "
-              f"{len(spec.rpm)} rpm, {spec.objective}, RTA {problem.t_req_h:.1f} h")
+              f"{len(spec.rpm)} listed rpm + the constant rpm meeting the RTA, {spec.objective}, RTA {problem.t_req_h:.1f} h")
         dp = dp_reference(spec, problem, space, weather, a.recompute_dp)
         when = "stored" if dp["stored"] else "computed now"
         print(f"   DP ({when}, within {100 * dp['gap']:g} %): {dp['status']}, cost {dp['cost']:.3f}, fuel "

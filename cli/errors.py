@@ -12,9 +12,9 @@ import logging
 
 # By class name (any base class counts), so this module imports none of the layers below.
 USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
-               "WarehouseBusyError", "WarehouseCorruptError", "RoutingInputError", "VoyageGeometryError", "ServeError",
-               "TimeoutError", "CubeError", "ExportPathError", "WeatherMapError", "FleetFileError", "SettingsError",
-               "PlanningInputError"}
+               "WarehouseBusyError", "WarehouseCorruptError", "WarehouseWriteError", "RoutingInputError",
+               "VoyageGeometryError", "ServeError", "TimeoutError", "CubeError", "ExportPathError", "WeatherMapError",
+               "FleetFileError", "SettingsError", "UnknownSolverError", "PlanningInputError"}
 
 
 def is_user_error(exc: BaseException | None) -> bool:

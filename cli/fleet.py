@@ -44,11 +44,18 @@ def problems_table(summary: dict) -> Table | None:
     t = Table(title="Voyages needing attention")
     for col in ("voyage", "IMO", "status", "reason"):
         t.add_column(col)
+    from rich.text import Text
+
+    from pipeline.validate_ids import printable
+
+    def cell(x) -> Text:  # plain text: no rich markup, control characters shown as escapes
+        return Text(printable(x))
+
     for r in rows:
-        t.add_row(str(r["voyage_id"]), str(r["imo"]), str(r["status"]), str(r["reason"] or ""))
+        t.add_row(cell(r["voyage_id"]), cell(r["imo"]), cell(r["status"]), cell(r["reason"] or ""))
     for line in exports:
         vid, _, err = line.partition(": ")
-        t.add_row(vid, "", "export failed", err)
+        t.add_row(cell(vid), "", "export failed", cell(err))
     return t
 
 

@@ -21,12 +21,13 @@ def refit_table(summaries: list[dict]) -> Table:
     t = Table(title="Performance models")
     for col in ("IMO", "n", "form", "STW R²", "STW RMSE kn", "STW held-out", "fuel R²", "fuel RMSE t/h", "fuel held-out", "changed"):
         t.add_column(col, no_wrap=True, justify="right" if col not in ("changed", "form") else "left")
+    t.add_column("gate")
     t.add_column("why")
     for s in summaries:
         t.add_row(str(s["imo"]), str(s["n"]), s.get("form", "-"), _fmt(s.get("speed_r2")), _fmt(s.get("speed_rmse")),
                   _fmt(s.get("speed_holdout_rmse")), _fmt(s.get("fuel_r2")), _fmt(s.get("fuel_rmse"), 4),
                   _fmt(s.get("fuel_holdout_rmse"), 4), "[green]yes" if s["changed"] else "[yellow]no",
-                  s.get("flag") or s.get("why") or s.get("reason", ""))
+                  s.get("gate", "-"), s.get("flag") or s.get("why") or s.get("reason", ""))
     return t
 
 
@@ -38,14 +39,19 @@ def register(app: typer.Typer) -> None:
 
     @noon.command("import")
     def noon_import(file: Path = typer.Argument(..., help="CSV or Parquet of noon reports (one or many vessels)."),
+                    replace: bool = typer.Option(False, "--replace", help="Corrected reports: a row differing from the "
+                                                 "stored report of the same vessel and time replaces it (the old one is "
+                                                 "kept in noon_reports_history) instead of being refused."),
                     data: Optional[Path] = DataOpt):
         """Validate and import noon reports; bad rows go to noon_reports_rejected with a reason."""
         from flows.jobs.refit import import_noon_file
 
+        kw = {"replace": True} if replace else {}
         c = run_job("flows.refit", "import_noon_reports", import_noon_file, path=str(file),
-                    data_root=str(data) if data else None)
+                    data_root=str(data) if data else None, **kw)
         console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
-                      f"{c['rejected']} rejected")
+                      + (f"{c['replaced']} replaced (old ones in noon_reports_history), " if c.get("replaced") else "")
+                      + f"{c['rejected']} rejected")
         if c["reasons"] or c["conflicts"]:
             t = Table(title="Rejected rows by reason")
             t.add_column("reason")
@@ -53,25 +59,60 @@ def register(app: typer.Typer) -> None:
             for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
                 t.add_row(reason, str(n))
             if c["conflicts"]:
-                t.add_row("conflicts with a stored report", str(c["conflicts"]))
+                t.add_row("conflicts with a stored report (corrected reports: import with --replace)", str(c["conflicts"]))
             console.print(t)
+
+    @noon.command("exclude")
+    def noon_exclude(imo: int = typer.Option(..., "--imo", help="Vessel IMO number."),
+                     from_: str = typer.Option(..., "--from", help="First report time to exclude (UTC, e.g. 2021-03-01T00)."),
+                     to: str = typer.Option(..., "--to", help="Last report time to exclude (UTC), inclusive."),
+                     reason: str = typer.Option(..., "--reason", help="Why (kept with the reports), e.g. 'speed log broken'."),
+                     data: Optional[Path] = DataOpt):
+        """Take a vessel's reports of a period out of the refit (e.g. a broken speed log); they are kept in
+        noon_reports_history with the reason."""
+        import pandas as pd
+
+        from flows.jobs.refit import UnknownVesselError, exclude_noon_period
+
+        try:
+            t0, t1 = (pd.Timestamp(x.strip()) for x in (from_, to))
+        except ValueError:
+            fail(f"--from {from_!r} / --to {to!r}: not times; use ISO 8601 such as 2021-03-01T00")
+        t0, t1 = (t.tz_convert("UTC").tz_localize(None) if t.tzinfo else t for t in (t0, t1))
+        if t1 < t0:
+            fail(f"--to {to} is before --from {from_}")
+        if not reason.strip():
+            fail("--reason must say why the reports are excluded")
+        try:
+            n = exclude_noon_period(imo, str(t0), str(t1), reason.strip(), data_root=str(data) if data else None)
+        except UnknownVesselError as exc:
+            fail(str(exc))
+        console.print(f"vessel {imo}: {n} reports from {t0} to {t1} excluded ({reason.strip()}); kept in noon_reports_history. "
+                      "Run `jitroute refit` to refit without them.", highlight=False)
 
     @app.command()
     def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),
               form: str = typer.Option("best", help="Model form: best (default: every form scored on the newest "
-                                                    "reports, the best proposed), physical, thesis or mlp."),
+                                                    "reports; the physical one kept unless another is significantly "
+                                                    "better), physical, thesis or mlp."),
+              gate: Optional[list[str]] = typer.Option(None, "--gate", metavar="NAME=VALUE",
+                                                       help="Override a gate setting for this refit (repeatable), e.g. "
+                                                            "min_rows_per_coef=3, min_r2=0.1, sanity=false; the table's "
+                                                            "gate column and perf_models.gate say which gate applied."),
               data: Optional[Path] = DataOpt):
-        """Refit vessels' speed and fuel models from their noon reports; prints fit quality and changes."""
+        """Refit vessels' speed and fuel models from their noon reports (validated on the newest reports, then fitted
+        on all of them); prints fit quality, the gate applied and changes."""
         from flows.jobs.refit import refit_job
-        from pipeline.performance.refit import check_form
+        from pipeline.performance.refit import Gate, check_form, gate_with
 
         try:
             check_form(form)  # before anything is read
+            gate_with(Gate(), gate)
         except ValueError as exc:
             fail(str(exc))
 
         summaries = run_job("flows.refit", "refit_performance", refit_job, imos=imo or None,
-                            data_root=str(data) if data else None, form=form)
+                            data_root=str(data) if data else None, form=form, gate=gate or None)
         console.print(refit_table(summaries))
 
     bunker = typer.Typer(help="Bunker logs: import with validation.", no_args_is_help=True)
@@ -89,7 +130,9 @@ def register(app: typer.Typer) -> None:
         console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
                       f"{c['rejected']} rejected")
         for reason, n in sorted(c["reasons"].items(), key=lambda kv: -kv[1]):
-            console.print(f"  {n} × {reason}")
+            console.print(f"  {n} × {reason}", highlight=False, markup=False)
+        if c["reasons"]:
+            console.print("  refused rows, with their reason and raw text: table bunker_logs_rejected")
         for key in c["conflicts"]:
             console.print(f"  conflicts with the stored row: {key} (delete it first to correct it)")
 
@@ -110,6 +153,65 @@ def register(app: typer.Typer) -> None:
         rate = fuzzy.fuel_tph(speed, resistance, wave)
         rules = ", ".join(map(str, fuzzy.fired_rules(speed, resistance, wave)))
         console.print(f"fuel {rate:.3f} t/h (rules fired: {rules})")
+
+    @model.command("predict")
+    def model_predict(imo: int = typer.Option(..., "--imo", help="Vessel IMO number."),
+                      rpm: float = typer.Option(..., "--rpm", help="Engine speed, rpm."),
+                      wind_kn: float = typer.Option(0.0, "--wind-kn", help="True wind speed, kn."),
+                      wind_dir_rel: float = typer.Option(0.0, "--wind-dir-rel", help="Wind coming from, relative to the bow, "
+                                                                                      "degrees (0 head, 180 following; −180..360)."),
+                      hs_m: float = typer.Option(0.0, "--hs-m", help="Significant wave height, m."),
+                      wave_dir_rel: float = typer.Option(0.0, "--wave-dir-rel", help="Waves coming from, relative to the bow, degrees."),
+                      draft_m: Optional[float] = typer.Option(None, "--draft-m", help="Mean draft, m (default: the middle of "
+                                                                                      "the drafts the model was fitted on)."),
+                      trim_m: Optional[float] = typer.Option(None, "--trim-m", help="Trim, m (default: as fitted)."),
+                      version: Optional[int] = typer.Option(None, "--version", help="Model version (default: the active one)."),
+                      as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+                      data: Optional[Path] = DataOpt):
+        """Speed through water and fuel rate of a vessel's model for given conditions, flagged when they lie outside
+        the conditions the model was fitted on."""
+        import json
+        import math
+
+        from flows.settings import load_settings
+        from pipeline.performance.model import model_from_stored
+        from storage import fleet_store
+
+        for name, v in (("--rpm", rpm), ("--wind-kn", wind_kn), ("--hs-m", hs_m), ("--draft-m", draft_m), ("--trim-m", trim_m),
+                        ("--wind-dir-rel", wind_dir_rel), ("--wave-dir-rel", wave_dir_rel)):
+            if v is not None and not math.isfinite(v):
+                fail(f"{name} {v} is not a finite number")
+        if rpm <= 0 or wind_kn < 0 or hs_m < 0 or (draft_m is not None and draft_m <= 0):
+            fail("--rpm and --draft-m must be positive, --wind-kn and --hs-m not negative")
+        s = load_settings(data_root=data)
+        db = s.layout.warehouse
+        if not db.exists():
+            fail(f"no warehouse at {db}: import the fleet and run `jitroute refit` first")
+        stored = fleet_store.model_version(db, imo, version)
+        if stored is None:
+            fail(f"vessel {imo} has no {'model v' + str(version) if version else 'active model'} in {db}; "
+                 "run `jitroute refit` (perf_models lists the versions)")
+        m = model_from_stored(stored, imo)
+        if m is None:
+            fail(f"vessel {imo}: model v{stored.get('version')} was stored by an older definition of its form "
+                 f"({stored.get('form')}); run `jitroute refit --imo {imo}`")
+        env = m.envelope or {}
+        draft = draft_m if draft_m is not None else (sum(env["draft_m"]) / 2 if env.get("draft_m") else 10.0)
+        trim = trim_m if trim_m is not None else float(env.get("trim_m", 0.0))
+        stw = float(m.stw_kn(rpm, draft, trim, wind_kn, wind_dir_rel, hs_m, wave_dir_rel))
+        fuel = float(m.fuel_tph(rpm, draft, trim, wind_kn, wind_dir_rel, hs_m, wave_dir_rel))
+        outside = m.outside_envelope(rpm, draft, wind_kn, hs_m)
+        out = {"imo": imo, "version": m.version, "form": m.form, "status": stored.get("status", "active"), "rpm": rpm,
+               "draft_m": draft, "trim_m": trim, "wind_kn": wind_kn, "wind_dir_rel_deg": wind_dir_rel, "hs_m": hs_m,
+               "wave_dir_rel_deg": wave_dir_rel, "months_dd": m.months_dd, "stw_kn": stw, "fuel_tph": fuel,
+               "out_of_envelope": bool(outside), "outside": outside, "envelope": m.envelope}
+        if as_json:
+            print(json.dumps(out))
+            return
+        console.print(f"vessel {imo} model v{m.version} ({m.form}, {out['status']}): STW {stw:.2f} kn, fuel {fuel:.3f} t/h "
+                      f"at {rpm:g} rpm, draft {draft:.2f} m", highlight=False)
+        if outside:
+            console.print(f"[yellow]outside the conditions the model was fitted on:[/] {', '.join(outside)}", highlight=False)
 
     @fleet.command("generate")
     def fleet_generate(out: Path = typer.Option(..., "--out"), start: str = typer.Option("2020-12-01T00", help="Reports end and voyages start here (UTC)."),

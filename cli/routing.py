@@ -70,7 +70,11 @@ def register(app: typer.Typer) -> None:
         rta: Optional[str] = typer.Option(None, help="Required time of arrival UTC."),
         imo: Optional[int] = typer.Option(None, help="Vessel (its active performance model is used)."),
         voyage: Optional[str] = typer.Option(None, "--voyage", help="Take the voyage from the warehouse instead."),
-        solver: str = typer.Option("bfoa", help="bfoa | dp | astar | gc | rhumb."),
+        solver: str = typer.Option("bfoa", help="bfoa | dp | astar | gc | rhumb (gc/rhumb: the constant-speed voyage "
+                                                "along the great circle / rhumb line)."),
+        solver_option: Optional[list[str]] = typer.Option(
+            None, "--solver-option", help="NAME=VALUE of the solver's own options, repeatable (e.g. gap=0 for an "
+                                          "exact dp; dp is certified within 0.1 % by default)."),
         seed: int = typer.Option(1, help="Random seed of the BFOA (same seed, same plan)."),
         objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
@@ -93,6 +97,16 @@ def register(app: typer.Typer) -> None:
         from storage import cube_window, export_store, fleet_store
 
         # Bad input is refused before anything is opened.
+        from pipeline.routing.options import RoutingOptions as _Options, UnknownSolverError
+
+        try:
+            pairs = [_option_pair(x) for x in solver_option or ()]
+            chosen = _Options(solver=solver, solver_options=tuple(pairs))
+            from pipeline.routing.solvers import SOLVERS
+
+            SOLVERS[solver].make_options(chosen.solver_overrides())
+        except UnknownSolverError as exc:
+            fail(str(exc))
         dep = _latlon(from_, "--from") if from_ is not None else None
         arr = _latlon(to, "--to") if to is not None else None
         t_dep = _utc(depart, "--depart") if depart is not None else None
@@ -136,7 +150,8 @@ def register(app: typer.Typer) -> None:
             version = cube_window.cycle_versions(lay.cube_store).get(c)
             cube_path, c = lay.weather_cube_url, str(np.datetime_as_string(np.datetime64(c, "s")))
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
-                       options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed),
+                       options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed,
+                                                            solver_options=tuple(pairs) or None),
                        cycle_version=version)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
@@ -172,6 +187,16 @@ def register(app: typer.Typer) -> None:
                 raise typer.Exit(1)
         if plan.status in ("infeasible", "failed"):
             raise typer.Exit(3)
+
+
+def _option_pair(text: str) -> tuple[str, str]:
+    """NAME=VALUE of --solver-option as a pair; UnknownSolverError when it is not of that shape."""
+    from pipeline.routing.options import UnknownSolverError
+
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise UnknownSolverError(f"--solver-option must be NAME=VALUE (e.g. gap=0), not {text!r}")
+    return name.strip(), value.strip()
 
 
 def _say(quiet: bool, text: str) -> None:

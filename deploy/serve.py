@@ -82,9 +82,14 @@ def build_deployments(*, timezone: str = "UTC", nightly_cron: str = NIGHTLY_CRON
 
 
 def serve_deployments(**kwargs) -> None:
-    """Register the deployments and run their flow runs until stopped (Ctrl-C or SIGTERM)."""
+    """Register the deployments and run their flow runs until stopped (Ctrl-C or SIGTERM). The data root and source
+    URLs given here (or in this process's environment) are pinned: a flow run asking for others is refused, and
+    secrets (the Earthdata token) come from this process's environment or Prefect Secret block only."""
     from prefect import serve
 
+    from flows.settings import pin_for_serving
+
+    pin_for_serving(kwargs.get("data_root"), kwargs.get("rish_url"), kwargs.get("oscar_url"))
     serve(*build_deployments(**kwargs))
 
 

@@ -127,6 +127,40 @@ def storage_options_from_env(text: str | None) -> dict | None:
     return value
 
 
+SERVED_ENV = "JITROUTE_SERVED"  # set by `jitroute serve` for the flow runs it starts
+
+
+def pin_for_serving(data_root: str | None = None, rish_url: str | None = None, oscar_url: str | None = None) -> None:
+    """Make this process (and the flow runs it starts, which inherit its environment) a served deployment: the data
+    root and source URLs given here (or already in its environment) are the only ones its flow runs accept."""
+    for var, value in (("JITROUTE_DATA", data_root), ("JITROUTE_RISH_URL", rish_url), ("JITROUTE_OSCAR_URL", oscar_url)):
+        if value:
+            os.environ[var] = str(value)
+    os.environ[SERVED_ENV] = "1"
+
+
+def refuse_served_overrides(**given: str | None) -> None:
+    """On a served deployment, a flow-run parameter (`data_root`, `rish_url`, `oscar_url`) that differs from the serve
+    process's settings is refused (SettingsError): anyone who can reach the Prefect API could otherwise point the
+    ingest at another data root, or the OSCAR fetch — which carries the Earthdata token — at their own server.
+    Elsewhere (the CLI, tests) parameters are the operator's own and pass."""
+    if not os.environ.get(SERVED_ENV):
+        return
+    s = load_settings()
+    pinned = {"data_root": s.data_root, "rish_url": s.sources.rish_url, "oscar_url": s.sources.oscar_url}
+    for name, value in given.items():
+        if value is None or name not in pinned:
+            continue
+        if name == "data_root":
+            same = Path(str(value)).expanduser().resolve() == Path(pinned[name]).expanduser().resolve()
+        else:
+            same = str(value).rstrip("/") == str(pinned[name]).rstrip("/")
+        if not same:
+            raise SettingsError(f"parameter {name}={str(value)[:200]!r} refused: a served deployment takes {name} from the "
+                                f"settings of its `jitroute serve` process ({pinned[name]}); to change it, restart "
+                                f"`jitroute serve` with it")
+
+
 def load_settings(**overrides) -> Settings:
     """Defaults, then environment, then `overrides` (e.g. `data_root=...`, `sources.rish_url=...`)."""
     env = os.environ
@@ -147,4 +181,5 @@ def load_settings(**overrides) -> Settings:
     return s.with_overrides(**overrides)
 
 
-__all__ = ["Settings", "SettingsError", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings"]
+__all__ = ["Settings", "SettingsError", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings",
+           "pin_for_serving", "refuse_served_overrides"]

@@ -5,10 +5,11 @@ reason. A refused row is kept with its raw text (`raw`) so it can be fixed and r
 
 Vessels: missing imo/name; `not an integer in imo`; `IMO number fails its check digit`
 (`pipeline.validate_ids.is_valid_imo`); `not a number in <col>`; `not a finite number in <col>`;
-`negative <col>`; `duplicate imo in file`.
+`negative <col>`; `control characters or a line break in <col>` (any text column); `duplicate imo in file`.
 
 Voyages: the voyage ID (`pipeline.validate_ids.voyage_id_problem`); `not an integer in imo`;
 `unknown vessel`; timestamps (ISO 8601 only, `pipeline.timestamps`); positions; `bad rpm_options`;
+`control characters or a line break in <col>` (port names and any other text column);
 `implausible voyage length` (RTA more than MAX_VOYAGE_DAYS after departure); `duplicate voyage_id in file`.
 An RTA not after departure is left to routing, which records the voyage `failed` naming both times.
 """
@@ -22,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.timestamps import parse_iso_column
-from pipeline.validate_ids import is_valid_imo, voyage_id_problem
+from pipeline.validate_ids import has_control_characters, is_valid_imo, voyage_id_problem
 
 MAX_VOYAGE_DAYS = 90.0  # the longest plausible single voyage (a slow round-the-world passage is ~60 days)
 VESSEL_NUMERIC = ("dwt", "design_speed_kn", "mcr_kw", "rpm_max", "design_fuel_tph")
@@ -82,6 +83,12 @@ def _numbers(df: pd.DataFrame, cols, r: _Reasons) -> None:
         df[c] = num
 
 
+def _clean_text(df: pd.DataFrame, columns, r: _Reasons) -> None:
+    for c in columns:
+        if c in df.columns:
+            r.flag(df[c].map(has_control_characters), f"control characters or a line break in {c}")
+
+
 def _split(df: pd.DataFrame, r: _Reasons, raw: pd.Series, source: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     df["source_file"] = source
     bad = df[r.reason.notna()].copy().astype(object)
@@ -106,6 +113,7 @@ def validate_vessels(raw: pd.DataFrame, source: str = "") -> tuple[pd.DataFrame,
     _numbers(df, VESSEL_NUMERIC, r)
     for c in VESSEL_NUMERIC:
         r.flag(df[c] < 0, f"negative {c}")
+    _clean_text(df, [c for c in df.columns if c not in ("imo", *VESSEL_NUMERIC)], r)
     r.flag(df["imo"].duplicated(keep="first") & r.reason.isna(), "duplicate imo in file")
     df["name"] = df["name"].astype(str)
     return _split(df, r, raw_rows(raw), source)
@@ -164,6 +172,8 @@ def validate_voyages(raw: pd.DataFrame, known_imos: set[int] | None = None,
     days = (df["rta_utc"] - df["depart_utc"]) / pd.Timedelta(days=1)
     r.flag(days > MAX_VOYAGE_DAYS,
            f"implausible voyage length: RTA more than {MAX_VOYAGE_DAYS:g} days after departure (check the year of rta_utc)")
+    _clean_text(df, [c for c in df.columns if c not in ("voyage_id", "imo", "depart_utc", "rta_utc", "rpm_options",
+                                                        *VOYAGE_NUMERIC)], r)
     r.flag(df["voyage_id"].duplicated(keep="first") & r.reason.isna(), "duplicate voyage_id in file")
     for c in ("dep_name", "arr_name", "status"):
         if c in df.columns:

@@ -5,11 +5,18 @@ A voyage ID names its export files (`<run folder>/<voyage_id>.rtz`), so it must 
 That excludes path separators, absolute paths, control characters, newlines and spaces.
 IMO numbers are seven digits whose last is the check digit: the sum of the first six digits weighted
 7, 6, 5, 4, 3, 2, modulo 10.
+Names (vessels, ports, suppliers, …) may hold any printable text but no control character or line break
+(`has_control_characters`): they end up in log lines, terminals, Markdown tables and XML (RTZ), where one such
+character forges a line, recolours a terminal or makes the file invalid. `printable` and `markdown_cell` escape
+text for those places when it comes from elsewhere.
 """
 
 from __future__ import annotations
 
 import re
+
+# C0 and C1 controls (ESC, CR, LF, NUL, …), DEL, and the Unicode line and paragraph separators
+_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029]")
 
 VOYAGE_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 VOYAGE_ID_MAX_LEN = 64
@@ -58,3 +65,19 @@ def imo_check_digit(first_six: int) -> int:
 def is_valid_imo(imo: int) -> bool:
     """Seven digits whose last is the IMO check digit of the first six."""
     return 1_000_000 <= int(imo) <= 9_999_999 and imo_check_digit(int(imo) // 10) == int(imo) % 10
+
+
+def has_control_characters(value) -> bool:
+    """A text value holding a control character or a line break (non-text values: False)."""
+    return isinstance(value, str) and _CONTROL.search(value) is not None
+
+
+def printable(text) -> str:
+    """`text` with every control character and line break written as an escape (`\\n`, `\\x1b`): safe in one log
+    line or a terminal."""
+    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], "" if text is None else str(text))
+
+
+def markdown_cell(text) -> str:
+    """`text` for one cell of a Markdown table: printable, `|` escaped."""
+    return printable(text).replace("|", "\\|")

@@ -25,6 +25,10 @@ class CubeVariable:
     standard_name: str | None
     long_name: str
     source: str | None  # the source that provides it (GSM, GWM, OSCAR); None: the cube's own bookkeeping
+    # physically plausible values in `units` (a decoded file with a finite value outside is refused): wind beyond
+    # 75 m/s is a unit mistake (km/h, knots) or damage, not weather; no surface current reaches 10 m/s (the
+    # strongest are ~3 m/s), while cm/s read as m/s gives tens
+    valid_range: tuple[float, float] | None = None
 
     @property
     def attrs(self) -> dict:
@@ -37,13 +41,17 @@ class CubeVariable:
 
 
 FIELDS = (
-    CubeVariable("u10", DIMS, "float32", "m s-1", "eastward_wind", "10 m eastward wind", "GSM"),
-    CubeVariable("v10", DIMS, "float32", "m s-1", "northward_wind", "10 m northward wind", "GSM"),
-    CubeVariable("swh", DIMS, "float32", "m", "sea_surface_wave_significant_height", "significant wave height", "GWM"),
-    CubeVariable("mwd", DIMS, "float32", "degree", "sea_surface_wave_from_direction", "mean wave direction (coming from)", "GWM"),
-    CubeVariable("mwp", DIMS, "float32", "s", "sea_surface_wave_mean_period", "mean wave period", "GWM"),
-    CubeVariable("uo", DIMS, "float32", "m s-1", "eastward_sea_water_velocity", "surface current east (going to)", "OSCAR"),
-    CubeVariable("vo", DIMS, "float32", "m s-1", "northward_sea_water_velocity", "surface current north (going to)", "OSCAR"),
+    CubeVariable("u10", DIMS, "float32", "m s-1", "eastward_wind", "10 m eastward wind", "GSM", (-75.0, 75.0)),
+    CubeVariable("v10", DIMS, "float32", "m s-1", "northward_wind", "10 m northward wind", "GSM", (-75.0, 75.0)),
+    CubeVariable("swh", DIMS, "float32", "m", "sea_surface_wave_significant_height", "significant wave height", "GWM",
+                 (0.0, 30.0)),
+    CubeVariable("mwd", DIMS, "float32", "degree", "sea_surface_wave_from_direction", "mean wave direction (coming from)",
+                 "GWM", (0.0, 360.0)),
+    CubeVariable("mwp", DIMS, "float32", "s", "sea_surface_wave_mean_period", "mean wave period", "GWM", (0.0, 40.0)),
+    CubeVariable("uo", DIMS, "float32", "m s-1", "eastward_sea_water_velocity", "surface current east (going to)", "OSCAR",
+                 (-10.0, 10.0)),
+    CubeVariable("vo", DIMS, "float32", "m s-1", "northward_sea_water_velocity", "surface current north (going to)",
+                 "OSCAR", (-10.0, 10.0)),
 )
 CURRENT_AGE = CubeVariable("current_age_h", ("cycle", "step"), "float32", "h", None,
                            "age of the OSCAR analysis used", "OSCAR")
@@ -69,6 +77,19 @@ def attrs(name: str) -> dict:
         return dict(COORD_ATTRS[name])
     out = BY_NAME[name].attrs
     return out | CYCLE_STATE_FLAGS if name == CYCLE_STATE.name else out
+
+
+def implausible(name: str, values: np.ndarray) -> str | None:
+    """None when every finite value of variable `name` lies in its `valid_range`, else what is wrong (one line)."""
+    lo, hi = BY_NAME[name].valid_range
+    v = np.asarray(values)
+    bad = np.isfinite(v) & ((v < lo) | (v > hi))
+    n = int(np.count_nonzero(bad))
+    if not n:
+        return None
+    worst = v[bad][np.argmax(np.abs(v[bad]))]
+    return (f"{n} value(s) of {name} outside the plausible {lo:g}..{hi:g} {BY_NAME[name].units} (e.g. {float(worst):.4g}): "
+            "wrong units or a damaged file")
 
 
 def provided_by(source: str) -> tuple[str, ...]:

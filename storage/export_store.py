@@ -6,6 +6,10 @@ commit each is moved to `runs/<run_id>/` and then, LAST, `runs/<run_id>/_SUCCESS
 listing every file with its size. On an object store a move is a copy per object, so a reader may see a run
 folder fill up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run
 never publishes: its staging prefix is removed (by the run itself, or by the next run when the process died).
+
+A run's files are named by keys of one to three plain names joined by `/`: the run's own files at the top
+(`fleet_map.png`, `weather_waves_<cycle>.png`, the manifest), each voyage's under `voyages/<voyage_id>/`, so no
+voyage ID can overwrite a run file or another voyage's file.
 """
 
 from __future__ import annotations
@@ -29,6 +33,16 @@ def check_file_name(name: str) -> str:
             or any(ord(ch) < 32 for ch in name) or len(name) > 255):
         raise ExportPathError(f"export file name {name!r} is not a plain file name; nothing written")
     return name
+
+
+def check_key(key: str) -> str:
+    """`key` if it is one to three plain file names joined by `/` (a file of the run or of one of its voyages)."""
+    parts = key.split("/") if isinstance(key, str) else [key]
+    if not 1 <= len(parts) <= 3:
+        raise ExportPathError(f"export file name {key!r} is not a plain name in the run folder; nothing written")
+    for part in parts:
+        check_file_name(part)
+    return key
 
 
 def child_path(folder: Path, name: str) -> Path:
@@ -82,10 +96,11 @@ class RunExports:
         return f"{self.url.rstrip('/')}/runs/{check_file_name(run_id)}"
 
     def stage(self, run_id: str, name: str, data: bytes) -> str:
-        """Write one file of the run under its staging prefix; returns the file name."""
+        """Write one file of the run (`name`: a key, see `check_key`) under its staging prefix; returns the key."""
         fs, folder = self.fs, self._staging(run_id)
-        fs.makedirs(folder, exist_ok=True)
-        fs.pipe_file(f"{folder}/{check_file_name(name)}", data)
+        path = f"{folder}/{check_key(name)}"
+        fs.makedirs(path.rsplit("/", 1)[0], exist_ok=True)
+        fs.pipe_file(path, data)
         return name
 
     def publish(self, run_id: str) -> dict | None:
@@ -94,9 +109,12 @@ class RunExports:
         fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
         if not fs.exists(src):
             return None
-        sizes = {p.rsplit("/", 1)[1]: int(info["size"]) for p, info in fs.find(src, detail=True).items()}
+        base = fs._strip_protocol(src).rstrip("/") + "/"
+        sizes = {fs._strip_protocol(p)[len(base):]: int(info["size"]) for p, info in fs.find(src, detail=True).items()}
         fs.makedirs(dst, exist_ok=True)
         for name in sorted(sizes):
+            if "/" in name:
+                fs.makedirs(f"{dst}/{name.rsplit('/', 1)[0]}", exist_ok=True)
             fs.mv(f"{src}/{name}", f"{dst}/{name}")
         manifest = {"run_id": run_id, "files": [{"name": n, "bytes": sizes[n]} for n in sorted(sizes)]}
         fs.pipe_file(f"{dst}/{MANIFEST}", json.dumps(manifest, indent=1).encode())

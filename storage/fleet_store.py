@@ -7,7 +7,7 @@ pipeline's job (`pipeline.performance.model.model_from_stored`).
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -70,8 +70,9 @@ def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, ke
     rej = pd.DataFrame({k: rejected[k] if k in rejected else None for k in keys})
     if "imo" in rej:
         rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
-    if "voyage_id" in rej:
-        rej["voyage_id"] = rej["voyage_id"].astype("string")
+    for k in ("voyage_id", "bill_no"):
+        if k in rej:
+            rej[k] = rej[k].astype("string")
     rej["raw"] = rejected["raw"].astype("string")
     rej["reason"] = rejected["reason"].astype("string")
     rej["source_file"] = rejected["source_file"].astype("string") if "source_file" in rejected else None
@@ -91,58 +92,130 @@ def known_imos(db_path: Path) -> set[int]:
         return {int(r[0]) for r in con.execute("SELECT imo FROM vessels").fetchall()}
 
 
-def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame) -> dict[str, int]:
-    """Insert validated rows; rows identical to stored ones are no-ops, conflicting ones are rejected.
+def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame, *, replace: bool = False) -> dict[str, int]:
+    """Insert validated rows; rows identical to stored ones are no-ops, conflicting ones are rejected — or, with
+    `replace`, replace the stored ones, which are kept in `noon_reports_history` ("replaced by <source_file>").
 
-    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts.
+    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts, replaced, duplicates_in_file.
     """
-    good = good.reindex(columns=NOON_COLUMNS)
+    return import_noon_chunks(db_path, [(good, rejected)], replace=replace)
+
+
+IMPORT_MEMORY_LIMIT = "128MB"  # DuckDB's memory while a noon file is imported (it spills the rest to temp files)
+
+
+def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.DataFrame]], *,
+                       replace: bool = False) -> dict[str, int]:
+    """`import_noon` for a file read and validated chunk by chunk: one connection and ONE transaction (a file
+    that fails half-way stores nothing), so memory follows the chunk, not the file. A (vessel, time) already
+    taken by an earlier chunk of the same file is rejected as `duplicate timestamp in file`, as within a chunk.
+    With `replace`, a row differing from the stored report of its vessel and time replaces it (the stored one is
+    kept in noon_reports_history).
+
+    Returns counts: inserted, already_present, rejected (incl. conflicts and duplicates), conflicts, replaced,
+    duplicates_in_file.
+    """
     value_cols = [c for c in NOON_COLUMNS if c not in ("imo", "ts_utc", "source_file")]
     same = " AND ".join(f"(n.{c} IS NOT DISTINCT FROM g.{c})" for c in value_cols)
+    counts = {"inserted": 0, "already_present": 0, "rejected": 0, "conflicts": 0, "replaced": 0,
+              "duplicates_in_file": 0}
     with warehouse.connect(db_path) as con:
-        con.register("g_df", good)
+        # a large file's uncommitted rows spill to disk instead of growing the process (this connection only)
+        con.execute(f"SET memory_limit = '{IMPORT_MEMORY_LIMIT}'")
         con.execute("BEGIN TRANSACTION")
         try:
-            con.execute("CREATE TEMP TABLE g AS SELECT * FROM g_df")
-            present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchone()[0]
-            conflicts = con.execute(
-                f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
-            # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
-            con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
-                        "ORDER BY g.imo, g.ts_utc")
-            inserted = len(good) - present - len(conflicts)
-            if len(conflicts):
-                conflicts["raw"] = _raw_text(conflicts[[c for c in NOON_COLUMNS if c != "source_file"]])
-                conflicts["reason"] = "conflicts with a stored report for the same vessel and time"
-                rejected = pd.concat([rejected, conflicts], ignore_index=True)
-            rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
-            for c in ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
-                      "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
-                      "current_dir_rel_deg", "months_since_drydock"):
-                rej[c] = pd.to_numeric(rej[c], errors="coerce")
-            rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
-            rej["ts_utc"] = pd.to_datetime(rej["ts_utc"], errors="coerce")
-            rej["rejected_at"] = _utcnow()
-            con.register("rej_df", rej)
-            # the same raw row rejected for the same reason is stored once: re-imports add nothing
-            con.execute(
-                "INSERT INTO noon_reports_rejected SELECT r.* FROM rej_df r "
-                "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason)"
-            )
-            con.execute("DROP TABLE g")
+            con.execute("CREATE TEMP TABLE file_keys (imo BIGINT, ts_utc TIMESTAMP)")
+            for good, rejected in chunks:
+                good = good.reindex(columns=NOON_COLUMNS)
+                con.register("g_df", good)
+                con.execute("CREATE TEMP TABLE g AS SELECT * FROM g_df")
+                con.unregister("g_df")
+                dups = con.execute("SELECT g.* FROM g SEMI JOIN file_keys k USING (imo, ts_utc)").fetchdf()
+                if len(dups):
+                    con.execute("DELETE FROM g USING file_keys k WHERE g.imo = k.imo AND g.ts_utc = k.ts_utc")
+                con.execute("INSERT INTO file_keys SELECT imo, ts_utc FROM g")
+                present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchall()[0][0]
+                conflicts = con.execute(
+                    f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
+                replaced = 0
+                if replace and len(conflicts):
+                    cols = ", ".join(f"n.{c}" for c in NOON_COLUMNS)
+                    con.execute(f"INSERT INTO noon_reports_history SELECT {cols}, ?, 'replaced by ' || "
+                                f"coalesce(nullif(g.source_file, ''), 'a corrected report') FROM noon_reports n "
+                                f"JOIN g USING (imo, ts_utc) WHERE NOT ({same})", [_utcnow()])
+                    con.execute(f"DELETE FROM noon_reports n USING g WHERE n.imo = g.imo AND n.ts_utc = g.ts_utc "
+                                f"AND NOT ({same})")
+                    replaced, conflicts = len(conflicts), conflicts.head(0)
+                # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
+                con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
+                            "ORDER BY g.imo, g.ts_utc")
+                n_good = con.execute("SELECT count(*) FROM g").fetchall()[0][0]
+                counts["inserted"] += int(n_good - present - len(conflicts) - replaced)
+                counts["already_present"] += int(present)
+                counts["conflicts"] += len(conflicts)
+                counts["replaced"] += int(replaced)
+                counts["duplicates_in_file"] += len(dups)
+                for extra, why in ((conflicts, "conflicts with a stored report for the same vessel and time"),
+                                   (dups, "duplicate timestamp in file")):
+                    if len(extra):
+                        extra["raw"] = _raw_text(extra[[c for c in NOON_COLUMNS if c != "source_file"]])
+                        extra["reason"] = why
+                        rejected = pd.concat([rejected, extra], ignore_index=True)
+                counts["rejected"] += len(rejected)
+                _insert_noon_rejected(con, rejected)
+                con.execute("DROP TABLE g")
+            con.execute("DROP TABLE file_keys")
             con.execute("COMMIT")
         except Exception:
             con.execute("ROLLBACK")
             raise
-    return {"inserted": int(inserted), "already_present": int(present), "rejected": int(len(rejected)), "conflicts": int(len(conflicts))}
+    return counts
+
+
+def _insert_noon_rejected(con, rejected: pd.DataFrame) -> None:
+    rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
+    for c in ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
+              "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
+              "current_dir_rel_deg", "months_since_drydock"):
+        rej[c] = pd.to_numeric(rej[c], errors="coerce")
+    rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
+    rej["ts_utc"] = pd.to_datetime(rej["ts_utc"], errors="coerce")
+    rej["rejected_at"] = _utcnow()
+    con.register("rej_df", rej)
+    # the same raw row rejected for the same reason is stored once: re-imports add nothing
+    con.execute(
+        "INSERT INTO noon_reports_rejected SELECT r.* FROM rej_df r "
+        "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason)"
+    )
+    con.unregister("rej_df")
+
+
+def exclude_noon(db_path: Path, imo: int, from_utc, to_utc, reason: str) -> int:
+    """Move vessel `imo`'s stored reports with from_utc ≤ ts_utc ≤ to_utc (naive UTC) to `noon_reports_history`
+    ("excluded: <reason>"): refits no longer see them. Returns how many."""
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            args = [int(imo), pd.Timestamp(from_utc).to_pydatetime(), pd.Timestamp(to_utc).to_pydatetime()]
+            n = con.execute("SELECT count(*) FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args).fetchone()[0]
+            con.execute(f"INSERT INTO noon_reports_history SELECT {', '.join(NOON_COLUMNS)}, ?, ? FROM noon_reports "
+                        "WHERE imo = ? AND ts_utc BETWEEN ? AND ?", [_utcnow(), f"excluded: {reason}", *args])
+            con.execute("DELETE FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args)
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return int(n)
 
 
 BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]
 
 
-def import_bunkers(db_path: Path, good: pd.DataFrame) -> dict[str, int]:
+def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | None = None) -> dict[str, int]:
     """Insert validated bunker-log rows; a row identical to a stored one is a no-op, one that differs from the
-    stored row of the same (imo, bill_no, fuel_type) is not stored. Returns counts and the conflicting rows."""
+    stored row of the same (imo, bill_no, fuel_type) is not stored. Rows refused by validation go to
+    `bunker_logs_rejected` with their reason and raw text. Returns counts and the conflicting rows."""
+    _store_rejected(db_path, "bunker_logs_rejected", rejected, ["imo", "bill_no"])
     good = good.reindex(columns=BUNKER_COLUMNS)
     key = "imo, bill_no, fuel_type"
     same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))
@@ -232,12 +305,26 @@ def active_models(db_path: Path) -> dict[int, dict]:
         return _active_models(con)
 
 
-def _active_models(con) -> dict[int, dict]:
-    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd, data_to_utc FROM perf_models "
-                       "WHERE active").fetchall()
+def model_version(db_path: Path, imo: int, version: int | None = None) -> dict | None:
+    """Vessel `imo`'s model `version` (None: the active one) as `active_models` gives models, with its "status"; None
+    if there is no such model."""
+    with warehouse.connect(db_path, write=False) as con:
+        if version is None:
+            return _active_models(con).get(int(imo))
+        found = _active_models(con, "imo = ? AND version = ?", [int(imo), int(version)]).get(int(imo))
+        if found:
+            found["status"] = con.execute("SELECT any_value(status) FROM perf_models WHERE imo = ? AND version = ?",
+                                          [int(imo), int(version)]).fetchone()[0]
+        return found
+
+
+def _active_models(con, where: str = "active", params: list | None = None) -> dict[int, dict]:
+    rows = con.execute("SELECT imo, version, form, target, coefficients, months_dd, data_to_utc, envelope FROM perf_models "
+                       f"WHERE {where}", params or []).fetchall()
     out: dict[int, dict] = {}
-    for imo, version, form, target, coefs, months, data_to in rows:
-        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0, "data_to_utc": data_to})
+    for imo, version, form, target, coefs, months, data_to, envelope in rows:
+        d = out.setdefault(int(imo), {"version": int(version), "form": form, "months_dd": months or 0.0, "data_to_utc": data_to,
+                                      "envelope": envelope})
         d[target] = json.loads(coefs)
     return out
 
@@ -263,7 +350,7 @@ def _next_versions(con) -> dict[int, int]:
 
 
 FIT_COLUMNS = ["imo", "version", "fitted_at", "form", "target", "coefficients", "n_rows", "r2", "rmse", "cv_rmse", "holdout_rmse",
-               "n_holdout", "status", "reason", "active", "months_dd", "data_hash", "data_to_utc"]
+               "n_holdout", "status", "reason", "active", "months_dd", "data_hash", "data_to_utc", "envelope", "gate"]
 
 
 def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[int, str]] | None = None,
@@ -330,3 +417,29 @@ def _raw_text(df: pd.DataFrame) -> pd.Series:
     for c in cols[1:]:
         out = out + "|" + c
     return out.astype(object)
+
+
+HULL_COLUMNS = ["imo", "month", "n_reports", "speed_loss_pct", "flag", "model_version", "computed_at"]
+
+
+def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd.DataFrame]]) -> None:
+    """Replace the hull-performance months of each vessel in `monthly` (imo → (model version, months from
+    `pipeline.performance.hull.monthly_speed_loss`)). One transaction."""
+    if not monthly:
+        return
+    frames = [df.assign(imo=int(imo), model_version=version) for imo, (version, df) in monthly.items() if len(df)]
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("DELETE FROM hull_performance_monthly WHERE imo IN (SELECT unnest(?))", [[int(i) for i in monthly]])
+            if frames:
+                df = pd.concat(frames, ignore_index=True)
+                df["computed_at"] = _utcnow()
+                df["month"] = pd.to_datetime(df["month"]).dt.date
+                con.register("hull_df", df.reindex(columns=HULL_COLUMNS))
+                con.execute(f"INSERT INTO hull_performance_monthly ({', '.join(HULL_COLUMNS)}) "
+                            f"SELECT {', '.join(HULL_COLUMNS)} FROM hull_df")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise

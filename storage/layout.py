@@ -41,7 +41,8 @@ class DataLayout:
 
     @property
     def warehouse_snapshot(self) -> Path:
-        """Read-only copy for analysts, replaced atomically after each write."""
+        """Read-only copy for analysts, replaced atomically after each write once it passes the check (the newest
+        recovery copy; `storage.warehouse.snapshot_generations` lists the older ones)."""
         return self.root / "warehouse.snapshot.duckdb"
 
     @property
@@ -75,6 +76,11 @@ class DataLayout:
         return self.root / "locks"
 
     def ensure(self) -> "DataLayout":
+        """Create the folders and check the warehouse: a job calls this before it writes anything, so a damaged
+        warehouse stops it first (WarehouseCorruptError, naming the newest good snapshot)."""
+        from storage import warehouse
+
+        warehouse.check_before_writing(self.warehouse)
         for p in (self.root, self.raw, self.quarantine, self.cubes, self.exports, self.locks):
             p.mkdir(parents=True, exist_ok=True)
         return self

@@ -65,7 +65,7 @@ _ROUTES = {
     "runtime_s": "solver run time, seconds",
     "n_legs": "number of legs of the plan",
     "n_legs_beyond_forecast": "number of legs sailed past the forecast horizon (weather of the last step persisted)",
-    "forecast_flag": "'beyond horizon', 'before cycle', both (comma separated) or empty when the voyage lies in the forecast",
+    "forecast_flag": "'beyond horizon', 'before cycle', 'weather missing' (a hole in the cube's wind, sailed as calm; the reason names the legs), comma separated, or empty when the voyage lies in the forecast",
     "hours_beyond_forecast": "hours sailed past the last forecast step",
     "hours_before_cycle": "hours sailed before the forecast cycle's init time",
     "honest_baseline_rpm": "the one constant rpm (between the vessel's limits) at which the base route arrives at the RTA",
@@ -131,7 +131,7 @@ _MODELS = {
     "imo": "IMO number of the vessel",
     "version": "model version, per vessel and target",
     "fitted_at": f"when the model was fitted {UTC}",
-    "form": "model form: thesis | physical | fuzzy",
+    "form": "model form: thesis | physical | mlp",
     "target": "what the model predicts: speed (knots through water) | fuel (tonnes per hour)",
     "coefficients": "JSON {regressor: value}",
     "n_rows": "noon reports fitted on",
@@ -147,6 +147,18 @@ _MODELS = {
     "data_hash": "digest of the rows, form and fit settings (the same inputs give the same model)",
     "data_to_utc": f"newest report the coefficients were fitted on {UTC}",
     "flag": "why new reports contradict this active model",
+    "envelope": "JSON of the conditions fitted on: rpm and draft_m [least, largest], largest wind_kn and hs_m; routing "
+                "clips rpm settings to it and evaluates the model inside it",
+    "gate": "the gate the refit applied: 'default' or the settings that differed (jitroute refit --gate NAME=VALUE)",
+}
+_HULL = {
+    "imo": "IMO number of the vessel", "month": "calendar month (its first day, UTC)",
+    "n_reports": "noon reports of the month with a reference speed",
+    "speed_loss_pct": "median speed loss over the month's reports, percent: 100·(1 − measured STW / the active model's STW with a clean hull "
+                      "in the report's conditions)",
+    "flag": "speed loss above the threshold (settings.performance.hull_flag_pct, 5 % by default)",
+    "model_version": "version of the active model used as the reference",
+    "computed_at": f"when the month was computed {UTC}",
 }
 _VOYAGES = {
     "voyage_id": "voyage id", "imo": "IMO number of the vessel",
@@ -268,6 +280,11 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
                          {"imo": _VESSELS["imo"], **_REJECTED, "source_file": _NOON["source_file"]}),
     "noon_reports": ("noon reports: what each vessel sailed, burnt and met, per report", _NOON),
     "noon_reports_rejected": ("noon reports refused on import, with the reason", {**_NOON, **_REJECTED}),
+    "hull_performance_monthly": ("speed loss against a clean hull per vessel and month (ISO 19030 spirit), rewritten at "
+                                 "every refit", _HULL),
+    "noon_reports_history": ("stored noon reports replaced by corrected ones or excluded for a period, as they were",
+                             {**_NOON, "removed_at": f"when the report was replaced or excluded {UTC}",
+                              "reason": "replaced by <file> | excluded: <the operator's reason>"}),
     "perf_models": ("fitted vessel performance models (speed and fuel), every version", _MODELS),
     "voyages": ("voyages to route: ports, departure and required arrival", _VOYAGES),
     "voyages_rejected": ("rows of voyages files refused on import",
@@ -279,6 +296,9 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
         "fuel_type": "fuel grade, upper case: HFO | LFO | MGO | MDO | DO | LNG | ...",
         "received_t": "fuel received, tonnes", "rob_t": "fuel of this grade remaining on board before receiving, tonnes",
         "source_file": _NOON["source_file"]}),
+    "bunker_logs_rejected": ("rows of bunker-log files refused on import, with the reason and the raw row", {
+        "imo": "IMO number of the vessel, when readable", "bill_no": "bunker delivery note number, as written",
+        **_REJECTED, "source_file": _NOON["source_file"]}),
     "ingest_log": ("weather files fetched: one row per file and attempt", _INGEST),
     "cycles": ("weather forecast cycles: complete or what is missing", _CYCLES),
     "route_runs": ("fleet routing runs: one row per run", _RUNS),
@@ -287,6 +307,9 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
     **_PLANNING,
 }
 VIEWS: dict[str, tuple[str, dict[str, str]]] = {
+    "hull_performance": ("hull and propeller performance per vessel and month, with the trend", _view_of(
+        {k: v for k, v in _HULL.items() if k != "computed_at"}, vessel_name=_VESSELS["name"],
+        trend_pct_per_month="least-squares slope of the vessel's monthly speed loss, percent per month")),
     "latest_routes": ("the plan to sail per voyage: its newest plan, flagged when a newer attempt failed", _view_of(
         _ROUTES, dep_name=_VOYAGES["dep_name"], arr_name=_VOYAGES["arr_name"], vessel_name=_VESSELS["name"],
         newer_attempt_failed="true when a newer attempt made no plan (this one is still the plan)",
@@ -310,7 +333,8 @@ VIEWS: dict[str, tuple[str, dict[str, str]]] = {
         "planned_eta_utc": f"planned arrival {UTC}", "n_reports": "noon reports at sea on the voyage",
         "actual_fuel_t": "fuel burnt in tonnes, from the noon reports", "actual_hours": "hours steamed, from the noon reports",
         "actual_dist_nm": "distance sailed, nautical miles, from the noon reports",
-        "actual_arrival_utc": f"last noon report of the voyage, standing for the arrival {UTC}",
+        "actual_arrival_utc": f"the arrival: the first noon report within 10 NM of the destination, else the last report at "
+                              f"sea before the next voyage (at most RTA + 30 days) {UTC}",
         "fuel_error_pct": "planned minus actual fuel, percent of actual",
         "arrival_error_h": "actual minus planned arrival, hours", "late_h": "actual arrival minus RTA, hours"}),
 }

@@ -148,4 +148,49 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE perf_models_new RENAME TO perf_models;
         """,
     ),
+    Migration(
+        "fleet_006_bunker_logs_rejected",
+        # bunker-log rows refused on import, kept with the reason and their raw text (as for noon reports)
+        """
+        CREATE TABLE bunker_logs_rejected (imo BIGINT, bill_no VARCHAR, raw VARCHAR, reason VARCHAR NOT NULL,
+                                           source_file VARCHAR, rejected_at TIMESTAMP);
+        """,
+    ),
+    Migration(
+        "fleet_007_model_envelope_gate",
+        # the conditions a model was fitted on (routing clips rpm settings and guards the inputs to them) and the
+        # gate its refit applied ('default' or the settings that differed)
+        """
+        ALTER TABLE perf_models ADD COLUMN envelope VARCHAR;  -- JSON {rpm: [lo, hi], draft_m: [lo, hi], wind_kn, hs_m, ...}
+        ALTER TABLE perf_models ADD COLUMN gate VARCHAR;      -- 'default' or the gate settings that differed
+        """,
+    ),
+    Migration(
+        "fleet_008_noon_history",
+        # stored reports replaced by corrected ones, or excluded for a period, are kept here with why and when
+        f"""
+        CREATE TABLE noon_reports_history ({NOON_COLUMNS}, removed_at TIMESTAMP NOT NULL, reason VARCHAR NOT NULL);
+        """,
+    ),
+    Migration(
+        "fleet_009_hull_performance",
+        # speed loss against a clean hull per vessel and month (pipeline.performance.hull), rewritten at every refit
+        """
+        CREATE TABLE hull_performance_monthly (
+            imo BIGINT NOT NULL,
+            month DATE NOT NULL,
+            n_reports INTEGER NOT NULL,
+            speed_loss_pct DOUBLE,
+            flag BOOLEAN NOT NULL,
+            model_version INTEGER,
+            computed_at TIMESTAMP NOT NULL,
+            PRIMARY KEY (imo, month)
+        );
+        CREATE VIEW hull_performance AS
+        SELECT h.imo, v.name AS vessel_name, h.month, h.n_reports, h.speed_loss_pct, h.flag, h.model_version,
+               regr_slope(h.speed_loss_pct, year(h.month) * 12 + month(h.month)) OVER (PARTITION BY h.imo)
+                   AS trend_pct_per_month
+        FROM hull_performance_monthly h LEFT JOIN vessels v USING (imo);
+        """,
+    ),
 ]

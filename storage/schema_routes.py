@@ -35,6 +35,8 @@ LATEST_ROUTES_VIEW = """
 """
 
 
+ARRIVAL_NM = 10.0  # a noon report this close to the destination is the arrival (plan against actual)
+
 MIGRATIONS: list[Migration] = [
     Migration(
         "routes_001_tables",
@@ -384,6 +386,48 @@ MIGRATIONS: list[Migration] = [
         -- least distance to land (NM) along the plan outside its port approaches, sampled at 0.1 NM
         -- (25 means at least 25 NM); empty when there is no plan
         ALTER TABLE routes ADD COLUMN IF NOT EXISTS min_land_clearance_nm DOUBLE;
+        """,
+    ),
+    Migration(
+        "routes_voyage_performance_ends_at_arrival",
+        # plan against actual ends a voyage at its arrival: the first report after departure within ARRIVAL_NM of
+        # the destination; reports after it (shifting to the berth, port stays) are not sea time. Without such a
+        # report (no positions), up to the next voyage's departure, at most RTA + 30 days (a late voyage is no
+        # longer cut at RTA + 3 days).
+        f"""
+        CREATE OR REPLACE VIEW voyage_performance AS
+        WITH bounds AS (
+            SELECT voyage_id, imo, depart_utc, rta_utc, arr_lat, arr_lon,
+                   least(coalesce(lead(depart_utc) OVER (PARTITION BY imo ORDER BY depart_utc), rta_utc + INTERVAL 30 DAY),
+                         rta_utc + INTERVAL 30 DAY) AS bound_utc
+            FROM voyages),
+        arrivals AS (
+            SELECT b.voyage_id, min(n.ts_utc) AS arrived_utc
+            FROM bounds b JOIN noon_reports n ON n.imo = b.imo AND n.ts_utc > b.depart_utc AND n.ts_utc <= b.bound_utc
+            WHERE n.lat IS NOT NULL AND n.lon IS NOT NULL AND b.arr_lat IS NOT NULL AND b.arr_lon IS NOT NULL
+              AND 2 * 3440.065 * asin(sqrt(pow(sin(radians(n.lat - b.arr_lat) / 2), 2)
+                    + cos(radians(n.lat)) * cos(radians(b.arr_lat)) * pow(sin(radians(n.lon - b.arr_lon) / 2), 2)))
+                  <= {ARRIVAL_NM}
+            GROUP BY b.voyage_id),
+        windows AS (
+            SELECT b.voyage_id, b.imo, b.depart_utc, coalesce(a.arrived_utc, b.bound_utc) AS window_end_utc
+            FROM bounds b LEFT JOIN arrivals a USING (voyage_id)),
+        sailed AS (
+            SELECT w.voyage_id, count(*) AS n_reports, sum(n.fuel_t) AS actual_fuel_t, sum(n.hours) AS actual_hours,
+                   sum(n.dist_nm) AS actual_dist_nm, max(n.ts_utc) AS actual_arrival_utc
+            FROM windows w JOIN noon_reports n ON n.imo = w.imo AND n.ts_utc > w.depart_utc AND n.ts_utc <= w.window_end_utc
+            WHERE coalesce(n.dist_nm, 0) > 0 OR coalesce(n.stw_kn, 0) > 0.5  -- at sea
+            GROUP BY w.voyage_id)
+        SELECT v.voyage_id, v.imo, s.name AS vessel_name, v.dep_name, v.arr_name, v.depart_utc, v.rta_utc,
+               p.run_id, p.status AS plan_status, p.model_version, p.fuel_t AS planned_fuel_t, p.eta_utc AS planned_eta_utc,
+               a.n_reports, a.actual_fuel_t, a.actual_hours, a.actual_dist_nm, a.actual_arrival_utc,
+               100 * (p.fuel_t - a.actual_fuel_t) / nullif(a.actual_fuel_t, 0) AS fuel_error_pct,
+               date_diff('second', p.eta_utc, a.actual_arrival_utc) / 3600.0 AS arrival_error_h,
+               date_diff('second', v.rta_utc, a.actual_arrival_utc) / 3600.0 AS late_h
+        FROM voyages v
+        LEFT JOIN vessels s USING (imo)
+        LEFT JOIN latest_routes p USING (voyage_id)
+        LEFT JOIN sailed a USING (voyage_id);
         """,
     ),
 ]

@@ -9,6 +9,11 @@ pipeline is idle. The snapshot is written in DuckDB storage format `SNAPSHOT_STO
 DuckDB readers from that release on (BI drivers bundle older DuckDBs) open it, whatever DuckDB
 the pipeline runs.
 
+The snapshot is also the recovery copy, so it must never be a copy of a damaged warehouse: a writer first
+checks the warehouse (every table read whole, so DuckDB verifies the checksum of every block in use) and
+refuses to write to a damaged one; a new snapshot is published only after the copy passes the same check, and
+the previous `SNAPSHOT_GENERATIONS - 1` verified snapshots are kept as `warehouse.snapshot.1.duckdb`, ….
+
 Schema lives in `storage/schema_*.py` modules as ordered lists of named migrations; each
 name is applied once and recorded in `schema_migrations`.
 """
@@ -31,6 +36,11 @@ import duckdb
 # SNAPSHOT_STORAGE_NUMBER, in the file header).
 SNAPSHOT_STORAGE_VERSION = "v1.1.0"
 SNAPSHOT_STORAGE_NUMBER = 64
+# Verified snapshots kept: the newest (`warehouse.snapshot.duckdb`, the analysts' copy) and older ones. A command
+# writes several times within seconds; the newest snapshot becomes an older generation only once it is this old,
+# so the older generations stay copies from earlier commands rather than from the same one.
+SNAPSHOT_GENERATIONS = 3
+SNAPSHOT_MIN_AGE_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -43,6 +53,11 @@ class WarehouseBusyError(RuntimeError):
     pass
 
 
+class WarehouseWriteError(RuntimeError):
+    """The warehouse (or its snapshot) cannot be written: disk full, read-only or immutable; the message names the
+    file and what to do."""
+
+
 class WarehouseCorruptError(RuntimeError):
     """The warehouse file is damaged; the message names it and how to recover from the snapshot."""
 
@@ -51,15 +66,37 @@ _CORRUPT_SIGNS = ("not a valid duckdb database", "corrupt database file", "check
 
 
 def _corrupt(path: Path, exc: Exception) -> WarehouseCorruptError:
-    snap = snapshot_path(path)
     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    snap = newest_good_snapshot(path)
+    if snap is None:
+        return WarehouseCorruptError(
+            f"warehouse {path} is damaged ({first}) and no snapshot beside it passes the check; "
+            f"move it aside (`mv {path} {path}.damaged`) and rebuild it by re-importing the fleet and re-running the ingest")
     return WarehouseCorruptError(
-        f"warehouse {path} is damaged ({first}); recover it from the snapshot: "
-        f"`mv {path} {path}.damaged && cp {snap} {path}`, then re-run (work since the last write is re-done by the re-run)")
+        f"warehouse {path} is damaged ({first}); nothing was written. Recover it from the newest good snapshot {snap}: "
+        f"`mv {path} {path}.damaged && cp {snap} {path}`, then re-run (work since that snapshot is re-done by the re-run)")
 
 
 def _is_corrupt(exc: Exception) -> bool:
     return any(sign in str(exc).lower() for sign in _CORRUPT_SIGNS)
+
+
+_NO_SPACE_SIGNS = ("no space left", "file too large", "disk quota")
+_NO_WRITE_SIGNS = ("operation not permitted", "permission denied", "read-only file system")
+
+
+def _unwritable(path: Path, exc: Exception) -> WarehouseWriteError | None:
+    """The one-line error for a write the file system refused (full, read-only, immutable); None for other errors."""
+    text = str(exc).lower()
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if any(sign in text for sign in _NO_SPACE_SIGNS):
+        return WarehouseWriteError(f"no space to write warehouse {path} ({first}): free space on its disk and re-run "
+                                   "(what this command had not committed is not in the warehouse)")
+    if any(sign in text for sign in _NO_WRITE_SIGNS):
+        return WarehouseWriteError(f"warehouse {path} cannot be written ({first}): make it writable (permissions, "
+                                   f"`chattr -i`, a read-write mount) and re-run; analysts can still read "
+                                   f"{snapshot_path(path)}")
+    return None
 
 
 def _all_migrations() -> list[Migration]:
@@ -85,6 +122,9 @@ def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnecti
                 raise _corrupt(path, exc) from exc
             if not isinstance(exc, duckdb.IOException):
                 raise
+            refused = _unwritable(path, exc)
+            if refused is not None:  # not another process's lock: waiting would not help
+                raise refused from exc
             # another process holds the file lock
             if "lock" not in str(exc).lower() or time.monotonic() >= deadline:
                 raise WarehouseBusyError(
@@ -128,6 +168,7 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
     con = _open(path, read_only=not write, wait_s=wait_s)
     try:
         if write:
+            verify(con)  # before anything is written to it
             migrate(con)
             from storage.route_store import reap_dead_runs  # here: route_store itself builds on this module
 
@@ -139,6 +180,9 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
     except duckdb.Error as exc:
         if _is_corrupt(exc):  # a damaged block met while reading or writing
             raise _corrupt(path, exc) from exc
+        refused = _unwritable(path, exc)
+        if refused is not None:
+            raise refused from exc
         raise
     finally:
         con.close()
@@ -149,6 +193,58 @@ def snapshot_path(path: Path) -> Path:
     return path.with_name(path.stem + ".snapshot.duckdb")
 
 
+def snapshot_generations(path: Path) -> list[Path]:
+    """The snapshot files of the warehouse `path`, newest first: `<name>.snapshot.duckdb`, `<name>.snapshot.1.duckdb`, …"""
+    snap = snapshot_path(path)
+    return [snap] + [snap.with_name(f"{Path(path).stem}.snapshot.{k}.duckdb") for k in range(1, SNAPSHOT_GENERATIONS)]
+
+
+def verify(con: duckdb.DuckDBPyConnection) -> None:
+    """Read every row of every table on `con` (DuckDB checks each block's checksum as it reads it); raises
+    duckdb.Error on a damaged block. A cheap pass: one hash over each table, nothing kept."""
+    tables = con.execute("SELECT schema_name, table_name FROM duckdb_tables() "
+                         "WHERE database_name = current_database() AND NOT temporary").fetchall()
+    for schema, table in tables:
+        con.execute(f'SELECT count(*), sum(hash(t)) FROM "{schema}"."{table}" AS t').fetchall()
+
+
+def check_file(path: Path) -> str | None:
+    """None when the DuckDB file `path` opens and passes `verify`, else why not (one line)."""
+    try:
+        con = duckdb.connect(str(path), read_only=True)
+    except duckdb.Error as exc:
+        return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    try:
+        verify(con)
+        return None
+    except duckdb.Error as exc:
+        return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    finally:
+        con.close()
+
+
+def newest_good_snapshot(path: Path) -> Path | None:
+    """The newest snapshot of the warehouse `path` that exists and passes the check, or None."""
+    return next((snap for snap in snapshot_generations(path) if snap.exists() and check_file(snap) is None), None)
+
+
+def check_before_writing(path: Path, wait_s: float = 60.0) -> None:
+    """Raise WarehouseCorruptError (naming the newest good snapshot) when the warehouse `path` exists and is
+    damaged, so a command stops before it writes anything (cube, exports or rows). A missing warehouse passes."""
+    path = Path(path)
+    if not path.exists():
+        return
+    con = _open(path, read_only=True, wait_s=wait_s)
+    try:
+        verify(con)
+    except duckdb.Error as exc:
+        if _is_corrupt(exc):
+            raise _corrupt(path, exc) from exc
+        raise
+    finally:
+        con.close()
+
+
 def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
     """Copy the warehouse `path` open on `con` to `<name>.snapshot.duckdb` atomically for analysts, in storage
     format `SNAPSHOT_STORAGE_VERSION`: a byte copy when the warehouse is in that format (every warehouse created
@@ -157,21 +253,55 @@ def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
 
     Call it on a checkpointed write connection (as `connect` does), so no other writer changes the warehouse
     during the copy and a newer snapshot is never replaced by an older one.
+
+    The copy is published only if it passes `check_file`; otherwise WarehouseCorruptError is raised and every
+    snapshot is left as it was. The snapshot it replaces, once SNAPSHOT_MIN_AGE_S old, becomes
+    `<name>.snapshot.1.duckdb` (and so on, up to SNAPSHOT_GENERATIONS files), so the last few verified copies stay.
     """
     path = Path(path)
     snap = snapshot_path(path)
     tmp = snap.with_name(snap.name + f".tmp{os.getpid()}")
     tmp.unlink(missing_ok=True)
     try:
-        if storage_version_number(path) == SNAPSHOT_STORAGE_NUMBER:
-            shutil.copyfile(path, tmp)
-        else:
-            _copy_in_snapshot_format(con, tmp)
+        try:
+            if storage_version_number(path) == SNAPSHOT_STORAGE_NUMBER:
+                shutil.copyfile(path, tmp)
+            else:
+                _copy_in_snapshot_format(con, tmp)
+        except OSError as exc:
+            raise WarehouseWriteError(
+                f"the snapshot {tmp} could not be written ({exc.strerror or exc}): free space (or make {snap.parent} "
+                f"writable) and re-run; warehouse {path} holds this command's writes and the snapshots are as they were"
+            ) from exc
+        problem = check_file(tmp)
+        if problem is not None:
+            raise WarehouseCorruptError(
+                f"the snapshot copy of warehouse {path} fails the check ({problem}), so it was not published and the "
+                f"snapshots {snap.name} … are as they were; check the disk (space, errors) and re-run")
+        if snap.exists() and time.time() - snap.stat().st_mtime >= SNAPSHOT_MIN_AGE_S:
+            _keep_older_generations(path)
         os.replace(tmp, snap)
     finally:
         tmp.unlink(missing_ok=True)
         tmp.with_name(tmp.name + ".wal").unlink(missing_ok=True)
     return snap
+
+
+def _keep_older_generations(path: Path) -> None:
+    """Shift the snapshots one generation older (the oldest is dropped); the newest stays in place (a hard link is
+    made for generation 1) so analysts never find the snapshot missing."""
+    gens = snapshot_generations(path)
+    for newer, older in reversed(list(zip(gens[1:-1], gens[2:]))):
+        if newer.exists():
+            os.replace(newer, older)
+    if len(gens) > 1 and gens[0].exists():
+        link = gens[1].with_name(gens[1].name + f".tmp{os.getpid()}")
+        link.unlink(missing_ok=True)
+        try:
+            os.link(gens[0], link)
+        except OSError:  # a file system without hard links
+            shutil.copyfile(gens[0], link)
+        os.replace(link, gens[1])
 
 
 def _copy_in_snapshot_format(con: duckdb.DuckDBPyConnection, target: Path) -> None:

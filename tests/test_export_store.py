@@ -32,8 +32,32 @@ def test_stale_staging_of_dead_runs_is_removed_and_a_live_runs_kept(tmp_path):
     assert sorted(p.name for p in (tmp_path / "exports" / "runs").iterdir()) == [".staging-live"]
 
 
-@pytest.mark.parametrize("name", ["../V1.rtz", "a/b.rtz", "", "..", "V1\n.rtz"])
+@pytest.mark.parametrize("name", ["../V1.rtz", "a/../../b.rtz", "", "..", "V1\n.rtz", "voyages/V1/x/y.rtz", "/abs.rtz",
+                                  "voyages//V1.rtz"])
 def test_a_file_name_that_is_not_plain_is_refused(tmp_path, name):
     with pytest.raises(ExportPathError):
         RunExports(str(tmp_path / "exports")).stage("r1", name, b"x")
     assert not (tmp_path / "exports").exists() or not any((tmp_path / "exports").rglob("*.rtz"))
+
+
+def test_voyage_ids_named_like_run_files_or_like_each_other_s_files_overwrite_nothing(tmp_path):
+    """Voyage IDs that pass the ID rule but spell a run file (`fleet_map`, `weather_waves_<cycle>`) or another voyage's
+    file (`V20001.convergence` + `.png` = `V20001` + `.convergence.png`): every staged file is published apart."""
+    from pipeline.export.bundle import SUFFIX
+    from pipeline.export.paths import voyage_export_key
+
+    runs = RunExports(str(tmp_path / "exports"))
+    staged = {"fleet_map.png": b"run map", "weather_waves_2020-12-01T12.png": b"run waves"}
+    for vid in ("fleet_map", "weather_waves_2020-12-01T12", "V20001", "V20001.convergence"):
+        for kind, suffix in SUFFIX.items():
+            staged[voyage_export_key(vid, suffix)] = f"{vid} {kind}".encode()
+    for key, data in staged.items():
+        runs.stage("r1", key, data)
+    manifest = runs.publish("r1")
+    out = tmp_path / "exports" / "runs" / "r1"
+    assert len(manifest["files"]) == len(staged) == 2 + 4 * len(SUFFIX)  # nothing lost to a collision
+    for key, data in staged.items():
+        assert (out / key).read_bytes() == data, key
+    assert (out / "fleet_map.png").read_bytes() == b"run map"
+    assert (out / "voyages" / "V20001" / "V20001.convergence.png").read_bytes() == b"V20001 convergence"
+    assert (out / "voyages" / "V20001.convergence" / "V20001.convergence.png").read_bytes() == b"V20001.convergence png"

@@ -72,11 +72,12 @@ def test_rtz_exports_validate_against_the_published_schema(fleet_root):
 
     root, fl, first, _ = fleet_root
     out = Path(first["routing"]["exports_dir"])
-    files = sorted(out.glob("*.rtz"))
+    files = sorted(out.glob("voyages/*/*.rtz"))
     assert len(files) == len(fl.voyages)  # every routed voyage, none for the failed one
     for f in files:
         validate_rtz(f.read_bytes())
-    gj = json.loads((out / f"{fl.voyages.voyage_id.iloc[0]}.geojson").read_text())
+    vid = fl.voyages.voyage_id.iloc[0]
+    gj = json.loads((out / "voyages" / vid / f"{vid}.geojson").read_text())
     assert gj["type"] == "FeatureCollection"
 
 

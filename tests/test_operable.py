@@ -144,7 +144,7 @@ def test_a_killed_run_is_marked_failed_by_the_next_command_and_publishes_nothing
     runs = root / "exports" / "runs"
     assert not (runs / run_id).exists() and not list(runs.glob(".staging-*"))
     published = [p.name for p in runs.iterdir()]
-    assert len(published) == 1 and (runs / published[0] / "V20001.rtz").exists()
+    assert len(published) == 1 and (runs / published[0] / "voyages" / "V20001" / "V20001.rtz").exists()
     left = wait_until_gone(tag, 30)
     kill_tagged(tag)
     assert not left, describe(left)
@@ -162,8 +162,8 @@ def test_a_failed_export_is_counted_and_the_others_still_written(routed_root, tm
     assert not any("export" in (reason or "") for _v, _s, reason in rows)  # the route stands; its reason is about the route
     assert len(summary["export_failures"]) == 3 and all(": rtz: " in e for e in summary["export_failures"])
     out = Path(summary["exports_dir"])
-    assert not list(out.glob("*.rtz"))
-    assert len(list(out.glob("*.geojson"))) == 3 and len(list(out.glob("V*.png"))) >= 3
+    assert not list(out.glob("voyages/*/*.rtz"))
+    assert len(list(out.glob("voyages/*/*.geojson"))) == 3 and len(list(out.glob("voyages/V*/V*.png"))) >= 3
     assert _sql(root, "SELECT n_export_failed FROM fleet_savings")[0][0] == 3
 
 

@@ -230,9 +230,15 @@ def test_versions_nothing_new_new_batch_worse_form_and_switching_back(history):
     again = _store_refit(db)
     assert _models(db) == [(i, 1, "physical", "active", True, None) for i in imos]
     assert all(not s["changed"] and s["why"] == "same as the active model" for s in again)
+    # the thesis form learns weather gains on these ships: the sanity gate refuses it, naming the check and the point
+    insane = _store_refit(db, "thesis", gate=Gate(max_speed_rmse_share=1.0, max_fuel_rmse_share=1.0))
+    assert all(not s["changed"] and s["why"].startswith("physical sanity (") and " at rpm " in s["why"] for s in insane)
+    assert [(m[1], m[2], m[3]) for m in _models(db)] == [(1, "physical", "active"), (2, "thesis", "rejected")] * 2
+    with duckdb.connect(str(db)) as con:
+        con.execute("DELETE FROM perf_models WHERE version = 2")
     # a worse form is compared with the active model on the same held-out rows, and stored rejected
     # (with a gate it passes on its own)
-    worse = _store_refit(db, "thesis", gate=Gate(max_speed_rmse_share=1.0, max_fuel_rmse_share=1.0))
+    worse = _store_refit(db, "thesis", gate=Gate(max_speed_rmse_share=1.0, max_fuel_rmse_share=1.0, sanity=False))
     assert [(m[1], m[2], m[3]) for m in _models(db)] == [(1, "physical", "active"), (2, "thesis", "rejected")] * 2
     assert all(not s["changed"] and s["why"].startswith("worse than the active model on the 50 held-out rows") for s in worse)
     # switching back and forth with nothing new stores nothing
@@ -257,7 +263,7 @@ def test_switching_forms_compares_and_reactivates_instead_of_storing_a_copy(hist
     db, _, imos = history
     _store_refit(db, "physical")
     # a gate that lets anything through activates the thesis form over the physical one ...
-    loose = Gate(min_r2=-1e9, max_speed_rmse_share=1e9, max_fuel_rmse_share=1e9, not_worse=1e9)
+    loose = Gate(min_r2=-1e9, max_speed_rmse_share=1e9, max_fuel_rmse_share=1e9, not_worse=1e9, sanity=False)
     _store_refit(db, "thesis", gate=loose)
     assert [(m[1], m[2], m[3]) for m in _models(db) if m[0] == imos[0]] == [(1, "physical", "superseded"), (2, "thesis", "active")]
     # ... and switching back compares the physical fit with it on the same rows: better, so v1 is active again
@@ -357,7 +363,10 @@ def test_batched_robust_fit_equals_each_vessel_fitted_alone(fleet):
             alone = fit.fit_target("physical", target, X[s], y[s], robust=True)
             np.testing.assert_allclose(res.coef, alone.coef, rtol=1e-12, atol=1e-15)
             assert (res.rmse, res.cv_rmse, res.dropped) == (alone.rmse, alone.cv_rmse, alone.dropped)
-            coef, rmse, cv = _reference_fit(X[s], y[s], robust=True)
+            # a fouling or weather term that came out as a gain is left out: the reference fits without it
+            Xr = X[s].copy()
+            Xr[:, [res.names.index(d) for d in res.dropped if d in features.NON_NEGATIVE | features.NON_POSITIVE_SPEED]] = 0.0
+            coef, rmse, cv = _reference_fit(Xr, y[s], robust=True)
             np.testing.assert_allclose(res.coef, coef, rtol=1e-8, atol=1e-12 * np.abs(coef).max())
             assert res.rmse == pytest.approx(rmse, rel=1e-9) and res.cv_rmse == pytest.approx(cv, rel=1e-8)
     assert fit.fit_targets("physical", "speed", fit.design("physical", "speed", inp), inp["stw_kn"], bounds,
@@ -524,7 +533,7 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
     p1, info = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
     p2, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
     p3, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=4)
-    assert p1.shape == (mlp.N_PARAMS,) == (256,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
+    assert p1.shape == (mlp.N_PARAMS,) == (266,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
     assert (info["n_train"], info["n_val"]) == (240, 60) and info["best_epoch"] < info["epochs"] <= mlp.MAX_EPOCHS
     # the validation rows are the newest: spoiling them changes where training stops, not what it learns from
     spoiled = Y[fit_rows].copy()
@@ -532,10 +541,11 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
     p4, info4 = mlp.train(X[fit_rows], spoiled, seed=3)
     np.testing.assert_array_equal(p4[: 2 * mlp.N_IN], p1[: 2 * mlp.N_IN])  # input scaling from the older rows only
     assert info4["best_epoch"] != info["best_epoch"]
-    # on rows it never saw, speed within 25 % of the noise and fuel within 3 %
+    # on rows it never saw, speed within the noise and fuel within 2 % (the monotone shape costs a little speed
+    # accuracy here, 0.147 kn against 0.092 unconstrained, and gains fuel accuracy, 1.2 % against 2.4 %)
     pred = mlp.forward(p1, X[300:])
-    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.25 * 0.15 + 0.1
-    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.03
+    assert np.sqrt(np.mean((pred[:, 0] - truth[300:, 0]) ** 2)) < 0.15
+    assert np.mean(np.abs(pred[:, 1] / truth[300:, 1] - 1)) < 0.02
     # routing's compiled forward pass is the same network
     for i in range(300, 310):
         for out in (0, 1):
@@ -550,9 +560,14 @@ def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
                             "draft_m": cols[1], "trim_m": cols[2], "wind_kn": cols[3], "wind_dir_rel_deg": cols[4], "wave_m": cols[5],
                             "wave_dir_rel_deg": cols[6], "months_since_drydock": 0.0, "stw_kn": Y[:, 0], "fuel_t": Y[:, 1] * 24,
                             "hours": 24.0})
+    # "best" keeps the physical form: the (monotone) network is not better on the held-out rows here
     rows, s = refit_vessel(9140607, reports, None, 1, form="best")
-    assert s["changed"] and s["form"] == "mlp" and "physical speed" in s["reason"] and "thesis speed" in s["reason"]
-    assert s["speed_holdout_rmse"] < 0.25 and [r["form"] for r in rows] == ["mlp", "mlp"]
+    assert s["changed"] and s["form"] == "physical" and "mlp speed" in s["reason"] and "thesis speed" in s["reason"]
+    rows, s = refit_vessel(9140607, reports, None, 1, form="mlp")
+    assert s["changed"] and s["form"] == "mlp" and s["gate"] == "default"
+    # monotone by construction, the network is about as good as the physical form here (0.297 against 0.316 kn;
+    # unconstrained it scored 0.199 but learnt speed gains in heavy head seas, which the gate refuses)
+    assert s["speed_holdout_rmse"] < 0.30 and [r["form"] for r in rows] == ["mlp", "mlp"]
     coef = np.array(list(json.loads(rows[0]["coefficients"]).values()))
     assert np.array_equal(coef, list(json.loads(rows[1]["coefficients"]).values()))  # one network, two outputs
     m = PerformanceModel("mlp", coef, coef)
@@ -627,8 +642,9 @@ def test_bunker_logs_import_with_validation_from_the_command_line(tmp_path, monk
     res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
     assert res.exit_code == 0, res.output
     assert "14 rows → 7 imported, 0 already present, 7 rejected" in res.output
-    for reason in ("negative received_t", "received looks like kg", "bad date", "unknown vessel", "missing fuel_type",
-                   "not a number in received_t", "duplicate bill and fuel in file"):
+    for reason in ("negative received_t", "received looks like kg", "date_utc: ambiguous timestamp",
+                   "IMO number fails its check digit", "missing fuel_type", "not a number in received_t",
+                   "duplicate bill and fuel in file"):
         assert f"1 × {reason}" in res.output
     with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
         rows = con.execute("SELECT fuel_type, sum(received_t) FROM bunker_logs GROUP BY 1 ORDER BY 1").fetchall()
@@ -670,3 +686,122 @@ def test_voyage_performance_sets_plan_beside_actual(tmp_path):
     assert v1.fuel_error_pct == pytest.approx(-5.0) and v1.arrival_error_h == pytest.approx(6.0) and v1.late_h == 0.0
     v2 = vp.loc["voy20200002"]  # sailed, never planned: actuals without a plan
     assert v2.n_reports == 5 and v2.actual_fuel_t == 100.0 and pd.isna(v2.planned_fuel_t) and pd.isna(v2.fuel_error_pct)
+
+
+def test_bunker_import_is_as_strict_as_noon_import_and_keeps_every_refused_row(tmp_path, monkeypatch):
+    """The attacks on the old import: a date-only first row no longer decides the format of the others; day/month
+    dates are refused, not guessed; inf, a date in 2031, IMO 9140607.9 and 17,000 t for a 3,500 dwt ship are refused;
+    every refused row is in bunker_logs_rejected with its reason and raw text."""
+    import logging
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "300")
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    monkeypatch.setattr(logging, "raiseExceptions", False)
+    data = tmp_path / "data"
+    data.mkdir()
+    fleet_store.import_vessels(data / "warehouse.duckdb", GAS_NIRVANA_VESSEL)
+    row = dict(imo="9140607", port="Hai Phong", supplier="PV Oil", fuel_type="DO", received_t="50", rob_t="0")
+    rows = pd.DataFrame([
+        dict(row, bill_no="g1", date_utc="2020-12-06"),  # date only, first: fine, and says nothing about the others
+        dict(row, bill_no="g2", date_utc="2020-12-07T08:30:00Z"),
+        dict(row, bill_no="g3", date_utc="2020-12-08T08:30:00+07:00"),
+        dict(row, bill_no="g4", date_utc="2020-12-09 10:00"),
+        dict(row, bill_no="a1", date_utc="01/02/2025"),
+        dict(row, bill_no="a2", date_utc="13/02/2025"),
+        dict(row, bill_no="f1", date_utc="2020-12-10", rob_t="inf"),
+        dict(row, bill_no="f2", date_utc="2031-01-01"),
+        dict(row, bill_no="f3", date_utc="2020-12-10", imo="9140607.9"),
+        dict(row, bill_no="f4", date_utc="2020-12-10", received_t="17000"),
+        dict(row, bill_no="f5", date_utc="2020-12-10", port="Hai Phong\n\x1b[31mfake"),
+    ])
+    path = tmp_path / "bunkers.csv"
+    rows.to_csv(path, index=False)
+    res = CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    assert res.exit_code == 0, res.output
+    assert "11 rows → 4 imported, 0 already present, 7 rejected" in res.output
+    assert "bunker_logs_rejected" in res.output
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        stored = con.execute("SELECT bill_no, date_utc FROM bunker_logs ORDER BY bill_no").fetchall()
+        refused = dict(con.execute("SELECT bill_no, reason FROM bunker_logs_rejected").fetchall())
+        raw = dict(con.execute("SELECT bill_no, raw FROM bunker_logs_rejected").fetchall())
+    assert [b for b, _ in stored] == ["g1", "g2", "g3", "g4"]
+    assert [str(d) for _, d in stored] == ["2020-12-06 00:00:00", "2020-12-07 08:30:00", "2020-12-08 01:30:00",
+                                           "2020-12-09 10:00:00"]
+    assert refused["a1"].startswith("date_utc: ambiguous timestamp") and refused["a2"].startswith("date_utc: ambiguous")
+    assert refused["f1"] == "not a finite number in rob_t"
+    assert refused["f2"] == "date in the future"
+    assert refused["f3"] == "not an integer in imo"
+    assert refused["f4"] == "received more than the vessel's deadweight (3500 t)"
+    assert refused["f5"] == "control characters or a line break in port"
+    assert "01/02/2025" in raw["a1"] and "9140607.9" in raw["f3"] and "17000" in raw["f4"]
+    assert len(stored) + len(refused) == len(rows)  # nothing lost
+    # a re-import stores no refused row twice
+    CliRunner().invoke(app, ["bunker", "import", str(path), "--data", str(data)])
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        assert con.execute("SELECT count(*) FROM bunker_logs_rejected").fetchone()[0] == 7
+
+
+def test_plan_against_actual_ends_a_late_voyage_at_its_arrival_not_at_rta_plus_3_days(tmp_path):
+    """A voyage arriving four days late is measured to its arrival report (within 10 NM of the destination), and a
+    shifting-to-berth report after arrival is not sea time."""
+    from storage import warehouse
+
+    db = tmp_path / "w.duckdb"
+    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
+    fleet_store.import_voyages(db, pd.DataFrame([dict(
+        voyage_id="voy20200001", imo=9140607, dep_name="Hai Phong", arr_name="Sai Gon", dep_lat=20.8, dep_lon=106.8,
+        arr_lat=10.7, arr_lon=106.8, depart_utc="2020-12-06T00:00Z", rta_utc="2020-12-10T12:00Z", draft_m=6.0, trim_m=2.0,
+        rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)]))
+    days = pd.date_range("2020-12-06T12:00", "2020-12-14T12:00", freq="D")  # 9 reports, the last at the destination
+    lat = np.linspace(19.6, 10.72, len(days))
+    sea = pd.DataFrame({"imo": "9140607", "ts_utc": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "lat": lat.round(3).astype(str),
+                        "lon": "106.8", "rpm": "120", "draft_m": "6", "stw_kn": "5", "sog_kn": "5", "dist_nm": "120",
+                        "hours": "24", "fuel_t": "20"})
+    berth = pd.DataFrame([{"imo": "9140607", "ts_utc": "2020-12-15T10:00:00Z", "lat": "10.77", "lon": "106.74", "rpm": "40",
+                           "draft_m": "6", "stw_kn": "0.2", "sog_kn": "0.2", "dist_nm": "5", "hours": "22", "fuel_t": "1.5"}])
+    good, bad = validate_noon(pd.concat([sea, berth], ignore_index=True), {9140607})
+    assert len(good) == 10 and len(bad) == 0
+    fleet_store.import_noon(db, good, bad)
+    with warehouse.connect(db) as con:
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', '2020-12-05', 'ok')")
+        con.execute("INSERT INTO routes (run_id, voyage_id, imo, status, depart_utc, eta_utc, rta_utc, fuel_t, model_version) "
+                    "VALUES ('r1', 'voy20200001', 9140607, 'ok', '2020-12-06', '2020-12-10 06:00', '2020-12-10 12:00', 95.0, 3)")
+    with duckdb.connect(str(db), read_only=True) as con:
+        v = con.execute("SELECT * FROM voyage_performance").fetchdf().iloc[0]
+    assert v.n_reports == 9 and v.actual_fuel_t == 180.0 and v.actual_hours == 216.0  # the berth report left out
+    assert str(v.actual_arrival_utc) == "2020-12-14 12:00:00"
+    assert v.fuel_error_pct == pytest.approx(100 * (95 - 180) / 180)  # -47.2 %, not cut at RTA + 3 days
+    assert v.arrival_error_h == pytest.approx(4 * 24 + 6) and v.late_h == pytest.approx(96.0)
+
+
+def test_a_noon_file_imported_in_chunks_stores_what_a_whole_file_import_stores(fleet, tmp_path, monkeypatch):
+    """Read, validated and stored 500 rows at a time (in one transaction): the same rows, rejected rows and reasons as
+    one chunk, including a (vessel, time) repeated in another chunk of the file (a duplicate, not a second report)."""
+    import flows.jobs.refit as refit_job
+
+    noon = _as_text(fleet.noon)
+    repeat = noon.iloc[[10]].copy()
+    repeat["fuel_t"] = "99"  # the same vessel and time 2,000 rows later, with other values
+    path = tmp_path / "noon.csv"
+    pd.concat([noon.iloc[:2000], repeat, noon.iloc[2000:]], ignore_index=True).to_csv(path, index=False)
+    results = {}
+    for rows in (10**9, 500):
+        monkeypatch.setattr(refit_job, "NOON_CHUNK_ROWS", rows)
+        monkeypatch.setattr(refit_job.read_table_chunks, "__defaults__", (rows,))
+        root = tmp_path / f"data{rows}"
+        root.mkdir()
+        fleet_store.import_vessels(root / "warehouse.duckdb", fleet.vessels)
+        counts = refit_job.import_noon_file(str(path), data_root=str(root))
+        with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+            stored = con.execute("SELECT * FROM noon_reports ORDER BY imo, ts_utc").fetchdf()
+            rejected = con.execute("SELECT reason, count(*) FROM noon_reports_rejected GROUP BY 1 ORDER BY 1").fetchall()
+        results[rows] = counts, stored, rejected
+    (whole, stored_whole, rej_whole), (chunked, stored_chunked, rej_chunked) = results[10**9], results[500]
+    assert chunked == whole and chunked["reasons"].get("duplicate timestamp in file", 0) >= 1
+    assert chunked["rows"] == len(noon) + 1 == chunked["inserted"] + chunked["rejected"]  # nothing lost
+    pd.testing.assert_frame_equal(stored_chunked, stored_whole)
+    assert rej_chunked == rej_whole

@@ -203,3 +203,21 @@ def test_lines_are_laid_closer_when_the_default_ones_leave_no_route_at_sea():
     assert reachable(space) and space.n_lines == 2 * coarse.n_lines
     open_sea = build_search_space((30.0, -160.0), (33.0, -146.0))  # nothing to thread: the default stays
     assert open_sea.n_lines == default_n_lines(open_sea.base_distance_nm)
+
+
+def test_a_strait_between_two_nodes_of_a_line_gets_more_nodes_along_the_lines():
+    """Through Gibraltar (clear corridor ≥ 3.5 NM from land): the default 21 nodes a line leave its corridor between
+    two nodes, 41 find it; the plan keeps the 2 NM clearance, checked on the mask independently of the graph."""
+    from pipeline.routing.search_space import lay_out_lines
+
+    dep, arr = (35.95, -6.0), (36.0, -5.0)
+    assert not reachable(lay_out_lines(dep, arr))  # the default layout: no way through
+    space = build_search_space(dep, arr)
+    assert reachable(space) and space.lat.shape[1] == 41 and space.n_lines == lay_out_lines(dep, arr).n_lines
+    pr = problem(dep, arr, 8.0, n_lines=None, n_points=21)
+    plan = solve(pr, CALM, solver="dp", space=space)
+    assert plan.status == "ok", plan.reason
+    assert plan.min_land_clearance_nm >= 2.0 - 1e-6
+    lat, lon = np.array(plan.waypoints).T
+    assert lon.min() < -5.7 and lon.max() > -5.3  # it sails through the strait, not round anything
+    assert not globe.is_land(lat, lon).any()

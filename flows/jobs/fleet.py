@@ -27,7 +27,8 @@ from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.export.bundle import SUFFIX
 from pipeline.performance.model import model_from_stored
-from pipeline.export.paths import ExportPathError, export_name
+from pipeline.export.paths import ExportPathError, voyage_export_key
+from pipeline.validate_ids import markdown_cell, printable
 from pipeline.export.voyage import utc_datetime
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
@@ -110,21 +111,21 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             results = [failed_result(job, f"routing task lost: {type(error).__name__}: {error}") for job in batch]
         for res in results:
             for lvl, msg in res.get("log", []):
-                LOG.log(level.get(lvl, logging.INFO), "%s", msg)
+                LOG.log(level.get(lvl, logging.INFO), "%s", printable(msg))
             r = res["route"]
             rows.append(r)
             legs.extend(res["legs"])
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
             for kind, data in res.get("exports", {}).items():
-                try:  # the voyage ID makes the file name: one plain name in the run folder, or refused naming the voyage
-                    run_exports.stage(r["run_id"], export_name(r["voyage_id"], SUFFIX[kind]), data)
+                try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
+                    run_exports.stage(r["run_id"], voyage_export_key(r["voyage_id"], SUFFIX[kind]), data)
                 except (OSError, ExportPathError) as exc:
                     export_errors.append(f"{r['voyage_id']}: {kind}: {exc}")
                     LOG.error("voyage %s: %s export not written: %s", r["voyage_id"], kind, exc)
             done += 1
-            LOG.info("routed %d/%d: %s %s%s", done, len(jobs), r["voyage_id"], r["status"],
-                     f" ({r['reason']})" if r.get("reason") else "")
+            LOG.info("routed %d/%d: %s %s%s", done, len(jobs), printable(r["voyage_id"]), r["status"],
+                     f" ({printable(r['reason'])})" if r.get("reason") else "")
 
     if jobs:
         with dask_pool.dask_client(dask_address, n_workers) as client:
@@ -286,8 +287,10 @@ def run_markdown(r: dict) -> str:
     problems = r.get("problems") or []
     if problems or r.get("export_failures"):
         lines += ["", "## Needing attention", "", "| voyage | status | reason |", "|---|---|---|"]
-        lines += [f"| {p['voyage_id']} | {p['status']} | {p['reason'] or ''} |" for p in problems]
-        lines += [f"| {e.split(':', 1)[0]} | export failed | {e.split(':', 1)[1].strip()} |" for e in r["export_failures"]]
+        lines += [f"| {markdown_cell(p['voyage_id'])} | {markdown_cell(p['status'])} | {markdown_cell(p['reason'] or '')} |"
+                  for p in problems]
+        lines += [f"| {markdown_cell(e.split(':', 1)[0])} | export failed | {markdown_cell(e.split(':', 1)[1].strip())} |"
+                  for e in r["export_failures"]]
     return "\n".join(lines) + "\n"
 
 

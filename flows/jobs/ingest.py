@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import uuid
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +25,7 @@ from flows.settings import Settings, load_settings
 from pipeline.decode.errors import DecodeError
 from pipeline.sources import rish
 from pipeline.sources.cycles import cycles_between, label as cycle_label, newest_published_cycles, parse_cycle, utcnow_h
-from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text
+from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text, token_may_go_to
 from pipeline.sources.registry import BY_NAME, SOURCES
 from pipeline.sources.source import ROLES
 from pipeline.weather.assemble import assemble_cycle
@@ -61,8 +61,11 @@ class CycleReport:
 
 def _opts(s: Settings, source: str, token: str | None = None) -> FetchOptions:
     """Fetch options for one source; only a source that needs it (OSCAR) sends the Earthdata token (`token`, else the
-    settings')."""
+    settings'), and only when its configured URL is https (or on this machine): never in clear text."""
     src = s.sources
+    if not token_may_go_to(getattr(src, BY_NAME[source].url_setting)):
+        token = None
+        src = replace(src, earthdata_token=None)
     return FetchOptions(timeout_s=src.http_timeout_s, retries=src.http_retries, backoff_s=src.http_backoff_s,
                         allowed_redirect_hosts=src.allowed_redirect_hosts, deadline_s=src.http_deadline_s,
                         min_rate_bps=src.http_min_rate_bps, rate_window_s=src.http_rate_window_s,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,8 @@ from flows.runner import PLAIN
 from flows.settings import load_settings
 from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.performance.bunker import validate_bunker
-from pipeline.performance.refit import REPORT_COLUMNS, Gate, check_form, fitted_from_rows, refit_fleet, storage_actions
+from pipeline.performance.refit import (REPORT_COLUMNS, Gate, check_form, fitted_from_rows, gate_with, refit_fleet,
+                                        storage_actions)
 from pipeline.performance.validate import NoonFileError, reason_counts, validate_noon
 from storage import fleet_store
 
@@ -39,16 +41,71 @@ def read_table(path: Path) -> pd.DataFrame:
     return df
 
 
-def import_noon_file(path: str, data_root: str | None = None, *, run=PLAIN) -> dict:
-    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
+NOON_CHUNK_ROWS = 20_000  # rows read, validated and stored at a time: memory follows this, not the file
+
+
+def read_table_chunks(path: Path, rows: int = NOON_CHUNK_ROWS) -> Iterator[pd.DataFrame]:
+    """`read_table`, `rows` at a time (CSV by pandas' chunked reader, Parquet by row batches)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            for batch in pq.ParquetFile(path).iter_batches(batch_size=rows):
+                yield batch.to_pandas().astype("string").astype(object)
+            return
+        first = True
+        with pd.read_csv(path, dtype=str, keep_default_na=False, na_values=[""], chunksize=rows) as reader:
+            for df in reader:
+                if first and not isinstance(df.index, pd.RangeIndex):  # surplus leading fields became an index
+                    raise NoonFileError(f"{path}: line 2 has more fields than the header's {len(df.columns)} columns; "
+                                        "fix the file and re-import")
+                first = False
+                yield df.reset_index(drop=True)
+    except (ValueError, OSError, pd.errors.ParserError) as exc:
+        if isinstance(exc, NoonFileError):
+            raise
+        raise NoonFileError(f"{path}: cannot be read as CSV/Parquet ({exc})") from exc
+
+
+def import_noon_file(path: str, data_root: str | None = None, replace: bool = False, *, run=PLAIN) -> dict:
+    """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason.
+    The file is read, validated and stored NOON_CHUNK_ROWS rows at a time, in one transaction. `replace`: a row
+    differing from the stored report of the same vessel and time replaces it (the stored one is kept in
+    noon_reports_history) instead of being refused."""
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
-    raw = read_table(Path(path))
-    good, bad = validate_noon(raw, fleet_store.known_imos(db), source=Path(path).name)
-    counts = fleet_store.import_noon(db, good, bad)
-    counts["rows"] = len(raw)
-    counts["reasons"] = reason_counts(bad)
+    known = fleet_store.known_imos(db)
+    n_rows, reasons = 0, {}
+
+    def validated():
+        nonlocal n_rows
+        for raw in read_table_chunks(Path(path)):
+            good, bad = validate_noon(raw, known, source=Path(path).name)
+            n_rows += len(raw)
+            for reason, n in reason_counts(bad).items():
+                reasons[reason] = reasons.get(reason, 0) + n
+            yield good, bad
+
+    counts = fleet_store.import_noon_chunks(db, validated(), replace=replace)
+    across = counts.pop("duplicates_in_file")  # a (vessel, time) repeated in another chunk of the file
+    if across:
+        reasons["duplicate timestamp in file"] = reasons.get("duplicate timestamp in file", 0) + across
+    counts["rows"] = n_rows
+    counts["reasons"] = reasons
     return counts
+
+
+def exclude_noon_period(imo: int, from_utc: str, to_utc: str, reason: str, data_root: str | None = None, *, run=PLAIN) -> int:
+    """Move vessel `imo`'s reports from `from_utc` to `to_utc` (inclusive) out of the refit's reach into
+    noon_reports_history with `reason`; returns how many."""
+    s = load_settings(data_root=Path(data_root) if data_root else None)
+    db = s.layout.ensure().warehouse
+    if int(imo) not in fleet_store.known_imos(db):
+        raise UnknownVesselError(f"vessel {imo} not in {db}: import it with `jitroute fleet import`")
+    return fleet_store.exclude_noon(db, int(imo), from_utc, to_utc, reason)
 
 
 def import_fleet_folder(folder: str, data_root: str | None = None, *, run=PLAIN) -> dict:
@@ -74,8 +131,10 @@ def import_bunker_file(path: str, data_root: str | None = None, *, run=PLAIN) ->
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     raw = read_table(Path(path))
-    good, bad = validate_bunker(raw, fleet_store.known_imos(db), source=Path(path).name)
-    counts = fleet_store.import_bunkers(db, good)
+    vessels = fleet_store.load_vessels(db) if db.exists() else None
+    dwt_t = dict(zip(vessels["imo"].astype(int), vessels["dwt"])) if vessels is not None and len(vessels) else {}
+    good, bad = validate_bunker(raw, set(dwt_t) if vessels is not None else set(), source=Path(path).name, dwt_t=dwt_t)
+    counts = fleet_store.import_bunkers(db, good, bad)
     conflicts = counts.pop("conflicts")
     counts.update(rows=len(raw), rejected=len(bad) + len(conflicts), reasons=reason_counts(bad),
                   conflicts=[f"{r.imo} {r.bill_no} {r.fuel_type}" for r in conflicts.itertuples()])
@@ -93,13 +152,38 @@ def fit_vessels(reports: dict[str, np.ndarray], active: dict, versions: dict, fo
     return refit_fleet(reports, active, versions, form=form, robust=robust, gate=gate, fitted=fitted)
 
 
+HULL_REPORT_COLUMNS = ("imo", "ts_utc", "rpm", "draft_m", "trim_m", "wind_kn", "wind_dir_rel_deg", "wave_m",
+                       "wave_dir_rel_deg", "stw_kn")
+
+
+def update_hull_performance(db: Path, imos: list[int], flag_pct: float) -> int:
+    """Speed loss against a clean hull, per month, of each vessel's reports under its active model (stored in
+    hull_performance_monthly); returns the number of vessels with a model."""
+    from pipeline.performance.hull import monthly_speed_loss
+    from pipeline.performance.model import model_from_stored
+
+    if not imos:
+        return 0
+    active = fleet_store.active_models(db)
+    reports = fleet_store.load_reports(db, imos, columns=HULL_REPORT_COLUMNS)
+    out = {}
+    for imo, rows in reports.groupby("imo", sort=True):
+        m = model_from_stored(active.get(int(imo)), int(imo))
+        if m is not None:
+            out[int(imo)] = (m.version, monthly_speed_loss(m, rows, flag_pct))
+    fleet_store.save_hull_performance(db, out)
+    return len(out)
+
+
 def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
-              robust: bool | None = None, *, run=PLAIN) -> list[dict]:
-    """Refit every (or the given) vessel's speed and fuel model ("best": every form, the best on held-out
-    reports proposed); a model becomes active only if it passes the gate (settings.performance) and is
-    not worse than the active one on the same held-out reports."""
+              robust: bool | None = None, gate: list[str] | None = None, *, run=PLAIN) -> list[dict]:
+    """Refit every (or the given) vessel's speed and fuel model ("best": every form, the physical one kept
+    unless another is significantly better on held-out reports); a model becomes active only if it passes
+    the gate (settings.performance, with `gate` "NAME=VALUE" overrides) and is not worse than the active
+    one on the same held-out reports."""
     check_form(form)  # before anything is read
     s = load_settings(data_root=Path(data_root) if data_root else None)
+    s = s.with_overrides(performance=gate_with(s.performance, gate))
     db = s.layout.ensure().warehouse
     known = fleet_store.known_imos(db)
     unknown = sorted(set(imos or ()) - set(known))
@@ -116,6 +200,9 @@ def refit_job(imos: list[int] | None = None, data_root: str | None = None, form:
                                name="fit-vessels")
     reactivate, flags = storage_actions(summaries)
     for imo, text in flags.items():
-        LOG.warning("vessel %s: %s", imo, text)
+        if text:
+            LOG.warning("vessel %s: %s", imo, text)
     run.step(fleet_store.save_fits, db, rows, reactivate=reactivate, flags=flags, name="save-fits")
+    run.step(update_hull_performance, db, sorted({int(x["imo"]) for x in summaries}), s.performance.hull_flag_pct,
+             name="hull-performance")
     return sorted(summaries + summaries_missing, key=lambda d: d["imo"])

@@ -36,8 +36,23 @@ class FieldInfo:
 
 @dataclass(frozen=True)
 class GridInfo:
-    lat: np.ndarray  # as stored (scan order), float64
-    lon: np.ndarray  # 0..360 east
+    lat: np.ndarray  # as stored (scan order), float64; ascending in what `read_fields` returns
+    lon: np.ndarray  # 0..360 east; ascending in what `read_fields` returns
+
+
+# The largest grid a field may declare (the 0.25° global grid of the newer GWM files), checked before its values
+# are decoded: a message of 1 MB can declare a 0.05° grid (26 M points, 100 MB a field once decoded).
+MAX_GRID_POINTS = 1440 * 721
+
+
+def axis_order(axis: np.ndarray) -> np.ndarray | slice:
+    """Index that sorts `axis` ascending; a slice (a view, no copy) when it is already sorted or reversed."""
+    order = np.argsort(axis, kind="stable")
+    if np.array_equal(order, np.arange(axis.size)):
+        return slice(None)
+    if np.array_equal(order, np.arange(axis.size)[::-1]):
+        return slice(None, None, -1)
+    return order
 
 
 def _get(h, key, default=None):
@@ -113,10 +128,14 @@ def list_fields(path: Path) -> list[FieldInfo]:
     return out
 
 
-def _grid(h: int, path: Path) -> GridInfo:
+def _grid(h: int, path: Path, max_points: int = MAX_GRID_POINTS) -> GridInfo:
     if _get(h, "gridType") != "regular_ll":
         raise DecodeError(path, f"unsupported grid {_get(h, 'gridType')!r}; expected a regular lat/lon grid")
     ni, nj = int(eccodes.codes_get(h, "Ni")), int(eccodes.codes_get(h, "Nj"))
+    if ni <= 1 or nj <= 1 or ni * nj > max_points:
+        raise DecodeError(path, f"wrong grid: {ni}×{nj} points declared (at most {max_points} expected); not decoded")
+    if int(_get(h, "jPointsAreConsecutive", 0) or 0) or int(_get(h, "alternativeRowScanning", 0) or 0):
+        raise DecodeError(path, "unsupported scanning mode (columns first or alternating rows)")
     la1 = eccodes.codes_get_double(h, "latitudeOfFirstGridPointInDegrees")
     la2 = eccodes.codes_get_double(h, "latitudeOfLastGridPointInDegrees")
     lo1 = eccodes.codes_get_double(h, "longitudeOfFirstGridPointInDegrees")
@@ -127,11 +146,16 @@ def _grid(h: int, path: Path) -> GridInfo:
 
 
 def read_fields(path: Path, wanted: dict[str, tuple[int, int, int, int | None, float | None]],
-                fill_value: float | None = None) -> tuple[dict[str, dict[int, np.ndarray]], GridInfo | None, np.datetime64 | None]:
-    """Values of the wanted fields by name → {step_h: 2-D array (nj, ni) in scan order}.
+                fill_value: float | None = None, units: dict[str, str] | None = None,
+                max_points: int = MAX_GRID_POINTS) -> tuple[dict[str, dict[int, np.ndarray]], GridInfo | None, np.datetime64 | None]:
+    """Values of the wanted fields by name → {step_h: 2-D array (nj, ni), lat and lon ascending}.
 
-    `wanted` maps a name to (discipline, category, number, level_type or None, level or None).
-    Bitmap-missing points and, when given, points at or above `fill_value` become NaN.
+    `wanted` maps a name to (discipline, category, number, level_type or None, level or None); `units` maps a name
+    to the units eccodes must report for it (e.g. "m s**-1"). Bitmap-missing and non-finite points and, when
+    given, points at or above `fill_value` become NaN. Each field is turned to ascending latitude and longitude
+    whatever its scanning direction, and must then lie on the same grid as the others. Refused with a
+    DecodeError: a declared grid above `max_points` (before its values are decoded), other units, a field on
+    another grid or of another reference time, and a second message of one name at one step.
     The grid is None when none of the wanted fields is present.
     """
     path = Path(path)
@@ -153,19 +177,32 @@ def read_fields(path: Path, wanted: dict[str, tuple[int, int, int, int | None, f
                 continue
             if lv is not None and abs(level - lv) > 1e-6:
                 continue
-            g = _grid(h, path)
+            if step_h in out[name]:
+                raise DecodeError(path, f"two {name} fields at lead {step_h} h (one message per variable and lead expected)")
+            if units and name in units and str(_get(h, "units", "?")) != units[name]:
+                raise DecodeError(path, f"{name} is in {_get(h, 'units', '?')!r}, expected {units[name]!r}")
+            g = _grid(h, path, max_points)
+            lat_order, lon_order = axis_order(g.lat), axis_order(g.lon)
+            g = GridInfo(lat=g.lat[lat_order], lon=g.lon[lon_order])
             if grid is None:
                 grid = g
-            elif g.lat.size != grid.lat.size or g.lon.size != grid.lon.size:
+            elif (g.lat.size != grid.lat.size or g.lon.size != grid.lon.size
+                  or not np.allclose(g.lat, grid.lat, atol=1e-6) or not np.allclose(g.lon, grid.lon, atol=1e-6)):
                 raise DecodeError(path, f"field {name} at step {step_h} h has a different grid from the others")
-            cycle = field_cycle
+            if cycle is None:
+                cycle = field_cycle
+            elif field_cycle != cycle:
+                raise DecodeError(path, f"field {name} at step {step_h} h has reference time {field_cycle}, "
+                                        f"the others {cycle}")
             vals = eccodes.codes_get_values(h).astype(np.float32)
             if int(_get(h, "bitmapPresent", 0) or 0):
                 missing = eccodes.codes_get_double(h, "missingValue")
                 vals[vals == missing] = np.nan
+            vals[~np.isfinite(vals)] = np.nan  # a hole, never a value
             if fill_value is not None:
                 vals[vals >= fill_value] = np.nan
-            out[name][step_h] = vals.reshape(g.lat.size, g.lon.size)
+            vals = vals.reshape(g.lat.size, g.lon.size)[lat_order][:, lon_order]
+            out[name][step_h] = np.ascontiguousarray(vals)
     if n == 0:
         raise DecodeError(path, "no GRIB messages found (empty, truncated or not GRIB)")
     return out, grid, cycle

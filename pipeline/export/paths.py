@@ -1,4 +1,6 @@
-"""Where a voyage's export files go: always inside the run folder, whatever the voyage ID says."""
+"""Where a voyage's export files go: always inside the run folder, whatever the voyage ID says, and in the voyage's
+own folder `voyages/<voyage_id>/`, so a voyage named like a run file (`fleet_map`, `weather_waves_<cycle>`) or
+like another voyage's file (`V1.convergence` against V1's `.convergence.png`) overwrites nothing."""
 
 from __future__ import annotations
 
@@ -24,6 +26,15 @@ def export_name(voyage_id: str, suffix: str) -> str:
     if "/" in suffix or "\\" in suffix or "\x00" in suffix or ".." in suffix:
         raise ExportPathError(f"voyage {vid}: export suffix {suffix!r} is not a plain file ending")
     return f"{vid}{suffix}"
+
+
+VOYAGES_FOLDER = "voyages"
+
+
+def voyage_export_key(voyage_id: str, suffix: str) -> str:
+    """`voyages/<voyage_id>/<voyage_id><suffix>`: the key of a voyage's export file in its run folder."""
+    name = export_name(voyage_id, suffix)
+    return f"{VOYAGES_FOLDER}/{name[: len(name) - len(suffix)]}/{name}"
 
 
 def export_path(run_dir: Path, voyage_id: str, suffix: str) -> Path:

@@ -30,6 +30,7 @@ from lxml import etree
 from pipeline.export.voyage import (finite_or_none, iso_utc, require_legs, vessel_label, voyage_id,
                                     waypoint_names, waypoints_deg)
 from pipeline.routing.geodesy import KN_PER_MS
+from pipeline.validate_ids import printable
 
 RTZ_SCHEMA_DIR = Path(__file__).parent / "schemas"  # shipped as package data (CIRM RTZ 1.0-1.2)
 RTZ_SCHEMA_ENV = "JITROUTE_RTZ_SCHEMAS"
@@ -97,8 +98,8 @@ def _lon(x) -> str:
 
 def _set(el, **attrs) -> None:
     for k, v in attrs.items():
-        if v is not None:
-            el.set(k, str(v))
+        if v is not None:  # control characters (not allowed in XML) written as escapes, never failing the file
+            el.set(k, printable(v))
 
 
 def _extension(parent, d: _Dialect, name: str, **attrs) -> None:
@@ -139,7 +140,7 @@ def route_to_rtz(route: dict, legs: list[dict], version: str = "1.1") -> bytes:
     names = waypoint_names(route, len(lat))
     wps = etree.SubElement(root, f"{{{ns}}}waypoints")
     for i, (la, lo, name) in enumerate(zip(lat, lon, names)):
-        wp = etree.SubElement(wps, f"{{{ns}}}waypoint", id=str(i + 1), revision="0", name=name)
+        wp = etree.SubElement(wps, f"{{{ns}}}waypoint", id=str(i + 1), revision="0", name=printable(name))
         etree.SubElement(wp, f"{{{ns}}}position", lat=f"{la:.6f}", lon=_lon(lo))
         if i > 0:  # the planned speed of the leg as both its limits: the plan holds one speed per leg
             speed = _speed(legs[i - 1].get("sog_kn"))

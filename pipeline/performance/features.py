@@ -54,6 +54,10 @@ FUEL_REGRESSORS = {
     FORM_MLP: mlp.PARAM_NAMES,
 }
 NON_NEGATIVE = {"wind_loss", "wave_loss", "wind_load", "wave_load"}  # weather costs speed and fuel, never gives
+# fouling (months since dry dock) costs speed and fuel, never gives: the speed coefficient is held ≤ 0, the fuel one ≥ 0
+FOULING_SPEED, FOULING_FUEL = "months_dd", "r3_months"
+NON_POSITIVE_SPEED = {FOULING_SPEED}
+NON_NEGATIVE |= {FOULING_FUEL}
 N_SPEED = {k: len(v) for k, v in SPEED_REGRESSORS.items()}
 # The thesis form has no intercept, so a constant column (e.g. a trim that never changes) is the only
 # constant term and stays in the fit; a form with an intercept "1" drops its other constant columns.

@@ -99,8 +99,9 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y
     — or, with `ends`, rows bounds[g]:ends[g] (groups need not tile X: no copy of the rows fitted).
 
-    Weather regressors (`features.NON_NEGATIVE`) are held ≥ 0: one that comes out negative is left
-    out (β = 0, listed in `dropped`) and the rest solved again. Rows with a non-finite regressor or
+    Weather and fouling regressors (`features.NON_NEGATIVE`, `features.NON_POSITIVE_SPEED`: fouling never speeds a
+    ship up nor saves fuel) are held to their sign: one that comes out the wrong way is left out (β = 0, listed in
+    `dropped`) and the rest solved again. Rows with a non-finite regressor or
     target are left out (per group, order kept). Each group
     stops re-weighting when its own coefficients settle, so it gets what `fit_target` gives it alone.
     `start` (groups × regressors): coefficients the robust re-weighting starts from (fewer solves when
@@ -119,11 +120,20 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     coef, keep = np.zeros((G, k)), np.zeros((G, k), dtype=np.bool_)
     n, stats = np.zeros(G, dtype=np.int64), np.full((G, 3), np.nan)  # r2, rmse, cv_rmse
     nonneg = np.array([nm in features.NON_NEGATIVE for nm in names], dtype=np.bool_)
+    # a coefficient held ≤ 0 (fouling on speed) is fitted as a ≥ 0 one on the negated regressor
+    flip = np.array([target == "speed" and nm in features.NON_POSITIVE_SPEED for nm in names], dtype=np.bool_)
     warm = start is not None
     beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
+    if flip.any():
+        X = X.copy()
+        X[:, flip] *= -1.0
+        nonneg = nonneg | flip
+        beta0 = np.ascontiguousarray(np.where(flip, -beta0, beta0))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
     fit_kernels.fit_groups_nb(X, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
                               max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
+    if flip.any():
+        coef[:, flip] *= -1.0
     out, dropped_for = [], {}
     for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):
         if kept not in dropped_for:

@@ -14,8 +14,11 @@ from an explicit seeded generator: the same rows and seed give the same network,
 Plain numpy (a 256-parameter network on a few hundred reports needs no framework); the forward
 pass is also a numba function so routing kernels evaluate it like the linear forms.
 
-A network is one flat parameter vector (`N_PARAMS` values, layout in `_unpack`), stored as the
-model's speed and its fuel coefficients alike.
+A network is one flat parameter vector (`N_PARAMS` values, layout in `_unpack`, then the least and the
+largest value of each input in the training rows), stored as the model's speed and its fuel
+coefficients alike. The network is evaluated at its inputs clamped to that range: outside the
+conditions it was trained on it answers as at their edge instead of extrapolating (a tanh network
+extrapolates anything: fuel falling to 0 below the lowest rpm it saw, speed rising in heavier seas).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numba
 import numpy as np
 
 N_IN, N_HIDDEN, N_OUT = 5, 30, 2
-N_PARAMS = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT
+N_PARAMS = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT + 2 * N_IN
 PARAM_NAMES = tuple(f"p{i:03d}" for i in range(N_PARAMS))
 VAL_FRAC = 0.2
 MAX_EPOCHS = 1500
@@ -34,6 +37,12 @@ PATIENCE = 100
 LEARNING_RATE = 0.01
 L2 = 1e-4
 DEFAULT_SEED = 1
+# Monotone by construction: the first N_HIDDEN // 2 hidden units feed only the speed output, the others only the
+# fuel output, each with an output weight ≥ 0, and the weights of rpm, wind and waves into a unit have the sign
+# its output needs (projected after every training step; tanh rises and the standardisation keeps signs): speed
+# never falls with rpm nor rises with wind or waves, fuel never falls with any of them — also where rows are few.
+MONO_INPUTS = (0, 3, 4)  # rpm, wind·w, waves·w
+MONO_SIGN = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]])  # (input, output): required sign of d output / d input
 
 # offsets of the parts of a parameter vector
 _XM, _XS = 0, N_IN
@@ -43,12 +52,20 @@ _W2 = _B1 + N_HIDDEN
 _B2 = _W2 + N_HIDDEN * N_OUT
 _YM = _B2 + N_OUT
 _YS = _YM + N_OUT
+_LO = _YS + N_OUT  # least and largest value of each input in the training rows: the network is evaluated
+_HI = _LO + N_IN  # at inputs clamped to them (flat outside what it saw, never extrapolated)
 
 
 def _unpack(p: np.ndarray):
     """(x_mean, x_std, W1 (5×30), b1, W2 (30×2), b2, y_mean, y_std) views of a parameter vector."""
     return (p[_XM:_XS], p[_XS:_W1], p[_W1:_B1].reshape(N_IN, N_HIDDEN), p[_B1:_W2], p[_W2:_B2].reshape(N_HIDDEN, N_OUT),
-            p[_B2:_YM], p[_YM:_YS], p[_YS:])
+            p[_B2:_YM], p[_YM:_YS], p[_YS:_LO])
+
+
+def input_bounds(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(least, largest) of each network input (rpm, draft, trim, wind·w, waves·w) in the rows it was trained on."""
+    p = np.asarray(p, dtype=np.float64)
+    return p[_LO:_HI], p[_HI:]
 
 
 def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> np.ndarray:
@@ -64,7 +81,9 @@ def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> n
 
 def forward(p: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(n × 2) outputs — speed (kn), fuel rate (t/h) — of the network p at the rows of X (n × 5)."""
-    xm, xs, W1, b1, W2, b2, ym, ys = _unpack(np.asarray(p, dtype=np.float64))
+    p = np.asarray(p, dtype=np.float64)
+    xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
+    X = np.minimum(np.maximum(X, p[_LO:_HI]), p[_HI:])
     return (np.tanh(((X - xm) / xs) @ W1 + b1) @ W2 + b2) * ys + ym
 
 
@@ -74,7 +93,7 @@ def forward_nb(p, x0, x1, x2, x3, x4, out_index):
     x = (x0, x1, x2, x3, x4)
     z = np.empty(N_IN)
     for i in range(N_IN):
-        z[i] = (x[i] - p[_XM + i]) / p[_XS + i]
+        z[i] = (min(max(x[i], p[_LO + i]), p[_HI + i]) - p[_XM + i]) / p[_XS + i]
     o = p[_B2 + out_index]
     for j in range(N_HIDDEN):
         a = p[_B1 + j]
@@ -84,12 +103,27 @@ def forward_nb(p, x0, x1, x2, x3, x4, out_index):
     return o * p[_YS + out_index] + p[_YM + out_index]
 
 
+def _project_monotone(W1: np.ndarray, W2: np.ndarray) -> None:
+    """In place: each hidden unit feeds one output (speed: the first half, fuel: the rest) with a weight ≥ 0, and the
+    weight of a monotone input into it has the sign MONO_SIGN asks for that output (else 0)."""
+    half = N_HIDDEN // 2
+    W2[:half, 1] = 0.0
+    W2[half:, 0] = 0.0
+    np.maximum(W2, 0.0, out=W2)
+    which = (np.arange(N_HIDDEN) >= half).astype(int)
+    for r, k in enumerate(MONO_INPUTS):
+        want = MONO_SIGN[r, which]
+        W1[k] = np.where(W1[k] * want < 0.0, 0.0, W1[k])
+
+
 def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: float = VAL_FRAC, max_epochs: int = MAX_EPOCHS,
-          patience: int = PATIENCE, lr: float = LEARNING_RATE, l2: float = L2) -> tuple[np.ndarray, dict]:
+          patience: int = PATIENCE, lr: float = LEARNING_RATE, l2: float = L2, monotone: bool = True
+          ) -> tuple[np.ndarray, dict]:
     """(parameter vector, info) of a network fitted to time-ordered rows X (n × 5) → Y (n × 2), non-finite rows left out.
 
     The newest `val_frac` of the rows (at least one, if there are two or more) are the validation rows
-    of early stopping; info: n_train, n_val, best_epoch, epochs, val_mse (standardised units).
+    of early stopping; `monotone`: keep the network monotone (see MONO_*); info: n_train,
+    n_val, best_epoch, epochs, val_mse (standardised units).
     """
     ok = np.isfinite(X).all(axis=1) & np.isfinite(Y).all(axis=1)
     X, Y = X[ok], Y[ok]
@@ -98,9 +132,11 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
     xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
     if n == 0:
         xs[:], ys[:] = 1.0, 1.0
+        p[_LO:_HI], p[_HI:] = -np.inf, np.inf
         return p, {"n_train": 0, "n_val": 0, "best_epoch": 0, "epochs": 0, "val_mse": float("nan")}
     n_val = min(max(int(round(n * val_frac)), 1), n - 1) if n >= 2 else 0
     n_fit = n - n_val
+    p[_LO:_HI], p[_HI:] = X.min(axis=0), X.max(axis=0)
     xm[:], ym[:] = X[:n_fit].mean(axis=0), Y[:n_fit].mean(axis=0)
     xs[:] = np.where(X[:n_fit].std(axis=0) > 1e-12, X[:n_fit].std(axis=0), 1.0)
     ys[:] = np.where(Y[:n_fit].std(axis=0) > 1e-12, Y[:n_fit].std(axis=0), 1.0)
@@ -110,6 +146,12 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
     W1[:] = rng.normal(0.0, 1.0 / math.sqrt(N_IN), W1.shape)
     W2[:] = rng.normal(0.0, 1.0 / math.sqrt(N_HIDDEN), W2.shape)
     params = (W1, b1, W2, b2)
+    if monotone:  # start inside the constraints: signs flipped rather than weights zeroed
+        half = N_HIDDEN // 2
+        W2[:] = np.abs(W2)
+        for r, k in enumerate(MONO_INPUTS):
+            W1[k] = np.abs(W1[k]) * MONO_SIGN[r, (np.arange(N_HIDDEN) >= half).astype(int)]
+        _project_monotone(W1, W2)
     m = [np.zeros_like(a) for a in params]
     v = [np.zeros_like(a) for a in params]
     b_1, b_2, eps = 0.9, 0.999, 1e-8
@@ -127,6 +169,8 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
             vi *= b_2
             vi += (1 - b_2) * g * g
             a -= lr * (mi / (1 - b_1 ** epoch)) / (np.sqrt(vi / (1 - b_2 ** epoch)) + eps)
+        if monotone:
+            _project_monotone(W1, W2)
         if n_val:
             val = float(np.mean((np.tanh(Zv @ W1 + b1) @ W2 + b2 - Tv) ** 2))
         else:

@@ -7,11 +7,16 @@ take `form_id`, `speed_coef`, `fuel_coef` and `months_dd` as plain values and ca
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from pipeline.performance import features
+
+
+DAYS_PER_MONTH = 365.25 / 12
 
 
 @dataclass(frozen=True)
@@ -23,6 +28,8 @@ class PerformanceModel:
     imo: int | None = None
     version: int | None = None
     meta: dict = field(default_factory=dict, compare=False)
+    envelope: dict | None = field(default=None, compare=False)  # conditions fitted on (`sanity.Envelope` JSON); None: unknown
+    data_to_utc: str | None = field(default=None, compare=False)  # newest report fitted on (ISO, UTC): months_dd's date
 
     def __post_init__(self):
         fid = features.FORM_IDS.get(self.form)
@@ -54,12 +61,52 @@ class PerformanceModel:
 
     def to_json(self) -> dict:
         return {"form": self.form, "speed_coef": self.speed_coef.tolist(), "fuel_coef": self.fuel_coef.tolist(),
-                "months_dd": self.months_dd, "imo": self.imo, "version": self.version}
+                "months_dd": self.months_dd, "imo": self.imo, "version": self.version, "envelope": self.envelope,
+                "data_to_utc": self.data_to_utc}
 
     @classmethod
     def from_json(cls, d: dict) -> "PerformanceModel":
         return cls(form=d["form"], speed_coef=np.asarray(d["speed_coef"]), fuel_coef=np.asarray(d["fuel_coef"]),
-                   months_dd=float(d.get("months_dd", 0.0)), imo=d.get("imo"), version=d.get("version"))
+                   months_dd=float(d.get("months_dd", 0.0)), imo=d.get("imo"), version=d.get("version"),
+                   envelope=d.get("envelope"), data_to_utc=d.get("data_to_utc"))
+
+    def fouled_at(self, when_utc) -> "PerformanceModel":
+        """This model with the months since dry dock it will have at `when_utc` (naive UTC): those of its newest
+        report plus the time since (routing plans a voyage with the hull as it will be then, not as it was)."""
+        if self.data_to_utc is None or when_utc is None:
+            return self
+        days = (np.datetime64(when_utc, "s") - np.datetime64(self.data_to_utc, "s")) / np.timedelta64(1, "D")
+        if not np.isfinite(days) or days <= 0:
+            return self
+        return dataclasses.replace(self, months_dd=self.months_dd + float(days) / DAYS_PER_MONTH)
+
+    def outside_envelope(self, rpm: float, draft_m: float, wind_kn: float = 0.0, hs_m: float = 0.0) -> list[str]:
+        """What of the conditions lies outside those the model was fitted on (['rpm 130 > 122', …]); [] inside or
+        when the envelope is unknown."""
+        from pipeline.performance.sanity import Envelope
+
+        env = Envelope.from_json(self.envelope)
+        return env.outside(rpm, draft_m, wind_kn, hs_m) if env else []
+
+    def clip_rpm_options(self, rpm_options, voyage: str = "") -> tuple[tuple[float, ...], str | None]:
+        """(allowed rpm settings within the rpm range the model was fitted on, why some were clipped or None).
+
+        A setting outside that range becomes its nearest end (duplicates merged): no model is trusted beyond
+        the engine speeds it saw, and a data-driven one extrapolates badly there."""
+        from pipeline.performance.sanity import Envelope
+
+        opts = tuple(sorted(float(r) for r in rpm_options))
+        env = Envelope.from_json(self.envelope)
+        if env is None or not opts:
+            return opts, None
+        lo, hi = env.rpm
+        out = [r for r in opts if not (lo <= r <= hi)]
+        if not out:
+            return opts, None
+        clipped = tuple(sorted({min(max(r, lo), hi) for r in opts}))
+        note = (f"{voyage + ': ' if voyage else ''}rpm settings {', '.join(f'{r:g}' for r in out)} outside the "
+                f"{lo:g}–{hi:g} rpm the vessel's model v{self.version} was fitted on: clipped to {', '.join(f'{r:g}' for r in clipped)}")
+        return clipped, note
 
 
 def model_from_stored(stored: dict | None, imo: int | None = None) -> PerformanceModel | None:
@@ -73,7 +120,15 @@ def model_from_stored(stored: dict | None, imo: int | None = None) -> Performanc
     return PerformanceModel(form=stored["form"], speed_coef=np.array(list(stored["speed"].values()), dtype=np.float64),
                             fuel_coef=np.array(list(stored["fuel"].values()), dtype=np.float64),
                             months_dd=float(stored.get("months_dd") or 0.0), imo=None if imo is None else int(imo),
-                            version=stored.get("version"))
+                            version=stored.get("version"), envelope=_envelope(stored.get("envelope")),
+                            data_to_utc=None if stored.get("data_to_utc") is None
+                            else str(np.datetime64(stored["data_to_utc"], "s")))
+
+
+def _envelope(text) -> dict | None:
+    if not text:
+        return None
+    return json.loads(text) if isinstance(text, str) else dict(text)
 
 
 def reference_model(design_speed_kn: float = 14.0, rpm_max: float = 100.0, design_fuel_tph: float = 1.5) -> PerformanceModel:

@@ -4,15 +4,17 @@ Per vessel, its reports in time order:
   1. the older rows train, the newest `Gate.holdout_frac` are held out and never fitted on;
   2. every candidate form is fitted on the training rows and scored on the held-out rows (RMSE of
      speed and fuel rate) — the same rows for every form and for the active model;
-  3. the best form is proposed: the smallest held-out RMSE relative to the held-out mean, speed and
-     fuel added, among the forms that pass the gate (the best of all if none does);
+  3. a form is proposed among those that pass the gate (all, if none does): the physical form, unless
+     another is better on the held-out rows by a margin, significantly (paired) and in every block of
+     them (`_choose`: ties and chance wins go to the simpler form);
   4. it is activated only if it passes the absolute gate (enough rows per coefficient, fit R² of
-     speed and fuel ≥ `min_r2`, held-out RMSE ≤ a share of the held-out mean), is not worse than
-     the active model on the same held-out rows (whatever the active model's form), and the
-     reports newer than the active model do not contradict it (a step change in its residuals,
-     e.g. a broken speed log: the vessel is flagged and nothing is activated);
-  5. an accepted model is refitted on all rows and stored active; a refused one is stored
-     `rejected` with the reason.
+     speed and fuel ≥ `min_r2`, held-out RMSE ≤ a share of the held-out mean, physical sanity over the
+     envelope of its reports — see `sanity`), is not worse than the active model on the same held-out
+     rows (whatever the active model's form), and the reports newer than the active model do not
+     contradict it (a step change in its residuals, e.g. a broken speed log: the vessel is flagged and
+     nothing is activated);
+  5. the proposed model is refitted on all rows and that fit is stored — active if accepted and it
+     passes the sanity checks again over the envelope of all rows, else `rejected` with the reason.
 Nothing is stored twice: the same rows fitted with the same form and settings (`data_hash`) give
 the same model, so a refit with nothing new stores nothing, and a form switched back to re-activates
 the version it gave before (if it wins the comparison) instead of storing a copy.
@@ -23,6 +25,7 @@ A fleet is refitted in one pass (`refit_fleet`): the fits are batched across ves
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -32,7 +35,7 @@ import numba
 import numpy as np
 import pandas as pd
 
-from pipeline.performance import features, fit, mlp
+from pipeline.performance import features, fit, mlp, sanity
 
 TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
@@ -61,6 +64,62 @@ class Gate:
     candidates: tuple[str, ...] = FORMS  # the forms `form="best"` tries
     mlp_seed: int = mlp.DEFAULT_SEED  # the MLP form's weights are initialised from this seed
     mlp_min_rows: int = 100  # training rows the MLP form needs
+    sanity: bool = True  # physical-sanity checks over the vessel's envelope before activation (see `sanity`)
+    speed_tol_kn: float = 0.05  # ... STW may rise this much with head weather or fall this much with rpm (grid step)
+    fuel_allowance_share: float = 0.03  # ... weather may lower fuel below calm by this share of it (air resistance)
+    switch_margin: float = 0.05  # best: another form replaces the physical one only if its held-out score is lower by
+    switch_sigmas: float = 2.0  # this share, by more than this many standard errors (paired over held-out rows),
+    switch_blocks: int = 3  # and lower in each of this many consecutive blocks of held-out rows (repeatable)
+    hull_flag_pct: float = 5.0  # hull performance: a month's speed loss against a clean hull above this is flagged
+
+    @property
+    def limits(self) -> sanity.Limits:
+        return sanity.Limits(speed_tol_kn=self.speed_tol_kn, fuel_allowance_share=self.fuel_allowance_share)
+
+
+REFERENCE_FORM = "physical"  # "best" keeps it unless another form is significantly better
+SIMPLICITY = ("physical", "thesis", "mlp")  # ties go to the earlier (simpler) form
+
+
+def describe_gate(gate: Gate) -> str:
+    """'default', or the settings that differ from the default gate ('min_rows_per_coef=3, min_r2=0.1')."""
+    base = Gate()
+    diff = [f"{f.name}={getattr(gate, f.name)!r}".replace("'", "") for f in dataclasses.fields(Gate)
+            if getattr(gate, f.name) != getattr(base, f.name)]
+    return ", ".join(diff) or "default"
+
+
+def gate_with(gate: Gate, overrides: dict[str, str] | list[str] | None) -> Gate:
+    """`gate` with settings given as text ("name=value" items or a mapping), typed like the default; ValueError naming
+    the setting and the choices when one is unknown or not a value of its type."""
+    if not overrides:
+        return gate
+    if not isinstance(overrides, dict):
+        pairs = {}
+        for item in overrides:
+            if "=" not in item:
+                raise ValueError(f"gate setting {item!r} is not NAME=VALUE (e.g. min_rows_per_coef=3)")
+            k, v = item.split("=", 1)
+            pairs[k.strip()] = v.strip()
+        overrides = pairs
+    names = {f.name: f for f in dataclasses.fields(Gate)}
+    out = {}
+    for k, v in overrides.items():
+        if k not in names:
+            raise ValueError(f"unknown gate setting {k!r}; use one of: {', '.join(names)}")
+        default = getattr(Gate(), k)
+        try:
+            if isinstance(default, bool):
+                if str(v).lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError(v)
+                out[k] = str(v).lower() in ("true", "1", "yes")
+            elif isinstance(default, tuple):
+                out[k] = tuple(check_form(x.strip()) for x in str(v).split(",") if x.strip())
+            else:
+                out[k] = type(default)(v)
+        except ValueError as exc:
+            raise ValueError(f"gate setting {k}={v!r}: not a {type(default).__name__} ({exc})") from None
+    return dataclasses.replace(gate, **out)
 
 
 def check_form(form: str) -> str:
@@ -111,9 +170,10 @@ def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, f
 
 def storage_actions(summaries: list[dict]) -> tuple[dict[int, tuple[int, str]], dict[int, str]]:
     """(imo → (version to re-activate, reason), imo → flag on its active model) from refit summaries,
-    as `fleet_store.save_fits` takes them beside the new rows."""
+    as `fleet_store.save_fits` takes them beside the new rows. Every refitted vessel gets its flag: None clears
+    one set before (its contradicting reports were replaced or excluded)."""
     return ({s["imo"]: (s["reactivate"], s["reason"]) for s in summaries if s.get("reactivate")},
-            {s["imo"]: s["flag"] for s in summaries if s.get("flag")})
+            {s["imo"]: s.get("flag") for s in summaries if "flag" in s})
 
 
 def fitted_from_rows(rows) -> dict[int, dict]:
@@ -218,6 +278,7 @@ class _Candidate:
     train: dict  # target → list[FitResult] fitted on the training rows
     hold_rmse: dict = field(default_factory=dict)  # target → per vessel
     hold_pred: dict = field(default_factory=dict)  # target → prediction at each held-out row (hold_rows order)
+    sane: list = field(default_factory=list)  # per vessel: why the training fit fails the sanity checks, or None
 
 
 def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, fitted) -> tuple[list[dict], list[dict]]:
@@ -232,6 +293,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
 
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
+    train_env = sanity.envelopes(inp, bounds[:-1], hold_from)
     cands = {}
     for form in forms:
         X = _designs(form, inp)
@@ -255,12 +317,24 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     mean_of = {t: hold_mean[t].tolist() for t in TARGETS}
     n_list, n_hold_list = n.tolist(), n_hold.tolist()
     plans, summaries = [], []
+    # the absolute gate, then physical sanity (`sanity`) of the training fits that pass it, all vessels at once
+    gated = {f: [_gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for g in range(G)] for f, c in cands.items()}
+    for f, c in cands.items():
+        c.sane = [None] * G
+        todo = [g for g in range(G) if gated[f][g] is None] if gate.sanity else []
+        if todo:
+            why = sanity.check_models(f, np.array([c.train["speed"][g].coef for g in todo]),
+                                      np.array([c.train["fuel"][g].coef for g in todo]), [train_env[g] for g in todo],
+                                      gate.limits)
+            for g, w in zip(todo, why):
+                c.sane[g] = w
     for g, imo in enumerate(imos.tolist()):
-        verdicts = {f: _gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for f, c in cands.items()}
+        verdicts = {f: gated[f][g] or cands[f].sane[g] for f in cands}
         score = {f: scores_of[f][g] for f in forms}
         passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
         pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
-        best = min(pool, key=lambda f: (score[f] if np.isfinite(score[f]) else np.inf, forms.index(f)))
+        sl = slice(hold_bounds[g], hold_bounds[g + 1])
+        best, choice = _choose(pool, score, forms, {f: cands[f] for f in pool}, sl, hold_rows, y, mean_of, g, gate)
         c = cands[best]
         act = active.get(imo)
         why = act_flag.get(g) or verdicts[best]  # a contradiction with the active model is the first thing to fix
@@ -281,14 +355,14 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
             why = (f"passes the gate and is not worse on held-out rows than the active v{act['version']} ({act['form']})"
                    if g in act_hold
                    else "first model" if not act else "passes the gate (active model not comparable)")
-        reason = f"{best}: {why}; held-out ({n_hold_list[g]} newest rows): {scores}"
+        reason = f"{best}: {why}; held-out ({n_hold_list[g]} newest rows): {scores}" + (f"; {choice}" if choice else "")
         dropped = sorted({d for t in TARGETS for d in c.train[t][g].dropped})
         if dropped:
-            reason += f"; left out (constant, or weather that came out as a gain): {', '.join(dropped)}"
+            reason += f"; left out (constant, or weather or fouling that came out as a gain): {', '.join(dropped)}"
         summary = {"imo": imo, "n": n_list[g], "n_holdout": n_hold_list[g], "form": best, "changed": False,
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
                    "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
-                   "fuel_holdout_rmse": rmse_of[best]["fuel"][g]}
+                   "fuel_holdout_rmse": rmse_of[best]["fuel"][g], "gate": describe_gate(gate)}
         summary.update(_scores(c.train, g))
         seen = fitted.get(imo, {}).get(hashes[best][g])
         if seen is not None:  # these rows were fitted with this form before: the same model
@@ -383,6 +457,41 @@ def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, 
     return None
 
 
+def _choose(pool, score, forms, cands, sl, hold_rows, y, mean_of, g, gate: Gate) -> tuple[str, str]:
+    """(form to propose, why another was not) among the forms in `pool` for vessel g.
+
+    The reference is the physical form (or the simplest form in the pool without it); a form with a lower
+    held-out score replaces it only when the improvement is significant and repeatable: its score lower by
+    `switch_margin` of the reference's, the mean paired difference of the rows' squared errors (speed and
+    fuel, each relative to its held-out mean) above `switch_sigmas` standard errors, and lower in each of
+    `switch_blocks` consecutive blocks of the held-out rows. A single form is taken as it is."""
+    finite = [f for f in pool if np.isfinite(score[f])]
+    if len(pool) == 1 or not finite:
+        return min(pool, key=lambda f: (score[f] if np.isfinite(score[f]) else np.inf, forms.index(f))), ""
+    ref = REFERENCE_FORM if REFERENCE_FORM in finite else min(finite, key=lambda f: (SIMPLICITY.index(f), score[f]))
+    rows = hold_rows[sl]
+
+    def row_err(f):
+        c = cands[f]
+        return sum(((y[t][rows] - c.hold_pred[t][sl]) / mean_of[t][g]) ** 2 for t in TARGETS)
+
+    e_ref = row_err(ref)
+    notes = []
+    for f in sorted((f for f in finite if f != ref and score[f] < score[ref]), key=lambda f: score[f]):
+        d = e_ref - row_err(f)
+        d = d[np.isfinite(d)]
+        gain = 1.0 - score[f] / score[ref]
+        se = float(np.std(d, ddof=1) / np.sqrt(d.size)) if d.size > 1 else np.inf
+        blocks = [b.mean() for b in np.array_split(d, max(int(gate.switch_blocks), 1)) if b.size]
+        if gain >= gate.switch_margin and d.size > 1 and d.mean() > gate.switch_sigmas * se and min(blocks) > 0:
+            return f, f"{f} chosen over {ref}: {100 * gain:.1f} % better on held-out rows ({d.mean() / se:.1f} σ, in every block)"
+        why = ("below the margin" if gain < gate.switch_margin else
+               f"not significant ({d.mean() / se if se > 0 else 0:.1f} σ)" if not d.mean() > gate.switch_sigmas * se
+               else "not better in every block of held-out rows")
+        notes.append(f"{f} {100 * gain:.1f} % better than {ref}, {why}: {ref} kept")
+    return ref, "; ".join(notes)
+
+
 def _paired(y, new, old, sigmas: float) -> tuple[float, float, bool]:
     """(RMSE of new, RMSE of old, whether new is worse by more than `sigmas` standard errors of the mean
     paired difference of squared errors) over the rows where both are finite."""
@@ -461,22 +570,40 @@ def _scores(results: dict, g: int) -> dict:
 
 
 def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> list[dict]:
-    """perf_models rows: an accepted model refitted on all its vessel's rows, a refused one as fitted on the training rows."""
-    full = {}
-    for form in {p[2] for p in plans if p[3]}:
-        gs = np.array([p[0] for p in plans if p[3] and p[2] == form])
+    """perf_models rows: every proposed model validated on the held-out rows and then refitted on all its vessel's
+    rows (what is stored, active or not); an accepted one is activated only if that fit passes the sanity checks
+    over the envelope of all the rows."""
+    full, envs = {}, {}
+    accepted = {p[0] for p in plans if p[3]}
+    for form in {p[2] for p in plans}:
+        gs = np.array([p[0] for p in plans if p[2] == form])
         c = cands[form]
         # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
+        env = sanity.envelopes(inp, bounds[gs], bounds[gs + 1])
+        active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
+        sane = [None] * gs.size
+        if gate.sanity and active:
+            why = sanity.check_models(form, np.array([res["speed"][j].coef for j in active]),
+                                      np.array([res["fuel"][j].coef for j in active]), [env[j] for j in active], gate.limits)
+            for j, w in zip(active, why):
+                sane[j] = w
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
+            envs[int(g)] = (env[j], sane[j])
     out = []
-    first, end, hold, n_hold = bounds[:-1].tolist(), bounds[1:].tolist(), hold_from.tolist(), n_hold.tolist()
+    first, end = bounds[:-1].tolist(), bounds[1:].tolist()
+    n_hold = n_hold.tolist()
     for g, imo, form, activate, summary, data_hash in plans:
-        res = full[g] if activate else {t: cands[form].train[t][g] for t in TARGETS}
-        last = end[g] - 1 if activate else hold[g] - 1
+        env, refused = envs[g]
+        if activate and refused:
+            activate = False
+            summary.update(changed=False, why=f"{refused} (fitted on all rows)",
+                           reason=f"{form}: refused after its fit on all rows: {refused}; {summary['reason']}")
+        res = full[g]
+        last = end[g] - 1
         used = last >= first[g]
         summary.update({f"{t}_{k}": float(getattr(res[t], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")})
         months, data_to = (float(inp["months_dd"][last]), ts[last].item()) if used else (0.0, None)  # .item(): a datetime
@@ -486,5 +613,6 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
                         "coefficients": _coefficients_json(r), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
                         "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": n_hold[g],
                         "status": "active" if activate else "rejected", "reason": summary["reason"], "active": activate,
-                        "months_dd": months, "data_hash": data_hash, "data_to_utc": data_to})
+                        "months_dd": months, "data_hash": data_hash, "data_to_utc": data_to,
+                        "envelope": env.to_json(), "gate": summary.get("gate")})
     return out

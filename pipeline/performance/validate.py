@@ -11,7 +11,7 @@ Nothing is silently dropped. Reasons (first failing check wins, in this order):
   unknown vessel                     IMO not in the vessels table
   hours <= 0                         reporting period not positive
   negative <col>                     negative where impossible
-  out of range <col>                 outside a physical range (lat, rpm, draft, directions…)
+  out of range <col>                 outside a physical range (lat, rpm, draft, directions −180..360…)
   speed beyond physics               STW or SOG above 35 kn
   fuel looks like kg                 fuel rate above 20 t/h (a unit mistake)
   speed looks like m/s               SOG disagrees with dist/hours by the m/s factor (1.944 ± 0.05)
@@ -36,9 +36,10 @@ NON_NEGATIVE = ("rpm", "draft_m", "stw_kn", "sog_kn", "dist_nm", "fuel_t", "fuel
                 "wave_m", "current_kn", "months_since_drydock")
 RANGES = {
     "lat": (-90, 90), "lon": (-180, 360), "rpm": (1, 250), "draft_m": (1, 25), "trim_m": (-6, 6), "hours": (0, 30),
-    "wind_dir_rel_deg": (0, 360), "wave_dir_rel_deg": (0, 360), "current_dir_rel_deg": (0, 360),
+    "wind_dir_rel_deg": (-180, 360), "wave_dir_rel_deg": (-180, 360), "current_dir_rel_deg": (-180, 360),
     "wind_kn": (0, 120), "wave_m": (0, 25), "current_kn": (0, 8), "months_since_drydock": (0, 240),
 }
+FOLDED_DIRECTIONS = ("wind_dir_rel_deg", "wave_dir_rel_deg")
 MAX_SPEED_KN = 35.0
 MAX_FUEL_TPH = 20.0
 MS_TO_KN = 1.943844
@@ -100,6 +101,12 @@ def validate_noon(raw: pd.DataFrame, known_imos: set[int] | None = None, source:
     ratio = implied / df["sog_kn"]
     flag((df["sog_kn"] > 0.5) & (ratio.sub(MS_TO_KN).abs() < 0.05), "speed looks like m/s")
     flag((df["sog_kn"] > 0.5) & ((ratio - 1.0).abs() > 0.25), "sog inconsistent with distance")
+    # relative directions: 0..360 clockwise from the bow, or signed −180..180 (negative to port) — both common.
+    # Wind and waves are folded to 0..180 (0 head, 90 beam either side, 180 following: the models use no side);
+    # the current's relative direction (going-to) is kept whole, as 0..360.
+    for c in FOLDED_DIRECTIONS:
+        df[c] = fold_rel_deg(df[c])
+    df["current_dir_rel_deg"] = df["current_dir_rel_deg"] % 360.0
     still_good = reason.isna()
     dup = df[still_good].duplicated(subset=["imo", "ts_utc"], keep="first").reindex(df.index, fill_value=False)
     flag(dup, "duplicate timestamp in file")
@@ -108,6 +115,12 @@ def validate_noon(raw: pd.DataFrame, known_imos: set[int] | None = None, source:
     bad["reason"] = reason[reason.notna()]
     good = df[reason.isna()].drop(columns=["raw"])
     return good.reset_index(drop=True), bad.reset_index(drop=True)
+
+
+def fold_rel_deg(rel_deg):
+    """Relative directions (degrees, 0..360 or −180..180) folded to 0..180, port and starboard alike:
+    |((rel + 180) mod 360) − 180| (as `features.fold_rel_deg`); NaN stays NaN."""
+    return np.abs(((np.asarray(rel_deg, dtype=np.float64) + 180.0) % 360.0) - 180.0)
 
 
 def raw_text(df: pd.DataFrame) -> pd.Series:

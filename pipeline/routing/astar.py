@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.routing import geodesy as geo
+from pipeline.routing.contract import Found
 from pipeline.routing.engine_limits import best_engine_plan
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 
@@ -85,10 +86,8 @@ class AstarOptions:
 
 def search(inst, baseline, *, seed: int, options: AstarOptions):
     """The solver contract (see solvers.py): one A* per α, the plan with the best objective value wins."""
-    from pipeline.routing.solvers import Found
-
     m, p = inst.problem.model, inst.problem
-    rpm = np.asarray(p.rpm_options)
+    rpm = np.asarray(inst.rpm_options)
     stw = m.stw_kn(rpm, p.draft_m, p.trim_m)
     fuel = m.fuel_tph(rpm, p.draft_m, p.trim_m)
     fuel_per_nm_lb = float(np.min(0.7 * fuel / (stw + 3.0)))

@@ -1,5 +1,11 @@
 """The baseline every plan is compared with: the shortest sea route through the graph (the base line itself
-when it is at sea) at the slowest constant rpm that meets the RTA, else the fastest."""
+when it is at sea) sailed at one constant rpm.
+
+`constant_rpm_for_rta` finds the one constant rpm anywhere between the lowest and the highest allowed setting
+that arrives at the RTA on a route in the voyage's weather (bisection; the slowest when even that is early, the
+fastest, late, when none is in time). solve.py adds that rpm to the settings the solvers may use, so the
+constant-speed voyage on the base route is a plan of every solver's space (`baseline` then picks it: it is the
+slowest setting that meets the RTA), and no plan returned burns more than it."""
 
 from __future__ import annotations
 
@@ -79,6 +85,47 @@ def evaluate(inst, nodes, rpm_idx) -> tuple[float, float, float, int]:
     return route_cost_nb(inst.objective, hours, fuel), hours, fuel, lk.OK
 
 
+def sail_constant(inst, nodes: np.ndarray, rpm: float) -> tuple[float, float]:
+    """(hours, fuel) of the route at a constant rpm (inf hours when a leg cannot be sailed)."""
+    v = inst.vessel._replace(rpm_options=np.array([float(rpm)]))
+    L2 = len(nodes)
+    ct, cf = np.empty(L2), np.empty(L2)
+    code, _ = lk.sail_route_nb(np.ascontiguousarray(nodes, np.int64), np.zeros(L2 - 1, np.int64), 0, inst.graph, v,
+                               inst.wx, inst.objective, ct, cf)
+    return (ct[-1] - inst.t_dep_h, cf[-1]) if code == lk.OK else (math.inf, math.nan)
+
+
+def constant_rpm_for_rta(inst, nodes: np.ndarray, tol_h: float = 1e-5) -> tuple[float, float, float] | None:
+    """(rpm, hours, fuel) of the one constant rpm between the allowed extremes that arrives at the RTA on `nodes`
+    (bisection: hours fall as rpm rises); None when the route cannot be sailed at the extremes."""
+    lo, hi = float(inst.rpm_options[0]), float(inst.rpm_options[-1])
+    t_req = inst.problem.t_req_h
+    h_lo, f_lo = sail_constant(inst, nodes, lo)
+    if h_lo <= t_req:
+        return lo, h_lo, f_lo
+    h_hi, f_hi = sail_constant(inst, nodes, hi)
+    if not math.isfinite(h_hi) or h_hi >= t_req:
+        return (hi, h_hi, f_hi) if math.isfinite(h_hi) else None
+    for _ in range(60):  # keep the on-time end: its plan arrives by the RTA
+        mid = 0.5 * (lo + hi)
+        h, f = sail_constant(inst, nodes, mid)
+        if h <= t_req:
+            hi, h_hi, f_hi = mid, h, f
+        else:
+            lo = mid
+        if t_req - h_hi <= tol_h:
+            break
+    return hi, h_hi, f_hi
+
+
+def with_setting(rpm_options: np.ndarray, rpm: float, rel_tol: float = 1e-9) -> np.ndarray:
+    """The sorted settings with `rpm` added (unless one is already that rpm)."""
+    rpm_options = np.asarray(rpm_options, np.float64)
+    if np.any(np.abs(rpm_options - rpm) <= rel_tol * max(abs(rpm), 1.0)):
+        return rpm_options
+    return np.sort(np.append(rpm_options, float(rpm)))
+
+
 def constant_rpm_route(inst, nodes: np.ndarray) -> tuple[np.ndarray, int]:
     """Slowest allowed rpm, held on every leg, that arrives by the RTA; else the fastest. (rpm_idx, code)."""
     n = len(inst.rpm_options)
@@ -96,8 +143,9 @@ def constant_rpm_route(inst, nodes: np.ndarray) -> tuple[np.ndarray, int]:
     return (fastest, lk.OK) if fastest is not None else (np.full(len(nodes) - 1, n - 1, np.int64), last_code)
 
 
-def baseline(inst) -> Baseline:
-    nodes = shortest_route(inst.space)
+def baseline(inst, nodes: np.ndarray | None = None) -> Baseline:
+    """The shortest sea route (`nodes`, found when not given) at the slowest setting that meets the RTA."""
+    nodes = shortest_route(inst.space) if nodes is None else nodes
     if nodes is None:
         return Baseline(None, None, lk.NO_EDGE)
     rpm_idx, code = constant_rpm_route(inst, nodes)

@@ -48,9 +48,9 @@ import numpy as np
 
 from pipeline.performance.features import FORM_PHYSICAL, FORM_THESIS, stw_kn_nb, fuel_tph_nb
 from pipeline.routing import geodesy as geo
+from pipeline.routing.contract import Found
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
-from pipeline.routing.weather_field import SWH, U10, UO, V10, VO
 
 
 @numba.njit(cache=True)
@@ -381,12 +381,7 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     wf, sp = inst.weather, inst.space
     grid = wf.grid
 
-    def var(k):  # (nlat, nlon, nt) float64, NaN as 0
-        return np.nan_to_num(wf.cells[..., k].astype(np.float64), nan=0.0)
-
-    wind = np.hypot(var(U10), var(V10)).max(axis=2) * geo.KN_PER_MS
-    hs = var(SWH).max(axis=2)
-    cur = np.hypot(var(UO), var(VO)).max(axis=2) * geo.KN_PER_MS
+    wind, hs, cur = wf.max_over_time
     L2, P = sp.lat.shape
     iy, ix = _cell_index(grid, sp.lat, sp.lon)
     out = np.zeros((3, L2, P))
@@ -489,25 +484,19 @@ class DpOptions:
 
 
 
-def search(inst, baseline, *, seed: int, options: DpOptions):
-    """The solver contract (see solvers.py); `seed` is not used."""
+def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf):
+    """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with (the
+    registry passes its incumbent's, solvers._dp)."""
     from pipeline.routing.baseline import evaluate
-    from pipeline.routing.solvers import Found
 
     if options.bucket_h is not None:
         nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
                                                     inst.objective)
     else:
-        upper = math.inf if options.upper_bound is None else float(options.upper_bound)
+        if options.upper_bound is not None:
+            upper = min(upper, float(options.upper_bound))
         if baseline.ok:
             upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
-        if options.incumbent is not None:
-            from pipeline.routing.solvers import SOLVERS
-
-            spec = SOLVERS[options.incumbent]
-            found = spec.search(inst, baseline, seed=1, options=spec.options())
-            if found.nodes is not None:
-                upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
         lams, m_lam, t_min, tau, phi = finish_bounds(inst)
         ld = latest_departures(inst)
         eps = trim_eps(inst, options.gap, upper, lams, m_lam, t_min)

@@ -40,6 +40,9 @@ from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_n
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 
+PLAN_GAP = 1e-3  # the share of the best plan under the limits within which solve() and the savings split take it
+
+
 @dataclass(frozen=True)
 class EngineLimits:
     """How often the engine setting may change: the least hours a setting is held, and a cost (t of fuel) per
@@ -85,12 +88,43 @@ def _route_latest_departures(lat, lon, nodes, v, w, fast_rpm, deadline, ld):
 
 
 @numba.njit(cache=True)
+def _sail_run_nb(lat, lon, nodes, v, w, rpm, i0, t0, f0, min_hold_h, to_end, out):
+    """Sail the route from line i0 at time t0 (fuel f0) at `rpm` until the setting has been held `min_hold_h`
+    hours, or to the arrival when `to_end`: (line reached, time, fuel, legs sailed, ok). ok is False when a leg
+    cannot be sailed; the line reached is the last one when the arrival comes first."""
+    L2 = nodes.shape[0]
+    t, f = t0, f0
+    i = i0
+    n = 0
+    while i < L2 - 1:
+        a, b = nodes[i], nodes[i + 1]
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, v, w, out)
+        n += 1
+        if out[CODE] != OK:
+            return i, t, f, n, False
+        t += out[H]
+        f += out[FUEL]
+        i += 1
+        if not to_end and t - t0 >= min_hold_h - 1e-9:
+            break
+    return i, t, f, n, True
+
+
+@numba.njit(cache=True)
 def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune, upper, lams, m_route, t_min, eps):
     """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
     (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`;
     under `jit`, labels whose fuel and change costs so far plus the least fuel to finish (dp.fuel_to_finish_lb
     with the route's tables m_route (K, lines), t_min (lines)) exceed `upper`, a known plan's cost, too. With
-    eps > 0 (t) a label is also dropped when an earlier one comes within eps of dominating it."""
+    eps > 0 (t) a label is also dropped when an earlier one comes within eps of dominating it.
+
+    Labels are kept only where the ship is free to change setting (its setting held `min_hold_h`): from such a
+    label it either sails one more leg at its setting, or changes and then sails the new setting until it has
+    been held the hold (a run sailed in one go, no labels inside it). The first setting is such a run from the
+    departure, which may also reach the arrival (a plan of one setting may be shorter than the hold); a changed
+    setting whose run reaches the arrival before the hold is not a plan. Free labels at a line and setting differ
+    only in time, fuel and changes, so the dominance is the DP's (dp.py): sorted by time, a label is kept when
+    its f + c·n − e·t is below every earlier one's."""
     rpm_options = v.rpm_options
     R = rpm_options.shape[0]
     L2 = nodes.shape[0]
@@ -98,89 +132,123 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
     e = o.early_t_per_h if o.kind == OBJ_JIT else 0.0
     deadline = t_dep_h + (o.t_req_h if upper < LATE_STEP_T else max_hours)
     tol = 1e-9 * max(1.0, abs(upper))
-    cap = 1024
-    kt, kf, kh = np.empty(cap), np.empty(cap), np.empty(cap)
-    kn, kr, kpar = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
-    n_kept = 0
-    line_lo = 0
+    tol += (L2 - 1) * eps  # the label standing for the best plan may be up to that much dearer: keep it (dp.py)
+    jit_bound = o.kind == OBJ_JIT and upper < np.inf
+    # candidates: a label waiting to be judged at its line (per-line linked lists)
     ccap = 1024
-    ct, cf, ch = np.empty(ccap), np.empty(ccap), np.empty(ccap)
-    cn, cr, cpar = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
+    ct, cf = np.empty(ccap), np.empty(ccap)
+    cn, cr, cpar, cstart, cnext = (np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64),
+                                   np.empty(ccap, np.int64), np.empty(ccap, np.int64))
+    head = np.full(L2, -1, np.int64)
+    n_c = 0
+    # kept labels: (time, fuel, changes, setting, parent kept label, line where its last run began, line)
+    cap = 1024
+    kt, kf = np.empty(cap), np.empty(cap)
+    kn, kr, kpar, kstart, kline = (np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64),
+                                   np.empty(cap, np.int64), np.empty(cap, np.int64))
+    n_kept = 0
     out = np.empty(N_LEG_OUT)
     n_legs = 0
-    for i in range(L2 - 1):
-        a, b = nodes[i], nodes[i + 1]
-        n_c = 0
-        n_src = 1 if i == 0 else n_kept - line_lo
-        for q in range(n_src):
-            j = -1 if i == 0 else line_lo + q
-            t0 = t_dep_h if j < 0 else kt[j]
-            f0 = 0.0 if j < 0 else kf[j]
-            h0 = 0.0 if j < 0 else kh[j]
-            n0 = 0 if j < 0 else kn[j]
-            r0 = -1 if j < 0 else kr[j]
-            for r in range(R):
-                change = r0 >= 0 and r != r0
-                if change and h0 < min_hold_h - 1e-9:
-                    continue
-                sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t0, rpm_options[r], v, w, out)
-                n_legs += 1
-                if out[CODE] != OK:
-                    continue
-                t1 = t0 + out[H]
-                if t1 - t_dep_h > max_hours or (prune and t1 > ld[i + 1]):
-                    continue
-                f1 = f0 + out[FUEL]
-                n1 = n0 + (1 if change else 0)
-                if o.kind == OBJ_JIT and upper < np.inf:
-                    lb = f1 + change_cost_t * n1 + fuel_to_finish_lb(m_route[:, i + 1], lams, t_min[i + 1], deadline - t1)
-                    if lb > upper + tol:
-                        continue
-                if n_c >= ct.shape[0]:
-                    ct, cf, ch = _grow(ct, n_c + 1), _grow(cf, n_c + 1), _grow(ch, n_c + 1)
-                    cn, cr, cpar = _grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1)
-                held = out[H] if change else h0 + out[H]
-                ct[n_c], cf[n_c], ch[n_c] = t1, f1, min(held, min_hold_h)
-                cn[n_c], cr[n_c], cpar[n_c] = n1, r, j
-                n_c += 1
-        # per setting, by arrival time: keep a label unless an earlier kept one dominates it
-        order = np.argsort(ct[:n_c], kind="mergesort")
+    best, best_j, best_single = np.inf, -1, -1
+    single_t, single_f = np.empty(R), np.empty(R)
+    # the first setting: a run from the departure (to the arrival too: a plan of one setting)
+    for r in range(R):
+        i1, t1, f1, nl, ok = _sail_run_nb(lat, lon, nodes, v, w, rpm_options[r], 0, t_dep_h, 0.0, min_hold_h, True, out)
+        n_legs += nl
+        single_t[r], single_f[r] = t1, f1
+        if ok and t1 - t_dep_h <= max_hours:
+            q = route_cost_nb(o, t1 - t_dep_h, f1)
+            if q < best:
+                best, best_single = q, r
+        # the same run, stopped where the hold is first met (its sailing is a prefix of the run above)
+        i1, t1, f1, nl, ok = _sail_run_nb(lat, lon, nodes, v, w, rpm_options[r], 0, t_dep_h, 0.0, min_hold_h, False, out)
+        n_legs += nl
+        if not ok or i1 >= L2 - 1 or t1 - t_dep_h > max_hours or (prune and t1 > ld[i1]):
+            continue
+        if jit_bound and f1 + fuel_to_finish_lb(m_route[:, i1], lams, t_min[i1], deadline - t1) > upper + tol:
+            continue
+        if n_c >= ct.shape[0]:
+            ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
+            cn, cr, cpar, cstart, cnext = (_grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1),
+                                           _grow(cstart, n_c + 1), _grow(cnext, n_c + 1))
+        ct[n_c], cf[n_c], cn[n_c], cr[n_c], cpar[n_c], cstart[n_c] = t1, f1, 0, r, -1, 0
+        cnext[n_c] = head[i1]
+        head[i1] = n_c
+        n_c += 1
+    gmin = np.empty(R)
+    for i in range(1, L2):
+        # judge this line's candidates: per setting, by time, kept when f + c·n − e·t beats every earlier one
+        m = 0
+        k = head[i]
+        while k >= 0:
+            m += 1
+            k = cnext[k]
+        idx = np.empty(m, np.int64)
+        k = head[i]
+        q = 0
+        while k >= 0:
+            idx[q] = k
+            q += 1
+            k = cnext[k]
+        order = idx[np.argsort(ct[idx], kind="mergesort")]
+        gmin[:] = np.inf
         line_lo = n_kept
-        for r in range(R):
-            start = n_kept
-            for q in range(n_c):
-                k = order[q]
-                if cr[k] != r:
+        for q in range(m):
+            k = order[q]
+            r = cr[k]
+            g = cf[k] + change_cost_t * cn[k] - e * ct[k]
+            if not g < gmin[r] - eps:
+                continue
+            gmin[r] = g
+            if n_kept >= kt.shape[0]:
+                kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
+                kn, kr, kpar, kstart, kline = (_grow(kn, n_kept + 1), _grow(kr, n_kept + 1), _grow(kpar, n_kept + 1),
+                                               _grow(kstart, n_kept + 1), _grow(kline, n_kept + 1))
+            kt[n_kept], kf[n_kept], kn[n_kept], kr[n_kept] = ct[k], cf[k], cn[k], r
+            kpar[n_kept], kstart[n_kept], kline[n_kept] = cpar[k], cstart[k], i
+            n_kept += 1
+        if i == L2 - 1:
+            for j in range(line_lo, n_kept):
+                qc = route_cost_nb(o, kt[j] - t_dep_h, kf[j]) + change_cost_t * kn[j]
+                if qc < best:
+                    best, best_j, best_single = qc, j, -1
+            break
+        # expand: one more leg at the label's setting, or a change and a run that holds the new setting
+        for j in range(line_lo, n_kept):
+            for r in range(R):
+                change = r != kr[j]
+                i1, t1, f1, nl, ok = _sail_run_nb(lat, lon, nodes, v, w, rpm_options[r], i, kt[j], kf[j], min_hold_h,
+                                                  False, out) if change else _sail_run_nb(
+                    lat, lon, nodes, v, w, rpm_options[r], i, kt[j], kf[j], 0.0, False, out)
+                n_legs += nl
+                if not ok or t1 - t_dep_h > max_hours or (prune and t1 > ld[i1]):
                     continue
-                gk = cf[k] + change_cost_t * cn[k] - e * ct[k]
-                dominated = False
-                if cn[k] > 0:  # a plan of one setting is always kept
-                    for m in range(start, n_kept):
-                        if kf[m] + change_cost_t * kn[m] - e * kt[m] <= gk + eps and kh[m] >= ch[k]:
-                            dominated = True
-                            break
-                if dominated:
+                n1 = kn[j] + (1 if change else 0)
+                if change and t1 - kt[j] < min_hold_h - 1e-9:
+                    continue  # the arrival came before the new setting was held: not a plan
+                if jit_bound and (f1 + change_cost_t * n1
+                                  + fuel_to_finish_lb(m_route[:, i1], lams, t_min[i1], deadline - t1)) > upper + tol:
                     continue
-                if n_kept >= kt.shape[0]:
-                    kt, kf, kh = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1), _grow(kh, n_kept + 1)
-                    kn, kr, kpar = _grow(kn, n_kept + 1), _grow(kr, n_kept + 1), _grow(kpar, n_kept + 1)
-                kt[n_kept], kf[n_kept], kh[n_kept] = ct[k], cf[k], ch[k]
-                kn[n_kept], kr[n_kept], kpar[n_kept] = cn[k], cr[k], cpar[k]
-                n_kept += 1
+                if n_c >= ct.shape[0]:
+                    ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
+                    cn, cr, cpar, cstart, cnext = (_grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1),
+                                                   _grow(cstart, n_c + 1), _grow(cnext, n_c + 1))
+                ct[n_c], cf[n_c], cn[n_c], cr[n_c], cpar[n_c], cstart[n_c] = t1, f1, n1, r, j, i
+                cnext[n_c] = head[i1]
+                head[i1] = n_c
+                n_c += 1
     rpm_idx = np.zeros(L2 - 1, np.int64)
-    best, best_j = np.inf, -1
-    for j in range(line_lo, n_kept):
-        if kn[j] > 0 and kh[j] < min_hold_h - 1e-9:
-            continue  # the last setting was not held long enough
-        q = route_cost_nb(o, kt[j] - t_dep_h, kf[j]) + change_cost_t * kn[j]
-        if q < best:
-            best, best_j = q, j
+    if best_single >= 0:
+        rpm_idx[:] = best_single
+        return rpm_idx, best, single_f[best_single], 0, n_legs
     if best_j < 0:
         return rpm_idx, np.inf, np.nan, 0, n_legs
+    fuel, changes = kf[best_j], kn[best_j]
     j = best_j
-    fuel, changes = kf[j], kn[j]
-    for i in range(L2 - 2, -1, -1):
-        rpm_idx[i] = kr[j]
+    end = L2 - 1
+    while j >= 0:
+        rpm_idx[kstart[j]:end] = kr[j]
+        end = kstart[j]
         j = kpar[j]
     return rpm_idx, best, fuel, changes, n_legs
 

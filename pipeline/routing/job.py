@@ -18,7 +18,7 @@ from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 from pipeline.routing.search_space import SearchSpace
-from pipeline.routing.solve import solve
+from pipeline.routing.solve import solve, solver_spec
 from pipeline.routing.voyage import problem_from_voyage
 
 
@@ -48,6 +48,7 @@ def routing_problem(job: RouteJob) -> RoutingProblem:
                                 "import its noon reports and run `jitroute refit` first")
     model = PerformanceModel.from_json(job.model)
     return problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
+                               base=solver_spec(o.solver).base,
                                window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
                                d_point_nm=o.d_point_nm, land_clearance_nm=o.land_clearance_nm,
                                port_approach_nm=o.port_approach_nm)
@@ -71,4 +72,9 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
     space = problem.search_space()
     weather = calm_weather(problem) if weather_for is None else weather_for(problem, space)
     o = job.options
-    return solve(problem, weather, solver=o.solver, seed=o.seed, space=space, limits=o.limits, savings=True), weather
+    options = solver_spec(o.solver).make_options(o.solver_overrides())
+    plan = solve(problem, weather, solver=o.solver, seed=o.seed, options=options, space=space, limits=o.limits,
+                 savings=True)
+    if problem.rpm_note:
+        plan.reason = f"{plan.reason}; {problem.rpm_note}" if plan.reason else problem.rpm_note
+    return plan, weather

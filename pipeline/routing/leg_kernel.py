@@ -5,7 +5,9 @@ A leg is the great-circle chord between two nodes. The ship steps along it, each
 the relative wind and wave angles from its course there, gets speed through water and fuel rate
 from its performance model at the leg's rpm, adds the current along course (SOG = STW + current
 along course), and advances. Hours and fuel (rate × time) accumulate; weather limits (Hs, wind)
-make the leg infeasible with a code.
+make the leg infeasible with a code. Where the wind is missing (a hole in the cube: every corner and both
+bracketing times NaN; GSM wind has no land mask, so this is never land) the step is sailed as calm but its
+hours are counted in NO_WIND_H, so the plan can say so instead of passing the hole off as calm weather.
 
 The ship comes as a `Vessel` (its performance model at the voyage's draft and trim, weather limits,
 the allowed engine settings and the integration step), the weather as a `weather_field.Weather`.
@@ -34,9 +36,10 @@ REASONS = {
     NO_EDGE: "leg crosses land, a limit line or the latitude limits",
     TOO_LONG: "voyage takes longer than the planning horizon",
 }
-N_LEG_OUT = 14
-# leg_out fields
-H, FUEL, CODE, BEYOND, WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, SOG_KN, CUR_KN = range(N_LEG_OUT)
+N_LEG_OUT = 15
+# leg_out fields (NO_WIND_H: hours of the leg sailed where the wind is missing)
+(H, FUEL, CODE, BEYOND, WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, SOG_KN, CUR_KN,
+ NO_WIND_H) = range(N_LEG_OUT)
 MIN_SOG_KN = 0.5
 
 
@@ -88,6 +91,7 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
         hdg = geo.chord_course_deg(chord, lat, lon)
         if sample_nb(wx, t, lat, lon, w):
             out[BEYOND] = 1.0
+        no_wind = math.isnan(w[U10]) or math.isnan(w[V10])
         u = 0.0 if math.isnan(w[U10]) else w[U10]
         v = 0.0 if math.isnan(w[V10]) else w[V10]
         hs = 0.0 if math.isnan(w[SWH]) else w[SWH]
@@ -125,6 +129,8 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
         out[CUR_ALONG_KN] += cur * dt
         out[STW_KN] += stw * dt
         out[CUR_KN] += math.sqrt(uo * uo + vo * vo) * geo.KN_PER_MS * dt
+        if no_wind:
+            out[NO_WIND_H] += dt
         t += dt
         done += ds
     hours = t - t0_h

@@ -9,11 +9,26 @@ if TYPE_CHECKING:
     from pipeline.routing.engine_limits import EngineLimits
 
 
+# the registered solvers (pipeline.routing.solvers.SOLVERS, which checks it holds exactly these), named here so a
+# run can refuse an unknown one before anything is loaded or opened
+SOLVER_NAMES = ("bfoa", "dp", "astar", "gc", "rhumb")
+# the product's defaults for a solver's own options, where they differ from the library's: `dp` certifies its plan
+# within 0.1 % of the optimum (ε-trimmed labels) instead of keeping every label
+DEFAULT_SOLVER_OPTIONS = {"dp": {"gap": 1e-3}}
+
+
+class UnknownSolverError(ValueError):
+    """A solver name or solver option the registry does not know (the message lists the known ones)."""
+
+
 @dataclass(frozen=True)
 class RoutingOptions:
     """Solver settings of a run (see pipeline.routing.solve); the settings' `routing` section extends them."""
 
     solver: str = "bfoa"
+    # the solver's own options as (name, value) pairs over the product defaults (DEFAULT_SOLVER_OPTIONS), e.g.
+    # (("gap", "0"),) for an exact dp; values may be text (`--solver-option gap=0`)
+    solver_options: tuple = ()
     objective: str = "jit"
     arrival_window_h: float = 6.0
     seed: int = 1
@@ -26,6 +41,15 @@ class RoutingOptions:
     # change costs this much fuel in the objective (0 and 0: the solver's plan as found, a setting per leg)
     min_engine_hold_h: float = 12.0
     engine_change_cost_t: float = 0.05
+
+    def __post_init__(self):
+        if self.solver not in SOLVER_NAMES:
+            raise UnknownSolverError(f"unknown solver {self.solver!r}; use one of {', '.join(SOLVER_NAMES)}")
+        object.__setattr__(self, "solver_options", tuple((str(k), v) for k, v in dict(self.solver_options).items()))
+
+    def solver_overrides(self) -> dict:
+        """The solver's option values of this run: the product defaults, then `solver_options`."""
+        return {**DEFAULT_SOLVER_OPTIONS.get(self.solver, {}), **dict(self.solver_options)}
 
     @property
     def limits(self) -> "EngineLimits":

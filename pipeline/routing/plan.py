@@ -86,9 +86,11 @@ class Plan:
 
     @property
     def forecast_flag(self) -> str | None:
-        """'beyond horizon', 'before cycle', both, or None when the whole voyage lies inside the forecast."""
+        """'beyond horizon', 'before cycle', 'weather missing' (a hole in the wind), comma separated, or None when
+        the whole voyage lies inside the forecast with its weather."""
+        no_wind_h = sum(leg.get("hours_without_wind", 0.0) for leg in self.legs)
         flags = [name for name, h in (("beyond horizon", self.hours_beyond_forecast),
-                                      ("before cycle", self.hours_before_cycle)) if h > 1e-9]
+                                      ("before cycle", self.hours_before_cycle), ("weather missing", no_wind_h)) if h > 1e-9]
         return ", ".join(flags) or None
 
     @property
@@ -206,5 +208,6 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
             "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
             "hours_beyond_forecast": max(0.0, t - max(t - o[lk.H], horizon_h)),
             "hours_before_cycle": max(0.0, min(t, cycle_h) - (t - o[lk.H])),
+            "hours_without_wind": float(o[lk.NO_WIND_H]),  # a hole in the cube's wind (sailed as calm): in the reason
         })
     return legs, lk.OK, -1

@@ -3,7 +3,7 @@ weather and objective as named structures)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -78,6 +78,7 @@ class RoutingProblem:
     max_step_h: float = 1.0
     land_clearance_nm: float = 2.0  # legs keep this far from land, except within port_approach_nm of a port
     port_approach_nm: float = 10.0
+    rpm_note: str | None = None  # why allowed rpm settings were clipped to the model's range (said on the plan)
 
     def __post_init__(self):
         object.__setattr__(self, "depart_utc", np.datetime64(self.depart_utc, "s"))
@@ -157,7 +158,13 @@ class Instance:
 
     @property
     def rpm_options(self) -> np.ndarray:
+        """The engine settings the solvers choose from (the voyage's, plus what solve.py adds)."""
         return self.vessel.rpm_options
+
+    def with_rpm_options(self, rpm_options) -> "Instance":
+        """The same voyage with other engine settings (sorted, rpm)."""
+        rpm = np.ascontiguousarray(np.sort(np.asarray(rpm_options, np.float64)))
+        return replace(self, vessel=self.vessel._replace(rpm_options=rpm))
 
     @property
     def t_dep_h(self) -> float:

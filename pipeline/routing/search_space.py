@@ -116,8 +116,12 @@ def _edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
                                                    lat_lo, lat_hi)
 
 
-DENSER_LINES = (2, 4)  # when the default lines leave no route at sea: this many times as many, in turn
+# when the default layout leaves no route at sea: (lines, nodes per line) this many times as many, in turn. More
+# nodes along each line, over the same width, find a narrow strait whose corridor falls between two nodes
+# (Gibraltar at 21 nodes a line); closer lines thread a coast's islands with shorter legs.
+DENSER = ((1, 2), (2, 1), (2, 2), (4, 2), (4, 4))
 MIN_LINE_SPACING_NM = 5.0  # never closer than this
+MAX_POINTS = 161  # nodes per line at most
 
 
 def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_lines: int | None = None,
@@ -128,15 +132,24 @@ def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_
 
     With `n_lines` None the number of lines follows the voyage length (`default_n_lines`); when that leaves no
     route at sea (legs too long to thread a coast's islands and keep their clearance, e.g. Qingdao → Busan past
-    Korea's south-west islands), the lines are laid `DENSER_LINES` times as close, in turn, before giving up."""
+    Korea's south-west islands; a strait whose clear corridor falls between two nodes of a line, e.g.
+    Gibraltar), the lines and the nodes along them are laid `DENSER` times as close, in turn, over the same
+    width, before giving up."""
     space = lay_out_lines(dep, arr, n_lines=n_lines, **kw)
     if n_lines is not None or not kw.get("check_land", True) or reachable(space):
         return space
     most = int(space.base_distance_nm / MIN_LINE_SPACING_NM)
-    for k in DENSER_LINES:
-        if space.n_lines * k > most:
-            break
-        denser = lay_out_lines(dep, arr, n_lines=space.n_lines * k, **kw)
+    n_points = space.lat.shape[1]
+    d_point = kw.pop("d_point_nm", None)
+    d_point = d_point if d_point is not None else default_d_point_nm(space.base_distance_nm, n_points)
+    max_shift = kw.pop("max_shift", None)
+    kw.pop("n_points", None)
+    for k_lines, k_points in DENSER:
+        lines, points = space.n_lines * k_lines, (n_points // 2) * k_points * 2 + 1
+        if lines > most or points > MAX_POINTS:
+            continue
+        denser = lay_out_lines(dep, arr, n_lines=lines, n_points=points, d_point_nm=d_point * (n_points // 2) / (points // 2),
+                               max_shift=None if max_shift is None else max_shift * k_points, **kw)
         if reachable(denser):
             return denser
     return space

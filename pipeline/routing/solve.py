@@ -1,12 +1,19 @@
 """One entry point for every solver: `solve(problem, weather, solver=…, seed=…)` → `Plan`.
 
-Solvers (the registry in solvers.py): `bfoa` (default, improved BFOA), `dp` (dynamic programming on the
-same graph), `astar` (A* with the α sweep), `gc` and `rhumb` (baselines: the shortest sea route along the
-great circle / rhumb-line graph at the slowest constant rpm that meets the RTA, else the fastest). Every
-plan carries that discrete-rpm baseline, and its savings against the honest constant-rpm baseline split into
-speed profile and route (savings.py). With engine-change limits the solver's route is re-planned so every
-engine setting is held (engine_limits.py); the plan keeps the solver's fuel without the limits for what
-they cost.
+Solvers (the registry in solvers.py, the contract in contract.py): `bfoa` (default, improved BFOA), `dp`
+(dynamic programming on the same graph), `astar` (A* with the α sweep), `gc` and `rhumb` (the constant-speed
+voyage: the shortest sea route along the great-circle / rhumb-line graph at the one constant rpm that meets the
+RTA).
+
+Speed is a decision between the lowest and the highest allowed rpm, not only the listed settings: the solvers
+choose per leg from the listed settings plus the constant rpm at which the base route arrives at the RTA
+(baseline.constant_rpm_for_rta), so a voyage too short to change setting sails one well-chosen rpm. That
+constant-speed voyage is every plan's `baseline`, and it is a plan of every solver's space: a solver whose plan
+(with its engine-change limits, engine_limits.py) costs more than it, or than the best engine plan on the base
+route, returns that plan instead and says so, so no plan on time burns more than the ship would at constant
+speed. With engine-change limits the solver's route is re-planned so every setting is held; `unlimited_fuel_t`
+is the best engine plan on the same route without them, for what the limits cost. The savings against the
+constant-speed voyage are split into speed profile and route (savings.py).
 """
 
 from __future__ import annotations
@@ -21,10 +28,10 @@ from pipeline.routing.baseline import Baseline, baseline as find_baseline, const
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.clearance import least_clearance_nm
 from pipeline.routing.dp import DpOptions
-from pipeline.routing.engine_limits import EngineLimits, limited_plan, unlimited_cost
+from pipeline.routing.engine_limits import PLAN_GAP, EngineLimits, limited_plan, unlimited_cost
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
-from pipeline.routing.savings import split_of
+from pipeline.routing.savings import profile_plan, split_of, with_constant_speed
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
 from pipeline.routing.solvers import SOLVERS as REGISTRY
 from pipeline.routing.weather_field import WeatherField
@@ -63,6 +70,12 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                 n = plan.n_beyond_forecast
                 notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({n} leg{'s' if n != 1 else ''}) beyond "
                              f"the forecast horizon {inst.weather.horizon_utc} (its last step persisted)")
+            no_wind = [leg["leg"] for leg in plan.legs if leg.get("hours_without_wind", 0.0) > 1e-9]
+            if no_wind:
+                hours = sum(leg.get("hours_without_wind", 0.0) for leg in plan.legs)
+                notes.append(f"weather missing: no wind data for {hours:.1f} h on leg{'s' if len(no_wind) != 1 else ''} "
+                             f"{', '.join(map(str, no_wind))} (a hole in cycle {inst.weather.cycle}, sailed as calm; "
+                             "re-ingest the cycle)")
             if plan.hours_before_cycle > 1e-9:
                 notes.append(f"{plan.hours_before_cycle:.1f} h of the voyage before the forecast cycle "
                              f"{inst.weather.cycle} (its first step used)")
@@ -91,42 +104,92 @@ def _check_forecast(problem: RoutingProblem, weather: WeatherField) -> None:
             f"{weather.horizon_utc} of the forecast cycle {cycle}; route it with a later cycle")
 
 
-def _options(solver: str, options, params: BfoaParams | None, bucket_h: float | None):
-    spec = REGISTRY[solver]
+def _options(spec, options, params: BfoaParams | None, bucket_h: float | None):
+    """The solver's options: `options` as given, else the shorthands (`params` are BfoaParams, `bucket_h` a
+    DpOptions field) when they are of this solver's kind, else its defaults."""
     if options is None:
-        if solver == "bfoa" and params is not None:
+        if params is not None and isinstance(params, spec.options):
             options = params
-        elif solver == "dp" and bucket_h is not None:
-            options = DpOptions(bucket_h=float(bucket_h))
+        elif bucket_h is not None and "bucket_h" in getattr(spec.options, "__dataclass_fields__", {}):
+            options = spec.make_options({"bucket_h": float(bucket_h)})
         else:
             options = spec.options()
     if not isinstance(options, spec.options):
-        raise RoutingInputError(f"solver {solver!r} takes {spec.options.__name__} options, not {type(options).__name__}")
+        raise RoutingInputError(f"solver {spec.name!r} takes {spec.options.__name__} options, not {type(options).__name__}")
     return options
 
 
+def _unlimited_fuel_t(inst: Instance, nodes, known_cost: float, known_fuel_t: float) -> float:
+    """Fuel of the best engine plan on the route without limits (the route's DP within 0.1 %, pruned by a known
+    plan of that route costing `known_cost` and burning `known_fuel_t`, which it is when nothing beats it)."""
+    _, free_fuel_t = unlimited_cost(inst, nodes, known_cost * (1.0 + 1e-9) + 1e-12)
+    return free_fuel_t if np.isfinite(free_fuel_t) else known_fuel_t
+
+
 def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
-    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan). For what
-    the limits cost, `unlimited_fuel_t` is the fuel of the solver's plan; when the limited plan, its change costs
-    aside, beats that (the solver left a better engine plan on its route), it is the best engine plan on the route
-    without limits instead (the route's DP within 0.1 %, pruned by the limited plan), so the limits never seem to
-    save fuel. Run only then, as the route's DP can cost more than the solve on long routes."""
-    held = limited_plan(inst, nodes, limits)
+    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan, within
+    0.1 % of the best such plan and never dearer than a setting held throughout). For what
+    the limits cost, `unlimited_fuel_t` is the best engine plan on the route without limits, so the limits never
+    seem to save fuel and are not blamed for what the solver left on its route."""
+    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
     limited.cost = held.cost
-    limited.limits, limited.unlimited_fuel_t = limits, plan.fuel_t
+    limited.limits = limits
     held_objective = held.cost - limits.change_cost_t * held.n_changes  # a plan without limits too
-    if held_objective < plan.cost - 1e-9 * abs(plan.cost):
-        _, free_fuel_t = unlimited_cost(inst, nodes, held_objective * (1.0 + 1e-9) + 1e-12)
-        limited.unlimited_fuel_t = free_fuel_t if np.isfinite(free_fuel_t) else held.fuel_t
+    known = (held_objective, held.fuel_t) if held_objective < plan.cost else (plan.cost, plan.fuel_t)
+    limited.unlimited_fuel_t = _unlimited_fuel_t(inst, nodes, *known)
     if limited.status == "late" and plan.status == "ok":
         limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
                           f"{limited.hours - inst.problem.t_req_h:.1f} h late (without the limits on time, "
                           f"{plan.fuel_t:.1f} t)")
     return limited
+
+
+def solver_spec(solver: str):
+    """The registered solver of that name; RoutingInputError listing the known ones otherwise."""
+    if solver not in REGISTRY:
+        raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    return REGISTRY[solver]
+
+
+def _never_worse(inst: Instance, plan: Plan, base: Baseline, limits: EngineLimits | None, profile, t0: float) -> Plan:
+    """The solver's plan, or the constant-speed voyage (or `profile`, the best engine plan on the base route under
+    the limits) when that costs less: both are plans of every solver's space, so no plan burns more than sailing
+    at constant speed. The plan kept says so in its reason."""
+    if not base.ok:
+        return plan
+    const_rpm = float(inst.rpm_options[base.rpm_idx[0]])
+    candidates = [(f"the base route at constant {const_rpm:.1f} rpm", base.rpm_idx,
+                   evaluate(inst, base.nodes, base.rpm_idx)[0])]
+    if profile is not None and np.isfinite(profile[1]):
+        candidates.append(("the best engine plan on the base route", profile[0], profile[1]))
+    what, rpm_idx, cost = min(candidates, key=lambda c: c[2])
+    if plan.legs and plan.cost <= cost * (1.0 + 1e-9) + 1e-12:
+        return plan
+    kept = _plan(inst, plan.solver, base.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
+                 n_evals=plan.n_evals)
+    if not kept.legs:
+        return plan
+    if limits is not None and limits.active:
+        n_changes = kept.n_engine_changes
+        kept.limits = limits
+        kept.unlimited_fuel_t = _unlimited_fuel_t(inst, base.nodes, kept.cost, kept.fuel_t)
+        kept.cost = cost if n_changes else kept.cost
+    found = (f"the {plan.solver} plan ({plan.fuel_t:.1f} t, {plan.status}) cost more" if plan.legs
+             else f"the {plan.solver} search found no plan ({plan.reason})")
+    note = f"{found}: kept {what}"
+    kept.reason = note if kept.reason is None else f"{kept.reason}; {note}"
+    return kept
+
+
+def solver_instance(problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> tuple[Instance, np.ndarray | None]:
+    """(the instance the solvers search, the base route's nodes or None): the voyage's listed settings plus the
+    constant rpm at which the base route arrives at the RTA (savings.with_constant_speed)."""
+    base_nodes = shortest_route(space)
+    return with_constant_speed(Instance.build(problem, space, weather), base_nodes), base_nodes
 
 
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa", seed: int = 1, options=None,
@@ -136,39 +199,38 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
 
     `options` are the solver's own (solvers.SOLVERS[solver].options); `params` (BfoaParams, for bfoa) and
     `bucket_h` (for dp) are shorthands for them. With `limits` (engine_limits.EngineLimits) the solver's route
-    gets the best engine plan holding each setting; `savings` adds the split against the honest baseline
-    (savings.py) to the plan (fleet and CLI plans always have both, see job.plan_voyage).
+    gets the best engine plan holding each setting; `savings` adds the split against the constant-speed voyage
+    (savings.py) to the plan (fleet and CLI plans always have both, see job.plan_voyage). A `space` laid along
+    another base route than the solver's (`rhumb`) is refused.
     """
-    if solver not in REGISTRY:
-        raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
-    spec = REGISTRY[solver]
-    opts = _options(solver, options, params, bucket_h)
+    spec = solver_spec(solver)
+    opts = _options(spec, options, params, bucket_h)
     _check_forecast(problem, weather)
     t0 = time.perf_counter()
     if space is None:
-        space = (replace(problem, base=spec.space_base) if spec.space_base else problem).search_space()
-    inst = Instance.build(problem, space, weather)
-    base = find_baseline(inst)
+        space = (replace(problem, base=spec.base) if spec.base != problem.base else problem).search_space()
+    elif space.base != spec.base:
+        raise RoutingInputError(f"voyage {problem.voyage_id}: solver {solver!r} routes along the {spec.base} base route, "
+                                f"but the search space given is laid along the {space.base}")
+    inst, base_nodes = solver_instance(problem, space, weather)
+    base = find_baseline(inst, base_nodes) if base_nodes is not None else Baseline(None, None, lk.NO_EDGE)
     if base.ok:
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)
-    baseline = _plan(inst, "gc" if space.base == "gc" else "rhumb", base.nodes, base.rpm_idx, t0=t0,
-                     reason_if_infeasible=_infeasible_reason(base))
-    if solver in ("gc", "rhumb"):
-        plan = baseline
-        plan.solver = solver
-        plan.baseline = None
-        return plan
+    baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=_infeasible_reason(base))
+    profile = profile_plan(inst, base.nodes, limits) if savings and base.ok else None
     if not reachable(space):
         plan = _plan(inst, solver, None, None, seed=seed, t0=t0, reason_if_infeasible=_infeasible_reason(None))
     else:
         found = spec.search(inst, base, seed=int(seed), options=opts)
-        plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if solver == "bfoa" else None, t0=t0,
+        plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=_infeasible_reason(base))
-        if limits is not None and limits.active and plan.legs:
-            plan = _with_limits(inst, plan, found.nodes, limits)
-    plan.baseline = baseline
+        if not spec.is_baseline:
+            if limits is not None and limits.active and plan.legs:
+                plan = _with_limits(inst, plan, found.nodes, limits)
+            plan = _never_worse(inst, plan, base, limits, profile, t0)
+    plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:
-        plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits)
+        plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits, profile)
     plan.runtime_s = time.perf_counter() - t0
     return plan
 

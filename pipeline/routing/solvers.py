@@ -1,49 +1,17 @@
-"""The solver registry: every solver answers one contract, so comparing them is one loop.
-
-    search(instance, baseline, *, seed, options) -> Found
-
-`instance` is a problem.Instance (graph, vessel, weather, objective), `baseline` the baseline.Baseline of
-the voyage (its shortest sea route at constant rpm), `seed` the random seed (ignored by exact solvers) and
-`options` an instance of the solver's own options class (`Solver.options`). A solver that finds nothing
-feasible returns Found(None, None). A new solver is one module with a `search` function and one entry here.
-"""
+"""The solver registry: every solver answers one contract (contract.py), so comparing them is one loop. A new
+solver is one module with a `search` function and one entry here."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from pipeline.routing import astar, dp
-from pipeline.routing.baseline import Baseline
+from pipeline.routing.baseline import Baseline, evaluate
 from pipeline.routing.bfoa import BfoaParams, run_bfoa
-
-
-@dataclass
-class Found:
-    """A solver's answer: node per line and rpm index per leg (None: nothing feasible), the legs or routes it
-    sailed, and for iterative solvers the best cost after each cycle."""
-
-    nodes: np.ndarray | None
-    rpm_idx: np.ndarray | None
-    n_evals: int = 0
-    history: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class NoOptions:
-    """The solver has no settings."""
-
-
-@dataclass(frozen=True)
-class Solver:
-    name: str
-    search: Callable[..., Found]
-    options: type
-    space_base: str | None = None  # lay the search space along this base route when the caller gives none
-    doc: str = ""
+from pipeline.routing.contract import Found, NoOptions, Solver
+from pipeline.routing.options import SOLVER_NAMES
 
 
 def _bfoa(inst, base: Baseline, *, seed: int, options: BfoaParams) -> Found:
@@ -56,16 +24,30 @@ def _bfoa(inst, base: Baseline, *, seed: int, options: BfoaParams) -> Found:
     return Found(nodes if ok else None, rpm_idx if ok else None, n_evals, history)
 
 
+def _dp(inst, base: Baseline, *, seed: int, options: dp.DpOptions) -> Found:
+    """The DP, pruned by the cost of the incumbent solver's plan when it names one (seed 1, default options)."""
+    upper = math.inf if options.upper_bound is None else float(options.upper_bound)
+    if options.bucket_h is None and options.incumbent is not None:
+        spec = SOLVERS[options.incumbent]
+        found = spec.search(inst, base, seed=1, options=spec.options())
+        if found.nodes is not None:
+            upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
+    return dp.search(inst, base, seed=seed, options=options, upper=upper)
+
+
 def _baseline(inst, base: Baseline, *, seed: int, options: NoOptions) -> Found:
     return Found(base.nodes, base.rpm_idx) if base.nodes is not None else Found(None, None)
 
 
 SOLVERS: dict[str, Solver] = {
-    "bfoa": Solver("bfoa", _bfoa, BfoaParams, doc="improved bacterial foraging optimisation (bfoa.py)"),
-    "dp": Solver("dp", dp.search, dp.DpOptions, doc="dynamic programming over the graph (dp.py)"),
+    "bfoa": Solver("bfoa", _bfoa, BfoaParams, seeded=True, doc="improved bacterial foraging optimisation (bfoa.py)"),
+    "dp": Solver("dp", _dp, dp.DpOptions, doc="dynamic programming over the graph (dp.py)"),
     "astar": Solver("astar", astar.search, astar.AstarOptions, doc="A* with the time-constraint weight sweep (astar.py)"),
-    "gc": Solver("gc", _baseline, NoOptions, space_base=None,
+    "gc": Solver("gc", _baseline, NoOptions, space_base=None, is_baseline=True,
                  doc="the shortest sea route along the great-circle graph at constant rpm"),
-    "rhumb": Solver("rhumb", _baseline, NoOptions, space_base="rhumb",
+    "rhumb": Solver("rhumb", _baseline, NoOptions, space_base="rhumb", is_baseline=True,
                     doc="the shortest sea route along the rhumb-line graph at constant rpm"),
 }
+
+if tuple(SOLVERS) != SOLVER_NAMES:  # options.SOLVER_NAMES lets a run refuse a name before loading the solvers
+    raise ImportError(f"solver registry {tuple(SOLVERS)} differs from options.SOLVER_NAMES {SOLVER_NAMES}")

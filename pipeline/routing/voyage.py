@@ -30,17 +30,20 @@ def rpm_options_of(voyage: dict, rpm_max: float | None) -> tuple[float, ...]:
 def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float | None = None, objective: str = "jit",
                         window_h: float = 6.0, n_lines: int | None = None, n_points: int = 21,
                         d_point_nm: float | None = None, land_clearance_nm: float = 2.0,
-                        port_approach_nm: float = 10.0) -> RoutingProblem:
+                        port_approach_nm: float = 10.0, base: str = "gc") -> RoutingProblem:
     vid = str(voyage.get("voyage_id"))
     for k in ("dep_lat", "dep_lon", "arr_lat", "arr_lon"):
         if _num(voyage.get(k)) is None:
             raise RoutingInputError(f"voyage {vid}: {k} is missing")
+    # the model is consulted only at engine speeds it was fitted on: settings beyond them are clipped (said on the plan)
+    rpm_options, rpm_note = model.clip_rpm_options(rpm_options_of(voyage, rpm_max), f"voyage {vid}")
+    model = model.fouled_at(np.datetime64(voyage["depart_utc"], "s"))  # the hull as it will be on the voyage
     return RoutingProblem(
         dep=(float(voyage["dep_lat"]), float(voyage["dep_lon"])), arr=(float(voyage["arr_lat"]), float(voyage["arr_lon"])),
         depart_utc=np.datetime64(voyage["depart_utc"], "s"), rta_utc=np.datetime64(voyage["rta_utc"], "s"), model=model,
-        rpm_options=rpm_options_of(voyage, rpm_max), draft_m=_num(voyage.get("draft_m"), 10.0),
+        rpm_options=rpm_options, rpm_note=rpm_note, draft_m=_num(voyage.get("draft_m"), 10.0),
         trim_m=_num(voyage.get("trim_m"), 0.0), max_hs_m=_num(voyage.get("max_hs_m")),
         max_wind_kn=_num(voyage.get("max_wind_kn")), objective=objective, window_h=window_h, voyage_id=vid,
         imo=int(voyage["imo"]) if voyage.get("imo") is not None else None, dep_name=str(voyage.get("dep_name") or "departure"),
         arr_name=str(voyage.get("arr_name") or "destination"), n_lines=n_lines, n_points=n_points, d_point_nm=d_point_nm,
-        land_clearance_nm=land_clearance_nm, port_approach_nm=port_approach_nm)
+        land_clearance_nm=land_clearance_nm, port_approach_nm=port_approach_nm, base=base)

@@ -26,11 +26,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numba
 import numpy as np
 
+from pipeline.routing.geodesy import KN_PER_MS
 from schemas.cube_variables import step_hours
 
 N_VARS = 7
@@ -70,6 +72,18 @@ class WeatherField:
     @property
     def kernel(self) -> Weather:
         return Weather(self.cells, self.times_h, self.grid)
+
+    @cached_property
+    def max_over_time(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(wind speed in kn, Hs in m, current speed in kn) per grid point (nlat, nlon): the largest at any valid
+        time, missing values as 0. Computed once per field (the exact solvers' bounds ask for it per route)."""
+        def var(k):
+            return np.nan_to_num(self.cells[..., k].astype(np.float64), nan=0.0)
+
+        wind = np.hypot(var(U10), var(V10)).max(axis=2) * KN_PER_MS
+        hs = var(SWH).max(axis=2)
+        cur = np.hypot(var(UO), var(VO)).max(axis=2) * KN_PER_MS
+        return wind, hs, cur
 
     @property
     def values(self) -> np.ndarray:

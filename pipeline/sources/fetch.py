@@ -235,6 +235,24 @@ def _client(opts: FetchOptions) -> httpx.Client:
     return httpx.Client(timeout=opts.timeout_s, follow_redirects=False, headers=headers, verify=_tls_context())
 
 
+def token_may_go_to(url: str) -> bool:
+    """A bearer token may be sent to `url` only over https, or to this machine (a loopback mirror): never in clear
+    text across a network."""
+    import ipaddress
+
+    u = urlparse(url)
+    if u.scheme == "https":
+        return True
+    if u.scheme != "http" or not u.hostname:
+        return False
+    if u.hostname == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(u.hostname).is_loopback
+    except ValueError:
+        return False
+
+
 def _origin(url: str) -> tuple[str, str | None, int | None]:
     u = urlparse(url)
     return u.scheme, u.hostname, u.port or {"http": 80, "https": 443}.get(u.scheme)
@@ -246,7 +264,7 @@ def _get_following(client: httpx.Client, url: str, opts: FetchOptions, stream: b
     for _ in range(5):
         try:
             req = client.build_request("GET", url)
-            if _origin(url) != origin:  # the token belongs to the first origin only
+            if _origin(url) != origin or not token_may_go_to(url):  # the first origin only, never in clear text
                 req.headers.pop("Authorization", None)
             resp = client.send(req, stream=stream)
         except (httpx.TimeoutException, httpx.TransportError) as exc:
@@ -255,6 +273,10 @@ def _get_following(client: httpx.Client, url: str, opts: FetchOptions, stream: b
             target = urljoin(url, resp.headers.get("location", ""))
             resp.close()
             new_host = urlparse(target).hostname
+            scheme = urlparse(target).scheme
+            if scheme not in ("http", "https"):
+                raise PermissionError(f"{url}: redirect to a {scheme or 'relative'}: URL refused (only http and https "
+                                      "redirects are followed; fix the mirror or point jitroute at the final URL)")
             if new_host != host and new_host not in opts.allowed_redirect_hosts:
                 raise PermissionError(f"{url}: redirect to another host {new_host!r} refused (allow it with JITROUTE_ALLOWED_REDIRECT_HOSTS)")
             url = target

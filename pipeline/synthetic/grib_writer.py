@@ -39,11 +39,12 @@ def jma_grid(res_deg: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _new_message(cycle: np.datetime64, step_h: int, res_deg: float, field: tuple[int, int, int, int, int],
-                 bits_per_value: int = 16) -> int:
+                 bits_per_value: int = 16, lat_span: tuple[float, float] = (90.0, -90.0), packing: str = "grid_simple") -> int:
     disc, cat, num, ltype, lvalue = field
     h = eccodes.codes_grib_new_from_samples("GRIB2")
     ts = np.datetime64(cycle, "m").astype(object)
-    lat, lon = jma_grid(res_deg)
+    _, lon = jma_grid(res_deg)
+    lat = np.linspace(lat_span[0], lat_span[1], int(round(abs(lat_span[1] - lat_span[0]) / res_deg)) + 1)
     eccodes.codes_set(h, "centre", CENTRE_RJTD)
     eccodes.codes_set(h, "dataDate", int(ts.strftime("%Y%m%d")))
     eccodes.codes_set(h, "dataTime", int(ts.strftime("%H%M")))
@@ -51,13 +52,13 @@ def _new_message(cycle: np.datetime64, step_h: int, res_deg: float, field: tuple
     eccodes.codes_set(h, "typeOfProcessedData", 1)
     eccodes.codes_set(h, "Ni", lon.size)
     eccodes.codes_set(h, "Nj", lat.size)
-    eccodes.codes_set(h, "latitudeOfFirstGridPointInDegrees", 90.0)
+    eccodes.codes_set(h, "latitudeOfFirstGridPointInDegrees", float(lat[0]))
     eccodes.codes_set(h, "longitudeOfFirstGridPointInDegrees", 0.0)
-    eccodes.codes_set(h, "latitudeOfLastGridPointInDegrees", -90.0)
+    eccodes.codes_set(h, "latitudeOfLastGridPointInDegrees", float(lat[-1]))
     eccodes.codes_set(h, "longitudeOfLastGridPointInDegrees", float(lon[-1]))
     eccodes.codes_set(h, "iDirectionIncrementInDegrees", res_deg)
     eccodes.codes_set(h, "jDirectionIncrementInDegrees", res_deg)
-    eccodes.codes_set(h, "jScansPositively", 0)
+    eccodes.codes_set(h, "jScansPositively", int(lat[-1] > lat[0]))
     eccodes.codes_set(h, "discipline", disc)
     eccodes.codes_set(h, "parameterCategory", cat)
     eccodes.codes_set(h, "parameterNumber", num)
@@ -67,8 +68,9 @@ def _new_message(cycle: np.datetime64, step_h: int, res_deg: float, field: tuple
         eccodes.codes_set(h, "scaledValueOfFirstFixedSurface", lvalue)
     eccodes.codes_set(h, "indicatorOfUnitOfTimeRange", 1)  # hours
     eccodes.codes_set(h, "forecastTime", int(step_h))
-    eccodes.codes_set(h, "packingType", "grid_simple")
-    eccodes.codes_set(h, "bitsPerValue", bits_per_value)
+    eccodes.codes_set(h, "packingType", packing)
+    if packing == "grid_simple":
+        eccodes.codes_set(h, "bitsPerValue", bits_per_value)
     return h
 
 
@@ -84,13 +86,15 @@ def _write(fout, h: int, values: np.ndarray, *, bitmap_mask: np.ndarray | None =
 
 
 def write_gsm_file(path: Path, cycle: np.datetime64, step_h: int, fields: dict[str, np.ndarray], res_deg: float = 0.5,
-                   order: Sequence[str] | None = None) -> Path:
-    """One GSM lead time: every array in `fields` (keys of GSM_FIELDS, shape (nlat, nlon) on jma_grid)."""
+                   order: Sequence[str] | None = None, lat_span: tuple[float, float] = (90.0, -90.0),
+                   packing: str = "grid_simple") -> Path:
+    """One GSM lead time: every array in `fields` (keys of GSM_FIELDS, shape (nlat, nlon) on jma_grid, or on the
+    latitudes `lat_span` first → last in scan order). `packing="grid_ieee"` stores floats as they are (NaN, inf)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
     with open(tmp, "wb") as fout:
         for name in order or fields:
-            h = _new_message(cycle, step_h, res_deg, GSM_FIELDS[name])
+            h = _new_message(cycle, step_h, res_deg, GSM_FIELDS[name], lat_span=lat_span, packing=packing)
             _write(fout, h, fields[name])
     tmp.replace(path)
     return path

@@ -1,0 +1,227 @@
+"""Physical sanity of a fitted model over its vessel's operating envelope, for every form.
+
+A router exploits whatever a model gets wrong: a model in which head seas are faster than calm water, or
+in which weather saves fuel, sends the ship into the storm. Before a model is activated it is evaluated
+(as routing evaluates it) on a grid over the envelope of the reports it was fitted on — rpm and draft
+from their least to their largest value, wind 0..largest and waves 0..largest, from five relative
+directions (0 head … 180 following) — and must pass four checks, each with a small tolerance:
+
+  head_weather_speed  STW does not rise as wind or waves from ahead (relative direction ≤ 45°) grow
+  weather_fuel        weather never puts the fuel rate below the calm-water rate at the same rpm by more
+                      than `fuel_allowance_share` of it (a following wind takes a little air resistance)
+  rpm_speed           STW does not fall as rpm rises, and rises from the least to the largest rpm seen
+  rpm_fuel            the fuel rate does not fall as rpm rises, and rises over the rpm range seen
+
+A failure names the check and the worst grid point (`check_models`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.performance import features
+
+N_RPM, N_DRAFT, N_WIND, N_WAVE = 5, 2, 3, 3
+DIRECTIONS_DEG = (0.0, 45.0, 90.0, 135.0, 180.0)
+AHEAD = (0, 1)  # indices of DIRECTIONS_DEG counted as "from ahead"
+CHECKS = ("head_weather_speed", "weather_fuel", "rpm_speed", "rpm_fuel")
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """The conditions a model was fitted on (ranges of its reports; weather from 0 up to the largest seen)."""
+
+    rpm: tuple[float, float]
+    draft_m: tuple[float, float]
+    wind_kn: float  # largest true wind seen
+    hs_m: float  # largest significant wave height seen
+    trim_m: float = 0.0  # mean trim (held fixed on the grid)
+    months_dd: float = 0.0  # months since dry dock of the newest report (held fixed on the grid)
+
+    def to_json(self) -> str:
+        return json.dumps({"rpm": list(self.rpm), "draft_m": list(self.draft_m), "wind_kn": self.wind_kn,
+                           "hs_m": self.hs_m, "trim_m": self.trim_m, "months_dd": self.months_dd})
+
+    @classmethod
+    def from_json(cls, text: str | dict | None) -> "Envelope | None":
+        if not text:
+            return None
+        d = json.loads(text) if isinstance(text, str) else text
+        return cls(tuple(d["rpm"]), tuple(d["draft_m"]), float(d["wind_kn"]), float(d["hs_m"]),
+                   float(d.get("trim_m", 0.0)), float(d.get("months_dd", 0.0)))
+
+    def outside(self, rpm: float, draft_m: float, wind_kn: float, hs_m: float) -> list[str]:
+        """What of the given conditions lies outside the envelope (empty: inside), e.g. ['rpm 130 > 122']."""
+        out = []
+        for name, v, lo, hi in (("rpm", rpm, *self.rpm), ("draft_m", draft_m, *self.draft_m),
+                                ("wind_kn", wind_kn, 0.0, self.wind_kn), ("hs_m", hs_m, 0.0, self.hs_m)):
+            if v < lo - 1e-9:
+                out.append(f"{name} {v:g} < {lo:g}")
+            elif v > hi + 1e-9:
+                out.append(f"{name} {v:g} > {hi:g}")
+        return out
+
+
+def envelope_of(inp: dict[str, np.ndarray], start: int, stop: int) -> Envelope:
+    """The envelope of rows start:stop of model inputs (`fit.inputs_from_reports`); NaNs left out."""
+    return envelopes(inp, np.array([start]), np.array([stop]))[0]
+
+
+def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
+    """`envelope_of` of the row ranges starts[g]:stops[g] (non-empty ones), in one pass per column: least and
+    largest rpm and draft, largest wind and waves, mean trim, months since dry dock of the last row."""
+    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
+    G = starts.size
+    if G == 0:
+        return []
+    n = stops - starts
+    # reduceat over [start, stop) pairs: every other result; a sentinel element lets a stop equal the length
+    idx = np.column_stack([starts, stops]).ravel()
+
+    def red(col, fn, fill):
+        v = np.asarray(inp[col], dtype=np.float64)
+        v = np.append(np.where(np.isfinite(v), v, fill), fill)
+        return np.where(n > 0, fn.reduceat(v, idx)[::2], fill)
+
+    rpm_lo, rpm_hi = red("rpm", np.minimum, np.inf), red("rpm", np.maximum, -np.inf)
+    d_lo, d_hi = red("draft_m", np.minimum, np.inf), red("draft_m", np.maximum, -np.inf)
+    wind, hs = red("wind_kn", np.maximum, 0.0), red("hs_m", np.maximum, 0.0)
+    trim = np.asarray(inp["trim_m"], dtype=np.float64)
+    ok = np.isfinite(trim)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        trim_mean = (np.add.reduceat(np.append(np.where(ok, trim, 0.0), 0.0), idx)[::2]
+                     / np.add.reduceat(np.append(ok.astype(np.float64), 0.0), idx)[::2])
+    trim_mean = np.where(n > 0, trim_mean, 0.0)
+    months = np.asarray(inp["months_dd"], dtype=np.float64)[np.maximum(stops - 1, 0)]
+    fin = lambda x: float(x) if np.isfinite(x) else 0.0  # noqa: E731
+    return [Envelope((fin(rpm_lo[g]), fin(rpm_hi[g])), (fin(d_lo[g]), fin(d_hi[g])), fin(wind[g]), fin(hs[g]),
+                     fin(trim_mean[g]), fin(months[g]) if n[g] else 0.0) for g in range(G)]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Tolerances of the checks (kn, and shares of the calm-water fuel rate)."""
+
+    speed_tol_kn: float = 0.05
+    fuel_allowance_share: float = 0.03
+    fuel_tol_share: float = 0.005
+
+
+GRID_SHAPE = (N_RPM, N_DRAFT, N_WIND, N_WAVE, len(DIRECTIONS_DEG))
+# the grid in units of each envelope's ranges (0..1), and the directions, flattened in GRID_SHAPE order
+_U = np.meshgrid(np.linspace(0.0, 1.0, N_RPM), np.linspace(0.0, 1.0, N_DRAFT), np.linspace(0.0, 1.0, N_WIND),
+                 np.linspace(0.0, 1.0, N_WAVE), np.asarray(DIRECTIONS_DEG), indexing="ij")
+_U = [u.ravel() for u in _U]
+
+
+def _grids(envelopes: list[Envelope]) -> list[np.ndarray]:
+    """Inputs (features.MODEL_INPUTS order) on each envelope's (rpm, draft, wind, wave, direction) grid: arrays
+    (G, grid points)."""
+    e = np.array([(v.rpm[0], v.rpm[1], v.draft_m[0], v.draft_m[1], max(v.wind_kn, 0.0), max(v.hs_m, 0.0), v.trim_m, v.months_dd)
+                  for v in envelopes], dtype=np.float64).reshape(-1, 8)
+    m = _U[0].size
+    rpm = e[:, :1] + (e[:, 1:2] - e[:, :1]) * _U[0]
+    draft = e[:, 2:3] + (e[:, 3:4] - e[:, 2:3]) * _U[1]
+    wind, wave = e[:, 4:5] * _U[2], e[:, 5:6] * _U[3]
+    rel = np.broadcast_to(_U[4], (len(e), m))
+    return [rpm, draft, np.repeat(e[:, 6:7], m, axis=1), wind, rel, wave, rel, np.repeat(e[:, 7:8], m, axis=1)]
+
+
+def evaluate(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: list[Envelope]
+             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """(STW, fuel rate) of model g (coefficient rows g) on envelope g's grid: arrays (G, *GRID_SHAPE), and the grid
+    inputs (arrays (G, grid points), features.MODEL_INPUTS order)."""
+    grid = _grids(envelopes)
+    G, m = len(envelopes), _U[0].size
+    cols = [np.ascontiguousarray(c, dtype=np.float64).ravel() for c in grid]
+    starts = np.arange(G, dtype=np.int64) * m
+    out = []
+    for target, coefs in (("speed", speed_coefs), ("fuel", fuel_coefs)):
+        o = np.empty(G * m)
+        features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
+                                   starts, starts + m, *cols, o)
+        out.append(o.reshape(G, *GRID_SHAPE))
+    return out[0], out[1], grid
+
+
+def _point(grid, g_idx: tuple[int, ...]) -> str:
+    r, d, w, h, a = g_idx
+    flat = np.ravel_multi_index(g_idx, GRID_SHAPE)
+    rpm, draft, _, wind, rel, hs = grid[0][flat], grid[1][flat], grid[2][flat], grid[3][flat], grid[4][flat], grid[5][flat]
+    return f"rpm {rpm:.4g}, draft {draft:.3g} m, wind {wind:.3g} kn and waves {hs:.3g} m from {rel:g}° relative"
+
+
+def check_one(S: np.ndarray, F: np.ndarray, grid, limits: Limits = Limits()) -> str | None:
+    """Why the model with STW S and fuel F (GRID_SHAPE) fails the sanity checks, or None. Names the check and the
+    worst point."""
+    if not (np.isfinite(S).all() and np.isfinite(F).all()):
+        return "physical sanity (finite): the model gives a non-finite value on its envelope"
+    tol = limits.speed_tol_kn
+    # 1. head weather never speeds the ship up: along wind (waves fixed) and waves (wind fixed), from ahead
+    ahead = S[..., list(AHEAD)]
+    rise = np.full(ahead.shape, -np.inf)
+    rise[:, :, 1:] = np.diff(ahead, axis=2)
+    rise[:, :, :, 1:] = np.maximum(rise[:, :, :, 1:], np.diff(ahead, axis=3))
+    i = np.unravel_index(int(np.argmax(rise)), rise.shape)
+    if rise[i] > tol:
+        idx = (*i[:4], AHEAD[i[4]])
+        return (f"physical sanity (head_weather_speed): STW rises by {rise[i]:.3f} kn as wind or waves from ahead grow, "
+                f"at {_point(grid, idx)}")
+    # 2. weather never lowers fuel below calm at the same rpm (beyond an air-resistance allowance)
+    calm = F[:, :, :1, :1, :1]
+    below = (calm - F) - limits.fuel_allowance_share * np.abs(calm)
+    i = np.unravel_index(int(np.argmax(below)), below.shape)
+    if below[i] > 1e-9:
+        return (f"physical sanity (weather_fuel): fuel {F[i]:.4g} t/h is below calm water's {calm[i[0], i[1], 0, 0, 0]:.4g} t/h "
+                f"at the same rpm, at {_point(grid, i)}")
+    # 3./4. STW and fuel rise with rpm
+    for name, V, t, unit in (("rpm_speed", S, tol, "kn"), ("rpm_fuel", F, limits.fuel_tol_share * float(np.abs(F).max()), "t/h")):
+        if N_RPM < 2:
+            break
+        fall = -np.diff(V, axis=0)
+        i = np.unravel_index(int(np.argmax(fall)), fall.shape)
+        what = "STW" if name == "rpm_speed" else "fuel rate"
+        if fall[i] > t:
+            return (f"physical sanity ({name}): {what} falls by {fall[i]:.3g} {unit} as rpm rises to the next grid step, "
+                    f"at {_point(grid, i)}")
+        total = V[-1, :, 0, 0, 0] - V[0, :, 0, 0, 0]
+        rpm_lo, rpm_hi = grid[0][0], grid[0][-1]
+        if rpm_hi - rpm_lo > 1e-6 and not (total > 0).all():
+            d = int(np.argmin(total))
+            return (f"physical sanity ({name}): calm-water {what} does not rise from {rpm_lo:.4g} to {rpm_hi:.4g} rpm "
+                    f"({total[d]:+.3g} {unit}) at draft {grid[1][np.ravel_multi_index((0, d, 0, 0, 0), GRID_SHAPE)]:.3g} m")
+    return None
+
+
+def check_models(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: list[Envelope],
+                 limits: Limits = Limits()) -> list[str | None]:
+    """Per model g (coefficient rows g, envelope g): why it fails the sanity checks (check and worst point), or None.
+    The checks run on all models at once; only a failing one is looked at again (`check_one`) for its message."""
+    if not envelopes:
+        return []
+    S, F, grids = evaluate(form, speed_coefs, fuel_coefs, envelopes)
+    G = len(envelopes)
+    flat = lambda a: a.reshape(G, -1)  # noqa: E731
+    tol = limits.speed_tol_kn
+    bad = ~(np.isfinite(flat(S)).all(axis=1) & np.isfinite(flat(F)).all(axis=1))
+    ahead = S[..., list(AHEAD)]
+    bad |= flat(np.diff(ahead, axis=3)).max(axis=1, initial=-np.inf) > tol
+    bad |= flat(np.diff(ahead, axis=4)).max(axis=1, initial=-np.inf) > tol
+    calm = F[:, :, :, :1, :1, :1]
+    bad |= flat((calm - F) - limits.fuel_allowance_share * np.abs(calm)).max(axis=1) > 1e-9
+    if N_RPM >= 2:
+        bad |= flat(-np.diff(S, axis=1)).max(axis=1) > tol
+        bad |= flat(-np.diff(F, axis=1)).max(axis=1) > limits.fuel_tol_share * flat(np.abs(F)).max(axis=1)
+        span = np.array([e.rpm[1] - e.rpm[0] > 1e-6 for e in envelopes])
+        bad |= span & ~((S[:, -1, :, 0, 0, 0] - S[:, 0, :, 0, 0, 0]) > 0).all(axis=1)
+        bad |= span & ~((F[:, -1, :, 0, 0, 0] - F[:, 0, :, 0, 0, 0]) > 0).all(axis=1)
+    return [check_one(S[g], F[g], [c[g] for c in grids], limits) if bad[g] else None for g in range(G)]
+
+
+def check_model(model, envelope: Envelope, limits: Limits = Limits()) -> str | None:
+    """`check_models` for one `PerformanceModel`."""
+    return check_models(model.form, model.speed_coef[None, :], model.fuel_coef[None, :], [envelope], limits)[0]
+
