@@ -34,6 +34,7 @@ bench: install
 	$(BIN)/python bench/fleet.py
 	$(BIN)/python bench/routing.py
 	$(BIN)/python bench/cli.py
+	$(BIN)/python bench/planning.py
 
 clean:
 	rm -rf data .prefect

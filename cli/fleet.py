@@ -25,6 +25,8 @@ def run_table(summary: dict) -> Table:
     t.add_row("cycle age at the run's time", _f(summary.get("cycle_age_h"), "{:.0f} h"))
     t.add_row("voyages routed", str(summary.get("n")))
     t.add_row("  planned from port / re-planned at sea", f"{summary.get('n_from_port')} / {summary.get('n_replanned')}")
+    if summary.get("from_plans"):
+        t.add_row("  of which from fleet plans", ", ".join(f"{n} ({p})" for p, n in summary["from_plans"].items()))
     t.add_row("on time / late / not routed", f"{summary.get('n_ok')} / {summary.get('n_late')} / {summary.get('n_failed')}")
     t.add_row("exports failed", str(len(summary.get("export_failures") or [])))
     t.add_row("fuel (t)", _f(summary.get("fuel_t")))
@@ -119,7 +121,9 @@ def register(app: typer.Typer) -> None:
     def demo(data: Optional[Path] = DataOpt,
              date: str = typer.Option("2020-12-01", help="Demo day (forecast cycles 00 and 12 UTC are generated)."),
              vessels: int = typer.Option(12, help="Number of demo vessels (≥ 10 routes)."),
-             workers: int = typer.Option(2, help="Local dask workers for routing.")):
+             workers: int = typer.Option(2, help="Local dask workers for routing."),
+             contracts: bool = typer.Option(True, "--contracts/--no-contracts",
+                                            help="Also plan demo cargo contracts (`plan fleet`); their legs are routed too.")):
         """Generate a demo mirror and fleet, then run the nightly job on them end to end."""
         import logging
         import os
@@ -146,8 +150,11 @@ def register(app: typer.Typer) -> None:
             (mirror / ".complete").write_text("ok\n")
         log.info("[demo 2/3] generating the demo fleet (%d vessels, a year of noon reports) and importing it", vessels)
         fleet_dir = root / "demo_fleet"
-        write_fleet(generate_fleet(f"{date}T00", n_vessels=vessels, seed=7, at_sea=DEMO_AT_SEA), fleet_dir)
+        fleet = generate_fleet(f"{date}T00", n_vessels=vessels, seed=7, at_sea=DEMO_AT_SEA)
+        write_fleet(fleet, fleet_dir)
         _import_fleet(fleet_dir, root)
+        if contracts:
+            _plan_demo_contracts(fleet, date, fleet_dir / "planning", root)
         log.info("[demo 3/3] the nightly job on %s: ingest → refit → route", date)
         summary = run_job("flows.fleet", "nightly", nightly_job, date=date, data_root=str(root),
                           rish_url=(mirror / "rish").as_uri() + "/", oscar_url=(mirror / "oscar").as_uri() + "/",
@@ -202,6 +209,21 @@ def _import_fleet(folder: Path, root: Path) -> None:
     logging.getLogger("jitroute.demo").info(
         "  noon reports: %d rows → %d imported, %d already present, %d rejected", c["rows"], c["inserted"],
         c["already_present"], c["rejected"])
+
+
+def _plan_demo_contracts(fleet, date: str, folder: Path, root: Path) -> None:
+    """Demo cargo contracts planned on the demo fleet as of the demo day; the plan's legs become voyages."""
+    import logging
+
+    from cli.planning import show_plan
+    from flows.jobs.planning import plan_fleet_job
+    from pipeline.synthetic.contracts import write_demo_planning
+
+    files = write_demo_planning(fleet.vessels, f"{date}T00", folder)
+    logging.getLogger("jitroute.demo").info("[demo 2/3] planning the demo cargo contracts (%s)", files["contracts"])
+    s = run_job("flows.planning", "plan_fleet", plan_fleet_job, contracts=files["contracts"],
+                availability=files["availability"], ports=files["ports"], as_of=f"{date}T00:00Z", data_root=str(root))
+    show_plan(s)
 
 
 def _show_nightly(s: dict, root: Path) -> None:

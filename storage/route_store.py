@@ -261,6 +261,10 @@ def run_summary(db_path: Path, run_id: str) -> dict:
             "FROM routes WHERE run_id = ? AND (status <> 'ok' OR forecast_flag IS NOT NULL) ORDER BY voyage_id",
             [run_id],
         ).fetchdf()
+        # voyages made by a fleet plan (voyages.plan_id): which plans the run routed, and how many of their voyages
+        from_plans = dict(con.execute(
+            "SELECT v.plan_id, count(*) FROM routes r JOIN voyages v USING (voyage_id) "
+            "WHERE r.run_id = ? AND v.plan_id IS NOT NULL GROUP BY v.plan_id ORDER BY v.plan_id", [run_id]).fetchall())
     out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}
     out.update({k: (int(v) if k.startswith("n") and v == v else v) for k, v in totals.iloc[0].to_dict().items()})
     if len(savings):
@@ -268,6 +272,7 @@ def run_summary(db_path: Path, run_id: str) -> dict:
                     for k, v in savings.iloc[0].to_dict().items()})
     out["problems"] = problems.to_dict("records")
     out["stale"] = stale_plans(db_path)
+    out["from_plans"] = {str(k): int(v) for k, v in from_plans.items()}
     errors = out.get("export_errors")
     out["export_failures"] = errors.splitlines() if isinstance(errors, str) and errors else []
     if out.get("cycle") is not None and out.get("cycle") == out.get("cycle"):

@@ -179,6 +179,67 @@ _VOYAGES = {
     "rpm_options": "main engine speeds the solver may choose, revolutions per minute",
     "max_hs_m": "highest significant wave height allowed, metres", "max_wind_kn": "highest wind allowed, knots",
     "status": "voyage status from the voyages file (planned voyages are routed)",
+    "plan_id": "fleet plan that made this voyage (fleet_plans.plan_id); NULL for voyages from a voyages file",
+}
+_PLAN_COST = "in the currency of the fuel price (e.g. USD)"
+_PLANNING = {
+    "ports": ("ports the planner may use, with the position of their pilot station (at sea)", {
+        "port": "port name", "lat": "latitude, degrees north", "lon": "longitude, degrees east",
+        "source_file": _NOON["source_file"]}),
+    "ports_rejected": ("rows of ports files refused on import", {"port": "port name", **_REJECTED,
+                                                                 "source_file": _NOON["source_file"]}),
+    "vessel_availability": ("when and where each vessel is available for planning, and what it may do", {
+        "imo": "IMO number of the vessel", "from_utc": f"available from {UTC}", "from_port": "port it is available at",
+        "until_utc": f"must be at until_port by then {UTC} (NULL: open-ended)", "until_port": "port where its availability ends",
+        "port_hours": "average time in port per call, hours", "daily_cost": f"cost per day out of service, {_PLAN_COST}",
+        "ports": "ports it may call, separated by ';' (NULL: any)",
+        "cargo_types": "cargo types it may carry, separated by ';' (NULL: any)",
+        "laden_speed_kn": "planning speed laden, knots (NULL: design speed)",
+        "ballast_speed_kn": "planning speed in ballast, knots (NULL: design speed)",
+        "laden_draft_m": "draft laden, metres (fuel per NM from the performance model at this draft)",
+        "ballast_draft_m": "draft in ballast, metres", "source_file": _NOON["source_file"]}),
+    "vessel_availability_rejected": ("rows of availability files refused on import",
+                                     {"imo": "IMO number of the vessel", **_REJECTED, "source_file": _NOON["source_file"]}),
+    "contracts": ("cargo contracts to plan: cargo, weights, ports and the load window", {
+        "code": "contract code", "cargo_type": "cargo type", "min_t": "minimum cargo weight, tonnes",
+        "max_t": "maximum cargo weight, tonnes", "load_port": "port of loading (ports.port)",
+        "discharge_port": "port of discharge (ports.port)", "early_utc": f"load window opens: earliest start of loading {UTC}",
+        "late_utc": f"load window closes: latest start of loading {UTC}",
+        "penalty": f"cost of leaving the contract unassigned (e.g. chartered out on the spot market), {_PLAN_COST}",
+        "source_file": _NOON["source_file"]}),
+    "contracts_rejected": ("rows of contracts files refused on import, with the reason",
+                           {"code": "contract code", **_REJECTED, "source_file": _NOON["source_file"]}),
+    "port_distances": ("sea distance between two ports: length of the routing graph's shortest sea route, reused by later plans", {
+        "port_a": "first port (names in sorted order; the distance holds both ways)", "port_b": "second port",
+        "lat_a": "latitude of port_a used, degrees north", "lon_a": "longitude of port_a used, degrees east",
+        "lat_b": "latitude of port_b used, degrees north", "lon_b": "longitude of port_b used, degrees east",
+        "dist_nm": "shortest sea route clear of land, nautical miles (NULL: no sea route, see reason)",
+        "gc_nm": "great-circle distance, nautical miles", "reason": "why there is no sea route",
+        "computed_at": f"when the distance was computed {UTC}"}),
+    "fleet_plans": ("fleet operation plans: which vessel lifts which contract, one row per plan, with its cost items", {
+        "plan_id": "plan id", "created_at": f"when the plan was made {UTC}", "as_of_utc": f"planning time {UTC}",
+        "status": "active (its voyages are routed) | superseded (a newer plan replaced its unsailed voyages)",
+        "superseded_at": f"when a newer plan replaced it {UTC}", "solver": "planner used (milp: HiGHS set partitioning)",
+        "solve_status": "optimal (proven) | feasible (best found; gap says how far from optimal at most) | no plan",
+        "gap": "proven relative optimality gap (0 when optimal)", "runtime_s": "planner run time, seconds",
+        "n_contracts": "contracts planned", "n_assigned": "contracts given to a vessel",
+        "n_unassigned": "contracts left (fleet_plan_unassigned says why)", "n_vessels_used": "vessels with at least one contract",
+        "fuel_price": "fuel price per tonne the plan was costed at", "fuel_t": "fuel planned, tonnes (ballast and laden legs)",
+        "fuel_cost": f"fuel cost, {_PLAN_COST}", "out_of_service_days": "days the used vessels spend in ballast or waiting",
+        "out_of_service_cost": f"cost of those days, {_PLAN_COST}", "penalty_cost": f"penalties of the contracts left, {_PLAN_COST}",
+        "total_cost": f"fuel + out of service + penalties, {_PLAN_COST}", "gantt_png": "picture of each vessel's schedule"}),
+    "fleet_plan_legs": ("legs of each fleet plan, ballast and laden, with the voyage each became", {
+        "plan_id": "plan (fleet_plans.plan_id)", "imo": "IMO number of the vessel", "seq": "leg number of the vessel, from 0",
+        "kind": "ballast (to a load port or the end port) | laden (load port to discharge port)",
+        "contract_code": "contract the leg serves (contracts.code; NULL for the last ballast to the end port)",
+        "from_port": "port the leg leaves", "to_port": "port the leg reaches", "dist_nm": "sea distance, nautical miles",
+        "depart_utc": f"planned departure {UTC}",
+        "arrive_utc": f"required arrival {UTC}: laden, the discharge; ballast, the start of loading (the voyage's RTA)",
+        "fuel_t": "fuel planned at the planning speed, tonnes", "lift_t": "cargo lifted, tonnes (0 in ballast)",
+        "voyage_id": "voyage made of the leg (voyages.voyage_id)"}),
+    "fleet_plan_unassigned": ("contracts a fleet plan leaves unassigned, and why", {
+        "plan_id": "plan (fleet_plans.plan_id)", "contract_code": "contract (contracts.code)",
+        "penalty": f"its penalty, {_PLAN_COST}", "reason": "why no vessel lifts it"}),
 }
 _INGEST = {
     "run_id": "ingest run that fetched the file",
@@ -257,6 +318,7 @@ TABLES: dict[str, tuple[str, dict[str, str]]] = {
     "route_runs": ("fleet routing runs: one row per run", _RUNS),
     "routes": ("route plans: one row per run and voyage (fuel in tonnes, times UTC)", _ROUTES),
     "route_legs": ("legs of each route plan, with the weather met (speeds in knots, times UTC)", _LEGS),
+    **_PLANNING,
 }
 VIEWS: dict[str, tuple[str, dict[str, str]]] = {
     "hull_performance": ("hull and propeller performance per vessel and month, with the trend", _view_of(

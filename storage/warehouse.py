@@ -101,9 +101,9 @@ def _unwritable(path: Path, exc: Exception) -> WarehouseWriteError | None:
 
 def _all_migrations() -> list[Migration]:
     # Imported here so each schema module can be edited on its own.
-    from storage import schema_docs, schema_fleet, schema_ingest, schema_routes
+    from storage import schema_docs, schema_fleet, schema_ingest, schema_planning, schema_routes
 
-    schema = [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS]
+    schema = [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS, *schema_planning.MIGRATIONS]
     schema.append(schema_routes.views_migration(after=[m.name for m in schema]))
     return [*schema, schema_docs.comments_migration(after=[m.name for m in schema])]
 

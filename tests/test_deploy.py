@@ -30,7 +30,7 @@ def test_prefect_yaml_entrypoints_are_the_flows_and_schedules_match_serve():
     from pipeline.sources.cycles import publication_cron
 
     deps = _deployments()
-    assert set(deps) == {"nightly", "ingest", "backfill", "route-fleet"}
+    assert set(deps) == {"nightly", "ingest", "backfill", "route-fleet", "plan-fleet"}
     for name, d in deps.items():
         path, attr = d["entrypoint"].split(":")
         assert (REPO / path).is_file(), d["entrypoint"]

@@ -1,0 +1,19 @@
+"""Prefect flow `plan-fleet`; the work is in flows/jobs/planning.py."""
+
+from __future__ import annotations
+
+from prefect import flow
+
+from flows.jobs.planning import DEFAULT_FUEL_PRICE, plan_fleet_job
+from flows.runner import InPrefect, register_flow
+from pipeline.planning.voyages import DEFAULT_PENALTY
+
+
+@register_flow
+@flow(name="plan-fleet")
+def plan_fleet(contracts: str, availability: str | None = None, ports: str | None = None, as_of: str | None = None,
+               data_root: str | None = None, fuel_price: float = DEFAULT_FUEL_PRICE, penalty: float = DEFAULT_PENALTY,
+               time_limit_s: float = 60.0) -> dict:
+    """Assign cargo contracts to vessels as of `as_of` (default now); the plan's legs become planned voyages."""
+    return plan_fleet_job(contracts, availability, ports, as_of, data_root=data_root, fuel_price=fuel_price,
+                          penalty=penalty, time_limit_s=time_limit_s, run=InPrefect())

@@ -1,0 +1,153 @@
+"""Validation of the planning files: `ports.csv`, vessel availability (`availability.csv`) and `contracts.csv`.
+
+As for vessels and voyages (`pipeline.fleet_validate`): rows come in as text, good rows leave typed, a refused row
+keeps its raw text and the first failing check as its reason; a file missing a required column is refused whole
+(`FleetFileError`). Times ISO 8601 (values without an offset are UTC).
+
+ports.csv:        port, lat, lon (the pilot station: at sea)
+availability.csv: imo, from_utc, from_port, [until_utc, until_port, port_hours, daily_cost, ports, cargo_types,
+                  laden_speed_kn, ballast_speed_kn, laden_draft_m, ballast_draft_m]; `ports` and `cargo_types`
+                  are lists separated by `;` (empty: any)
+contracts.csv:    code, cargo_type, min_t, max_t, load_port, discharge_port, early_utc, late_utc, [penalty]
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from pipeline.fleet_validate import FleetFileError, _integer_imo, _is_empty, _numbers, _Reasons, _split, raw_rows
+from pipeline.timestamps import parse_iso_column
+from pipeline.validate_ids import is_valid_imo, voyage_id_problem
+
+PORT_REQUIRED = ("port", "lat", "lon")
+AVAILABILITY_REQUIRED = ("imo", "from_utc", "from_port")
+AVAILABILITY_NUMERIC = ("port_hours", "daily_cost", "laden_speed_kn", "ballast_speed_kn", "laden_draft_m",
+                        "ballast_draft_m")
+CONTRACT_REQUIRED = ("code", "cargo_type", "min_t", "max_t", "load_port", "discharge_port", "early_utc", "late_utc")
+
+
+def _require(raw: pd.DataFrame, cols, what: str, source: str) -> None:
+    absent = [c for c in cols if c not in raw.columns]
+    if absent:
+        raise FleetFileError(f"{source or what}: required columns missing: {', '.join(absent)}")
+
+
+def _text(df: pd.DataFrame, col: str) -> pd.Series:
+    """Stripped text; None where empty."""
+    empty = _is_empty(df[col])
+    return pd.Series([None if e else str(x).strip() for x, e in zip(df[col], empty)], index=df.index, dtype=object)
+
+
+def split_list(value) -> frozenset[str] | None:
+    """'a;b' → {'a', 'b'}; empty → None (any)."""
+    if value is None or (isinstance(value, float) and value != value) or not str(value).strip():
+        return None
+    return frozenset(x.strip() for x in str(value).split(";") if x.strip()) or None
+
+
+def validate_ports(raw: pd.DataFrame, source: str = "", *, check_land: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(good ports: port, lat, lon; refused rows with `raw`, `reason`). A port on land (global land mask) is refused:
+    give the pilot station's position."""
+    _require(raw, PORT_REQUIRED, "ports file", source)
+    df = raw.copy()
+    r = _Reasons(df.index)
+    for c in PORT_REQUIRED:
+        r.flag(_is_empty(df[c]), f"missing {c}")
+    df["port"] = _text(df, "port")
+    _numbers(df, ("lat", "lon"), r)
+    r.flag(df["lat"].abs() > 90, "out of range lat")
+    r.flag((df["lon"] < -180) | (df["lon"] > 360), "out of range lon")
+    if check_land:
+        from pipeline.routing.land import is_sea  # the routing land mask: a port routing cannot leave is useless
+
+        ok = r.reason.isna()
+        if ok.any():
+            sea = pd.Series(True, index=df.index)
+            sea[ok] = [bool(is_sea(la, lo)) for la, lo in zip(df.loc[ok, "lat"], df.loc[ok, "lon"])]
+            r.flag(~sea, "on land (global land mask): give the position of the pilot station, at sea")
+    r.flag(df["port"].duplicated(keep="first") & r.reason.isna(), "duplicate port in file")
+    return _split(df, r, raw_rows(raw), source)
+
+
+def validate_availability(raw: pd.DataFrame, *, known_imos: set[int] | None = None, ports: set[str] | None = None,
+                          source: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(good availability rows, typed; refused rows). `ports`: the known port names (None: not checked)."""
+    _require(raw, AVAILABILITY_REQUIRED, "availability file", source)
+    df = raw.copy()
+    r = _Reasons(df.index)
+    for c in AVAILABILITY_REQUIRED:
+        r.flag(_is_empty(df[c]), f"missing {c}")
+    df["imo"] = _integer_imo(df, r)
+    r.flag(~df["imo"].map(lambda i: 0 < i <= 9_999_999 and is_valid_imo(i)), "IMO number fails its check digit")
+    if known_imos is not None:
+        r.flag(~df["imo"].isin(list(known_imos)), "unknown vessel (import it with vessels.csv first)")
+    for c in ("from_utc", "until_utc"):
+        if c not in df.columns:
+            df[c] = None
+        ts, why = parse_iso_column(df[c].where(~_is_empty(df[c]), "2000-01-01"))
+        r.flag_each(why.where(~_is_empty(df[c]), pd.NA), prefix=f"{c}: ")
+        df[c] = ts.where(~_is_empty(df[c]))
+    for c in ("from_port", "until_port", "ports", "cargo_types"):
+        df[c] = _text(df, c) if c in df.columns else None
+    if ports is not None:
+        for c in ("from_port", "until_port"):
+            r.flag(df[c].notna() & ~df[c].isin(list(ports)), f"unknown {c} (not in the ports file)")
+        unknown = df["ports"].map(lambda x: sorted((split_list(x) or set()) - set(ports)))
+        r.flag_each(unknown.map(lambda u: f"unknown port(s) in ports: {', '.join(u)}" if u else pd.NA))
+    r.flag(df["until_port"].notna() & df["until_utc"].isna(), "until_port given without until_utc")
+    r.flag(df["until_utc"].notna() & (df["until_utc"] <= df["from_utc"]),
+           "available nowhere: until_utc is not after from_utc")
+    _numbers(df, AVAILABILITY_NUMERIC, r)
+    for c in AVAILABILITY_NUMERIC:
+        r.flag(df[c] < 0, f"negative {c}")
+    for c in ("laden_speed_kn", "ballast_speed_kn"):
+        r.flag(df[c] == 0, f"zero {c}")
+    allowed = df["ports"].map(split_list)
+    r.flag(df["from_port"].notna() & allowed.notna() &
+           pd.Series([a is not None and p not in a for a, p in zip(allowed, df["from_port"])], index=df.index),
+           "from_port is not among the vessel's allowed ports")
+    r.flag(df["imo"].duplicated(keep="first") & r.reason.isna(), "duplicate imo in file")
+    return _split(df, r, raw_rows(raw), source)
+
+
+def validate_contracts(raw: pd.DataFrame, *, as_of: pd.Timestamp | None = None, ports: set[str] | None = None,
+                       max_dwt_t: float | None = None, cargo_types: set[str] | None = None,
+                       source: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(good contracts, typed; refused rows). A contract is refused when: a field is missing or malformed, the
+    code is not a plain name or repeats, min_t > max_t, the window has zero length or closed before `as_of`, a
+    port is unknown (not in `ports`) or both ports are the same, its minimum weight is above every deadweight
+    (`max_dwt_t`), or no vessel may carry its cargo type (`cargo_types`: what the vessels may carry, None: any)."""
+    _require(raw, CONTRACT_REQUIRED, "contracts file", source)
+    df = raw.copy()
+    r = _Reasons(df.index)
+    problems = [voyage_id_problem(x) for x in df["code"]]  # a code names voyages and files: a plain name
+    r.flag_each(pd.Series([p.replace("voyage_id", "code") if p else pd.NA for p in problems], index=df.index,
+                          dtype=object))
+    for c in CONTRACT_REQUIRED:
+        r.flag(_is_empty(df[c]), f"missing {c}")
+    for c in ("code", "cargo_type", "load_port", "discharge_port"):
+        df[c] = _text(df, c)
+    for c in ("early_utc", "late_utc"):
+        ts, why = parse_iso_column(df[c])
+        r.flag_each(why.where(~_is_empty(df[c]), pd.NA), prefix=f"{c}: ")
+        df[c] = ts
+    if "penalty" not in df.columns:
+        df["penalty"] = None
+    _numbers(df, ("min_t", "max_t", "penalty"), r)
+    for c in ("min_t", "max_t", "penalty"):
+        r.flag(df[c] < 0, f"negative {c}")
+    r.flag(df["max_t"] == 0, "max_t is zero")
+    r.flag(df["min_t"] > df["max_t"], "min_t above max_t")
+    r.flag(df["late_utc"] <= df["early_utc"], "window of zero length: late_utc is not after early_utc")
+    if as_of is not None:
+        r.flag(df["late_utc"] < pd.Timestamp(as_of), f"window closed before the planning time {pd.Timestamp(as_of)}")
+    if ports is not None:
+        for c in ("load_port", "discharge_port"):
+            r.flag(df[c].notna() & ~df[c].isin(list(ports)), f"unknown {c} (not in the ports file)")
+    r.flag(df["load_port"] == df["discharge_port"], "load_port and discharge_port are the same")
+    if max_dwt_t is not None:
+        r.flag(df["min_t"] > max_dwt_t, f"min_t above every vessel's deadweight ({max_dwt_t:.0f} t at most)")
+    if cargo_types is not None:
+        r.flag(df["cargo_type"].notna() & ~df["cargo_type"].isin(list(cargo_types)), "no vessel may carry this cargo type")
+    r.flag(df["code"].duplicated(keep=False) & r.reason.isna(), "duplicate code in file (every row with it refused)")
+    return _split(df, r, raw_rows(raw), source)

@@ -1,0 +1,294 @@
+"""The planning problem: vessels, cargo contracts and sea distances → what each vessel could do.
+
+Conventions (all solvers share them, so their costs compare exactly):
+- Times are hours after the planning time (`as_of`); a vessel is available from max(as_of, its available-from
+  time) at its start port.
+- A contract is one full cargo (one vessel, one cargo at a time). Loading starts inside [early, late] (the load
+  window); the vessel then spends `port_h` loading, sails laden to the discharge port and spends `port_h`
+  discharging. A vessel arriving before `early` waits.
+- Lifted weight = min(max weight, deadweight); it must reach the contract's minimum weight.
+- Legs are sailed at the vessel's ballast / laden planning speed; fuel per NM at that speed and draft
+  (`fuel.py`). The weather routing of each leg later arrives just in time at the RTA the schedule gives.
+- Cost of a plan = fuel price × fuel (ballast + laden, and the last ballast to the vessel's end port when it has
+  one) + daily cost × days out of service + the penalty of every contract left unassigned. Days out of service of
+  a used vessel = from its available-from time to the end of its last leg, less the days it spends carrying and
+  handling cargo (so ballast sailing and waiting count). An unused vessel costs nothing.
+- A vessel with an end (time, port) must reach that port by that time after its last discharge.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+HOURS_PER_DAY = 24.0
+# A ballast leg leaves no earlier than it must to reach the load port when loading starts at this share of the
+# planning speed: the weather routing may slow down that much instead of waiting at anchor; longer waits are
+# spent in port before sailing, not drifting at sea.
+SLOWEST_BALLAST_SHARE = 0.7
+
+
+@dataclass(frozen=True)
+class PlanVessel:
+    imo: int
+    name: str
+    dwt_t: float
+    start_port: str
+    start_h: float  # available from, hours after as_of (≥ 0)
+    end_port: str | None = None
+    end_h: float = math.inf  # must be at end_port (if any) by then, hours after as_of
+    port_h: float = 24.0  # average time in port per call, hours
+    daily_cost: float = 0.0  # cost per day out of service (currency of fuel_price)
+    ports: frozenset[str] | None = None  # ports it may call (None: any)
+    cargo_types: frozenset[str] | None = None  # cargo types it may carry (None: any)
+    laden_speed_kn: float = 12.0
+    ballast_speed_kn: float = 13.0
+    laden_fuel_t_per_nm: float = 0.1
+    ballast_fuel_t_per_nm: float = 0.08
+
+
+@dataclass(frozen=True)
+class Contract:
+    code: str
+    cargo_type: str
+    min_t: float
+    max_t: float
+    load_port: str
+    discharge_port: str
+    early_h: float  # load window, hours after as_of
+    late_h: float
+    penalty: float  # cost of leaving it unassigned (e.g. chartered out on the spot market)
+
+
+@dataclass
+class VesselArcs:
+    """What vessel k can do. Arc keys: ('s', j) start → contract j; (i, j) contract i → j; (j, 'e') contract j → end.
+    Every value is per arc: ballast distance (NM), hours from ready-at-origin to possible load start at j
+    (for start arcs: the arrival time at j's load port), and cost excluding out-of-service days."""
+
+    k: int
+    contracts: list[int]  # contracts the vessel may lift
+    dur_h: dict[int, float]  # load start → end of discharge
+    laden_nm: dict[int, float]
+    lift_t: dict[int, float]
+    arcs: dict[tuple, float] = field(default_factory=dict)  # arc → ballast NM
+    travel_h: dict[tuple, float] = field(default_factory=dict)  # arc → ballast hours
+    successors: dict | None = None  # colgen's pricing table, built on first use
+
+
+@dataclass
+class PlanData:
+    vessels: list[PlanVessel]
+    contracts: list[Contract]
+    fuel_price: float
+    per_vessel: list[VesselArcs]
+    reasons: dict[int, str]  # contract index → why no vessel can lift it (absent: some vessel can)
+
+    def fuel_cost(self, k: int, ballast_nm: float = 0.0, laden_nm: float = 0.0) -> float:
+        v = self.vessels[k]
+        return self.fuel_price * (ballast_nm * v.ballast_fuel_t_per_nm + laden_nm * v.laden_fuel_t_per_nm)
+
+
+def _distance(dist_nm: dict, a: str, b: str) -> float | None:
+    if a == b:
+        return 0.0
+    d = dist_nm.get((a, b))
+    if d is None:
+        d = dist_nm.get((b, a))
+    return None if d is None or not math.isfinite(d) else float(d)
+
+
+def _why_not(v: PlanVessel, c: Contract, dist_nm: dict) -> str | None:
+    if v.cargo_types is not None and c.cargo_type not in v.cargo_types:
+        return f"cannot carry {c.cargo_type}"
+    for p in (c.load_port, c.discharge_port):
+        if v.ports is not None and p not in v.ports:
+            return f"may not call {p}"
+    if min(c.max_t, v.dwt_t) < c.min_t:
+        return f"deadweight {v.dwt_t:.0f} t below the minimum {c.min_t:.0f} t"
+    if _distance(dist_nm, c.load_port, c.discharge_port) is None:
+        return f"no sea route {c.load_port} → {c.discharge_port}"
+    if _distance(dist_nm, v.start_port, c.load_port) is None:
+        return f"no sea route from its start port {v.start_port} to {c.load_port}"
+    if v.end_port is not None and _distance(dist_nm, c.discharge_port, v.end_port) is None:
+        return f"no sea route from {c.discharge_port} to its end port {v.end_port}"
+    return None
+
+
+def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tuple[str, str], float],
+          fuel_price: float) -> PlanData:
+    """Every feasible arc per vessel, with its distance and time; `dist_nm` maps (port, port) → NM (either order;
+    a pair absent or NaN has no sea route)."""
+    per_vessel: list[VesselArcs] = []
+    why: dict[int, list[str]] = {j: [] for j in range(len(contracts))}
+    for k, v in enumerate(vessels):
+        va = VesselArcs(k, [], {}, {}, {})
+        for j, c in enumerate(contracts):
+            reason = _why_not(v, c, dist_nm)
+            if reason is None:
+                laden = _distance(dist_nm, c.load_port, c.discharge_port)
+                dur = 2 * v.port_h + laden / v.laden_speed_kn
+                bal0 = _distance(dist_nm, v.start_port, c.load_port)
+                arrive = v.start_h + bal0 / v.ballast_speed_kn
+                to_end = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port) / v.ballast_speed_kn
+                if arrive > c.late_h + 1e-9:
+                    reason = f"cannot reach {c.load_port} before the window closes"
+                elif max(arrive, c.early_h) + dur + to_end > v.end_h + 1e-9:
+                    reason = "cannot finish it before its availability ends"
+                else:
+                    va.contracts.append(j)
+                    va.dur_h[j], va.laden_nm[j], va.lift_t[j] = dur, laden, min(c.max_t, v.dwt_t)
+                    va.arcs[("s", j)], va.travel_h[("s", j)] = bal0, arrive
+                    end_nm = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port)
+                    va.arcs[(j, "e")], va.travel_h[(j, "e")] = end_nm, to_end
+            if reason is not None:
+                why[j].append(f"{v.name or v.imo}: {reason}")
+        for i in va.contracts:
+            ci = contracts[i]
+            for j in va.contracts:
+                if i == j:
+                    continue
+                cj = contracts[j]
+                d = _distance(dist_nm, ci.discharge_port, cj.load_port)
+                if d is None:
+                    continue
+                h = d / v.ballast_speed_kn
+                ready = ci.early_h + va.dur_h[i] + h
+                if ready > cj.late_h + 1e-9 or max(ready, cj.early_h) + va.dur_h[j] + va.travel_h[(j, "e")] > v.end_h + 1e-9:
+                    continue
+                va.arcs[(i, j)], va.travel_h[(i, j)] = d, h
+        per_vessel.append(va)
+    reasons = {j: _summary(contracts[j], r) for j, r in why.items() if len(r) == len(vessels)}
+    return PlanData(vessels, contracts, float(fuel_price), per_vessel, reasons)
+
+
+def _summary(c: Contract, reasons: list[str]) -> str:
+    if not reasons:
+        return "no vessel available"
+    kinds = {r.split(": ", 1)[1] for r in reasons}
+    if len(kinds) == 1:
+        return f"no vessel can lift it: every vessel {next(iter(kinds))}"
+    return "no vessel can lift it: " + "; ".join(reasons[:6]) + ("; …" if len(reasons) > 6 else "")
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One planned leg of a vessel: ballast (to a load port or the end port) or laden (load → discharge)."""
+
+    imo: int
+    seq: int
+    kind: str  # ballast | laden
+    contract: str | None
+    from_port: str
+    to_port: str
+    dist_nm: float
+    depart_h: float
+    arrive_h: float  # arrival for laden legs; for ballast legs the time the vessel is wanted there (RTA)
+    fuel_t: float
+    lift_t: float = 0.0
+
+
+@dataclass(frozen=True)
+class VesselSchedule:
+    k: int
+    sequence: tuple[int, ...]
+    load_start_h: tuple[float, ...]
+    end_h: float
+    fuel_t: float
+    fuel_cost: float
+    out_of_service_days: float
+    out_of_service_cost: float
+    legs: tuple[Leg, ...]
+
+    @property
+    def cost(self) -> float:
+        return self.fuel_cost + self.out_of_service_cost
+
+
+def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedule | None:
+    """The earliest schedule of vessel k lifting `sequence` in order (None: infeasible). Starting each load as
+    early as possible is optimal: every cost item grows with time."""
+    v, va = data.vessels[k], data.per_vessel[k]
+    if not sequence:
+        return VesselSchedule(k, (), (), v.start_h, 0.0, 0.0, 0.0, 0.0, ())
+    legs: list[Leg] = []
+    starts: list[float] = []
+    ready, prev, busy, ballast_nm, laden_nm = v.start_h, "s", 0.0, 0.0, 0.0
+    for j in sequence:
+        arc = (prev, j)
+        if arc not in va.arcs:
+            return None
+        c = data.contracts[j]
+        arrive = va.travel_h[arc] if prev == "s" else ready + va.travel_h[arc]
+        t = max(arrive, c.early_h)
+        if t > c.late_h + 1e-9:
+            return None
+        from_port = v.start_port if prev == "s" else data.contracts[prev].discharge_port
+        if from_port != c.load_port:
+            sail_h = va.arcs[arc] / v.ballast_speed_kn
+            depart = max(ready, t - sail_h / SLOWEST_BALLAST_SHARE)
+            legs.append(Leg(v.imo, len(legs), "ballast", c.code, from_port, c.load_port, va.arcs[arc], depart, t,
+                            va.arcs[arc] * v.ballast_fuel_t_per_nm))
+        sail_h = va.dur_h[j] - 2 * v.port_h
+        legs.append(Leg(v.imo, len(legs), "laden", c.code, c.load_port, c.discharge_port, va.laden_nm[j],
+                        t + v.port_h, t + v.port_h + sail_h, va.laden_nm[j] * v.laden_fuel_t_per_nm, va.lift_t[j]))
+        starts.append(t)
+        ballast_nm += va.arcs[arc]
+        laden_nm += va.laden_nm[j]
+        busy += va.dur_h[j]
+        ready, prev = t + va.dur_h[j], j
+    end_nm = va.arcs[(prev, "e")]
+    end = ready + va.travel_h[(prev, "e")]
+    if end > v.end_h + 1e-9:
+        return None
+    if v.end_port is not None and end_nm > 0:
+        legs.append(Leg(v.imo, len(legs), "ballast", None, data.contracts[prev].discharge_port, v.end_port, end_nm,
+                        ready, end, end_nm * v.ballast_fuel_t_per_nm))
+    ballast_nm += end_nm
+    fuel_t = ballast_nm * v.ballast_fuel_t_per_nm + laden_nm * v.laden_fuel_t_per_nm
+    oos_days = (end - v.start_h - busy) / HOURS_PER_DAY
+    return VesselSchedule(k, tuple(sequence), tuple(starts), end, fuel_t, data.fuel_price * fuel_t, oos_days,
+                          v.daily_cost * oos_days, tuple(legs))
+
+
+@dataclass(frozen=True)
+class FleetPlan:
+    """A solved plan: one schedule per used vessel, why each contract is left, the cost items and how it was solved."""
+
+    schedules: tuple[VesselSchedule, ...]
+    unassigned: dict[int, str]  # contract index → reason
+    fuel_cost: float
+    out_of_service_cost: float
+    penalty_cost: float
+    solver: str
+    status: str  # optimal | feasible (time limit: gap below) | trivial
+    gap: float  # proven relative optimality gap (0 when optimal)
+    runtime_s: float
+    n_columns: int = 0  # columns (vessel sequences) the MILP chose among
+
+    @property
+    def cost(self) -> float:
+        return self.fuel_cost + self.out_of_service_cost + self.penalty_cost
+
+
+def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: str, status: str, gap: float,
+             runtime_s: float, n_columns: int = 0, left_reason: str | None = None) -> FleetPlan:
+    """The plan of `sequences` (vessel index → contract indices in order), each scheduled earliest."""
+    scheds = []
+    for k, seq in sorted(sequences.items()):
+        if seq:
+            s = schedule(data, k, tuple(seq))
+            if s is None:
+                raise ValueError(f"vessel {data.vessels[k].imo}: sequence {seq} is not feasible")
+            scheds.append(s)
+    lifted = {j for s in scheds for j in s.sequence}
+    left = {}
+    for j in range(len(data.contracts)):
+        if j in lifted:
+            continue
+        left[j] = data.reasons.get(j) or left_reason or (
+            f"left to the spot market: lifting it costs more than its penalty "
+            f"{data.contracts[j].penalty:.0f}, or its window clashes with contracts that save more")
+    return FleetPlan(tuple(scheds), left, sum(s.fuel_cost for s in scheds), sum(s.out_of_service_cost for s in scheds),
+                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_columns)
+

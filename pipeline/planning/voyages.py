@@ -1,0 +1,134 @@
+"""From stored rows to the planning problem, and from a plan to its table rows and voyages.
+
+Times: the planner works in hours after `as_of`; rows carry naive-UTC timestamps.
+Each planned leg becomes a voyage (status planned, tagged with the plan): its departure is the leg's planned
+departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading (the leg leaves early
+enough to make it at `problem.SLOWEST_BALLAST_SHARE` of the planning speed, so the weather routing slows down
+instead of waiting at anchor); for a laden leg, the arrival at the planning speed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from pipeline.performance.model import model_from_stored, reference_model
+from pipeline.planning.fuel import DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, speed_and_fuel_per_nm
+from pipeline.planning.inputs import split_list
+from pipeline.planning.problem import Contract, FleetPlan, PlanData, PlanVessel
+
+DEFAULT_PORT_HOURS = 24.0
+DEFAULT_PENALTY = 500_000.0
+
+
+def _hours(ts, as_of: pd.Timestamp) -> float:
+    return (pd.Timestamp(ts) - as_of) / pd.Timedelta(hours=1)
+
+
+def _num(v, default):
+    return default if v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA else float(v)
+
+
+def plan_vessels(fleet: pd.DataFrame, models: dict[int, dict], as_of: pd.Timestamp) -> tuple[list[PlanVessel], dict[int, str]]:
+    """Vessels (rows of vessels joined to their availability) as the planner sees them, and per IMO where its fuel
+    figures come from ("model vN (form)" or "design data")."""
+    out, source = [], {}
+    for r in fleet.to_dict("records"):
+        imo = int(r["imo"])
+        model = model_from_stored(models.get(imo), imo)
+        rpm_max = _num(r.get("rpm_max"), 100.0)
+        if model is None:
+            model = reference_model(_num(r.get("design_speed_kn"), 13.0), rpm_max, _num(r.get("design_fuel_tph"), 1.5))
+            source[imo] = "design data (fuel ∝ rpm³)"
+        else:
+            source[imo] = f"model v{model.version} ({model.form})"
+        design = _num(r.get("design_speed_kn"), 13.0)
+        laden_kn, laden_t = speed_and_fuel_per_nm(model, _num(r.get("laden_speed_kn"), design),
+                                                  _num(r.get("laden_draft_m"), DEFAULT_LADEN_DRAFT_M), rpm_max)
+        ballast_kn, ballast_t = speed_and_fuel_per_nm(model, _num(r.get("ballast_speed_kn"), design),
+                                                      _num(r.get("ballast_draft_m"), DEFAULT_BALLAST_DRAFT_M), rpm_max)
+        until = r.get("until_utc")
+        out.append(PlanVessel(
+            imo=imo, name=str(r.get("name") or imo), dwt_t=_num(r.get("dwt"), 0.0), start_port=str(r["from_port"]),
+            start_h=max(0.0, _hours(r["from_utc"], as_of)),
+            end_port=r.get("until_port") if isinstance(r.get("until_port"), str) else None,
+            end_h=math.inf if until is None or pd.isna(until) else _hours(until, as_of),
+            port_h=_num(r.get("port_hours"), DEFAULT_PORT_HOURS), daily_cost=_num(r.get("daily_cost"), 0.0),
+            ports=split_list(r.get("ports")), cargo_types=split_list(r.get("cargo_types")),
+            laden_speed_kn=laden_kn, ballast_speed_kn=ballast_kn, laden_fuel_t_per_nm=laden_t,
+            ballast_fuel_t_per_nm=ballast_t))
+    return out, source
+
+
+def plan_contracts(contracts: pd.DataFrame, as_of: pd.Timestamp, default_penalty: float = DEFAULT_PENALTY) -> list[Contract]:
+    return [Contract(code=str(r["code"]), cargo_type=str(r["cargo_type"]), min_t=float(r["min_t"]), max_t=float(r["max_t"]),
+                     load_port=str(r["load_port"]), discharge_port=str(r["discharge_port"]),
+                     early_h=_hours(r["early_utc"], as_of), late_h=_hours(r["late_utc"], as_of),
+                     penalty=_num(r.get("penalty"), default_penalty))
+            for r in contracts.to_dict("records")]
+
+
+def plan_rows(plan: FleetPlan, data: PlanData, plan_id: str, as_of: pd.Timestamp,
+              ports: dict[str, tuple[float, float]], vessel_drafts: dict[int, tuple[float, float]] | None = None
+              ) -> tuple[dict, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """(fleet_plans row, fleet_plan_legs rows, fleet_plan_unassigned rows, voyages rows) of a plan."""
+    def at(h):
+        return (as_of + pd.Timedelta(hours=float(h))).round("s")
+
+    legs, voyages = [], []
+    for s in plan.schedules:
+        for leg in s.legs:
+            vid = f"{plan_id}-{leg.imo}-{leg.seq}"
+            legs.append({"plan_id": plan_id, "imo": leg.imo, "seq": leg.seq, "kind": leg.kind,
+                         "contract_code": leg.contract, "from_port": leg.from_port, "to_port": leg.to_port,
+                         "dist_nm": leg.dist_nm, "depart_utc": at(leg.depart_h), "arrive_utc": at(leg.arrive_h),
+                         "fuel_t": leg.fuel_t, "lift_t": leg.lift_t, "voyage_id": vid})
+            laden_d, ballast_d = (vessel_drafts or {}).get(leg.imo, (DEFAULT_LADEN_DRAFT_M, DEFAULT_BALLAST_DRAFT_M))
+            voyages.append({"voyage_id": vid, "imo": leg.imo, "dep_name": leg.from_port, "dep_lat": ports[leg.from_port][0],
+                            "dep_lon": ports[leg.from_port][1], "arr_name": leg.to_port, "arr_lat": ports[leg.to_port][0],
+                            "arr_lon": ports[leg.to_port][1], "depart_utc": at(leg.depart_h), "rta_utc": at(leg.arrive_h),
+                            "draft_m": laden_d if leg.kind == "laden" else ballast_d, "trim_m": 0.0, "rpm_options": None,
+                            "status": "planned", "plan_id": plan_id})
+    left = [{"plan_id": plan_id, "contract_code": data.contracts[j].code, "penalty": data.contracts[j].penalty,
+             "reason": why} for j, why in sorted(plan.unassigned.items())]
+    fuel_t = float(sum(s.fuel_t for s in plan.schedules))
+    row = {"plan_id": plan_id, "as_of_utc": as_of, "solver": plan.solver, "solve_status": plan.status,
+           "gap": None if not np.isfinite(plan.gap) else float(plan.gap), "runtime_s": plan.runtime_s,
+           "n_contracts": len(data.contracts), "n_assigned": len(data.contracts) - len(plan.unassigned),
+           "n_unassigned": len(plan.unassigned), "n_vessels_used": len(plan.schedules), "fuel_price": data.fuel_price,
+           "fuel_t": fuel_t, "fuel_cost": plan.fuel_cost,
+           "out_of_service_days": float(sum(s.out_of_service_days for s in plan.schedules)),
+           "out_of_service_cost": plan.out_of_service_cost, "penalty_cost": plan.penalty_cost, "total_cost": plan.cost}
+    return row, pd.DataFrame(legs), pd.DataFrame(left), pd.DataFrame(voyages)
+
+
+def committed(legs: pd.DataFrame, as_of: pd.Timestamp) -> tuple[dict[str, str], dict[int, tuple[pd.Timestamp, str]]]:
+    """What the active plan has already set going by `as_of`: a contract is committed once a leg serving it has
+    departed (the ballast towards its load port or its laden leg); its vessel is busy until the end of the last
+    committed contract's discharge. `legs`: the active plan's fleet_plan_legs rows with `port_hours` of the vessel.
+    Returns ({contract code: why}, {imo: (free from, at port)})."""
+    out: dict[str, str] = {}
+    busy: dict[int, tuple[pd.Timestamp, str]] = {}
+    if legs is None or not len(legs):
+        return out, busy
+    sailed = legs[(legs["depart_utc"] <= as_of) & legs["contract_code"].notna()]
+    for code, imo, vid in sailed[["contract_code", "imo", "voyage_id"]].drop_duplicates("contract_code").itertuples(index=False):
+        out[str(code)] = f"under way on voyage {vid} (vessel {imo}) of plan {legs['plan_id'].iloc[0]}: not planned again"
+    laden = legs[(legs["kind"] == "laden") & legs["contract_code"].isin(list(out))]
+    for imo, rows in laden.groupby("imo"):
+        last = rows.sort_values("arrive_utc").iloc[-1]
+        port_h = _num(last.get("port_hours"), DEFAULT_PORT_HOURS)
+        busy[int(imo)] = (pd.Timestamp(last["arrive_utc"]) + pd.Timedelta(hours=port_h), str(last["to_port"]))
+    return out, busy
+
+
+def apply_commitments(fleet: pd.DataFrame, busy: dict[int, tuple[pd.Timestamp, str]]) -> pd.DataFrame:
+    """Vessels busy with committed contracts become available where and when those end."""
+    fleet = fleet.copy()
+    for imo, (free_from, port) in busy.items():
+        at = fleet["imo"] == imo
+        fleet.loc[at, "from_utc"] = fleet.loc[at, "from_utc"].map(lambda t: max(pd.Timestamp(t), free_from))
+        fleet.loc[at, "from_port"] = port
+    return fleet

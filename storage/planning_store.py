@@ -1,0 +1,175 @@
+"""Reads and writes of the planning tables: ports, vessel availability, contracts (+ refused rows), port
+distances, fleet plans with their legs, and the voyages a plan makes.
+
+Plain values in and out (DataFrames, dicts). Each write is one transaction: an import or a plan is stored
+whole or not at all.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from storage import warehouse
+from storage.fleet_store import VOYAGE_COLUMNS, _utcnow
+
+PORT_COLUMNS = ["port", "lat", "lon", "source_file"]
+AVAILABILITY_COLUMNS = ["imo", "from_utc", "from_port", "until_utc", "until_port", "port_hours", "daily_cost", "ports",
+                        "cargo_types", "laden_speed_kn", "ballast_speed_kn", "laden_draft_m", "ballast_draft_m",
+                        "source_file"]
+CONTRACT_COLUMNS = ["code", "cargo_type", "min_t", "max_t", "load_port", "discharge_port", "early_utc", "late_utc",
+                    "penalty", "source_file"]
+DISTANCE_COLUMNS = ["port_a", "port_b", "lat_a", "lon_a", "lat_b", "lon_b", "dist_nm", "gc_nm", "reason", "computed_at"]
+PLAN_COLUMNS = ["plan_id", "created_at", "as_of_utc", "status", "superseded_at", "solver", "solve_status", "gap",
+                "runtime_s", "n_contracts", "n_assigned", "n_unassigned", "n_vessels_used", "fuel_price", "fuel_t",
+                "fuel_cost", "out_of_service_days", "out_of_service_cost", "penalty_cost", "total_cost", "gantt_png"]
+LEG_COLUMNS = ["plan_id", "imo", "seq", "kind", "contract_code", "from_port", "to_port", "dist_nm", "depart_utc",
+               "arrive_utc", "fuel_t", "lift_t", "voyage_id"]
+UNASSIGNED_COLUMNS = ["plan_id", "contract_code", "penalty", "reason"]
+PLANNED_VOYAGE_COLUMNS = [*VOYAGE_COLUMNS, "plan_id"]
+
+# (table, its columns, key, rejected table, the key kept on a rejected row)
+_INPUTS = {"ports": ("ports", PORT_COLUMNS, "port", "ports_rejected", "port"),
+           "availability": ("vessel_availability", AVAILABILITY_COLUMNS, "imo", "vessel_availability_rejected", "imo"),
+           "contracts": ("contracts", CONTRACT_COLUMNS, "code", "contracts_rejected", "code")}
+
+
+def import_inputs(db_path: Path, parts: dict[str, tuple[pd.DataFrame, pd.DataFrame]]) -> dict[str, dict[str, int]]:
+    """Upsert validated rows and store refused ones, for any of "ports", "availability", "contracts" (→ (good,
+    rejected)), in one transaction. The same raw row refused for the same reason is stored once."""
+    counts = {}
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            for kind, (good, rejected) in parts.items():
+                table, columns, key, rej_table, rej_key = _INPUTS[kind]
+                con.register("incoming", good.reindex(columns=columns))
+                con.execute(f"DELETE FROM {table} WHERE {key} IN (SELECT {key} FROM incoming)")
+                con.execute(f"INSERT INTO {table} ({', '.join(columns)}) SELECT {', '.join(columns)} FROM incoming")
+                con.unregister("incoming")
+                n_rej = 0
+                if rejected is not None and len(rejected):
+                    rej = pd.DataFrame({rej_key: rejected[rej_key] if rej_key in rejected else None})
+                    rej[rej_key] = (pd.to_numeric(rej[rej_key], errors="coerce").astype("Int64") if rej_key == "imo"
+                                    else rej[rej_key].astype("string"))
+                    rej["raw"] = rejected["raw"].astype("string")
+                    rej["reason"] = rejected["reason"].astype("string")
+                    rej["source_file"] = rejected["source_file"].astype("string") if "source_file" in rejected else None
+                    rej["rejected_at"] = _utcnow()
+                    rej = rej.drop_duplicates(subset=["raw", "reason"])
+                    con.register("rej_df", rej)
+                    con.execute(f"INSERT INTO {rej_table} ({rej_key}, raw, reason, source_file, rejected_at) "
+                                f"SELECT r.* FROM rej_df r WHERE NOT EXISTS "
+                                f"(SELECT 1 FROM {rej_table} x WHERE x.raw = r.raw AND x.reason = r.reason)")
+                    con.unregister("rej_df")
+                    n_rej = len(rejected)
+                counts[kind] = {"imported": len(good), "rejected": n_rej}
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return counts
+
+
+def load_port_distances(db_path: Path) -> pd.DataFrame:
+    if not Path(db_path).exists():
+        return pd.DataFrame(columns=DISTANCE_COLUMNS)
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute(f"SELECT {', '.join(DISTANCE_COLUMNS)} FROM port_distances").fetchdf()
+
+
+def save_port_distances(db_path: Path, rows: pd.DataFrame) -> int:
+    """Upsert computed distances (one row per sorted pair)."""
+    if not len(rows):
+        return 0
+    df = rows.reindex(columns=DISTANCE_COLUMNS)
+    df["computed_at"] = _utcnow()
+    with warehouse.connect(db_path) as con:
+        con.register("d", df)
+        con.execute("BEGIN TRANSACTION")
+        try:
+            con.execute("DELETE FROM port_distances p USING d WHERE p.port_a = d.port_a AND p.port_b = d.port_b")
+            con.execute(f"INSERT INTO port_distances ({', '.join(DISTANCE_COLUMNS)}) SELECT * FROM d")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return len(df)
+
+
+def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.DataFrame, voyages: pd.DataFrame) -> dict:
+    """Store a plan as the active one, in one transaction: earlier active plans become superseded and their voyages
+    that have not sailed (status planned, departing after the plan's as_of) are deleted; voyages at sea or done are
+    kept. Then the plan, its legs and unassigned contracts, and its voyages (status planned, tagged with plan_id).
+    Returns {"superseded_plans": [...], "voyages_replaced": n, "voyages_kept": n, "voyages_added": n}."""
+    as_of = pd.Timestamp(plan["as_of_utc"])
+    row = pd.DataFrame([{**plan, "created_at": _utcnow(), "status": "active", "superseded_at": None}]).reindex(
+        columns=PLAN_COLUMNS)
+    voyages = voyages.copy()
+    voyages["status"] = "planned"
+    with warehouse.connect(db_path) as con:
+        con.execute("BEGIN TRANSACTION")
+        try:
+            older = [r[0] for r in con.execute("SELECT plan_id FROM fleet_plans WHERE status = 'active'").fetchall()]
+            replaced = kept = 0
+            if older:
+                cond = "plan_id IN (SELECT unnest(?))"
+                replaced = con.execute(f"SELECT count(*) FROM voyages WHERE {cond} AND status = 'planned' AND depart_utc > ?",
+                                       [older, as_of]).fetchone()[0]
+                kept = con.execute(f"SELECT count(*) FROM voyages WHERE {cond} AND NOT (status = 'planned' AND depart_utc > ?)",
+                                   [older, as_of]).fetchone()[0]
+                con.execute(f"DELETE FROM voyages WHERE {cond} AND status = 'planned' AND depart_utc > ?", [older, as_of])
+                con.execute("UPDATE fleet_plans SET status = 'superseded', superseded_at = ? WHERE plan_id IN (SELECT unnest(?))",
+                            [_utcnow(), older])
+            con.register("p", row)
+            con.execute(f"INSERT INTO fleet_plans ({', '.join(PLAN_COLUMNS)}) SELECT * FROM p")
+            con.register("l", legs.reindex(columns=LEG_COLUMNS))
+            con.execute(f"INSERT INTO fleet_plan_legs ({', '.join(LEG_COLUMNS)}) SELECT * FROM l")
+            con.register("u", unassigned.reindex(columns=UNASSIGNED_COLUMNS))
+            con.execute(f"INSERT INTO fleet_plan_unassigned ({', '.join(UNASSIGNED_COLUMNS)}) SELECT * FROM u")
+            v = voyages.reindex(columns=PLANNED_VOYAGE_COLUMNS)
+            con.register("v", v)
+            con.execute("DELETE FROM voyages WHERE voyage_id IN (SELECT voyage_id FROM v)")
+            con.execute(f"INSERT INTO voyages ({', '.join(PLANNED_VOYAGE_COLUMNS)}) SELECT * FROM v")
+            con.execute("COMMIT")
+        except Exception:
+            con.execute("ROLLBACK")
+            raise
+    return {"superseded_plans": older, "voyages_replaced": int(replaced), "voyages_kept": int(kept),
+            "voyages_added": len(voyages)}
+
+
+def set_plan_picture(db_path: Path, plan_id: str, path: str) -> None:
+    with warehouse.connect(db_path) as con:
+        con.execute("UPDATE fleet_plans SET gantt_png = ? WHERE plan_id = ?", [path, plan_id])
+
+
+def load_planning_fleet(db_path: Path) -> tuple[pd.DataFrame, dict[int, dict]]:
+    """(vessels joined to their availability — only vessels with availability —, active models) for planning."""
+    from storage.fleet_store import _active_models
+
+    with warehouse.connect(db_path, write=False) as con:
+        df = con.execute("SELECT v.*, a.* EXCLUDE (imo, source_file) FROM vessels v JOIN vessel_availability a "
+                         "USING (imo) ORDER BY imo").fetchdf()
+        return df, _active_models(con)
+
+
+def active_plan_legs(db_path: Path) -> pd.DataFrame:
+    """Legs of the active plan (none: empty), with the vessel's port_hours."""
+    if not Path(db_path).exists():
+        return pd.DataFrame(columns=[*LEG_COLUMNS, "port_hours"])
+    with warehouse.connect(db_path, write=False) as con:
+        return con.execute("SELECT l.*, a.port_hours FROM fleet_plan_legs l JOIN fleet_plans p USING (plan_id) "
+                           "LEFT JOIN vessel_availability a USING (imo) WHERE p.status = 'active' "
+                           "ORDER BY l.imo, l.seq").fetchdf()
+
+
+def load_plan(db_path: Path, plan_id: str) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
+    with warehouse.connect(db_path, write=False) as con:
+        plan = con.execute("SELECT * FROM fleet_plans WHERE plan_id = ?", [plan_id]).fetchdf()
+        legs = con.execute("SELECT * FROM fleet_plan_legs WHERE plan_id = ? ORDER BY imo, seq", [plan_id]).fetchdf()
+        left = con.execute("SELECT * FROM fleet_plan_unassigned WHERE plan_id = ? ORDER BY contract_code", [plan_id]).fetchdf()
+    if plan.empty:
+        raise KeyError(f"no fleet plan {plan_id!r} in {db_path}")
+    return plan.iloc[0].to_dict(), legs, left
