@@ -78,7 +78,7 @@ def _sql(root, q):
 def at_sea_root(tmp_path_factory, demo_mirror):
     """The mirror's 2020-12-01T00 cycle and a 3-vessel fleet whose first voyage is at sea, refitted (plain jobs)."""
     from cli.fleet import _import_fleet
-    from conftest import mirror_urls
+    from tests.conftest import mirror_urls
     from flows.jobs.ingest import ingest_cycle
     from flows.jobs.refit import refit_job
     from pipeline.synthetic.fleet import generate_fleet, write_fleet
@@ -133,7 +133,7 @@ def test_routing_on_a_cycle_too_old_at_the_runs_time_is_refused_and_recorded(at_
 
 
 def test_a_nightly_whose_cycles_are_missing_refuses_the_old_cycle_and_says_which_are_missing(at_sea_root, demo_mirror):
-    from conftest import mirror_urls
+    from tests.conftest import mirror_urls
     from flows.jobs.fleet import StaleWeatherError, nightly_job, nightly_markdown
 
     published = {}
