@@ -85,12 +85,12 @@ def test_a_killed_worker_loses_no_voyage_and_the_exports_land_in_the_bucket(tmp_
 
     s3.invalidate_cache()
     run_prefix = f"{bucket_root}/exports/runs/{run_id}"
-    objects = {p.rsplit("/", 1)[1]: info["size"] for p, info in s3.find(run_prefix, detail=True).items()}
+    objects = {p[len(run_prefix) + 1:]: info["size"] for p, info in s3.find(run_prefix, detail=True).items()}
     manifest = json.loads(s3.cat_file(f"{run_prefix}/_SUCCESS"))
     assert {f["name"]: f["bytes"] for f in manifest["files"]} == {n: b for n, b in objects.items() if n != "_SUCCESS"}
     for voyage_id, _status, _reason in rows:
         for ending in (".rtz", ".geojson", ".png"):
-            assert objects.get(f"{voyage_id}{ending}", 0) > 0, (voyage_id, ending, sorted(objects))
+            assert objects.get(f"voyages/{voyage_id}/{voyage_id}{ending}", 0) > 0, (voyage_id, ending, sorted(objects))
     assert objects.get("fleet_map.png", 0) > 0
     assert not s3.find(f"{bucket_root}/exports/runs/.staging-{run_id}")
     assert not (root / "exports" / "runs").exists()  # nothing of the run's exports on the local data root
