@@ -35,7 +35,6 @@ def run_table(summary: dict) -> Table:
               f"{_f(summary.get('savings_route_pct'), '{:.1f} %')}")
     t.add_row("constant-speed baseline fuel (t), same voyages", _f(summary.get("honest_baseline_fuel_t")))
     t.add_row("engine-change limits cost (t)", _f(summary.get("limits_fuel_t"), "{:.2f}"))
-    t.add_row("savings vs discrete-rpm baseline (arrives early)", _f(summary.get("savings_vs_discrete_pct"), "{:.1f} %"))
     return t
 
 

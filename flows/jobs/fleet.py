@@ -346,9 +346,7 @@ def summary_table(r: dict) -> list[dict]:
             {"what": "… of which speed profile %", "value": _r(r.get("savings_speed_profile_pct"))},
             {"what": "… of which route %", "value": _r(r.get("savings_route_pct"))},
             {"what": "constant-speed baseline fuel t", "value": _r(r.get("honest_baseline_fuel_t"))},
-            {"what": "engine-change limits cost t", "value": _r(r.get("limits_fuel_t"), 2)},
-            {"what": "savings % vs discrete-rpm baseline (arrives early; overstated)",
-             "value": _r(r.get("savings_vs_discrete_pct"))}]
+            {"what": "engine-change limits cost t", "value": _r(r.get("limits_fuel_t"), 2)}]
     return rows
 
 
