@@ -16,7 +16,9 @@ from typing import Callable
 
 import numpy as np
 
-from pipeline.routing.options import UnknownSolverError
+
+class UnknownSolverError(ValueError):
+    """A solver name or solver option the registry does not know (the message lists the known ones)."""
 
 
 @dataclass

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from pipeline.routing.contract import UnknownSolverError
+
 if TYPE_CHECKING:
     from pipeline.routing.engine_limits import EngineLimits
 
@@ -15,10 +17,6 @@ SOLVER_NAMES = ("bfoa", "dp", "astar", "gc", "rhumb")
 # the product's defaults for a solver's own options, where they differ from the library's: `dp` certifies its plan
 # within 0.1 % of the optimum (ε-trimmed labels) instead of keeping every label
 DEFAULT_SOLVER_OPTIONS = {"dp": {"gap": 1e-3}}
-
-
-class UnknownSolverError(ValueError):
-    """A solver name or solver option the registry does not know (the message lists the known ones)."""
 
 
 @dataclass(frozen=True)
