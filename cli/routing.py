@@ -125,8 +125,11 @@ def register(app: typer.Typer) -> None:
             from pipeline.routing.solvers import SOLVERS
 
             SOLVERS[solver].make_options(chosen.solver_overrides())
+            bad_solver = None
         except UnknownSolverError as exc:
-            fail(str(exc))
+            bad_solver = str(exc)
+        if bad_solver:  # outside the except block: the message is said once, not again for the exception behind it
+            fail(bad_solver)
         dep = _latlon(from_, "--from") if from_ is not None else None
         arr = _latlon(to, "--to") if to is not None else None
         t_dep = _utc(depart, "--depart") if depart is not None else None

@@ -131,3 +131,19 @@ def test_rhumb_routes_along_the_rhumb_line_not_the_great_circle():
     assert mid_gc[0] > mid_rh[0] + 0.3  # the great circle bends poleward of the rhumb line
     with pytest.raises(RoutingInputError, match="rhumb base route"):
         solve(pr, field(wavy(1)), solver="rhumb", space=pr.search_space())
+
+
+def test_the_cli_refuses_an_unknown_solver_or_option_before_opening_anything(tmp_path):
+    import os
+
+    from processes import jitroute
+
+    env = {**os.environ, "JITROUTE_DATA": str(tmp_path / "data")}
+    for args, says in ((("--solver", "dijkstra"), "unknown solver 'dijkstra'; use one of bfoa, dp, astar, gc, rhumb"),
+                       (("--solver", "dp", "--solver-option", "gapp=0"), "solver 'dp' has no option 'gapp'"),
+                       (("--solver", "dp", "--solver-option", "gap"), "--solver-option must be NAME=VALUE")):
+        done = jitroute("route", *args, "--voyage", "V1", env=env, timeout_s=120)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.count(says) == 1, done.stderr  # said once, as one error line
+        assert "Traceback" not in done.stderr
+    assert not (tmp_path / "data").exists()  # refused before the data root was opened
