@@ -217,9 +217,9 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
         for j in range(line_lo, n_kept):
             for r in range(R):
                 change = r != kr[j]
-                i1, t1, f1, nl, ok = _sail_run_nb(lat, lon, nodes, v, w, rpm_options[r], i, kt[j], kf[j], min_hold_h,
-                                                  False, out) if change else _sail_run_nb(
-                    lat, lon, nodes, v, w, rpm_options[r], i, kt[j], kf[j], 0.0, False, out)
+                hold = min_hold_h if change else 0.0  # a held setting goes on one leg at a time
+                i1, t1, f1, nl, ok = _sail_run_nb(lat, lon, nodes, v, w, rpm_options[r], i, kt[j], kf[j], hold, False,
+                                                  out)
                 n_legs += nl
                 if not ok or t1 - t_dep_h > max_hours or (prune and t1 > ld[i1]):
                     continue
