@@ -77,11 +77,17 @@ def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float, limits:
 def savings_split(problem, weather, plan: Plan, space=None, limits: EngineLimits | None = None) -> SavingsSplit | None:
     """The plan's savings against the honest baseline of its voyage, split (None: no baseline can be sailed)."""
     space = space if space is not None else problem.search_space()
-    base_nodes = shortest_route(space)
-    inst = with_constant_speed(Instance.build(problem, space, weather), base_nodes)
+    inst, base_nodes = solver_instance(problem, space, weather)
     if plan.baseline is not None and plan.baseline.legs:
         inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it (the thesis objective's scale)
     return split_of(inst, base_nodes, plan.fuel_t if plan.legs else math.nan, limits)
+
+
+def solver_instance(problem, space, weather) -> tuple[Instance, np.ndarray | None]:
+    """(the instance the solvers search, the base route's nodes or None): the voyage's listed settings plus the
+    constant rpm at which the base route arrives at the RTA (`with_constant_speed`)."""
+    base_nodes = shortest_route(space)
+    return with_constant_speed(Instance.build(problem, space, weather), base_nodes), base_nodes
 
 
 def with_constant_speed(inst: Instance, base_nodes: np.ndarray | None) -> Instance:

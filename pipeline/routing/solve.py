@@ -31,7 +31,7 @@ from pipeline.routing.dp import DpOptions
 from pipeline.routing.engine_limits import PLAN_GAP, EngineLimits, limited_plan, unlimited_cost
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
-from pipeline.routing.savings import profile_plan, split_of, with_constant_speed
+from pipeline.routing.savings import profile_plan, solver_instance, split_of
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
 from pipeline.routing.solvers import SOLVERS as REGISTRY
 from pipeline.routing.weather_field import WeatherField
@@ -155,22 +155,23 @@ def solver_spec(solver: str):
     return REGISTRY[solver]
 
 
-def _never_worse(inst: Instance, plan: Plan, base: Baseline, limits: EngineLimits | None, profile, t0: float) -> Plan:
-    """The solver's plan, or the constant-speed voyage (or `profile`, the best engine plan on the base route under
-    the limits) when that costs less: both are plans of every solver's space, so no plan burns more than sailing
-    at constant speed. The plan kept says so in its reason."""
-    if not base.ok:
+def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, limits: EngineLimits | None, profile,
+                 t0: float) -> Plan:
+    """The solver's plan, or the constant-speed voyage `baseline` (or `profile`, the best engine plan on the base
+    route under the limits) when that costs less: both are plans of every solver's space, so no plan burns more than
+    sailing at constant speed. The plan kept says so in its reason."""
+    if not base.ok or not baseline.legs:
         return plan
-    const_rpm = float(inst.rpm_options[base.rpm_idx[0]])
-    candidates = [(f"the base route at constant {const_rpm:.1f} rpm", base.rpm_idx,
-                   evaluate(inst, base.nodes, base.rpm_idx)[0])]
+    const_rpm = baseline.legs[0]["rpm"]
+    candidates = [(f"the base route at constant {const_rpm:.1f} rpm", base.rpm_idx, baseline.cost)]
     if profile is not None and np.isfinite(profile[1]):
         candidates.append(("the best engine plan on the base route", profile[0], profile[1]))
     what, rpm_idx, cost = min(candidates, key=lambda c: c[2])
     if plan.legs and plan.cost <= cost * (1.0 + 1e-9) + 1e-12:
         return plan
+    # the base route's clearance is the baseline's: the legs are not traced against the land again
     kept = _plan(inst, plan.solver, base.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
-                 n_evals=plan.n_evals)
+                 n_evals=plan.n_evals, clearance_nm=baseline.min_land_clearance_nm)
     if not kept.legs:
         return plan
     if limits is not None and limits.active:
@@ -183,13 +184,6 @@ def _never_worse(inst: Instance, plan: Plan, base: Baseline, limits: EngineLimit
     note = f"{found}: kept {what}"
     kept.reason = note if kept.reason is None else f"{kept.reason}; {note}"
     return kept
-
-
-def solver_instance(problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> tuple[Instance, np.ndarray | None]:
-    """(the instance the solvers search, the base route's nodes or None): the voyage's listed settings plus the
-    constant rpm at which the base route arrives at the RTA (savings.with_constant_speed)."""
-    base_nodes = shortest_route(space)
-    return with_constant_speed(Instance.build(problem, space, weather), base_nodes), base_nodes
 
 
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa", seed: int = 1, options=None,
@@ -218,16 +212,18 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)
     baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=_infeasible_reason(base))
     profile = profile_plan(inst, base.nodes, limits) if savings and base.ok else None
-    if not reachable(space):
+    if spec.is_baseline:  # the constant-speed voyage itself: the plan just made, compared with nothing
+        plan = baseline
+        plan.solver = solver
+    elif not reachable(space):
         plan = _plan(inst, solver, None, None, seed=seed, t0=t0, reason_if_infeasible=_infeasible_reason(None))
     else:
         found = spec.search(inst, base, seed=int(seed), options=opts)
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=_infeasible_reason(base))
-        if not spec.is_baseline:
-            if limits is not None and limits.active and plan.legs:
-                plan = _with_limits(inst, plan, found.nodes, limits)
-            plan = _never_worse(inst, plan, base, limits, profile, t0)
+        if limits is not None and limits.active and plan.legs:
+            plan = _with_limits(inst, plan, found.nodes, limits)
+        plan = _never_worse(inst, plan, baseline, base, limits, profile, t0)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:
         plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits, profile)
