@@ -32,10 +32,9 @@ def _upsert(db_path: Path, table: str, df: pd.DataFrame, columns: list[str], key
     df = df.reindex(columns=columns)
     with warehouse.connect(db_path) as con:
         con.register("incoming", df)
-        con.execute("BEGIN TRANSACTION")
-        con.execute(f"DELETE FROM {table} WHERE {key} IN (SELECT {key} FROM incoming)")
-        con.execute(f"INSERT INTO {table} ({', '.join(columns)}) SELECT {', '.join(columns)} FROM incoming")
-        con.execute("COMMIT")
+        with warehouse.transaction(con):
+            con.execute(f"DELETE FROM {table} WHERE {key} IN (SELECT {key} FROM incoming)")
+            con.execute(f"INSERT INTO {table} ({', '.join(columns)}) SELECT {', '.join(columns)} FROM incoming")
     return len(df)
 
 
@@ -122,8 +121,7 @@ def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.Da
     with warehouse.connect(db_path) as con:
         # a large file's uncommitted rows spill to disk instead of growing the process (this connection only)
         con.execute(f"SET memory_limit = '{IMPORT_MEMORY_LIMIT}'")
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             con.execute("CREATE TEMP TABLE file_keys (imo BIGINT, ts_utc TIMESTAMP)")
             for good, rejected in chunks:
                 good = good.reindex(columns=NOON_COLUMNS)
@@ -165,10 +163,6 @@ def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.Da
                 _insert_noon_rejected(con, rejected)
                 con.execute("DROP TABLE g")
             con.execute("DROP TABLE file_keys")
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     return counts
 
 
@@ -194,17 +188,12 @@ def exclude_noon(db_path: Path, imo: int, from_utc, to_utc, reason: str) -> int:
     """Move vessel `imo`'s stored reports with from_utc ≤ ts_utc ≤ to_utc (naive UTC) to `noon_reports_history`
     ("excluded: <reason>"): refits no longer see them. Returns how many."""
     with warehouse.connect(db_path) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             args = [int(imo), pd.Timestamp(from_utc).to_pydatetime(), pd.Timestamp(to_utc).to_pydatetime()]
             n = con.execute("SELECT count(*) FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args).fetchone()[0]
             con.execute(f"INSERT INTO noon_reports_history SELECT {', '.join(NOON_COLUMNS)}, ?, ? FROM noon_reports "
                         "WHERE imo = ? AND ts_utc BETWEEN ? AND ?", [_utcnow(), f"excluded: {reason}", *args])
             con.execute("DELETE FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args)
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     return int(n)
 
 
@@ -221,15 +210,10 @@ def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | N
     same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))
     with warehouse.connect(db_path) as con:
         con.register("g", good)
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             present = con.execute(f"SELECT count(*) FROM g JOIN bunker_logs b USING ({key}) WHERE {same}").fetchone()[0]
             conflicts = con.execute(f"SELECT g.* FROM g JOIN bunker_logs b USING ({key}) WHERE NOT ({same})").fetchdf()
             con.execute(f"INSERT INTO bunker_logs SELECT g.* FROM g ANTI JOIN bunker_logs b USING ({key})")
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     return {"inserted": int(len(good) - present - len(conflicts)), "already_present": int(present), "conflicts": conflicts}
 
 
@@ -364,8 +348,7 @@ def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[in
     if not rows and not reactivate and not flags:
         return
     with warehouse.connect(db_path) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             for imo, text in flags.items():
                 con.execute("UPDATE perf_models SET flag = ? WHERE active AND imo = ?", [text, int(imo)])
             if reactivate:
@@ -381,10 +364,6 @@ def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[in
                 con.execute("UPDATE perf_models SET active = false, status = 'superseded' "
                             "WHERE active AND imo IN (SELECT imo FROM fits WHERE active)")
                 con.execute(f"INSERT INTO perf_models ({', '.join(FIT_COLUMNS)}) SELECT {', '.join(FIT_COLUMNS)} FROM fits")
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
 
 
 def load_vessels(db_path: Path) -> pd.DataFrame:
@@ -429,8 +408,7 @@ def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd
         return
     frames = [df.assign(imo=int(imo), model_version=version) for imo, (version, df) in monthly.items() if len(df)]
     with warehouse.connect(db_path) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             con.execute("DELETE FROM hull_performance_monthly WHERE imo IN (SELECT unnest(?))", [[int(i) for i in monthly]])
             if frames:
                 df = pd.concat(frames, ignore_index=True)
@@ -439,10 +417,6 @@ def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd
                 con.register("hull_df", df.reindex(columns=HULL_COLUMNS))
                 con.execute(f"INSERT INTO hull_performance_monthly ({', '.join(HULL_COLUMNS)}) "
                             f"SELECT {', '.join(HULL_COLUMNS)} FROM hull_df")
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
 
 
 def positions_after(db_path: Path, imos: list[int], since_utc) -> pd.DataFrame:

@@ -40,8 +40,7 @@ def import_inputs(db_path: Path, parts: dict[str, tuple[pd.DataFrame, pd.DataFra
     rejected)), in one transaction. The same raw row refused for the same reason is stored once."""
     counts = {}
     with warehouse.connect(db_path) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             for kind, (good, rejected) in parts.items():
                 table, columns, key, rej_table, rej_key = _INPUTS[kind]
                 con.register("incoming", good.reindex(columns=columns))
@@ -65,10 +64,6 @@ def import_inputs(db_path: Path, parts: dict[str, tuple[pd.DataFrame, pd.DataFra
                     con.unregister("rej_df")
                     n_rej = len(rejected)
                 counts[kind] = {"imported": len(good), "rejected": n_rej}
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     return counts
 
 
@@ -87,14 +82,9 @@ def save_port_distances(db_path: Path, rows: pd.DataFrame) -> int:
     df["computed_at"] = _utcnow()
     with warehouse.connect(db_path) as con:
         con.register("d", df)
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             con.execute("DELETE FROM port_distances p USING d WHERE p.port_a = d.port_a AND p.port_b = d.port_b")
             con.execute(f"INSERT INTO port_distances ({', '.join(DISTANCE_COLUMNS)}) SELECT * FROM d")
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     return len(df)
 
 
@@ -109,8 +99,7 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
     voyages = voyages.copy()
     voyages["status"] = "planned"
     with warehouse.connect(db_path) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             older = [r[0] for r in con.execute("SELECT plan_id FROM fleet_plans WHERE status = 'active'").fetchall()]
             replaced = kept = 0
             if older:
@@ -132,10 +121,6 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
             con.register("v", v)
             con.execute("DELETE FROM voyages WHERE voyage_id IN (SELECT voyage_id FROM v)")
             con.execute(f"INSERT INTO voyages ({', '.join(PLANNED_VOYAGE_COLUMNS)}) SELECT * FROM v")
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     return {"superseded_plans": older, "voyages_replaced": int(replaced), "voyages_kept": int(kept),
             "voyages_added": len(voyages)}
 

@@ -208,8 +208,7 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
     n_failed = len(routes) - n_ok
     status = "ok" if n_failed == 0 else ("failed" if n_ok == 0 else "partial")
     with warehouse.connect(db_path) as con:
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with warehouse.transaction(con):
             con.register("routes_df", _naive_utc(routes))
             con.register("legs_df", _naive_utc(legs))
             con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
@@ -220,10 +219,6 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
                 [_utcnow(), n_ok, n_failed, status, len(export_errors or []),
                  "\n".join(export_errors) if export_errors else None, run_id],
             )
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
     migrate_old_parquet_layout(exports_dir)
     _publish_run_parquet(exports_dir, run_id, {"routes": routes, "route_legs": legs})
     return n_ok, n_failed

@@ -145,14 +145,9 @@ def migrate(con: duckdb.DuckDBPyConnection) -> list[str]:
     for m in _all_migrations():
         if m.name in done:
             continue
-        con.execute("BEGIN TRANSACTION")
-        try:
+        with transaction(con):
             con.execute(m.sql)
             con.execute("INSERT INTO schema_migrations VALUES (?, now())", [m.name])
-            con.execute("COMMIT")
-        except Exception:
-            con.execute("ROLLBACK")
-            raise
         applied.append(m.name)
     return applied
 
@@ -321,3 +316,15 @@ def storage_version_number(path: Path) -> int:
     if magic != b"DUCK":
         raise ValueError(f"{path} is not a DuckDB file")
     return number
+
+
+@contextlib.contextmanager
+def transaction(con: duckdb.DuckDBPyConnection) -> Iterator[duckdb.DuckDBPyConnection]:
+    """BEGIN … COMMIT on `con`; when the block (or the COMMIT) fails, ROLLBACK and re-raise: all or nothing."""
+    con.execute("BEGIN TRANSACTION")
+    try:
+        yield con
+        con.execute("COMMIT")
+    except Exception:
+        con.execute("ROLLBACK")
+        raise
