@@ -13,7 +13,8 @@ import pytest
 
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import shortest_route
-from pipeline.routing.engine_limits import EngineLimits, best_engine_plan, limited_plan, settings_held_h
+from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
+                                            incumbent_cost, limited_plan, settings_held_h)
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solve, solver_instance
@@ -61,6 +62,18 @@ def test_limited_plan_equals_brute_force_over_hold_respecting_sequences(limits):
     assert got.cost == pytest.approx(best, rel=1e-12)
     near = limited_plan(inst, nodes, limits, gap=0.01)  # ε-trimmed labels: within 1 % of the best
     assert best - 1e-9 <= near.cost <= best * 1.01
+    # bucketed labels (as routing runs it): a real plan, never dearer than one setting held throughout; with
+    # routing's bucket count a graph this small keeps its optimum
+    single = incumbent_cost(inst, nodes, limits, one_change=False)
+    for buckets in (1, 2, PLAN_BUCKETS):
+        coarse = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=buckets)
+        assert best - 1e-9 <= coarse.cost <= single + 1e-9
+        ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
+        lk.sail_route_nb(nodes, coarse.rpm_idx, 0, inst.graph, inst.vessel, inst.wx, inst.objective, ct, cf)
+        changes = int(np.count_nonzero(np.diff(coarse.rpm_idx)))
+        assert coarse.cost == pytest.approx(route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1])
+                                            + limits.change_cost_t * changes, rel=1e-12)
+    assert limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS).cost <= best * (1 + PLAN_GAP)
     ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
     lk.sail_route_nb(nodes, got.rpm_idx, 0, inst.graph, inst.vessel, inst.wx, inst.objective, ct, cf)
     assert got.fuel_t == pytest.approx(cf[-1], rel=1e-12)
@@ -85,6 +98,8 @@ def test_best_engine_plan_on_a_route_equals_enumeration(weather, rpm_rta):
     assert route_cost_nb(inst.objective, ct[-1] - inst.t_dep_h, cf[-1]) == pytest.approx(cost, rel=1e-12)
     _, near, _ = best_engine_plan(inst, nodes, gap=0.01)
     assert best - 1e-9 <= near <= best * 1.01
+    _, coarse, _ = best_engine_plan(inst, nodes, gap=PLAN_GAP, buckets=REFERENCE_BUCKETS)  # the limits' reference
+    assert best - 1e-9 <= coarse <= best * (1 + PLAN_GAP)
 
 
 def test_limited_plan_holds_every_setting_and_costs_fuel():

@@ -51,12 +51,17 @@ Added beyond the thesis's moves (the structure above is kept):
            a detour sideways as one piece, which the thesis's 1..3-line vectors can only do through dearer,
            kinked intermediate routes.
   stall stop  the cycles end early once `stall_cycles` cycles in a row lowered the best cost by no more than
-           `stall_tol` of it (never while no bacterium is feasible); the polish then fixes the small rest. Easy
-           voyages stop after a few cycles, so fleets route faster.
-  polish   after the last cycle the best plan is polished by a local exact search of a window: the DP
+           `stall_tol` of it (never while no bacterium is feasible); the polish, cheap with its bucketed labels,
+           then fixes the rest in up to `polish_rounds` rounds. Easy voyages stop after a few cycles, so fleets
+           route faster.
+  polish   after the last cycle the best plan is polished by a local search of a window: the DP
            (dp.dp_exact_nb) over the corridor of ±`polish_width` nodes around its route, every engine setting
            per leg, keeping partial plans within `polish_window_h` hours and `polish_fuel` × cost of fuel of
-           the plan's own at each line, with ε-trimmed labels (`polish_gap` of the cost). It fixes what the
+           the plan's own at each line, with ε-trimmed labels (`polish_gap` of the cost) and at most
+           `polish_buckets` labels per node (the line's arrival times cut into that many spans, a span keeping
+           its label of least fuel plus the plan's price of time: its cost grows with the lines, not with the
+           lines times the spread of their arrival times, so a 5,000 NM voyage costs ~2.5× a 2,000 NM one,
+           bench/routing_length.py). It fixes what the
            random tumbles leave (a setting one leg too early or late, a one-node kink) and can only lower the
            cost; `polish_width` −1 leaves it out. The polished plan is polished again, around its new route,
            while a round lowers the cost by more than `stall_tol` of it (at most `polish_rounds` rounds): each
@@ -151,10 +156,11 @@ class BfoaParams:
     polish_gap: float = 0.002  # the polish's ε-trimming of its labels, as a share of the plan's cost
     polish_window_h: float = 4.0  # the polish keeps partial plans within this many hours of the plan's
     polish_fuel: float = 0.003  # and within this share of its cost in fuel so far
-    polish_rounds: int = 3  # polish the polished plan again while a round gains more than stall_tol × cost
+    polish_rounds: int = 6  # polish the polished plan again while a round gains more than stall_tol × cost
+    polish_buckets: int = 16  # > 0: the polish keeps at most this many labels per node (time spans of the line)
     p_block: float = 0.15  # chance a route tumble shifts a whole block of lines (a plateau of the route)
     offset_routes: int = 8  # bacteria that start on offset routes spread evenly over the graph's width
-    stall_cycles: int = 4  # stop after this many cycles without a gain of stall_tol × cost (0: never)
+    stall_cycles: int = 2  # stop after this many cycles without a gain of stall_tol × cost (0: never)
     stall_tol: float = 1e-4
 
     def knobs(self, n_lines: int, n_points: int, max_shift: int) -> Knobs:
@@ -629,8 +635,11 @@ def polish(nodes, rpm_idx, cost: float, params: BfoaParams, g, v, w, o):
     m_lam = np.repeat(to_finish[None, :, None], P, axis=2)
     no_rate = np.zeros((L2, P, v.rpm_options.shape[0]))
     eps = params.polish_gap * cost / (L2 - 1) * (1.0 if o.kind == OBJ_JIT else o.f_target / 3.0)
+    lam_t = (time_price_nb(np.asarray(rpm_idx, np.int64), cum_t, cum_f, v.rpm_options)
+             if params.polish_buckets > 0 and o.kind == OBJ_JIT else 0.0)
     new_nodes, new_rpm, new_cost, n_legs, _ = dp_exact_nb(corridor, v, w, o, cost, np.zeros(1), m_lam,
-                                                          np.zeros((L2, P)), no_rate, no_rate, latest, eps)
+                                                          np.zeros((L2, P)), no_rate, no_rate, latest, eps,
+                                                          int(params.polish_buckets), float(lam_t))
     if np.isfinite(new_cost) and new_cost < cost:
         return new_nodes, new_rpm, float(new_cost), int(n_legs)
     return nodes, rpm_idx, cost, int(n_legs)

@@ -155,7 +155,7 @@ def _priced_out(o, fuel_lb, upper, tol, on_time):
 
 
 @numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps):
+def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, buckets=0, lam_t=0.0):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
@@ -164,7 +164,11 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps):
     cannot beat `upper` or make the RTA); ld (L+2, P) the latest departures that can still make the
     RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
-    the optimum (see `trim_eps`; the incumbent bound is widened by as much, so that plan is not cut)."""
+    the optimum (see `trim_eps`; the incumbent bound is widened by as much, so that plan is not cut).
+
+    With `buckets` > 0 (approximate, for local searches: bfoa's polish) a node keeps at most that many labels:
+    the line's candidate times are cut into `buckets` equal spans and a span keeps its label of least
+    f − e·t + lam_t·t, lam_t (t/h) the price of time."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
@@ -231,14 +235,28 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps):
         line_lo = n_kept
         gmin = np.inf
         prev = -1
+        last_b, last_val = -1, np.inf
+        if n_c > 0:
+            t_lo, t_span = ct[order[0]], ct[order[n_c - 1]] - ct[order[0]]
         for q in range(n_c):
             k = order[by_node[q]]
             if cnode[k] != prev:
                 prev = cnode[k]
                 gmin = np.inf
+                last_b = -1
             gk = cf[k] - e * ct[k]
             if gk < gmin - eps:
                 gmin = gk
+                if buckets > 0:
+                    b = min(int((ct[k] - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
+                    val = gk + lam_t * ct[k]
+                    if b == last_b:  # the span has a label at this node: keep the better one
+                        if val < last_val:
+                            s_ = n_kept - 1
+                            kt[s_], kf[s_], kpar[s_], kr[s_] = ct[k], cf[k], cpar[k], cr[k]
+                            last_val = val
+                        continue
+                    last_b, last_val = b, val
                 if n_kept >= kt.shape[0]:
                     kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
                     kpar, knode, kr = _grow(kpar, n_kept + 1), _grow(knode, n_kept + 1), _grow(kr, n_kept + 1)

@@ -40,7 +40,9 @@ from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_n
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 
-PLAN_GAP = 1e-3  # the share of the best plan under the limits within which solve() and the savings split take it
+PLAN_GAP = 1e-3  # the ε-trimming (share of a known plan's cost) of the plan under the limits in solve() and savings
+PLAN_BUCKETS = 64  # and its labels per line and setting (bucketed: within 0.05 % of the ε-trimmed DP on the benches)
+REFERENCE_BUCKETS = 256  # labels per line of the best plan without limits, the reference of what the limits cost
 
 
 @dataclass(frozen=True)
@@ -111,7 +113,8 @@ def _sail_run_nb(lat, lon, nodes, v, w, rpm, i0, t0, f0, min_hold_h, to_end, out
 
 
 @numba.njit(cache=True)
-def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune, upper, lams, m_route, t_min, eps):
+def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune, upper, lams, m_route, t_min, eps,
+                    buckets, lam_t):
     """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
     (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`;
     under `jit`, labels whose fuel and change costs so far plus the least fuel to finish (dp.fuel_to_finish_lb
@@ -124,7 +127,12 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
     departure, which may also reach the arrival (a plan of one setting may be shorter than the hold); a changed
     setting whose run reaches the arrival before the hold is not a plan. Free labels at a line and setting differ
     only in time, fuel and changes, so the dominance is the DP's (dp.py): sorted by time, a label is kept when
-    its f + c·n − e·t is below every earlier one's."""
+    its f + c·n − e·t is below every earlier one's.
+
+    With `buckets` > 0 the labels kept per line and setting are at most that many: the line's candidate times are
+    cut into `buckets` equal spans and a span keeps its label of least f + c·n − e·t + lam_t·t, lam_t (t/h) the
+    price of time (`time_price`). Approximate: the bucketed DP's cost grows with the lines, not with the lines
+    times the spread of their arrival times."""
     rpm_options = v.rpm_options
     R = rpm_options.shape[0]
     L2 = nodes.shape[0]
@@ -176,6 +184,7 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
         head[i1] = n_c
         n_c += 1
     gmin = np.empty(R)
+    last_slot, last_bucket, last_val = np.empty(R, np.int64), np.empty(R, np.int64), np.empty(R)
     for i in range(1, L2):
         # judge this line's candidates: per setting, by time, kept when f + c·n − e·t beats every earlier one
         m = 0
@@ -193,6 +202,9 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
         order = idx[np.argsort(ct[idx], kind="mergesort")]
         gmin[:] = np.inf
         line_lo = n_kept
+        last_slot[:] = -1
+        if m > 0:
+            t_lo, t_span = ct[order[0]], ct[order[m - 1]] - ct[order[0]]
         for q in range(m):
             k = order[q]
             r = cr[k]
@@ -200,6 +212,17 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
             if not g < gmin[r] - eps:
                 continue
             gmin[r] = g
+            if buckets > 0:
+                b = min(int((ct[k] - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
+                val = g + lam_t * ct[k]
+                if last_slot[r] >= 0 and last_bucket[r] == b:  # the span has a label: keep the better one
+                    if val < last_val[r]:
+                        s_ = last_slot[r]
+                        kt[s_], kf[s_], kn[s_] = ct[k], cf[k], cn[k]
+                        kpar[s_], kstart[s_] = cpar[k], cstart[k]
+                        last_val[r] = val
+                    continue
+                last_bucket[r], last_slot[r], last_val[r] = b, n_kept, val
             if n_kept >= kt.shape[0]:
                 kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
                 kn, kr, kpar, kstart, kline = (_grow(kn, n_kept + 1), _grow(kr, n_kept + 1), _grow(kpar, n_kept + 1),
@@ -263,10 +286,11 @@ class LimitedPlan:
 
 
 @numba.njit(cache=True)
-def incumbent_cost_nb(nodes, g, v, w, o, min_hold_h, change_cost_t):
-    """The cost of a plan obeying the limits, for pruning: the best of each setting held throughout and of one
-    change from one setting to another at any line (inf when none can be sailed). A one-change plan shares its
-    first part with the plan of its first setting throughout, so only its second part is sailed."""
+def incumbent_cost_nb(nodes, g, v, w, o, min_hold_h, change_cost_t, one_change):
+    """The cost of a plan obeying the limits, for pruning: the best of each setting held throughout and, with
+    `one_change`, of one change from one setting to another at any line (inf when none can be sailed). A
+    one-change plan shares its first part with the plan of its first setting throughout, so only its second part
+    is sailed (still lines² legs: the bucketed DPs, whose labels are few anyway, go without it)."""
     L = nodes.shape[0] - 1
     R = v.rpm_options.shape[0]
     ct, cf = np.empty((R, L + 1)), np.empty((R, L + 1))
@@ -281,7 +305,7 @@ def incumbent_cost_nb(nodes, g, v, w, o, min_hold_h, change_cost_t):
         if sailed[r] == L:
             best = min(best, route_cost_nb(o, ct[r, L] - o.t_dep_h, cf[r, L]))
     t2, f2 = np.empty(L + 1), np.empty(L + 1)
-    for r0 in range(R):
+    for r0 in range(R if one_change else 0):
         for k in range(1, sailed[r0] + 1 if sailed[r0] < L else L):
             if ct[r0, k] - o.t_dep_h < min_hold_h - 1e-9:
                 continue  # the first setting is not held long enough yet
@@ -297,10 +321,10 @@ def incumbent_cost_nb(nodes, g, v, w, o, min_hold_h, change_cost_t):
     return best
 
 
-def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits) -> float:
+def incumbent_cost(inst, nodes: np.ndarray, limits: EngineLimits, one_change: bool = True) -> float:
     """incumbent_cost_nb for an instance."""
     return float(incumbent_cost_nb(np.ascontiguousarray(nodes, np.int64), inst.graph, inst.vessel, inst.wx,
-                                   inst.objective, float(limits.min_hold_h), float(limits.change_cost_t)))
+                                   inst.objective, float(limits.min_hold_h), float(limits.change_cost_t), one_change))
 
 
 def _route_instance(inst, nodes: np.ndarray):
@@ -320,35 +344,64 @@ def _route_finish_tables(inst, nodes: np.ndarray):
     return lams, np.ascontiguousarray(m_lam[:, :, 0]), np.ascontiguousarray(t_min[:, 0])
 
 
-def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: float = 0.0) -> tuple[np.ndarray, float, int]:
+def time_price(inst, nodes: np.ndarray) -> float:
+    """The fuel (t) the route pays per hour gained around its RTA: the slope between the two settings held
+    throughout whose arrivals bracket the RTA (0 when none do). The price at which the bucketed DPs compare
+    labels of one time span."""
+    o = inst.objective
+    deadline = o.t_dep_h + o.t_req_h
+    hours, fuel = [], []
+    for r in range(len(inst.rpm_options)):
+        ok, t, f = _sail_held(inst, nodes, r)
+        hours.append(t if ok else np.inf)
+        fuel.append(f)
+    for r in range(len(hours) - 1):
+        if hours[r] > deadline >= hours[r + 1]:
+            return max(0.0, (fuel[r + 1] - fuel[r]) / (hours[r] - hours[r + 1]))
+    return 0.0
+
+
+def _sail_held(inst, nodes: np.ndarray, r: int):
+    """The route at setting r throughout: (sailed ok, arrival time h, fuel t)."""
+    L2 = len(nodes)
+    ct, cf = np.empty(L2), np.empty(L2)
+    code, _ = lk.sail_route_nb(nodes, np.full(L2 - 1, r, np.int64), 0, inst.graph, inst.vessel, inst.wx,
+                               inst.objective, ct, cf)
+    return code == OK, float(ct[-1]), float(cf[-1])
+
+
+def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: float = 0.0,
+                     buckets: int = 0) -> tuple[np.ndarray, float, int]:
     """(rpm index per leg, cost, legs sailed) of the best engine plan without limits on the fixed route `nodes`:
     on time at the least fuel when the RTA can be met, else the least late. The exact DP on the route alone
     (dp.dp_exact_nb with its bounds), pruned by `upper` (default: the best plan of one setting throughout or one
     change, `incumbent_cost_nb` without a hold); with gap > 0 its labels are ε-trimmed so the plan is within that
-    share of the best. Cost inf when no plan beats `upper` (or none can be sailed)."""
+    share of the best; with `buckets` > 0 at most that many labels per line (approximate, see limited_plan_nb).
+    Cost inf when no plan beats `upper` (or none can be sailed)."""
     nodes = np.ascontiguousarray(nodes, np.int64)
     if upper is None:
-        upper = float(incumbent_cost_nb(nodes, inst.graph, inst.vessel, inst.wx, inst.objective, 0.0, 0.0))
+        upper = incumbent_cost(inst, nodes, EngineLimits(0.0, 0.0), one_change=buckets == 0)
         upper = upper * (1.0 + 1e-9) + 1e-12 if math.isfinite(upper) else math.inf  # that plan itself is kept
     sub = _route_instance(inst, nodes)
     lams, m_lam, t_min, tau, phi = finish_bounds(sub)
     ld = latest_departures(sub)
     eps = trim_eps(sub, gap, upper, lams, m_lam, t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
+    lam_t = time_price(inst, nodes) if buckets > 0 else 0.0
     _, rpm_idx, cost, n_legs, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
-                                              tau, phi, ld, eps)
+                                              tau, phi, ld, eps, int(buckets), float(lam_t))
     return rpm_idx, float(cost), int(n_legs)
 
 
-def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3) -> tuple[float, float]:
+def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3, buckets: int = 0) -> tuple[float, float]:
     """(cost, fuel) of the best engine plan on the route without limits, within `gap` of it (`best_engine_plan`),
     or (upper, nan) when none beats `upper`."""
-    rpm_idx, cost, _ = best_engine_plan(inst, nodes, upper, gap)
+    rpm_idx, cost, _ = best_engine_plan(inst, nodes, upper, gap, buckets)
     if not math.isfinite(cost) or cost >= upper:
         return upper, math.nan
     return cost, float(evaluate(inst, nodes, rpm_idx)[2])
 
 
-def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0) -> LimitedPlan:
+def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0, buckets: int = 0) -> LimitedPlan:
     """The best engine plan on the fixed route `nodes` under `limits` (see the module docstring); with gap > 0
     within that share of a known plan's cost of the optimum (faster). The hold itself keeps the labels few:
     without limits (EngineLimits(0, 0)) a long route takes far longer."""
@@ -358,15 +411,17 @@ def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0
     _route_latest_departures(g.lat, g.lon, nodes, v, inst.wx, float(v.rpm_options[-1]), o.t_dep_h + o.t_req_h + 1e-9,
                              ld)
     prune = bool(ld[0] >= o.t_dep_h)  # the RTA can be met at full speed: late labels cannot win
-    upper = incumbent_cost(inst, nodes, limits)
+    upper = incumbent_cost(inst, nodes, limits, one_change=buckets == 0)
     lams, m_route, t_min = _route_finish_tables(inst, nodes)
     hold, cost_t = float(limits.min_hold_h), float(limits.change_cost_t)
     eps = gap * upper / (len(nodes) - 1) if gap > 0.0 and math.isfinite(upper) else 0.0
+    lam_t = time_price(inst, nodes) if buckets > 0 else 0.0
     rpm_idx, cost, fuel, changes, n_legs = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, hold, cost_t, ld, prune,
-                                                           upper, lams, m_route, t_min, eps)
+                                                           upper, lams, m_route, t_min, eps, int(buckets), lam_t)
     if not math.isfinite(cost):  # the hold makes the RTA unreachable: the least-late plan, without the bounds
         rpm_idx, cost, fuel, changes, n_legs2 = limited_plan_nb(g.lat, g.lon, nodes, v, inst.wx, o, hold, cost_t, ld,
-                                                                False, np.inf, lams, m_route, t_min, 0.0)
+                                                                False, np.inf, lams, m_route, t_min, 0.0, int(buckets),
+                                                                lam_t)
         n_legs += n_legs2
     return LimitedPlan(rpm_idx, float(cost), float(fuel), int(changes), int(n_legs))
 

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
-from pipeline.routing.engine_limits import PLAN_GAP, EngineLimits, best_engine_plan, limited_plan
+from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, EngineLimits, best_engine_plan, limited_plan
 from pipeline.routing.problem import Instance
 
 if TYPE_CHECKING:
@@ -48,7 +48,7 @@ def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | 
     (within 0.1 % of the best, never dearer than a setting held throughout; cost includes the change costs; inf:
     none can be sailed)."""
     if limits is not None and limits.active:
-        best = limited_plan(inst, base_nodes, limits, gap=PLAN_GAP)
+        best = limited_plan(inst, base_nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
         return best.rpm_idx, best.cost
     rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
     return rpm_idx, cost

@@ -28,7 +28,7 @@ from pipeline.routing.baseline import Baseline, baseline as find_baseline, const
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.clearance import least_clearance_nm
 from pipeline.routing.dp import DpOptions
-from pipeline.routing.engine_limits import PLAN_GAP, EngineLimits, limited_plan, unlimited_cost
+from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, limited_plan, unlimited_cost
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import profile_plan, solver_instance, split_of
@@ -120,9 +120,10 @@ def _options(spec, options, params: BfoaParams | None, bucket_h: float | None):
 
 
 def _unlimited_fuel_t(inst: Instance, nodes, known_cost: float, known_fuel_t: float) -> float:
-    """Fuel of the best engine plan on the route without limits (the route's DP within 0.1 %, pruned by a known
+    """Fuel of the best engine plan on the route without limits (the route's bucketed DP, pruned by a known
     plan of that route costing `known_cost` and burning `known_fuel_t`, which it is when nothing beats it)."""
-    _, free_fuel_t = unlimited_cost(inst, nodes, known_cost * (1.0 + 1e-9) + 1e-12)
+    _, free_fuel_t = unlimited_cost(inst, nodes, known_cost * (1.0 + 1e-9) + 1e-12, gap=PLAN_GAP,
+                                    buckets=REFERENCE_BUCKETS)
     return free_fuel_t if np.isfinite(free_fuel_t) else known_fuel_t
 
 
@@ -131,7 +132,7 @@ def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Pla
     0.1 % of the best such plan and never dearer than a setting held throughout). For what
     the limits cost, `unlimited_fuel_t` is the best engine plan on the route without limits, so the limits never
     seem to save fuel and are not blamed for what the solver left on its route."""
-    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP)
+    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
     limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
