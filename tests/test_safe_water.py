@@ -221,3 +221,37 @@ def test_a_strait_between_two_nodes_of_a_line_gets_more_nodes_along_the_lines():
     lat, lon = np.array(plan.waypoints).T
     assert lon.min() < -5.7 and lon.max() > -5.3  # it sails through the strait, not round anything
     assert not globe.is_land(lat, lon).any()
+
+
+STRAITS = {
+    # name: (dep, arr, the widest corridor's clearance in the product's mask, NM, to its 0.6 NM grid)
+    "gibraltar": ((35.95, -6.0), (36.0, -5.0), None),  # ≥ 3 NM: open at the default 2 NM
+    "lombok": ((-8.2, 115.75), (-9.0, 115.8), None),
+    "singapore": ((1.25, 104.5), (1.15, 103.55), 1.4),  # among the southern islands: narrower than 2 × 2 NM
+    "verde-island": ((14.25, 120.45), (13.6, 121.2), 1.7),  # Manila Bay → Verde Island Passage
+}
+
+
+@pytest.mark.parametrize("name", sorted(STRAITS))
+def test_a_strait_routes_when_its_corridor_keeps_the_clearance_and_says_why_not_when_it_does_not(name):
+    """Where a corridor keeps `land_clearance_nm` from land the default graph finds a route; where the widest one
+    keeps less (the Singapore Strait, the Verde Island Passage: 1.4 and 1.7 NM in the mask), the plan says so,
+    names that width and the setting, and a clearance below it routes the voyage, clear of land by it."""
+    dep, arr, narrow_nm = STRAITS[name]
+    hours = 1.3 * float(haversine_nm(*dep, *arr)) / 10.0
+    pr = problem(dep, arr, hours, n_lines=None, n_points=21)
+    plan = solve(pr, CALM, solver="bfoa", seed=1, params=FAST)
+    if narrow_nm is None:
+        assert plan.status == "ok", plan.reason
+        assert plan.min_land_clearance_nm >= 2.0 - 1e-6
+    else:
+        assert plan.status == "infeasible"
+        widest = float(plan.reason.split("keeps about ")[1].split(" NM")[0])
+        assert abs(widest - narrow_nm) <= 0.2, plan.reason
+        assert "routing.land_clearance_nm" in plan.reason
+        pr = problem(dep, arr, hours, n_lines=None, n_points=21, land_clearance_nm=1.0)
+        plan = solve(pr, CALM, solver="bfoa", seed=1, params=FAST)
+        assert plan.status == "ok", plan.reason
+        assert plan.min_land_clearance_nm >= 1.0 - 1e-6
+    lat, lon = np.array(plan.waypoints).T
+    assert not globe.is_land(lat, lon).any()

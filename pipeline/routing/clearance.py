@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.land import BOUND_CAP_NM, distance_to_land_nb, land_grid
+from pipeline.routing.land import BOUND_CAP_NM, distance_to_land_nb, distance_to_land_nm, land_grid
 
 MIN_STEP_NM = 0.1
 DEFAULT_CLEARANCE_NM = 2.0
@@ -118,3 +118,52 @@ def least_clearance_nm(waypoints: list[tuple[float, float]], rule: Clearance) ->
         return float("nan")
     pts = np.asarray(waypoints, np.float64)
     return float(least_clearance_nb(land_grid(), rule, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])))
+
+
+WIDEST_BOX_DEG = 6.0  # voyages whose box is larger than this are not diagnosed (the grid would be too coarse)
+WIDEST_STEP_DEG = 0.01  # ≈ 0.6 NM: the widest corridor is known to about that
+
+
+def widest_corridor_nm(rule: Clearance, pad_deg: float = 0.5) -> float | None:
+    """The most clearance from land (NM) at which some path at sea joins the two ports, outside their approaches:
+    on a 0.01° grid over the voyage's box (± `pad_deg`), the largest c for which the ports' cells are connected
+    through cells at least c from land (or inside an approach), up to the clearance + 1 NM (a larger answer means
+    "more than that"). About ± 0.6 NM; None when the box is too large to
+    diagnose (over WIDEST_BOX_DEG) or a port is on land. It says why a voyage has no route at sea: a strait
+    whose widest corridor keeps less than the clearance asked is closed by the rule, not by the graph."""
+    from scipy import ndimage
+
+    lat_lo, lat_hi = sorted((rule.dep_lat, rule.arr_lat))
+    lon_a, lon_b = rule.dep_lon, rule.dep_lon + geo.wrap180(rule.arr_lon - rule.dep_lon)
+    lon_lo, lon_hi = sorted((lon_a, lon_b))
+    if max(lat_hi - lat_lo, lon_hi - lon_lo) > WIDEST_BOX_DEG:
+        return None
+    la = np.arange(lat_lo - pad_deg, lat_hi + pad_deg + WIDEST_STEP_DEG, WIDEST_STEP_DEG)
+    lo = np.arange(lon_lo - pad_deg, lon_hi + pad_deg + WIDEST_STEP_DEG, WIDEST_STEP_DEG)
+    LA, LO = np.meshgrid(la, lo, indexing="ij")
+    LO = geo.wrap180(LO)
+    cap = rule.clearance_nm + 1.0  # beyond that the answer is "more than the clearance": the graph is at fault
+    d = distance_to_land_nm(LA, LO, limit_nm=cap)
+    dep_nm, arr_nm = _haversine_nm(LA, LO, rule.dep_lat, rule.dep_lon), _haversine_nm(LA, LO, rule.arr_lat, rule.arr_lon)
+    near = (dep_nm <= rule.approach_nm) | (arr_nm <= rule.approach_nm)
+    sea = d > 0.0
+    i0, i1 = np.unravel_index(np.argmin(dep_nm), LA.shape), np.unravel_index(np.argmin(arr_nm), LA.shape)
+
+    def joined(c: float) -> bool:
+        labels, _ = ndimage.label(sea & ((d >= c) | near))
+        return labels[i0] != 0 and labels[i0] == labels[i1]
+
+    if not joined(0.0):
+        return None
+    lo_c, hi_c = 0.0, cap
+    for _ in range(10):  # to ≈ 0.003 NM, well below the grid's own resolution
+        mid = 0.5 * (lo_c + hi_c)
+        lo_c, hi_c = (mid, hi_c) if joined(mid) else (lo_c, mid)
+    return lo_c
+
+
+def _haversine_nm(lat, lon, lat0: float, lon0: float) -> np.ndarray:
+    """geodesy.gc_distance_nm from (lat0, lon0) to every point of the arrays."""
+    p1, p2 = np.radians(lat), np.radians(lat0)
+    a = np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(np.radians(geo.wrap180(lon0 - lon)) / 2) ** 2
+    return 2.0 * geo.EARTH_RADIUS_NM * np.arcsin(np.minimum(1.0, np.sqrt(a)))

@@ -26,7 +26,7 @@ import numpy as np
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
-from pipeline.routing.clearance import least_clearance_nm
+from pipeline.routing.clearance import least_clearance_nm, widest_corridor_nm
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, limited_plan, unlimited_cost
 from pipeline.routing.plan import Plan, legs_of_route
@@ -88,9 +88,16 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
     return plan
 
 
-def _infeasible_reason(base: Baseline | None) -> str:
+def _infeasible_reason(base: Baseline | None, space: SearchSpace) -> str:
     if base is None or base.nodes is None:
-        return "no route at sea between the ports inside the search corridor and limits"
+        reason = "no route at sea between the ports inside the search corridor and limits"
+        rule = space.clearance
+        widest = widest_corridor_nm(rule) if rule is not None and rule.clearance_nm > 0.0 else None
+        if widest is not None and widest < rule.clearance_nm:
+            reason += (f": the widest corridor at sea between them keeps about {widest:.1f} NM from land, less than "
+                       f"the {rule.clearance_nm:g} NM asked (routing.land_clearance_nm; a strait narrower than twice "
+                       "the clearance is closed); route it with a smaller clearance if its fairway allows")
+        return reason
     return f"every route is blocked; the shortest sea route fails: {lk.REASONS.get(base.code, 'unknown')}"
 
 
@@ -211,17 +218,18 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
     base = find_baseline(inst, base_nodes) if base_nodes is not None else Baseline(None, None, lk.NO_EDGE)
     if base.ok:
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)
-    baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=_infeasible_reason(base))
+    why_not = _infeasible_reason(base, space)  # what a plan that cannot be sailed says
+    baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=why_not)
     profile = profile_plan(inst, base.nodes, limits) if savings and base.ok else None
     if spec.is_baseline:  # the constant-speed voyage itself: the plan just made, compared with nothing
         plan = baseline
         plan.solver = solver
     elif not reachable(space):
-        plan = _plan(inst, solver, None, None, seed=seed, t0=t0, reason_if_infeasible=_infeasible_reason(None))
+        plan = _plan(inst, solver, None, None, seed=seed, t0=t0, reason_if_infeasible=why_not)
     else:
         found = spec.search(inst, base, seed=int(seed), options=opts)
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
-                     history=found.history, n_evals=found.n_evals, reason_if_infeasible=_infeasible_reason(base))
+                     history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not)
         if limits is not None and limits.active and plan.legs:
             plan = _with_limits(inst, plan, found.nodes, limits)
         plan = _never_worse(inst, plan, baseline, base, limits, profile, t0)
