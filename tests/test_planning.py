@@ -59,6 +59,26 @@ def test_column_generation_proves_a_bound_no_higher_than_the_optimum_when_enumer
         assert capped.status == ("optimal" if capped.gap <= 1e-9 else "feasible")
 
 
+def test_local_search_from_an_empty_or_a_worse_plan_ends_feasible_between_the_optimum_and_its_start():
+    from pipeline.planning import local_search
+    from pipeline.planning.problem import assemble
+
+    rng = np.random.default_rng(9)
+    gained = 0
+    for seed in range(40):
+        vessels, contracts, dist = random_instance(int(rng.integers(2, 4)), int(rng.integers(3, 7)), seed=seed,
+                                                   horizon_days=20, n_ports=5)
+        data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+        best = brute.solve(data)
+        worst_first = {s.k: s.sequence[:1] for s in best.schedules}  # a worse plan: each vessel keeps its first only
+        for start in ({}, worst_first):
+            before = assemble(data, start, solver="t", status="", gap=0.0, runtime_s=0.0)
+            after = assemble(data, local_search.improve(data, start), solver="t", status="", gap=0.0, runtime_s=0.0)
+            assert best.cost - 1e-6 <= after.cost <= before.cost + 1e-6, f"seed {seed}"
+            gained += after.cost < before.cost - 1e-6
+    assert gained > 20  # the moves do something
+
+
 def test_a_hand_computed_plan():
     # start A at t=0; contract: load B (120 NM from A), discharge C (240 NM), window [24 h, 48 h]; 12 kn both ways
     v = PlanVessel(imo=9074729, name="X", dwt_t=50_000, start_port="A", start_h=0.0, port_h=12.0, daily_cost=2400.0,

@@ -45,6 +45,8 @@ def solve_lp(data: PlanData, columns: list[Column]) -> tuple[float, np.ndarray, 
         return const, np.zeros(n), np.zeros(V), np.zeros(0)
     c, A = _master(data, columns)
     res = linprog(c, A_ub=A, b_ub=np.ones(n + V), bounds=(0, None), method="highs-ipm")  # ~10x the simplex here
+    if res.status == 4:  # HiGHS's interior point sometimes ends in a "solve error" (seen at 20 x 80); the simplex does not
+        res = linprog(c, A_ub=A, b_ub=np.ones(n + V), bounds=(0, None), method="highs-ds")
     if res.status != 0:
         raise RuntimeError(f"the planning LP failed: {res.message}")
     duals = res.ineqlin.marginals

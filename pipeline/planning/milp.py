@@ -27,7 +27,7 @@ from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from pipeline.planning.problem import HOURS_PER_DAY, FleetPlan, PlanData, assemble
-from pipeline.planning import colgen
+from pipeline.planning import colgen, local_search
 from pipeline.planning.routes import vessel_columns
 
 
@@ -130,7 +130,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     (routes.vessel_columns), solved by HiGHS — proven optimal when every vessel's sequences were enumerated (at
     most `max_labels` partial sequences each) and HiGHS finished. Otherwise the columns are the `init_labels`
     most promising per vessel plus those column generation prices (colgen.py, up to 45 % of the time left); a dive
-    on the LP (up to 75 % of what is left then) gives a plan, the restricted MILP gets the rest of the time, the
+    on the LP (up to 75 % of what is left then), improved by local search (local_search.py), gives a plan, the restricted MILP gets the rest of the time, the
     better of the two is returned, and `gap` is its proven relative gap to colgen's lower bound. The time limit
     covers all of it (HiGHS may overrun it by about a second)."""
     t0 = time.perf_counter()
@@ -148,6 +148,8 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         columns, bound, _, (pi, mu, y) = colgen.generate(data, columns, time_limit_s=max(1.0, 0.45 * left))
         left = float(time_limit_s) - (time.perf_counter() - t0)
         dived, columns = colgen.dive(data, columns, time_limit_s=max(1.0, 0.75 * left))
+        left = float(time_limit_s) - (time.perf_counter() - t0)
+        dived = local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left))
         rounded = assemble(data, dived, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
         # reduced-cost fixing: a column whose reduced cost exceeds (rounded plan − bound) is in no better plan
         rc = colgen.reduced_costs(data, columns, pi, mu)
