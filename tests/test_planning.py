@@ -208,6 +208,28 @@ def test_fuel_per_nm_from_design_data_follows_the_cubic_law():
     assert speed_and_fuel_per_nm(m, 20.0, 10.0, 100.0)[0] == pytest.approx(14.0)  # capped at rpm_max
 
 
+def test_laden_fuel_and_speed_follow_the_weight_lifted():
+    from pipeline.performance.model import PerformanceModel
+    from pipeline.planning.fuel import draft_at, laden_curve
+
+    # physical form: speed falls 0.2 kn per metre of draft, fuel rate grows 5 % per metre at the same rpm
+    m = PerformanceModel(form="physical", speed_coef=np.array([2.5, 0.12, -0.2, 0.0, 0.0, 0.0, 0.0]),
+                         fuel_coef=np.array([0.0, 1.0, 0.05, 0.0, 0.0, 0.0]))
+    assert draft_at(30_000, 60_000, 12.0, 6.0) == pytest.approx(9.0) and draft_at(90_000, 60_000, 12.0, 6.0) == 12.0
+    curve = laden_curve(m, 12.0, 60_000, 12.0, 6.0, 100.0)
+    assert [w for w, _, _ in curve] == [15_000, 30_000, 45_000, 60_000]
+    fuel = [f for _, _, f in curve]
+    assert all(s == pytest.approx(12.0) for _, s, _ in curve) and fuel == sorted(fuel) and fuel[-1] > 1.1 * fuel[0]
+    v = PlanVessel(imo=1, name="a", dwt_t=60_000, start_port="A", start_h=0.0, laden_curve=curve)
+    assert v.laden_at(37_500) == pytest.approx((12.0, 0.5 * (fuel[1] + fuel[2])))
+    assert v.laden_at(1_000) == pytest.approx(curve[0][1:]) and v.laden_at(1e9) == pytest.approx(curve[-1][1:])
+    # in a plan: the same contract lifted at half the weight costs the half-weight fuel and sails at its speed
+    c = Contract("C1", "grain", 10_000, 30_000, "A", "B", 0.0, 100.0, penalty=1e9)
+    data = problem.build([v], [c], {("A", "B"): 600.0}, fuel_price=500.0)
+    s = problem.schedule(data, 0, (0,))
+    assert s.fuel_t == pytest.approx(600.0 * v.laden_at(30_000)[1]) and s.legs[0].lift_t == 30_000
+
+
 # ---------------------------------------------------------------------------------------------- end to end
 
 

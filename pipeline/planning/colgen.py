@@ -63,7 +63,7 @@ def _successors(data: PlanData, k: int) -> dict[object, list[tuple]]:
         for (a, b), nm in va.arcs.items():
             if b != "e":
                 c = data.contracts[b]
-                succ.setdefault(a, []).append((b, va.travel_h[(a, b)], data.fuel_cost(k, nm, va.laden_nm[b])
+                succ.setdefault(a, []).append((b, va.travel_h[(a, b)], data.fuel_cost(k, nm, va.laden_fuel_t[b])
                                                - dc_h * va.dur_h[b], c.early_h, c.late_h, va.dur_h[b]))
         va.successors = succ
     return va.successors

@@ -78,7 +78,7 @@ def _arc_model(data: PlanData):
             continue
         j = b
         cj = data.contracts[j]
-        c[x] = data.fuel_cost(k, ballast_nm=bal_nm, laden_nm=va.laden_nm[j]) - dc_h * va.dur_h[j] - cj.penalty
+        c[x] = data.fuel_cost(k, ballast_nm=bal_nm, laden_fuel_t=va.laden_fuel_t[j]) - dc_h * va.dur_h[j] - cj.penalty
         into[j].append(x)
         flow.setdefault((k, j), []).append((x, 1.0))
         if a == "s":

@@ -8,7 +8,9 @@ Conventions (all solvers share them, so their costs compare exactly):
   discharging. A vessel arriving before `early` waits.
 - Lifted weight = min(max weight, deadweight); it must reach the contract's minimum weight.
 - Legs are sailed at the vessel's ballast / laden planning speed; fuel per NM at that speed and draft
-  (`fuel.py`). The weather routing of each leg later arrives just in time at the RTA the schedule gives.
+  (`fuel.py`). Laden, speed and fuel per NM depend on the weight lifted: `PlanVessel.laden_curve` holds them at
+  several cargo weights (interpolated linearly between, held beyond). The weather routing of each leg later arrives
+  just in time at the RTA the schedule gives.
 - Cost of a plan = fuel price × fuel (ballast + laden, and the last ballast to the vessel's end port when it has
   one) + daily cost × days out of service + the penalty of every contract left unassigned. Days out of service of
   a used vessel = from its available-from time to the end of its last leg, less the days it spends carrying and
@@ -45,6 +47,21 @@ class PlanVessel:
     ballast_speed_kn: float = 13.0
     laden_fuel_t_per_nm: float = 0.1
     ballast_fuel_t_per_nm: float = 0.08
+    # (cargo t, laden speed kn, fuel t/NM) at several cargo weights, by weight; empty: the laden figures above at any
+    laden_curve: tuple[tuple[float, float, float], ...] = ()
+
+    def laden_at(self, cargo_t: float) -> tuple[float, float]:
+        """(speed kn, fuel t/NM) laden with `cargo_t`."""
+        pts = self.laden_curve
+        if not pts:
+            return self.laden_speed_kn, self.laden_fuel_t_per_nm
+        if cargo_t <= pts[0][0]:
+            return pts[0][1], pts[0][2]
+        for (w0, s0, f0), (w1, s1, f1) in zip(pts, pts[1:]):
+            if cargo_t <= w1:
+                x = (cargo_t - w0) / (w1 - w0) if w1 > w0 else 1.0
+                return s0 + x * (s1 - s0), f0 + x * (f1 - f0)
+        return pts[-1][1], pts[-1][2]
 
 
 @dataclass(frozen=True)
@@ -71,6 +88,7 @@ class VesselArcs:
     dur_h: dict[int, float]  # load start → end of discharge
     laden_nm: dict[int, float]
     lift_t: dict[int, float]
+    laden_fuel_t: dict[int, float]  # fuel of the laden leg at the weight lifted
     arcs: dict[tuple, float] = field(default_factory=dict)  # arc → ballast NM
     travel_h: dict[tuple, float] = field(default_factory=dict)  # arc → ballast hours
     successors: dict | None = None  # colgen's pricing table, built on first use
@@ -84,9 +102,8 @@ class PlanData:
     per_vessel: list[VesselArcs]
     reasons: dict[int, str]  # contract index → why no vessel can lift it (absent: some vessel can)
 
-    def fuel_cost(self, k: int, ballast_nm: float = 0.0, laden_nm: float = 0.0) -> float:
-        v = self.vessels[k]
-        return self.fuel_price * (ballast_nm * v.ballast_fuel_t_per_nm + laden_nm * v.laden_fuel_t_per_nm)
+    def fuel_cost(self, k: int, ballast_nm: float = 0.0, laden_fuel_t: float = 0.0) -> float:
+        return self.fuel_price * (ballast_nm * self.vessels[k].ballast_fuel_t_per_nm + laden_fuel_t)
 
 
 def _distance(dist_nm: dict, a: str, b: str) -> float | None:
@@ -122,12 +139,14 @@ def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tu
     per_vessel: list[VesselArcs] = []
     why: dict[int, list[str]] = {j: [] for j in range(len(contracts))}
     for k, v in enumerate(vessels):
-        va = VesselArcs(k, [], {}, {}, {})
+        va = VesselArcs(k, [], {}, {}, {}, {})
         for j, c in enumerate(contracts):
             reason = _why_not(v, c, dist_nm)
             if reason is None:
                 laden = _distance(dist_nm, c.load_port, c.discharge_port)
-                dur = 2 * v.port_h + laden / v.laden_speed_kn
+                lift = min(c.max_t, v.dwt_t)
+                speed_kn, fuel_t_per_nm = v.laden_at(lift)
+                dur = 2 * v.port_h + laden / speed_kn
                 bal0 = _distance(dist_nm, v.start_port, c.load_port)
                 arrive = v.start_h + bal0 / v.ballast_speed_kn
                 to_end = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port) / v.ballast_speed_kn
@@ -137,7 +156,8 @@ def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tu
                     reason = "cannot finish it before its availability ends"
                 else:
                     va.contracts.append(j)
-                    va.dur_h[j], va.laden_nm[j], va.lift_t[j] = dur, laden, min(c.max_t, v.dwt_t)
+                    va.dur_h[j], va.laden_nm[j], va.lift_t[j] = dur, laden, lift
+                    va.laden_fuel_t[j] = laden * fuel_t_per_nm
                     va.arcs[("s", j)], va.travel_h[("s", j)] = bal0, arrive
                     end_nm = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port)
                     va.arcs[(j, "e")], va.travel_h[(j, "e")] = end_nm, to_end
@@ -213,7 +233,7 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
         return VesselSchedule(k, (), (), v.start_h, 0.0, 0.0, 0.0, 0.0, ())
     legs: list[Leg] = []
     starts: list[float] = []
-    ready, prev, busy, ballast_nm, laden_nm = v.start_h, "s", 0.0, 0.0, 0.0
+    ready, prev, busy, ballast_nm, laden_fuel_t = v.start_h, "s", 0.0, 0.0, 0.0
     for j in sequence:
         arc = (prev, j)
         if arc not in va.arcs:
@@ -231,10 +251,10 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
                             va.arcs[arc] * v.ballast_fuel_t_per_nm))
         sail_h = va.dur_h[j] - 2 * v.port_h
         legs.append(Leg(v.imo, len(legs), "laden", c.code, c.load_port, c.discharge_port, va.laden_nm[j],
-                        t + v.port_h, t + v.port_h + sail_h, va.laden_nm[j] * v.laden_fuel_t_per_nm, va.lift_t[j]))
+                        t + v.port_h, t + v.port_h + sail_h, va.laden_fuel_t[j], va.lift_t[j]))
         starts.append(t)
         ballast_nm += va.arcs[arc]
-        laden_nm += va.laden_nm[j]
+        laden_fuel_t += va.laden_fuel_t[j]
         busy += va.dur_h[j]
         ready, prev = t + va.dur_h[j], j
     end_nm = va.arcs[(prev, "e")]
@@ -245,7 +265,7 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
         legs.append(Leg(v.imo, len(legs), "ballast", None, data.contracts[prev].discharge_port, v.end_port, end_nm,
                         ready, end, end_nm * v.ballast_fuel_t_per_nm))
     ballast_nm += end_nm
-    fuel_t = ballast_nm * v.ballast_fuel_t_per_nm + laden_nm * v.laden_fuel_t_per_nm
+    fuel_t = ballast_nm * v.ballast_fuel_t_per_nm + laden_fuel_t
     oos_days = (end - v.start_h - busy) / HOURS_PER_DAY
     return VesselSchedule(k, tuple(sequence), tuple(starts), end, fuel_t, data.fuel_price * fuel_t, oos_days,
                           v.daily_cost * oos_days, tuple(legs))

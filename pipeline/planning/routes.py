@@ -37,7 +37,7 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000) -> tuple[l
     for j in succ.get("s", []):
         c = data.contracts[j]
         t = max(va.travel_h[("s", j)], c.early_h)
-        fuel = data.fuel_cost(k, va.arcs[("s", j)], va.laden_nm[j])
+        fuel = data.fuel_cost(k, va.arcs[("s", j)], va.laden_fuel_t[j])
         level[(frozenset((j,)), j)] = [(t + va.dur_h[j], fuel, va.dur_h[j], (j,))]
     complete, n_labels = True, len(level)
     while level:
@@ -60,7 +60,7 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000) -> tuple[l
                     t = max(ready + va.travel_h[(last, j)], c.early_h)
                     if t > c.late_h + 1e-9:
                         continue
-                    lab = (t + va.dur_h[j], fuel + data.fuel_cost(k, va.arcs[(last, j)], va.laden_nm[j]),
+                    lab = (t + va.dur_h[j], fuel + data.fuel_cost(k, va.arcs[(last, j)], va.laden_fuel_t[j]),
                            busy + va.dur_h[j], seq + (j,))
                     kept = nxt.setdefault(key, [])
                     if any(r <= lab[0] + 1e-9 and f <= lab[1] + 1e-9 for r, f, _, _ in kept):
