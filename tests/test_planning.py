@@ -87,13 +87,20 @@ def test_a_hand_computed_plan():
     data = problem.build([v], [c], {("A", "B"): 120.0, ("B", "C"): 240.0, ("A", "C"): 300.0}, fuel_price=500.0)
     plan = milp.solve(data)
     (s,) = plan.schedules
-    # ballast 10 h, wait until 24 h; load 12 h, sail 20 h, discharge 12 h: busy 44 h, ends at 68 h
+    # ballast 10 h at 12 kn, 14 h to spare before loading at 24 h: it leaves at 24 - 10/0.7 h and sails 0.7 × 12 kn,
+    # on 0.7² of the fuel per NM (no curve: ∝ speed²); load 12 h, sail 20 h, discharge 12 h: busy 44 h, ends at 68 h
     assert s.load_start_h == (24.0,) and s.end_h == pytest.approx(68.0)
-    assert s.fuel_t == pytest.approx(120 * 0.05 + 240 * 0.1)
+    assert s.fuel_t == pytest.approx(120 * 0.05 * 0.49 + 240 * 0.1)
     assert s.out_of_service_days == pytest.approx((68.0 - 44.0) / 24.0)
-    assert plan.cost == pytest.approx(500.0 * 30.0 + 2400.0 * 1.0)
+    assert plan.cost == pytest.approx(500.0 * s.fuel_t + 2400.0 * 1.0)
     assert [leg.kind for leg in s.legs] == ["ballast", "laden"]
+    assert s.legs[0].depart_h == pytest.approx(24.0 - 10.0 / 0.7) and s.legs[0].fuel_t == pytest.approx(2.94)
     assert s.legs[0].arrive_h == 24.0 and s.legs[1].depart_h == 36.0 and s.legs[1].lift_t == 45_000
+    # with 4 h to spare it sails 120 NM in 14 h (8.57 kn); with none, at 12 kn
+    assert v.ballast_leg(120.0, 10.0, 24.0) == pytest.approx((10.0, 120 * 0.05 * (120 / 14 / 12) ** 2))
+    assert v.ballast_leg(120.0, 14.0, 24.0) == pytest.approx((14.0, 6.0))
+    curved = dataclasses.replace(v, ballast_curve=((8.0, 0.02), (12.0, 0.05)))
+    assert curved.ballast_leg(120.0, 10.0, 24.0)[1] == pytest.approx(120 * (0.02 + 0.03 * (120 / 14 - 8) / 4))
     # a penalty below the cost leaves it, saying why
     cheap = problem.build([v], [dataclasses.replace(c, penalty=1000.0)], {("A", "B"): 120.0, ("B", "C"): 240.0},
                           fuel_price=500.0)
@@ -210,7 +217,7 @@ def test_fuel_per_nm_from_design_data_follows_the_cubic_law():
 
 def test_laden_fuel_and_speed_follow_the_weight_lifted():
     from pipeline.performance.model import PerformanceModel
-    from pipeline.planning.fuel import draft_at, laden_curve
+    from pipeline.planning.fuel import ballast_curve, draft_at, laden_curve
 
     # physical form: speed falls 0.2 kn per metre of draft, fuel rate grows 5 % per metre at the same rpm
     m = PerformanceModel(form="physical", speed_coef=np.array([2.5, 0.12, -0.2, 0.0, 0.0, 0.0, 0.0]),
@@ -223,6 +230,8 @@ def test_laden_fuel_and_speed_follow_the_weight_lifted():
     v = PlanVessel(imo=1, name="a", dwt_t=60_000, start_port="A", start_h=0.0, laden_curve=curve)
     assert v.laden_at(37_500) == pytest.approx((12.0, 0.5 * (fuel[1] + fuel[2])))
     assert v.laden_at(1_000) == pytest.approx(curve[0][1:]) and v.laden_at(1e9) == pytest.approx(curve[-1][1:])
+    slow = ballast_curve(m, 12.0, 6.0, 100.0, 0.7)
+    assert [s for s, _ in slow] == pytest.approx([8.4, 9.6, 10.8, 12.0]) and [f for _, f in slow] == sorted(f for _, f in slow)
     # in a plan: the same contract lifted at half the weight costs the half-weight fuel and sails at its speed
     c = Contract("C1", "grain", 10_000, 30_000, "A", "B", 0.0, 100.0, penalty=1e9)
     data = problem.build([v], [c], {("A", "B"): 600.0}, fuel_price=500.0)

@@ -55,3 +55,17 @@ def laden_curve(model: PerformanceModel, speed_kn: float, dwt_t: float, laden_dr
     return tuple((share * dwt_t, *speed_and_fuel_per_nm(model, speed_kn, draft_at(share * dwt_t, dwt_t, laden_draft_m,
                                                                                    ballast_draft_m), rpm_max))
                  for share in CARGO_SHARES)
+
+
+def ballast_curve(model: PerformanceModel, speed_kn: float, draft_m: float, rpm_max: float, slowest_share: float,
+                  n: int = 4) -> tuple[tuple[float, float], ...]:
+    """(speed kn, fuel t/NM) in ballast at `n` speeds from `slowest_share` of `speed_kn` to `speed_kn`, fuel made
+    non-decreasing in speed (a fit's noise must not make a faster leg cheaper: the planner relies on it)."""
+    out, most = [], 0.0
+    for i in range(n):
+        speed, fuel = speed_and_fuel_per_nm(model, speed_kn * (slowest_share + (1 - slowest_share) * i / (n - 1)),
+                                            draft_m, rpm_max)
+        most = max(most, fuel)
+        if not out or speed > out[-1][0]:
+            out.append((speed, most))
+    return tuple(out)

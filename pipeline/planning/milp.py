@@ -12,7 +12,8 @@ enumerated this is the exact problem, and its LP relaxation is tight, so HiGHS p
 Each contract is entered at most once over all vessels; flow is conserved at each contract per vessel; each
 vessel leaves its start at most once. Times follow the arcs through big-M constraints with the tightest M each
 arc allows. Minimised: fuel price × fuel + daily cost × (e[k] − start − busy hours)/24 + Σ penalty of contracts
-not entered. Its relaxation is weak (the big-M rows), hence only a bound.
+not entered, with each ballast leg to a load port costed at the slowest speed the schedule may sail it (its true
+fuel depends on the waiting it replaces). Its relaxation is weak (the big-M rows), hence only a bound.
 
 The plan returned is re-scheduled earliest (problem.schedule) and costed there, so every solver's plan is costed
 the same way.
@@ -26,7 +27,7 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from pipeline.planning.problem import HOURS_PER_DAY, FleetPlan, PlanData, assemble
+from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, FleetPlan, PlanData, assemble
 from pipeline.planning import colgen, local_search
 from pipeline.planning.routes import vessel_columns
 
@@ -78,7 +79,8 @@ def _arc_model(data: PlanData):
             continue
         j = b
         cj = data.contracts[j]
-        c[x] = data.fuel_cost(k, ballast_nm=bal_nm, laden_fuel_t=va.laden_fuel_t[j]) - dc_h * va.dur_h[j] - cj.penalty
+        slowest_t = bal_nm * v.ballast_at(SLOWEST_BALLAST_SHARE * v.ballast_speed_kn)  # a bound: it may slow down
+        c[x] = data.fuel_price * (slowest_t + va.laden_fuel_t[j]) - dc_h * va.dur_h[j] - cj.penalty
         into[j].append(x)
         flow.setdefault((k, j), []).append((x, 1.0))
         if a == "s":

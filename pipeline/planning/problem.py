@@ -8,7 +8,10 @@ Conventions (all solvers share them, so their costs compare exactly):
   discharging. A vessel arriving before `early` waits.
 - Lifted weight = min(max weight, deadweight); it must reach the contract's minimum weight.
 - Legs are sailed at the vessel's ballast / laden planning speed; fuel per NM at that speed and draft
-  (`fuel.py`). Laden, speed and fuel per NM depend on the weight lifted: `PlanVessel.laden_curve` holds them at
+  (`fuel.py`). A ballast leg to a load port where the vessel would wait for the window leaves later and sails
+  slower, down to `SLOWEST_BALLAST_SHARE` of its ballast speed, so that it arrives when loading starts; its fuel is
+  taken at the speed sailed (`PlanVessel.ballast_curve`, or fuel per NM ∝ speed² without one). Loading still starts
+  as early as the planning speed allows, so times do not depend on the speeds chosen. Laden, speed and fuel per NM depend on the weight lifted: `PlanVessel.laden_curve` holds them at
   several cargo weights (interpolated linearly between, held beyond). The weather routing of each leg later arrives
   just in time at the RTA the schedule gives.
 - Cost of a plan = fuel price × fuel (ballast + laden, and the last ballast to the vessel's end port when it has
@@ -22,6 +25,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 HOURS_PER_DAY = 24.0
 # A ballast leg leaves no earlier than it must to reach the load port when loading starts at this share of the
@@ -49,6 +54,26 @@ class PlanVessel:
     ballast_fuel_t_per_nm: float = 0.08
     # (cargo t, laden speed kn, fuel t/NM) at several cargo weights, by weight; empty: the laden figures above at any
     laden_curve: tuple[tuple[float, float, float], ...] = ()
+    # (speed kn, fuel t/NM) in ballast, by speed, fuel not falling with speed; empty: ∝ speed² from the figures above
+    ballast_curve: tuple[tuple[float, float], ...] = ()
+
+    def ballast_at(self, speed_kn: float) -> float:
+        """Fuel t/NM in ballast at `speed_kn`."""
+        pts = self.ballast_curve
+        if not pts:
+            return self.ballast_fuel_t_per_nm * (speed_kn / self.ballast_speed_kn) ** 2
+        return float(np.interp(speed_kn, [p[0] for p in pts], [p[1] for p in pts]))
+
+    def ballast_leg(self, nm: float, ready_h: float, load_h: float) -> tuple[float, float]:
+        """(departure, hours after as_of; fuel t) of a ballast leg of `nm` when the vessel is ready at `ready_h` and
+        loading starts at `load_h` (reachable at the ballast speed): it leaves as late as sailing no slower than
+        SLOWEST_BALLAST_SHARE of the ballast speed allows."""
+        if nm <= 0:
+            return ready_h, 0.0
+        fastest_h = nm / self.ballast_speed_kn
+        depart = max(ready_h, load_h - fastest_h / SLOWEST_BALLAST_SHARE)
+        speed = min(self.ballast_speed_kn, nm / max(load_h - depart, fastest_h))
+        return depart, nm * self.ballast_at(speed)
 
     def laden_at(self, cargo_t: float) -> tuple[float, float]:
         """(speed kn, fuel t/NM) laden with `cargo_t`."""
@@ -103,7 +128,15 @@ class PlanData:
     reasons: dict[int, str]  # contract index → why no vessel can lift it (absent: some vessel can)
 
     def fuel_cost(self, k: int, ballast_nm: float = 0.0, laden_fuel_t: float = 0.0) -> float:
+        """Cost of `ballast_nm` at the ballast speed and `laden_fuel_t`."""
         return self.fuel_price * (ballast_nm * self.vessels[k].ballast_fuel_t_per_nm + laden_fuel_t)
+
+    def leg_cost(self, k: int, arc: tuple, ready_h: float, load_h: float) -> float:
+        """Fuel cost of arc (origin, contract j) of vessel k — the ballast leg, slowed to arrive at `load_h`, and j's
+        laden leg — when the vessel is ready at `ready_h` and loading starts at `load_h`."""
+        va = self.per_vessel[k]
+        return self.fuel_price * (self.vessels[k].ballast_leg(va.arcs[arc], ready_h, load_h)[1]
+                                  + va.laden_fuel_t[arc[1]])
 
 
 def _distance(dist_nm: dict, a: str, b: str) -> float | None:
@@ -233,7 +266,7 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
         return VesselSchedule(k, (), (), v.start_h, 0.0, 0.0, 0.0, 0.0, ())
     legs: list[Leg] = []
     starts: list[float] = []
-    ready, prev, busy, ballast_nm, laden_fuel_t = v.start_h, "s", 0.0, 0.0, 0.0
+    ready, prev, busy, fuel_t = v.start_h, "s", 0.0, 0.0
     for j in sequence:
         arc = (prev, j)
         if arc not in va.arcs:
@@ -244,17 +277,15 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
         if t > c.late_h + 1e-9:
             return None
         from_port = v.start_port if prev == "s" else data.contracts[prev].discharge_port
+        depart, ballast_t = v.ballast_leg(va.arcs[arc], ready, t)
         if from_port != c.load_port:
-            sail_h = va.arcs[arc] / v.ballast_speed_kn
-            depart = max(ready, t - sail_h / SLOWEST_BALLAST_SHARE)
             legs.append(Leg(v.imo, len(legs), "ballast", c.code, from_port, c.load_port, va.arcs[arc], depart, t,
-                            va.arcs[arc] * v.ballast_fuel_t_per_nm))
+                            ballast_t))
         sail_h = va.dur_h[j] - 2 * v.port_h
         legs.append(Leg(v.imo, len(legs), "laden", c.code, c.load_port, c.discharge_port, va.laden_nm[j],
                         t + v.port_h, t + v.port_h + sail_h, va.laden_fuel_t[j], va.lift_t[j]))
         starts.append(t)
-        ballast_nm += va.arcs[arc]
-        laden_fuel_t += va.laden_fuel_t[j]
+        fuel_t += ballast_t + va.laden_fuel_t[j]
         busy += va.dur_h[j]
         ready, prev = t + va.dur_h[j], j
     end_nm = va.arcs[(prev, "e")]
@@ -264,8 +295,7 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
     if v.end_port is not None and end_nm > 0:
         legs.append(Leg(v.imo, len(legs), "ballast", None, data.contracts[prev].discharge_port, v.end_port, end_nm,
                         ready, end, end_nm * v.ballast_fuel_t_per_nm))
-    ballast_nm += end_nm
-    fuel_t = ballast_nm * v.ballast_fuel_t_per_nm + laden_fuel_t
+    fuel_t += end_nm * v.ballast_fuel_t_per_nm
     oos_days = (end - v.start_h - busy) / HOURS_PER_DAY
     return VesselSchedule(k, tuple(sequence), tuple(starts), end, fuel_t, data.fuel_price * fuel_t, oos_days,
                           v.daily_cost * oos_days, tuple(legs))

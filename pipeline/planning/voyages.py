@@ -2,9 +2,10 @@
 
 Times: the planner works in hours after `as_of`; rows carry naive-UTC timestamps.
 Each planned leg becomes a voyage (status planned, tagged with the plan): its departure is the leg's planned
-departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading (the leg leaves early
-enough to make it at `problem.SLOWEST_BALLAST_SHARE` of the planning speed, so the weather routing slows down
-instead of waiting at anchor); for a laden leg, the arrival at the planning speed.
+departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading (the leg leaves late
+enough to sail no faster than it needs, down to `problem.SLOWEST_BALLAST_SHARE` of the planning speed, so the weather
+routing slows down instead of waiting at anchor; the plan's fuel is costed at that speed); for a laden leg, the
+arrival at the planning speed for its cargo weight, at the draft of that weight.
 """
 
 from __future__ import annotations
@@ -15,10 +16,10 @@ import numpy as np
 import pandas as pd
 
 from pipeline.performance.model import model_from_stored, reference_model
-from pipeline.planning.fuel import (DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, draft_at, laden_curve,
-                                    speed_and_fuel_per_nm)
+from pipeline.planning.fuel import (DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, ballast_curve, draft_at,
+                                    laden_curve, speed_and_fuel_per_nm)
 from pipeline.planning.inputs import split_list
-from pipeline.planning.problem import Contract, FleetPlan, PlanData, PlanVessel
+from pipeline.planning.problem import SLOWEST_BALLAST_SHARE, Contract, FleetPlan, PlanData, PlanVessel
 
 DEFAULT_PORT_HOURS = 24.0
 DEFAULT_PENALTY = 500_000.0
@@ -51,6 +52,7 @@ def plan_vessels(fleet: pd.DataFrame, models: dict[int, dict], as_of: pd.Timesta
         laden_kn, laden_t = speed_and_fuel_per_nm(model, _num(r.get("laden_speed_kn"), design), laden_d, rpm_max)
         ballast_kn, ballast_t = speed_and_fuel_per_nm(model, _num(r.get("ballast_speed_kn"), design), ballast_d, rpm_max)
         curve = laden_curve(model, _num(r.get("laden_speed_kn"), design), dwt, laden_d, ballast_d, rpm_max) if dwt > 0 else ()
+        slower = ballast_curve(model, ballast_kn, ballast_d, rpm_max, SLOWEST_BALLAST_SHARE)
         until = r.get("until_utc")
         out.append(PlanVessel(
             imo=imo, name=str(r.get("name") or imo), dwt_t=dwt, start_port=str(r["from_port"]),
@@ -60,7 +62,7 @@ def plan_vessels(fleet: pd.DataFrame, models: dict[int, dict], as_of: pd.Timesta
             port_h=_num(r.get("port_hours"), DEFAULT_PORT_HOURS), daily_cost=_num(r.get("daily_cost"), 0.0),
             ports=split_list(r.get("ports")), cargo_types=split_list(r.get("cargo_types")),
             laden_speed_kn=laden_kn, ballast_speed_kn=ballast_kn, laden_fuel_t_per_nm=laden_t,
-            ballast_fuel_t_per_nm=ballast_t, laden_curve=curve))
+            ballast_fuel_t_per_nm=ballast_t, laden_curve=curve, ballast_curve=slower))
     return out, source
 
 
