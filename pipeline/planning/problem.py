@@ -259,8 +259,10 @@ class VesselSchedule:
 
 
 def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedule | None:
-    """The earliest schedule of vessel k lifting `sequence` in order (None: infeasible). Starting each load as
-    early as possible is optimal: every cost item grows with time."""
+    """The earliest schedule of vessel k lifting `sequence` in order (None: infeasible). Each load starts as early
+    as the planning speeds allow: every cost item grows with time, except a ballast leg's fuel, which a later load
+    start could lower further by a slower leg — the schedule takes the earliest start all the same (the convention
+    every solver shares), so a plan never waits on purpose to save ballast fuel."""
     v, va = data.vessels[k], data.per_vessel[k]
     if not sequence:
         return VesselSchedule(k, (), (), v.start_h, 0.0, 0.0, 0.0, 0.0, ())
