@@ -61,7 +61,7 @@ def main() -> None:
     from pipeline.synthetic.contracts import random_instance
 
     print(f"{'size':8} {'seed':>4} {'plan s':>7} {'cpu s':>6} {'status':>9} {'incumbent':>13} {'bound':>13} {'gap %':>6} "
-          f"{'assigned':>8}   {'arc-flow s':>10} {'arc cost':>13} {'arc bound':>13} {'gap to best bound %':>20}"
+          f"{'assigned':>8}   {'arc-flow s':>10} {'arc objective':>13} {'arc bound':>13} {'gap to best bound %':>20}"
           f"{'   best known  (s)   its gap %' if a.long else ''}  target")
     for name, (n_v, n_c, target_s, target_gap) in SIZES.items():
         if a.only and name != a.only:

@@ -177,10 +177,18 @@ def test_contract_rows_are_refused_with_their_reason_and_nothing_else_is_lost():
 
 def test_ports_on_land_and_availability_without_a_window_are_refused():
     ports = _raw([dict(port="Busan", lat="34.95", lon="129.15"), dict(port="Tokyo city", lat="35.68", lon="139.76"),
-                   dict(port="Nowhere", lat="95", lon="0")])
+                   dict(port="Nowhere", lat="95", lon="0"), dict(port="Yokohama", lat="35.3", lon="139.8")])
     good, bad = validate_ports(ports)
     assert list(good["port"]) == ["Busan"]
     assert "on land" in bad["reason"].iloc[0] and "out of range lat" in bad["reason"].iloc[1]
+    # 35.3,139.8 is at sea but on the corner of a land cell (Futtsu): no leg can leave it; the suggestion can
+    (why,) = bad.loc[bad["port"] == "Yokohama", "reason"]
+    assert why.startswith("touches land in the land mask")
+    from pipeline.planning.sea_distances import sea_distance
+
+    lat, lon = (float(x) for x in why.split("e.g. ")[1].split(" ")[0].split(","))
+    assert math.isnan(sea_distance("Yokohama", (35.3, 139.8), "Nagoya", (34.5, 137.0)).dist_nm)
+    assert sea_distance("Yokohama", (lat, lon), "Nagoya", (34.5, 137.0)).reason is None
     base = dict(imo="9074729", from_utc="2020-12-01", from_port="Busan", until_utc="", until_port="", ports="",
                 cargo_types="grain;coal", daily_cost="9000")
     avail = _raw([base, {**base, "imo": "9176187", "until_utc": "2020-11-30"}, {**base, "imo": "9074728"},
