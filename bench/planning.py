@@ -5,9 +5,8 @@ Random instances (`pipeline/synthetic/contracts.py`: ports on a 3,000 NM square,
 - the planner (`pipeline.planning.milp.solve`: set partitioning on HiGHS; column generation and a proven bound when
   enumerating every sequence is too big), wall time including the enumeration, cost, status and proven gap;
 - the reference, in the same run: the textbook arc-flow MILP (per-vessel arcs, big-M time windows) on the same
-  HiGHS with the same time limit — its best plan and its own dual bound — and the gap of the planner's plan to
-  the best lower bound either proves.
-
+  HiGHS with the same time limit — its best objective (ballast legs costed at their slowest speed, so at most its
+  plan's cost) and its own dual bound — and the gap of the planner's plan to the best lower bound either proves;
 - with `--long S`, the planner again with S seconds: the best plan known, to tell how much of the gap is the plan
   (incumbent) and how much the bound.
 
@@ -35,7 +34,7 @@ SIZES = {"10x30": (10, 30, 10.0, 0.0), "50x200": (50, 200, 60.0, 0.01)}  # vesse
 
 
 def arc_flow(data, time_limit_s: float) -> tuple[float, float, float]:
-    """(best plan cost or inf, dual bound, seconds) of the arc-flow MILP."""
+    """(best objective or inf, dual bound, seconds) of the arc-flow MILP."""
     from scipy.optimize import Bounds, LinearConstraint, milp
 
     from pipeline.planning.milp import _arc_model
