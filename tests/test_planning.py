@@ -59,6 +59,26 @@ def test_column_generation_proves_a_bound_no_higher_than_the_optimum_when_enumer
         assert capped.status == ("optimal" if capped.gap <= 1e-9 else "feasible")
 
 
+def test_local_search_from_an_empty_or_a_worse_plan_ends_feasible_between_the_optimum_and_its_start():
+    from pipeline.planning import local_search
+    from pipeline.planning.problem import assemble
+
+    rng = np.random.default_rng(9)
+    gained = 0
+    for seed in range(40):
+        vessels, contracts, dist = random_instance(int(rng.integers(2, 4)), int(rng.integers(3, 7)), seed=seed,
+                                                   horizon_days=20, n_ports=5)
+        data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+        best = brute.solve(data)
+        worst_first = {s.k: s.sequence[:1] for s in best.schedules}  # a worse plan: each vessel keeps its first only
+        for start in ({}, worst_first):
+            before = assemble(data, start, solver="t", status="", gap=0.0, runtime_s=0.0)
+            after = assemble(data, local_search.improve(data, start), solver="t", status="", gap=0.0, runtime_s=0.0)
+            assert best.cost - 1e-6 <= after.cost <= before.cost + 1e-6, f"seed {seed}"
+            gained += after.cost < before.cost - 1e-6
+    assert gained > 20  # the moves do something
+
+
 def test_a_hand_computed_plan():
     # start A at t=0; contract: load B (120 NM from A), discharge C (240 NM), window [24 h, 48 h]; 12 kn both ways
     v = PlanVessel(imo=9074729, name="X", dwt_t=50_000, start_port="A", start_h=0.0, port_h=12.0, daily_cost=2400.0,
@@ -67,13 +87,20 @@ def test_a_hand_computed_plan():
     data = problem.build([v], [c], {("A", "B"): 120.0, ("B", "C"): 240.0, ("A", "C"): 300.0}, fuel_price=500.0)
     plan = milp.solve(data)
     (s,) = plan.schedules
-    # ballast 10 h, wait until 24 h; load 12 h, sail 20 h, discharge 12 h: busy 44 h, ends at 68 h
+    # ballast 10 h at 12 kn, 14 h to spare before loading at 24 h: it leaves at 24 - 10/0.7 h and sails 0.7 × 12 kn,
+    # on 0.7² of the fuel per NM (no curve: ∝ speed²); load 12 h, sail 20 h, discharge 12 h: busy 44 h, ends at 68 h
     assert s.load_start_h == (24.0,) and s.end_h == pytest.approx(68.0)
-    assert s.fuel_t == pytest.approx(120 * 0.05 + 240 * 0.1)
+    assert s.fuel_t == pytest.approx(120 * 0.05 * 0.49 + 240 * 0.1)
     assert s.out_of_service_days == pytest.approx((68.0 - 44.0) / 24.0)
-    assert plan.cost == pytest.approx(500.0 * 30.0 + 2400.0 * 1.0)
+    assert plan.cost == pytest.approx(500.0 * s.fuel_t + 2400.0 * 1.0)
     assert [leg.kind for leg in s.legs] == ["ballast", "laden"]
+    assert s.legs[0].depart_h == pytest.approx(24.0 - 10.0 / 0.7) and s.legs[0].fuel_t == pytest.approx(2.94)
     assert s.legs[0].arrive_h == 24.0 and s.legs[1].depart_h == 36.0 and s.legs[1].lift_t == 45_000
+    # with 4 h to spare it sails 120 NM in 14 h (8.57 kn); with none, at 12 kn
+    assert v.ballast_leg(120.0, 10.0, 24.0) == pytest.approx((10.0, 120 * 0.05 * (120 / 14 / 12) ** 2))
+    assert v.ballast_leg(120.0, 14.0, 24.0) == pytest.approx((14.0, 6.0))
+    curved = dataclasses.replace(v, ballast_curve=((8.0, 0.02), (12.0, 0.05)))
+    assert curved.ballast_leg(120.0, 10.0, 24.0)[1] == pytest.approx(120 * (0.02 + 0.03 * (120 / 14 - 8) / 4))
     # a penalty below the cost leaves it, saying why
     cheap = problem.build([v], [dataclasses.replace(c, penalty=1000.0)], {("A", "B"): 120.0, ("B", "C"): 240.0},
                           fuel_price=500.0)
@@ -150,10 +177,18 @@ def test_contract_rows_are_refused_with_their_reason_and_nothing_else_is_lost():
 
 def test_ports_on_land_and_availability_without_a_window_are_refused():
     ports = _raw([dict(port="Busan", lat="34.95", lon="129.15"), dict(port="Tokyo city", lat="35.68", lon="139.76"),
-                   dict(port="Nowhere", lat="95", lon="0")])
+                   dict(port="Nowhere", lat="95", lon="0"), dict(port="Yokohama", lat="35.3", lon="139.8")])
     good, bad = validate_ports(ports)
     assert list(good["port"]) == ["Busan"]
     assert "on land" in bad["reason"].iloc[0] and "out of range lat" in bad["reason"].iloc[1]
+    # 35.3,139.8 is at sea but on the corner of a land cell (Futtsu): no leg can leave it; the suggestion can
+    (why,) = bad.loc[bad["port"] == "Yokohama", "reason"]
+    assert why.startswith("touches land in the land mask")
+    from pipeline.planning.sea_distances import sea_distance
+
+    lat, lon = (float(x) for x in why.split("e.g. ")[1].split(" ")[0].split(","))
+    assert math.isnan(sea_distance("Yokohama", (35.3, 139.8), "Nagoya", (34.5, 137.0)).dist_nm)
+    assert sea_distance("Yokohama", (lat, lon), "Nagoya", (34.5, 137.0)).reason is None
     base = dict(imo="9074729", from_utc="2020-12-01", from_port="Busan", until_utc="", until_port="", ports="",
                 cargo_types="grain;coal", daily_cost="9000")
     avail = _raw([base, {**base, "imo": "9176187", "until_utc": "2020-11-30"}, {**base, "imo": "9074728"},
@@ -186,6 +221,30 @@ def test_fuel_per_nm_from_design_data_follows_the_cubic_law():
     s7, f7 = speed_and_fuel_per_nm(m, 7.0, 10.0, 100.0)
     assert s12 == pytest.approx(12.0) and f12 / f7 == pytest.approx((12.0 / 7.0) ** 2, rel=1e-6)
     assert speed_and_fuel_per_nm(m, 20.0, 10.0, 100.0)[0] == pytest.approx(14.0)  # capped at rpm_max
+
+
+def test_laden_fuel_and_speed_follow_the_weight_lifted():
+    from pipeline.performance.model import PerformanceModel
+    from pipeline.planning.fuel import ballast_curve, draft_at, laden_curve
+
+    # physical form: speed falls 0.2 kn per metre of draft, fuel rate grows 5 % per metre at the same rpm
+    m = PerformanceModel(form="physical", speed_coef=np.array([2.5, 0.12, -0.2, 0.0, 0.0, 0.0, 0.0]),
+                         fuel_coef=np.array([0.0, 1.0, 0.05, 0.0, 0.0, 0.0]))
+    assert draft_at(30_000, 60_000, 12.0, 6.0) == pytest.approx(9.0) and draft_at(90_000, 60_000, 12.0, 6.0) == 12.0
+    curve = laden_curve(m, 12.0, 60_000, 12.0, 6.0, 100.0)
+    assert [w for w, _, _ in curve] == [15_000, 30_000, 45_000, 60_000]
+    fuel = [f for _, _, f in curve]
+    assert all(s == pytest.approx(12.0) for _, s, _ in curve) and fuel == sorted(fuel) and fuel[-1] > 1.1 * fuel[0]
+    v = PlanVessel(imo=1, name="a", dwt_t=60_000, start_port="A", start_h=0.0, laden_curve=curve)
+    assert v.laden_at(37_500) == pytest.approx((12.0, 0.5 * (fuel[1] + fuel[2])))
+    assert v.laden_at(1_000) == pytest.approx(curve[0][1:]) and v.laden_at(1e9) == pytest.approx(curve[-1][1:])
+    slow = ballast_curve(m, 12.0, 6.0, 100.0, 0.7)
+    assert [s for s, _ in slow] == pytest.approx([8.4, 9.6, 10.8, 12.0]) and [f for _, f in slow] == sorted(f for _, f in slow)
+    # in a plan: the same contract lifted at half the weight costs the half-weight fuel and sails at its speed
+    c = Contract("C1", "grain", 10_000, 30_000, "A", "B", 0.0, 100.0, penalty=1e9)
+    data = problem.build([v], [c], {("A", "B"): 600.0}, fuel_price=500.0)
+    s = problem.schedule(data, 0, (0,))
+    assert s.fuel_t == pytest.approx(600.0 * v.laden_at(30_000)[1]) and s.legs[0].lift_t == 30_000
 
 
 # ---------------------------------------------------------------------------------------------- end to end

@@ -16,8 +16,9 @@ from pipeline.export.plan_gantt import plan_gantt_png
 from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
 from pipeline.planning.sea_distances import PortDistance, distance_map, needed_pairs, sea_distance
-from pipeline.planning.voyages import (DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, DEFAULT_PENALTY,
-                                       apply_commitments, committed, plan_contracts, plan_rows, plan_vessels)
+from pipeline.planning.voyages import (DEFAULT_PENALTY,
+                                       apply_commitments, committed, plan_contracts, plan_rows, plan_vessels,
+                                       vessel_drafts)
 from pipeline.timestamps import parse_iso_utc
 from storage import fleet_store, planning_store, warehouse
 
@@ -130,10 +131,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     data = problem.build(vessels, cons, distance_map(dists), fuel_price)
     plan = run.step(milp.solve, data, time_limit_s=time_limit_s, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"
-    drafts = {int(r["imo"]): (r["laden_draft_m"] if pd.notna(r["laden_draft_m"]) else DEFAULT_LADEN_DRAFT_M,
-                              r["ballast_draft_m"] if pd.notna(r["ballast_draft_m"]) else DEFAULT_BALLAST_DRAFT_M)
-              for r in fleet.to_dict("records")}
-    row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, drafts)
+    row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, vessel_drafts(fleet))
     stored = planning_store.save_plan(db, row, legs, left, voyages)
     png = None
     if picture:

@@ -9,6 +9,7 @@ problem.py     the planning problem: vessels, contracts, distances → per-vesse
 routes.py      every feasible contract sequence per vessel, best order per set (the MILP's columns)
 milp.py        the planner: set partitioning on HiGHS (scipy.optimize.milp); the arc-flow model for a bound
 colgen.py      column generation and an LP dive for fleets too big to enumerate, with a proven lower bound
+local_search   moves of single contracts between vessels and the spot market, after the dive
 brute.py       the brute-force reference for small instances (tests, bench)
 voyages.py     a plan's legs as voyage rows
 """

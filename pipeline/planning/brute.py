@@ -1,6 +1,6 @@
 """The brute-force reference planner for small instances: every order of every subset of contracts per vessel,
 then every way of sharing the contracts among the vessels. Exponential; for tests and the bench's reference.
-Each sequence is scheduled earliest (problem.schedule), which is optimal for a fixed sequence."""
+Each sequence is scheduled earliest (problem.schedule), the convention every solver shares."""
 
 from __future__ import annotations
 

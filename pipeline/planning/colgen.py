@@ -4,7 +4,7 @@ The LP relaxation of the set-partitioning master (routes.Column variables y ∈ 
 at most once) is solved by HiGHS (`scipy.optimize.linprog`); its duals price new columns. Pricing, per vessel, is a
 shortest path with resources over its feasible arcs: a label at contract j holds (ready time, reduced cost so far);
 one label no later and no dearer than another at the same contract makes it useless (every later cost grows with
-time). Contracts may repeat along a priced path (no elementarity): a relaxation, so the least reduced cost found is
+time; a ballast leg leaving earlier can sail slower, never dearer). Contracts may repeat along a priced path (no elementarity): a relaxation, so the least reduced cost found is
 a lower bound on the true one — with load windows shorter than any cycle of voyages, paths cannot repeat anyway.
 Paths that do repeat are not added as columns.
 
@@ -45,6 +45,8 @@ def solve_lp(data: PlanData, columns: list[Column]) -> tuple[float, np.ndarray, 
         return const, np.zeros(n), np.zeros(V), np.zeros(0)
     c, A = _master(data, columns)
     res = linprog(c, A_ub=A, b_ub=np.ones(n + V), bounds=(0, None), method="highs-ipm")  # ~10x the simplex here
+    if res.status == 4:  # HiGHS's interior point sometimes ends in a "solve error" (seen at 20 x 80); the simplex does not
+        res = linprog(c, A_ub=A, b_ub=np.ones(n + V), bounds=(0, None), method="highs-ds")
     if res.status != 0:
         raise RuntimeError(f"the planning LP failed: {res.message}")
     duals = res.ineqlin.marginals
@@ -52,8 +54,9 @@ def solve_lp(data: PlanData, columns: list[Column]) -> tuple[float, np.ndarray, 
 
 
 def _successors(data: PlanData, k: int) -> dict[object, list[tuple]]:
-    """Per origin ('s' or a contract) of vessel k: (j, ballast hours, fuel cost of the arc and of j's laden leg less
-    the out-of-service credit of j's busy hours, early_j, late_j, dur_j); cached on the vessel's arcs."""
+    """Per origin ('s' or a contract) of vessel k: (j, ballast hours, j's arc, early_j, late_j, dur_j, the
+    out-of-service credit of j's busy hours); cached on the vessel's arcs. The arc's fuel depends on when the vessel
+    is ready (a ballast leg slows down instead of waiting), so pricing costs it per label (PlanData.leg_cost)."""
     va = data.per_vessel[k]
     if va.successors is None:
         dc_h = data.vessels[k].daily_cost / HOURS_PER_DAY
@@ -61,8 +64,8 @@ def _successors(data: PlanData, k: int) -> dict[object, list[tuple]]:
         for (a, b), nm in va.arcs.items():
             if b != "e":
                 c = data.contracts[b]
-                succ.setdefault(a, []).append((b, va.travel_h[(a, b)], data.fuel_cost(k, nm, va.laden_nm[b])
-                                               - dc_h * va.dur_h[b], c.early_h, c.late_h, va.dur_h[b]))
+                succ.setdefault(a, []).append((b, va.travel_h[(a, b)], (a, b), c.early_h, c.late_h, va.dur_h[b],
+                                               dc_h * va.dur_h[b]))
         va.successors = succ
     return va.successors
 
@@ -101,21 +104,22 @@ def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) 
         front[j] = keep
         queue.append(new)
 
-    for j, travel, cost, early, late, dur in succ.get("s", []):
+    leg_cost = data.leg_cost
+    for j, travel, arc, early, late, dur, credit in succ.get("s", []):
         t = max(travel, early)  # start arcs: travel is the arrival time
-        offer(j, t + dur, cost - prize[j], None)
+        offer(j, t + dur, leg_cost(k, arc, v.start_h, t) - credit - prize[j], None)
     while queue:
         lab = queue.popleft()
         if not lab[4]:
             continue
         ready, rc, i = lab[0], lab[1], lab[3]
-        for j, travel, cost, early, late, dur in succ.get(i, ()):
+        for j, travel, arc, early, late, dur, credit in succ.get(i, ()):
             t = ready + travel
             if t < early:
                 t = early
             elif t > late + 1e-9:
                 continue
-            offer(j, t + dur, rc + cost - prize[j], lab)
+            offer(j, t + dur, rc + leg_cost(k, arc, ready, t) - credit - prize[j], lab)
     best, found = 0.0, []
     for j, labs in front.items():
         for lab in labs:

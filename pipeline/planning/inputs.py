@@ -47,7 +47,8 @@ def split_list(value) -> frozenset[str] | None:
 
 def validate_ports(raw: pd.DataFrame, source: str = "", *, check_land: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(good ports: port, lat, lon; refused rows with `raw`, `reason`). A port on land (global land mask) is refused:
-    give the pilot station's position."""
+    give the pilot station's position. So is a port at sea that touches land (0 NM from a land cell, e.g. exactly on
+    a cell's corner), which no route can leave; the reason suggests a position a little further out."""
     _require(raw, PORT_REQUIRED, "ports file", source)
     df = raw.copy()
     r = _Reasons(df.index)
@@ -65,8 +66,33 @@ def validate_ports(raw: pd.DataFrame, source: str = "", *, check_land: bool = Tr
             sea = pd.Series(True, index=df.index)
             sea[ok] = [bool(is_sea(la, lo)) for la, lo in zip(df.loc[ok, "lat"], df.loc[ok, "lon"])]
             r.flag(~sea, "on land (global land mask): give the position of the pilot station, at sea")
+            ok = r.reason.isna()
+            for i in df.index[ok]:
+                why = _touches_land(float(df.at[i, "lat"]), float(df.at[i, "lon"]))
+                if why:
+                    r.flag(df.index == i, why)
     r.flag(df["port"].duplicated(keep="first") & r.reason.isna(), "duplicate port in file")
     return _split(df, r, raw_rows(raw), source)
+
+
+def _touches_land(lat: float, lon: float) -> str | None:
+    """Why a port at sea per the mask still cannot be sailed from: 0 NM from land (on the edge or corner of a land
+    cell), where routing's leg check refuses every leg leaving it, even inside the port approach."""
+    import numpy as np
+
+    from pipeline.routing.geodesy import destination
+    from pipeline.routing.land import distance_to_land_nm
+
+    if float(distance_to_land_nm(lat, lon, 1.0)) > 0.0:
+        return None
+    for r_nm in np.arange(0.1, 2.01, 0.1):  # the nearest point at least 0.2 NM from land, as a suggestion
+        pts = [destination(lat, lon, float(b), float(r_nm)) for b in range(0, 360, 15)]
+        d = distance_to_land_nm(np.array([p[0] for p in pts]), np.array([p[1] for p in pts]), 1.0)
+        if d.max() >= 0.2:
+            la, lo = pts[int(np.argmax(d))]
+            return (f"touches land in the land mask (0 NM from a land cell's edge): no route can leave it; "
+                    f"move it out to sea, e.g. {la:.4f},{lo:.4f} ({r_nm:.1f} NM off)")
+    return "touches land in the land mask (0 NM from a land cell's edge): no route can leave it; move it out to sea"
 
 
 def validate_availability(raw: pd.DataFrame, *, known_imos: set[int] | None = None, ports: set[str] | None = None,

@@ -12,7 +12,8 @@ enumerated this is the exact problem, and its LP relaxation is tight, so HiGHS p
 Each contract is entered at most once over all vessels; flow is conserved at each contract per vessel; each
 vessel leaves its start at most once. Times follow the arcs through big-M constraints with the tightest M each
 arc allows. Minimised: fuel price × fuel + daily cost × (e[k] − start − busy hours)/24 + Σ penalty of contracts
-not entered. Its relaxation is weak (the big-M rows), hence only a bound.
+not entered, with each ballast leg to a load port costed at the slowest speed the schedule may sail it (its true
+fuel depends on the waiting it replaces). Its relaxation is weak (the big-M rows), hence only a bound.
 
 The plan returned is re-scheduled earliest (problem.schedule) and costed there, so every solver's plan is costed
 the same way.
@@ -26,8 +27,8 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from pipeline.planning.problem import HOURS_PER_DAY, FleetPlan, PlanData, assemble
-from pipeline.planning import colgen
+from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, FleetPlan, PlanData, assemble
+from pipeline.planning import colgen, local_search
 from pipeline.planning.routes import vessel_columns
 
 
@@ -78,7 +79,8 @@ def _arc_model(data: PlanData):
             continue
         j = b
         cj = data.contracts[j]
-        c[x] = data.fuel_cost(k, ballast_nm=bal_nm, laden_nm=va.laden_nm[j]) - dc_h * va.dur_h[j] - cj.penalty
+        slowest_t = bal_nm * v.ballast_at(SLOWEST_BALLAST_SHARE * v.ballast_speed_kn)  # a bound: it may slow down
+        c[x] = data.fuel_price * (slowest_t + va.laden_fuel_t[j]) - dc_h * va.dur_h[j] - cj.penalty
         into[j].append(x)
         flow.setdefault((k, j), []).append((x, 1.0))
         if a == "s":
@@ -130,7 +132,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     (routes.vessel_columns), solved by HiGHS — proven optimal when every vessel's sequences were enumerated (at
     most `max_labels` partial sequences each) and HiGHS finished. Otherwise the columns are the `init_labels`
     most promising per vessel plus those column generation prices (colgen.py, up to 45 % of the time left); a dive
-    on the LP (up to 75 % of what is left then) gives a plan, the restricted MILP gets the rest of the time, the
+    on the LP (up to 75 % of what is left then), improved by local search (local_search.py), gives a plan, the restricted MILP gets the rest of the time, the
     better of the two is returned, and `gap` is its proven relative gap to colgen's lower bound. The time limit
     covers all of it (HiGHS may overrun it by about a second)."""
     t0 = time.perf_counter()
@@ -148,6 +150,8 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         columns, bound, _, (pi, mu, y) = colgen.generate(data, columns, time_limit_s=max(1.0, 0.45 * left))
         left = float(time_limit_s) - (time.perf_counter() - t0)
         dived, columns = colgen.dive(data, columns, time_limit_s=max(1.0, 0.75 * left))
+        left = float(time_limit_s) - (time.perf_counter() - t0)
+        dived = local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left))
         rounded = assemble(data, dived, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
         # reduced-cost fixing: a column whose reduced cost exceeds (rounded plan − bound) is in no better plan
         rc = colgen.reduced_costs(data, columns, pi, mu)

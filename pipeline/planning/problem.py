@@ -8,7 +8,12 @@ Conventions (all solvers share them, so their costs compare exactly):
   discharging. A vessel arriving before `early` waits.
 - Lifted weight = min(max weight, deadweight); it must reach the contract's minimum weight.
 - Legs are sailed at the vessel's ballast / laden planning speed; fuel per NM at that speed and draft
-  (`fuel.py`). The weather routing of each leg later arrives just in time at the RTA the schedule gives.
+  (`fuel.py`). A ballast leg to a load port where the vessel would wait for the window leaves later and sails
+  slower, down to `SLOWEST_BALLAST_SHARE` of its ballast speed, so that it arrives when loading starts; its fuel is
+  taken at the speed sailed (`PlanVessel.ballast_curve`, or fuel per NM ∝ speed² without one). Loading still starts
+  as early as the planning speed allows, so times do not depend on the speeds chosen. Laden, speed and fuel per NM depend on the weight lifted: `PlanVessel.laden_curve` holds them at
+  several cargo weights (interpolated linearly between, held beyond). The weather routing of each leg later arrives
+  just in time at the RTA the schedule gives.
 - Cost of a plan = fuel price × fuel (ballast + laden, and the last ballast to the vessel's end port when it has
   one) + daily cost × days out of service + the penalty of every contract left unassigned. Days out of service of
   a used vessel = from its available-from time to the end of its last leg, less the days it spends carrying and
@@ -20,6 +25,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 HOURS_PER_DAY = 24.0
 # A ballast leg leaves no earlier than it must to reach the load port when loading starts at this share of the
@@ -45,6 +52,41 @@ class PlanVessel:
     ballast_speed_kn: float = 13.0
     laden_fuel_t_per_nm: float = 0.1
     ballast_fuel_t_per_nm: float = 0.08
+    # (cargo t, laden speed kn, fuel t/NM) at several cargo weights, by weight; empty: the laden figures above at any
+    laden_curve: tuple[tuple[float, float, float], ...] = ()
+    # (speed kn, fuel t/NM) in ballast, by speed, fuel not falling with speed; empty: ∝ speed² from the figures above
+    ballast_curve: tuple[tuple[float, float], ...] = ()
+
+    def ballast_at(self, speed_kn: float) -> float:
+        """Fuel t/NM in ballast at `speed_kn`."""
+        pts = self.ballast_curve
+        if not pts:
+            return self.ballast_fuel_t_per_nm * (speed_kn / self.ballast_speed_kn) ** 2
+        return float(np.interp(speed_kn, [p[0] for p in pts], [p[1] for p in pts]))
+
+    def ballast_leg(self, nm: float, ready_h: float, load_h: float) -> tuple[float, float]:
+        """(departure, hours after as_of; fuel t) of a ballast leg of `nm` when the vessel is ready at `ready_h` and
+        loading starts at `load_h` (reachable at the ballast speed): it leaves as late as sailing no slower than
+        SLOWEST_BALLAST_SHARE of the ballast speed allows."""
+        if nm <= 0:
+            return ready_h, 0.0
+        fastest_h = nm / self.ballast_speed_kn
+        depart = max(ready_h, load_h - fastest_h / SLOWEST_BALLAST_SHARE)
+        speed = min(self.ballast_speed_kn, nm / max(load_h - depart, fastest_h))
+        return depart, nm * self.ballast_at(speed)
+
+    def laden_at(self, cargo_t: float) -> tuple[float, float]:
+        """(speed kn, fuel t/NM) laden with `cargo_t`."""
+        pts = self.laden_curve
+        if not pts:
+            return self.laden_speed_kn, self.laden_fuel_t_per_nm
+        if cargo_t <= pts[0][0]:
+            return pts[0][1], pts[0][2]
+        for (w0, s0, f0), (w1, s1, f1) in zip(pts, pts[1:]):
+            if cargo_t <= w1:
+                x = (cargo_t - w0) / (w1 - w0) if w1 > w0 else 1.0
+                return s0 + x * (s1 - s0), f0 + x * (f1 - f0)
+        return pts[-1][1], pts[-1][2]
 
 
 @dataclass(frozen=True)
@@ -71,6 +113,7 @@ class VesselArcs:
     dur_h: dict[int, float]  # load start → end of discharge
     laden_nm: dict[int, float]
     lift_t: dict[int, float]
+    laden_fuel_t: dict[int, float]  # fuel of the laden leg at the weight lifted
     arcs: dict[tuple, float] = field(default_factory=dict)  # arc → ballast NM
     travel_h: dict[tuple, float] = field(default_factory=dict)  # arc → ballast hours
     successors: dict | None = None  # colgen's pricing table, built on first use
@@ -84,9 +127,16 @@ class PlanData:
     per_vessel: list[VesselArcs]
     reasons: dict[int, str]  # contract index → why no vessel can lift it (absent: some vessel can)
 
-    def fuel_cost(self, k: int, ballast_nm: float = 0.0, laden_nm: float = 0.0) -> float:
-        v = self.vessels[k]
-        return self.fuel_price * (ballast_nm * v.ballast_fuel_t_per_nm + laden_nm * v.laden_fuel_t_per_nm)
+    def fuel_cost(self, k: int, ballast_nm: float = 0.0, laden_fuel_t: float = 0.0) -> float:
+        """Cost of `ballast_nm` at the ballast speed and `laden_fuel_t`."""
+        return self.fuel_price * (ballast_nm * self.vessels[k].ballast_fuel_t_per_nm + laden_fuel_t)
+
+    def leg_cost(self, k: int, arc: tuple, ready_h: float, load_h: float) -> float:
+        """Fuel cost of arc (origin, contract j) of vessel k — the ballast leg, slowed to arrive at `load_h`, and j's
+        laden leg — when the vessel is ready at `ready_h` and loading starts at `load_h`."""
+        va = self.per_vessel[k]
+        return self.fuel_price * (self.vessels[k].ballast_leg(va.arcs[arc], ready_h, load_h)[1]
+                                  + va.laden_fuel_t[arc[1]])
 
 
 def _distance(dist_nm: dict, a: str, b: str) -> float | None:
@@ -122,12 +172,14 @@ def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tu
     per_vessel: list[VesselArcs] = []
     why: dict[int, list[str]] = {j: [] for j in range(len(contracts))}
     for k, v in enumerate(vessels):
-        va = VesselArcs(k, [], {}, {}, {})
+        va = VesselArcs(k, [], {}, {}, {}, {})
         for j, c in enumerate(contracts):
             reason = _why_not(v, c, dist_nm)
             if reason is None:
                 laden = _distance(dist_nm, c.load_port, c.discharge_port)
-                dur = 2 * v.port_h + laden / v.laden_speed_kn
+                lift = min(c.max_t, v.dwt_t)
+                speed_kn, fuel_t_per_nm = v.laden_at(lift)
+                dur = 2 * v.port_h + laden / speed_kn
                 bal0 = _distance(dist_nm, v.start_port, c.load_port)
                 arrive = v.start_h + bal0 / v.ballast_speed_kn
                 to_end = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port) / v.ballast_speed_kn
@@ -137,7 +189,8 @@ def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tu
                     reason = "cannot finish it before its availability ends"
                 else:
                     va.contracts.append(j)
-                    va.dur_h[j], va.laden_nm[j], va.lift_t[j] = dur, laden, min(c.max_t, v.dwt_t)
+                    va.dur_h[j], va.laden_nm[j], va.lift_t[j] = dur, laden, lift
+                    va.laden_fuel_t[j] = laden * fuel_t_per_nm
                     va.arcs[("s", j)], va.travel_h[("s", j)] = bal0, arrive
                     end_nm = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port)
                     va.arcs[(j, "e")], va.travel_h[(j, "e")] = end_nm, to_end
@@ -206,14 +259,16 @@ class VesselSchedule:
 
 
 def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedule | None:
-    """The earliest schedule of vessel k lifting `sequence` in order (None: infeasible). Starting each load as
-    early as possible is optimal: every cost item grows with time."""
+    """The earliest schedule of vessel k lifting `sequence` in order (None: infeasible). Each load starts as early
+    as the planning speeds allow: every cost item grows with time, except a ballast leg's fuel, which a later load
+    start could lower further by a slower leg — the schedule takes the earliest start all the same (the convention
+    every solver shares), so a plan never waits on purpose to save ballast fuel."""
     v, va = data.vessels[k], data.per_vessel[k]
     if not sequence:
         return VesselSchedule(k, (), (), v.start_h, 0.0, 0.0, 0.0, 0.0, ())
     legs: list[Leg] = []
     starts: list[float] = []
-    ready, prev, busy, ballast_nm, laden_nm = v.start_h, "s", 0.0, 0.0, 0.0
+    ready, prev, busy, fuel_t = v.start_h, "s", 0.0, 0.0
     for j in sequence:
         arc = (prev, j)
         if arc not in va.arcs:
@@ -224,17 +279,15 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
         if t > c.late_h + 1e-9:
             return None
         from_port = v.start_port if prev == "s" else data.contracts[prev].discharge_port
+        depart, ballast_t = v.ballast_leg(va.arcs[arc], ready, t)
         if from_port != c.load_port:
-            sail_h = va.arcs[arc] / v.ballast_speed_kn
-            depart = max(ready, t - sail_h / SLOWEST_BALLAST_SHARE)
             legs.append(Leg(v.imo, len(legs), "ballast", c.code, from_port, c.load_port, va.arcs[arc], depart, t,
-                            va.arcs[arc] * v.ballast_fuel_t_per_nm))
+                            ballast_t))
         sail_h = va.dur_h[j] - 2 * v.port_h
         legs.append(Leg(v.imo, len(legs), "laden", c.code, c.load_port, c.discharge_port, va.laden_nm[j],
-                        t + v.port_h, t + v.port_h + sail_h, va.laden_nm[j] * v.laden_fuel_t_per_nm, va.lift_t[j]))
+                        t + v.port_h, t + v.port_h + sail_h, va.laden_fuel_t[j], va.lift_t[j]))
         starts.append(t)
-        ballast_nm += va.arcs[arc]
-        laden_nm += va.laden_nm[j]
+        fuel_t += ballast_t + va.laden_fuel_t[j]
         busy += va.dur_h[j]
         ready, prev = t + va.dur_h[j], j
     end_nm = va.arcs[(prev, "e")]
@@ -244,8 +297,7 @@ def schedule(data: PlanData, k: int, sequence: tuple[int, ...]) -> VesselSchedul
     if v.end_port is not None and end_nm > 0:
         legs.append(Leg(v.imo, len(legs), "ballast", None, data.contracts[prev].discharge_port, v.end_port, end_nm,
                         ready, end, end_nm * v.ballast_fuel_t_per_nm))
-    ballast_nm += end_nm
-    fuel_t = ballast_nm * v.ballast_fuel_t_per_nm + laden_nm * v.laden_fuel_t_per_nm
+    fuel_t += end_nm * v.ballast_fuel_t_per_nm
     oos_days = (end - v.start_h - busy) / HOURS_PER_DAY
     return VesselSchedule(k, tuple(sequence), tuple(starts), end, fuel_t, data.fuel_price * fuel_t, oos_days,
                           v.daily_cost * oos_days, tuple(legs))

@@ -2,8 +2,8 @@
 
 Sequences grow one contract at a time, each scheduled earliest (problem.py's conventions). Two partial sequences
 of the same vessel holding the same contracts and ending at the same one compare by (ready time, fuel cost so
-far): one no later and no dearer makes the other useless (every later cost item grows with time), so it is
-dropped. What is left gives, for each set of contracts a vessel can lift, its least cost and the order achieving
+far): one no later and no dearer makes the other useless (every later cost item grows with time; a ballast leg
+leaving earlier can sail slower, never dearer), so it is dropped. What is left gives, for each set of contracts a vessel can lift, its least cost and the order achieving
 it — exactly what the brute force gets by trying every order. `max_labels` caps the work per vessel; when it
 binds, the most promising partial sequences (least cost so far less the penalties they save) are kept,
 the enumeration is `complete=False` and the plan is optimal only over the sequences found.
@@ -37,7 +37,7 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000) -> tuple[l
     for j in succ.get("s", []):
         c = data.contracts[j]
         t = max(va.travel_h[("s", j)], c.early_h)
-        fuel = data.fuel_cost(k, va.arcs[("s", j)], va.laden_nm[j])
+        fuel = data.leg_cost(k, ("s", j), v.start_h, t)
         level[(frozenset((j,)), j)] = [(t + va.dur_h[j], fuel, va.dur_h[j], (j,))]
     complete, n_labels = True, len(level)
     while level:
@@ -60,7 +60,7 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000) -> tuple[l
                     t = max(ready + va.travel_h[(last, j)], c.early_h)
                     if t > c.late_h + 1e-9:
                         continue
-                    lab = (t + va.dur_h[j], fuel + data.fuel_cost(k, va.arcs[(last, j)], va.laden_nm[j]),
+                    lab = (t + va.dur_h[j], fuel + data.leg_cost(k, (last, j), ready, t),
                            busy + va.dur_h[j], seq + (j,))
                     kept = nxt.setdefault(key, [])
                     if any(r <= lab[0] + 1e-9 and f <= lab[1] + 1e-9 for r, f, _, _ in kept):

@@ -2,9 +2,10 @@
 
 Times: the planner works in hours after `as_of`; rows carry naive-UTC timestamps.
 Each planned leg becomes a voyage (status planned, tagged with the plan): its departure is the leg's planned
-departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading (the leg leaves early
-enough to make it at `problem.SLOWEST_BALLAST_SHARE` of the planning speed, so the weather routing slows down
-instead of waiting at anchor); for a laden leg, the arrival at the planning speed.
+departure and its RTA the leg's planned arrival — for a ballast leg, the start of loading (the leg leaves late
+enough to sail no faster than it needs, down to `problem.SLOWEST_BALLAST_SHARE` of the planning speed, so the weather
+routing slows down instead of waiting at anchor; the plan's fuel is costed at that speed); for a laden leg, the
+arrival at the planning speed for its cargo weight, at the draft of that weight.
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ import numpy as np
 import pandas as pd
 
 from pipeline.performance.model import model_from_stored, reference_model
-from pipeline.planning.fuel import DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, speed_and_fuel_per_nm
+from pipeline.planning.fuel import (DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M, ballast_curve, draft_at,
+                                    laden_curve, speed_and_fuel_per_nm)
 from pipeline.planning.inputs import split_list
-from pipeline.planning.problem import Contract, FleetPlan, PlanData, PlanVessel
+from pipeline.planning.problem import SLOWEST_BALLAST_SHARE, Contract, FleetPlan, PlanData, PlanVessel
 
 DEFAULT_PORT_HOURS = 24.0
 DEFAULT_PENALTY = 500_000.0
@@ -45,21 +47,33 @@ def plan_vessels(fleet: pd.DataFrame, models: dict[int, dict], as_of: pd.Timesta
         else:
             source[imo] = f"model v{model.version} ({model.form})"
         design = _num(r.get("design_speed_kn"), 13.0)
-        laden_kn, laden_t = speed_and_fuel_per_nm(model, _num(r.get("laden_speed_kn"), design),
-                                                  _num(r.get("laden_draft_m"), DEFAULT_LADEN_DRAFT_M), rpm_max)
-        ballast_kn, ballast_t = speed_and_fuel_per_nm(model, _num(r.get("ballast_speed_kn"), design),
-                                                      _num(r.get("ballast_draft_m"), DEFAULT_BALLAST_DRAFT_M), rpm_max)
+        laden_d, ballast_d = _drafts(r)
+        dwt = _num(r.get("dwt"), 0.0)
+        laden_kn, laden_t = speed_and_fuel_per_nm(model, _num(r.get("laden_speed_kn"), design), laden_d, rpm_max)
+        ballast_kn, ballast_t = speed_and_fuel_per_nm(model, _num(r.get("ballast_speed_kn"), design), ballast_d, rpm_max)
+        curve = laden_curve(model, _num(r.get("laden_speed_kn"), design), dwt, laden_d, ballast_d, rpm_max) if dwt > 0 else ()
+        slower = ballast_curve(model, ballast_kn, ballast_d, rpm_max, SLOWEST_BALLAST_SHARE)
         until = r.get("until_utc")
         out.append(PlanVessel(
-            imo=imo, name=str(r.get("name") or imo), dwt_t=_num(r.get("dwt"), 0.0), start_port=str(r["from_port"]),
+            imo=imo, name=str(r.get("name") or imo), dwt_t=dwt, start_port=str(r["from_port"]),
             start_h=max(0.0, _hours(r["from_utc"], as_of)),
             end_port=r.get("until_port") if isinstance(r.get("until_port"), str) else None,
             end_h=math.inf if until is None or pd.isna(until) else _hours(until, as_of),
             port_h=_num(r.get("port_hours"), DEFAULT_PORT_HOURS), daily_cost=_num(r.get("daily_cost"), 0.0),
             ports=split_list(r.get("ports")), cargo_types=split_list(r.get("cargo_types")),
             laden_speed_kn=laden_kn, ballast_speed_kn=ballast_kn, laden_fuel_t_per_nm=laden_t,
-            ballast_fuel_t_per_nm=ballast_t))
+            ballast_fuel_t_per_nm=ballast_t, laden_curve=curve, ballast_curve=slower))
     return out, source
+
+
+def _drafts(r: dict) -> tuple[float, float]:
+    """(laden draft at full deadweight, ballast draft), m, of an availability row."""
+    return _num(r.get("laden_draft_m"), DEFAULT_LADEN_DRAFT_M), _num(r.get("ballast_draft_m"), DEFAULT_BALLAST_DRAFT_M)
+
+
+def vessel_drafts(fleet: pd.DataFrame) -> dict[int, tuple[float, float]]:
+    """IMO → (laden draft at full deadweight, ballast draft), m, as `plan_rows` takes them."""
+    return {int(r["imo"]): _drafts(r) for r in fleet.to_dict("records")}
 
 
 def plan_contracts(contracts: pd.DataFrame, as_of: pd.Timestamp, default_penalty: float = DEFAULT_PENALTY) -> list[Contract]:
@@ -78,6 +92,7 @@ def plan_rows(plan: FleetPlan, data: PlanData, plan_id: str, as_of: pd.Timestamp
         return (as_of + pd.Timedelta(hours=float(h))).round("s")
 
     legs, voyages = [], []
+    dwt = {v.imo: v.dwt_t for v in data.vessels}
     for s in plan.schedules:
         for leg in s.legs:
             vid = f"{plan_id}-{leg.imo}-{leg.seq}"
@@ -86,10 +101,11 @@ def plan_rows(plan: FleetPlan, data: PlanData, plan_id: str, as_of: pd.Timestamp
                          "dist_nm": leg.dist_nm, "depart_utc": at(leg.depart_h), "arrive_utc": at(leg.arrive_h),
                          "fuel_t": leg.fuel_t, "lift_t": leg.lift_t, "voyage_id": vid})
             laden_d, ballast_d = (vessel_drafts or {}).get(leg.imo, (DEFAULT_LADEN_DRAFT_M, DEFAULT_BALLAST_DRAFT_M))
+            draft = draft_at(leg.lift_t, dwt[leg.imo], laden_d, ballast_d) if leg.kind == "laden" else ballast_d
             voyages.append({"voyage_id": vid, "imo": leg.imo, "dep_name": leg.from_port, "dep_lat": ports[leg.from_port][0],
                             "dep_lon": ports[leg.from_port][1], "arr_name": leg.to_port, "arr_lat": ports[leg.to_port][0],
                             "arr_lon": ports[leg.to_port][1], "depart_utc": at(leg.depart_h), "rta_utc": at(leg.arrive_h),
-                            "draft_m": laden_d if leg.kind == "laden" else ballast_d, "trim_m": 0.0, "rpm_options": None,
+                            "draft_m": draft, "trim_m": 0.0, "rpm_options": None,
                             "status": "planned", "plan_id": plan_id})
     left = [{"plan_id": plan_id, "contract_code": data.contracts[j].code, "penalty": data.contracts[j].penalty,
              "reason": why} for j, why in sorted(plan.unassigned.items())]

@@ -4,6 +4,7 @@ Ports are points on a plane (NM), distances straight lines; windows spread over 
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -24,6 +25,7 @@ def random_instance(n_vessels: int, n_contracts: int, *, seed: int = 0, n_ports:
     xy = rng.uniform(0, width_nm, (n_ports, 2))
     dist = {(a, b): float(math.hypot(*(xy[i] - xy[j]))) for (i, a), (j, b) in itertools.combinations(enumerate(ports), 2)}
     vessels = []
+    light = np.random.default_rng(seed + 10_000)  # weight curves on their own stream: the rest stays as it was
     for k in range(n_vessels):
         dwt = float(rng.choice([35_000, 60_000, 80_000]))
         types = frozenset(rng.choice(CARGO_TYPES, size=int(rng.integers(2, len(CARGO_TYPES) + 1)), replace=False))
@@ -34,6 +36,9 @@ def random_instance(n_vessels: int, n_contracts: int, *, seed: int = 0, n_ports:
             daily_cost=float(rng.uniform(8_000, 15_000)), cargo_types=types, laden_speed_kn=speed,
             ballast_speed_kn=speed + 0.5, laden_fuel_t_per_nm=float(rng.uniform(0.08, 0.12)),
             ballast_fuel_t_per_nm=float(rng.uniform(0.06, 0.09))))
+        v = vessels[-1]  # laden at half the deadweight: a little faster on less fuel
+        half = (0.5 * dwt, speed + float(light.uniform(0.0, 0.5)), v.laden_fuel_t_per_nm * float(light.uniform(0.75, 0.95)))
+        vessels[-1] = dataclasses.replace(v, laden_curve=(half, (dwt, speed, v.laden_fuel_t_per_nm)))
     contracts = []
     for j in range(n_contracts):
         lp, dp = rng.choice(n_ports, 2, replace=False)
