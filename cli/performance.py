@@ -174,7 +174,7 @@ def register(app: typer.Typer) -> None:
         import math
 
         from flows.settings import load_settings
-        from pipeline.performance.model import model_from_stored
+        from pipeline.performance.model import model_from_stored, unusable_reason
         from storage import fleet_store
 
         for name, v in (("--rpm", rpm), ("--wind-kn", wind_kn), ("--hs-m", hs_m), ("--draft-m", draft_m), ("--trim-m", trim_m),
@@ -193,8 +193,7 @@ def register(app: typer.Typer) -> None:
                  "run `jitroute refit` (perf_models lists the versions)")
         m = model_from_stored(stored, imo)
         if m is None:
-            fail(f"vessel {imo}: model v{stored.get('version')} was stored by an older definition of its form "
-                 f"({stored.get('form')}); run `jitroute refit --imo {imo}`")
+            fail(unusable_reason(stored, imo))
         env = m.envelope or {}
         draft = draft_m if draft_m is not None else (sum(env["draft_m"]) / 2 if env.get("draft_m") else 10.0)
         trim = trim_m if trim_m is not None else float(env.get("trim_m", 0.0))

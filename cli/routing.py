@@ -111,7 +111,7 @@ def register(app: typer.Typer) -> None:
 
         from flows.jobs.route_worker import cube_weather
         from flows.settings import load_settings
-        from pipeline.performance.model import model_from_stored
+        from pipeline.performance.model import model_from_stored, unusable_reason
         from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
         from pipeline.sources.cycles import parse_cycle
         from storage import cube_window, export_store, fleet_store
@@ -162,9 +162,11 @@ def register(app: typer.Typer) -> None:
         if vessel.empty:
             fail(f"vessel {v['imo']} is not in the warehouse: import it with `jitroute fleet import`")
         vessel = vessel.iloc[0].to_dict()
-        model = model_from_stored(fleet_store.active_model(lay.warehouse, int(v["imo"])), int(v["imo"]))
+        stored = fleet_store.active_model(lay.warehouse, int(v["imo"]))
+        model = model_from_stored(stored, int(v["imo"]))
         if model is None:
-            fail(f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
+            fail(unusable_reason(stored, int(v["imo"]))
+                 or f"vessel {v['imo']} has no active performance model: import its noon reports and run `jitroute refit`")
         cube_path, c, version = None, None, None
         if not calm:
             c = parse_cycle(cycle) if cycle else cube_window.newest_complete_cycle(lay.cube_store)

@@ -533,7 +533,7 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
     p1, info = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
     p2, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=3)
     p3, _ = mlp.train(X[fit_rows], Y[fit_rows], seed=4)
-    assert p1.shape == (mlp.N_PARAMS,) == (266,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
+    assert p1.shape == (mlp.N_PARAMS,) == (279,) and np.array_equal(p1, p2) and not np.array_equal(p1, p3)
     assert (info["n_train"], info["n_val"]) == (240, 60) and info["best_epoch"] < info["epochs"] <= mlp.MAX_EPOCHS
     # the validation rows are the newest: spoiling them changes where training stops, not what it learns from
     spoiled = Y[fit_rows].copy()

@@ -26,7 +26,7 @@ from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline import enroute
 from pipeline.export.bundle import SUFFIX
-from pipeline.performance.model import model_from_stored
+from pipeline.performance.model import model_from_stored, unusable_reason
 from pipeline.export.paths import ExportPathError, voyage_export_key
 from pipeline.validate_ids import markdown_cell, printable
 from pipeline.export.voyage import utc_datetime
@@ -113,16 +113,19 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     chosen = [sel for sel in chosen if sel.start is not None]
     fingerprints = fleet_store.voyage_fingerprints(db, [sel.voyage["voyage_id"] for sel in chosen])
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
-    models = {}
+    models, notes = {}, {}
     for imo in {int(sel.voyage["imo"]) for sel in chosen}:
-        m = model_from_stored(fleet_store.active_model(db, imo), imo)
+        stored = fleet_store.active_model(db, imo)
+        m = model_from_stored(stored, imo)
         models[imo] = m.to_json() if m is not None else None
+        notes[imo] = unusable_reason(stored, imo)
     cyc = str(np.datetime_as_string(cycle, unit="s"))
     jobs = []
     for sel in chosen:
         v = enroute.voyage_from(sel.voyage, sel.start)
         v["voyage_fingerprint"] = fingerprints.get(str(v["voyage_id"]))
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
+                             model_note=notes.get(int(v["imo"])),
                              run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version))
     return jobs
 

@@ -42,3 +42,11 @@ def _predict(m: PerformanceModel, args, months) -> tuple[np.ndarray, np.ndarray]
     """Speed and fuel at each row with that row's months since dry dock (the model's own is the refit's last)."""
     return (features.predict(m.form_id, "speed", m.speed_coef, *args, months),
             features.predict(m.form_id, "fuel", m.fuel_coef, *args, months))
+
+
+def model_of_rows(rows: list[dict]) -> PerformanceModel:
+    """The model of a refit's perf_models rows (the speed and fuel rows of one version), envelope included."""
+    coef = {r["target"]: np.array(list(json.loads(r["coefficients"]).values())) for r in rows}
+    r = rows[0]
+    return PerformanceModel(r["form"], coef["speed"], coef["fuel"], months_dd=r["months_dd"], imo=r["imo"],
+                            version=r["version"], envelope=json.loads(r["envelope"]) if r.get("envelope") else None)

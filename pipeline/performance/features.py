@@ -65,6 +65,7 @@ KEEP_CONSTANT = {FORM_THESIS: True, FORM_PHYSICAL: False, FORM_MLP: False}
 # Huber re-weighting by default: the thesis form is published as ordinary least squares.
 ROBUST_DEFAULT = {FORM_THESIS: False, FORM_PHYSICAL: True, FORM_MLP: False}
 N_FUEL = {k: len(v) for k, v in FUEL_REGRESSORS.items()}
+assert (N_SPEED[FORM_PHYSICAL], N_FUEL[FORM_PHYSICAL]) == (mlp.N_PHYSICAL_SPEED, mlp.N_PHYSICAL_FUEL)  # the network's fallback
 
 
 @numba.njit(cache=True, inline="always")
@@ -167,18 +168,58 @@ def fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_re
     _fuel_physical(rpm, draft_m, months_dd, wind_term, wave_term, out)
 
 
+@numba.njit(cache=True, inline="always")
+def _stw_physical_nb(coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
+    calm = coef[0] + coef[1] * rpm + coef[2] * draft_m + coef[3] * trim_m + coef[6] * months_dd
+    wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+    loss = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
+    return max(calm - min(loss, MAX_SPEED_LOSS_SHARE * max(calm, 0.0)), 0.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _fuel_physical_nb(coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
+    r = rpm / 100.0
+    r3 = r * r * r
+    calm = max(coef[0] + coef[1] * r3 + coef[2] * r3 * draft_m + coef[3] * r3 * months_dd, 0.0)
+    wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+    extra = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
+    return calm + min(extra, MAX_FUEL_ADD_SHARE * calm)
+
+
+@numba.njit(cache=True)
+def _mlp_guarded_nb(coef, out_index, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
+    """The network's speed (out_index 0) or fuel rate (1); outside its envelope, its value at the nearest edge plus
+    the physical form's change (fitted on the same rows, its linear terms) from that edge to the point (see `mlp`)."""
+    x3, x4 = wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg)
+    v = mlp.forward_nb(coef, rpm, draft_m, trim_m, x3, x4, out_index)
+    outside, e = mlp.edge_nb(coef, rpm, draft_m, trim_m, x3, x4)
+    if not outside:
+        return v
+    wind_e = wind_kn * e[3] / x3 if x3 > 0.0 else wind_kn  # the edge keeps the relative directions
+    hs_e = hs_m * e[4] / x4 if x4 > 0.0 else hs_m
+    if out_index == 0:
+        c = coef[mlp.N_NET:mlp.N_NET + mlp.N_PHYSICAL_SPEED]
+        at, edge = np.empty(c.size), np.empty(c.size)
+        speed_row_nb(FORM_PHYSICAL, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, at)
+        speed_row_nb(FORM_PHYSICAL, e[0], e[1], e[2], wind_e, wind_rel_deg, hs_e, wave_rel_deg, months_dd, edge)
+    else:
+        c = coef[mlp.N_NET + mlp.N_PHYSICAL_SPEED:mlp.N_PARAMS]
+        at, edge = np.empty(c.size), np.empty(c.size)
+        fuel_row_nb(FORM_PHYSICAL, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, at)
+        fuel_row_nb(FORM_PHYSICAL, e[0], e[1], e[2], wind_e, wind_rel_deg, hs_e, wave_rel_deg, months_dd, edge)
+    for k in range(c.size):
+        v += c[k] * (at[k] - edge[k])
+    return v
+
+
 @numba.njit(cache=True)
 def stw_kn_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
     """Speed through water (kn) for one condition; never below 0. Physical form: the calm-water speed
     less a weather loss that is ≥ 0 and at most MAX_SPEED_LOSS_SHARE of it."""
     if form == FORM_MLP:
-        v = mlp.forward_nb(coef, rpm, draft_m, trim_m, wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg), 0)
-        return max(v, 0.0)
+        return max(_mlp_guarded_nb(coef, 0, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd), 0.0)
     if form == FORM_PHYSICAL:
-        calm = coef[0] + coef[1] * rpm + coef[2] * draft_m + coef[3] * trim_m + coef[6] * months_dd
-        wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
-        loss = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
-        return max(calm - min(loss, MAX_SPEED_LOSS_SHARE * max(calm, 0.0)), 0.0)
+        return _stw_physical_nb(coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     row = np.empty(coef.shape[0])
     speed_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, row)
     v = 0.0
@@ -192,15 +233,9 @@ def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, w
     """Fuel rate (t/h) for one condition; never below 0. Physical form: never below the calm-water rate
     at the same rpm, the weather adding at most MAX_FUEL_ADD_SHARE of it."""
     if form == FORM_MLP:
-        f = mlp.forward_nb(coef, rpm, draft_m, trim_m, wind_kn * direction_weight(wind_rel_deg), hs_m * direction_weight(wave_rel_deg), 1)
-        return max(f, 0.0)
+        return max(_mlp_guarded_nb(coef, 1, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd), 0.0)
     if form == FORM_PHYSICAL:
-        r = rpm / 100.0
-        r3 = r * r * r
-        calm = max(coef[0] + coef[1] * r3 + coef[2] * r3 * draft_m + coef[3] * r3 * months_dd, 0.0)
-        wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
-        extra = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
-        return calm + min(extra, MAX_FUEL_ADD_SHARE * calm)
+        return _fuel_physical_nb(coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     row = np.empty(coef.shape[0])
     fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, row)
     f = 0.0

@@ -14,11 +14,18 @@ from an explicit seeded generator: the same rows and seed give the same network,
 Plain numpy (a 256-parameter network on a few hundred reports needs no framework); the forward
 pass is also a numba function so routing kernels evaluate it like the linear forms.
 
-A network is one flat parameter vector (`N_PARAMS` values, layout in `_unpack`, then the least and the
-largest value of each input in the training rows), stored as the model's speed and its fuel
-coefficients alike. The network is evaluated at its inputs clamped to that range: outside the
-conditions it was trained on it answers as at their edge instead of extrapolating (a tanh network
-extrapolates anything: fuel falling to 0 below the lowest rpm it saw, speed rising in heavier seas).
+A network is one flat parameter vector (`N_PARAMS` values: layout in `_unpack`, then the least and the
+largest value of each input in the training rows, then the coefficients of the physical form fitted on
+the same rows — `PHYSICAL_SPEED`, `PHYSICAL_FUEL`), stored as the model's speed and its fuel
+coefficients alike. `forward`/`forward_nb` evaluate the network at its inputs clamped to that range;
+what routing gets (`features.stw_kn_nb`) is the guarded prediction: outside the conditions the network
+was trained on (rpm, draft or trim beyond the least or largest seen, wind·w or waves·w beyond the
+largest) it follows the physical form — the network's value at the nearest edge of its envelope plus the
+change of the physical form's linear terms from that edge to the point. A tanh network extrapolates
+anything (fuel falling to 0 below the lowest rpm it saw, speed rising in heavier seas); the physical form
+extrapolates as a ship does. The two meet at the edge, and each of the physical form's terms depends on one
+input with a held sign (weather costs speed and fuel), so the guarded prediction stays monotone where the
+network and the physical form are.
 """
 
 from __future__ import annotations
@@ -29,7 +36,9 @@ import numba
 import numpy as np
 
 N_IN, N_HIDDEN, N_OUT = 5, 30, 2
-N_PARAMS = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT + 2 * N_IN
+N_PHYSICAL_SPEED, N_PHYSICAL_FUEL = 7, 6  # coefficients of the physical form (`features`; checked there)
+N_NET = 2 * N_IN + N_IN * N_HIDDEN + N_HIDDEN + N_HIDDEN * N_OUT + N_OUT + 2 * N_OUT + 2 * N_IN
+N_PARAMS = N_NET + N_PHYSICAL_SPEED + N_PHYSICAL_FUEL
 PARAM_NAMES = tuple(f"p{i:03d}" for i in range(N_PARAMS))
 VAL_FRAC = 0.2
 MAX_EPOCHS = 1500
@@ -54,6 +63,8 @@ _YM = _B2 + N_OUT
 _YS = _YM + N_OUT
 _LO = _YS + N_OUT  # least and largest value of each input in the training rows: the network is evaluated
 _HI = _LO + N_IN  # at inputs clamped to them (flat outside what it saw, never extrapolated)
+PHYSICAL_SPEED = slice(N_NET, N_NET + N_PHYSICAL_SPEED)  # the physical form fitted on the same rows: what the
+PHYSICAL_FUEL = slice(PHYSICAL_SPEED.stop, N_PARAMS)  # prediction follows outside the envelope (all 0: none)
 
 
 def _unpack(p: np.ndarray):
@@ -65,7 +76,29 @@ def _unpack(p: np.ndarray):
 def input_bounds(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(least, largest) of each network input (rpm, draft, trim, wind·w, waves·w) in the rows it was trained on."""
     p = np.asarray(p, dtype=np.float64)
-    return p[_LO:_HI], p[_HI:]
+    return p[_LO:_HI], p[_HI:N_NET]
+
+
+def with_physical(p: np.ndarray, speed_coef: np.ndarray, fuel_coef: np.ndarray) -> np.ndarray:
+    """A copy of network p carrying the physical form's coefficients (fitted on the same rows) for its fallback."""
+    out = np.array(p, dtype=np.float64)
+    out[PHYSICAL_SPEED], out[PHYSICAL_FUEL] = speed_coef, fuel_coef
+    return out
+
+
+@numba.njit(cache=True)
+def edge_nb(p, x0, x1, x2, x3, x4):
+    """(whether the input row lies outside the network's envelope, the row clamped to it). The weather inputs
+    count as outside above the largest seen only (calm water below the least seen is no extrapolation)."""
+    x = (x0, x1, x2, x3, x4)
+    e = np.empty(N_IN)
+    outside = False
+    for i in range(N_IN):
+        lo, hi = p[_LO + i], p[_HI + i]
+        e[i] = min(max(x[i], lo), hi)
+        if x[i] > hi or (x[i] < lo and i < 3):
+            outside = True
+    return outside, e
 
 
 def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> np.ndarray:
@@ -83,7 +116,7 @@ def forward(p: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(n × 2) outputs — speed (kn), fuel rate (t/h) — of the network p at the rows of X (n × 5)."""
     p = np.asarray(p, dtype=np.float64)
     xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
-    X = np.minimum(np.maximum(X, p[_LO:_HI]), p[_HI:])
+    X = np.minimum(np.maximum(X, p[_LO:_HI]), p[_HI:N_NET])
     return (np.tanh(((X - xm) / xs) @ W1 + b1) @ W2 + b2) * ys + ym
 
 
@@ -129,14 +162,15 @@ def train(X: np.ndarray, Y: np.ndarray, *, seed: int = DEFAULT_SEED, val_frac: f
     X, Y = X[ok], Y[ok]
     n = len(X)
     p = np.zeros(N_PARAMS)
+    # the physical part stays 0 until `with_physical`: a zero physical form gives no ratio, the network stays clamped
     xm, xs, W1, b1, W2, b2, ym, ys = _unpack(p)
     if n == 0:
         xs[:], ys[:] = 1.0, 1.0
-        p[_LO:_HI], p[_HI:] = -np.inf, np.inf
+        p[_LO:_HI], p[_HI:N_NET] = -np.inf, np.inf
         return p, {"n_train": 0, "n_val": 0, "best_epoch": 0, "epochs": 0, "val_mse": float("nan")}
     n_val = min(max(int(round(n * val_frac)), 1), n - 1) if n >= 2 else 0
     n_fit = n - n_val
-    p[_LO:_HI], p[_HI:] = X.min(axis=0), X.max(axis=0)
+    p[_LO:_HI], p[_HI:N_NET] = X.min(axis=0), X.max(axis=0)
     xm[:], ym[:] = X[:n_fit].mean(axis=0), Y[:n_fit].mean(axis=0)
     xs[:] = np.where(X[:n_fit].std(axis=0) > 1e-12, X[:n_fit].std(axis=0), 1.0)
     ys[:] = np.where(Y[:n_fit].std(axis=0) > 1e-12, Y[:n_fit].std(axis=0), 1.0)

@@ -88,6 +88,28 @@ class PerformanceModel:
         env = Envelope.from_json(self.envelope)
         return env.outside(rpm, draft_m, wind_kn, hs_m) if env else []
 
+    def envelope_note(self, legs: list[dict], draft_m: float) -> str | None:
+        """For a network: how many of a plan's legs (rpm, wind_kn, hs_m each) sail outside the conditions it was fitted
+        on, the farthest, and that the physical form fitted on the same rows takes over there; None when all lie
+        inside, and for the other forms (they extrapolate as fitted)."""
+        if self.form != "mlp":
+            return None
+        worst: dict[str, tuple[float, str]] = {}  # per input: (how far outside, 'hs_m 8 > 5.2') of the farthest leg
+        n = 0
+        for leg in legs:
+            out = self.outside_envelope(leg["rpm"], draft_m, leg.get("wind_kn", 0.0), leg.get("hs_m", 0.0))
+            n += bool(out)
+            for item in out:
+                name, v, _, edge = item.split(" ")
+                far = abs(float(v) - float(edge))
+                if far > worst.get(name, (-1.0, ""))[0]:
+                    worst[name] = (far, item)
+        if not n:
+            return None
+        return (f"{n} of {len(legs)} legs outside the conditions network model v{self.version} was fitted on "
+                f"({', '.join(item for _, item in worst.values())}): speed and fuel follow the physical form fitted on the "
+                "same reports there")
+
     def clip_rpm_options(self, rpm_options, voyage: str = "") -> tuple[tuple[float, ...], str | None]:
         """(allowed rpm settings within the rpm range the model was fitted on, why some were clipped or None).
 
@@ -123,6 +145,22 @@ def model_from_stored(stored: dict | None, imo: int | None = None) -> Performanc
                             version=stored.get("version"), envelope=_envelope(stored.get("envelope")),
                             data_to_utc=None if stored.get("data_to_utc") is None
                             else str(np.datetime64(stored["data_to_utc"], "s")))
+
+
+def unusable_reason(stored: dict | None, imo: int) -> str | None:
+    """Why the stored model `stored` of vessel `imo` cannot be used (its coefficients are not those of its form as
+    defined now, e.g. a network stored before it carried its physical fallback), naming what to run; None when it
+    can be used or there is none."""
+    if not stored or model_from_stored(stored, imo) is not None:
+        return None
+    form = stored.get("form")
+    fid = features.FORM_IDS.get(form)
+    have = len(stored.get("speed") or ()), len(stored.get("fuel") or ())
+    want = (features.N_SPEED[fid], features.N_FUEL[fid]) if fid is not None else None
+    what = (f"{have[0]} speed and {have[1]} fuel coefficients where the {form} form now has {want[0]} and {want[1]}"
+            if want else f"an unknown form {form!r}")
+    return (f"vessel {imo}: model v{stored.get('version')} ({form}) was stored by an older definition of its form "
+            f"({what}); run `jitroute refit --imo {imo}`")
 
 
 def _envelope(text) -> dict | None:

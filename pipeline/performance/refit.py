@@ -35,7 +35,7 @@ import numba
 import numpy as np
 import pandas as pd
 
-from pipeline.performance import features, fit, mlp, sanity
+from pipeline.performance import features, fit, mlp, sanity, screen
 
 TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
@@ -64,6 +64,7 @@ class Gate:
     candidates: tuple[str, ...] = FORMS  # the forms `form="best"` tries
     mlp_seed: int = mlp.DEFAULT_SEED  # the MLP form's weights are initialised from this seed
     mlp_min_rows: int = 100  # training rows the MLP form needs
+    network_screen: bool = True  # best: train the MLP only where the physical form leaves structure it could learn
     sanity: bool = True  # physical-sanity checks over the vessel's envelope before activation (see `sanity`)
     speed_tol_kn: float = 0.05  # ... STW may rise this much with head weather or fall this much with rpm (grid step)
     fuel_allowance_share: float = 0.03  # ... weather may lower fuel below calm by this share of it (air resistance)
@@ -279,6 +280,7 @@ class _Candidate:
     hold_rmse: dict = field(default_factory=dict)  # target → per vessel
     hold_pred: dict = field(default_factory=dict)  # target → prediction at each held-out row (hold_rows order)
     sane: list = field(default_factory=list)  # per vessel: why the training fit fails the sanity checks, or None
+    skipped: dict = field(default_factory=dict)  # vessel → why this form was not fitted for it (the network's screen)
 
 
 def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, fitted) -> tuple[list[dict], list[dict]]:
@@ -295,15 +297,20 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
     train_env = sanity.envelopes(inp, bounds[:-1], hold_from)
     cands = {}
-    for form in forms:
-        X = _designs(form, inp)
+    for form in sorted(forms, key=lambda f: f == "mlp"):  # the network last: its screen looks at the physical fit
+        X = _designs(form, inp, {f: c.X for f, c in cands.items()})
+        skipped = {}
+        if form == "mlp" and len(forms) > 1 and "physical" in cands and gate.network_screen:
+            skipped = _network_screen(cands["physical"], X, y, bounds, hold_from, gate)
         # no k-fold CV (the candidate is scored on the held-out rows instead); re-weighting stops at TRAIN_RTOL:
         # the candidate is only scored and, if accepted, the start of the refit on all rows
         c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, bounds[:-1], hold_from, robust_of[form], gate,
-                                                           k_folds=0, rtol=TRAIN_RTOL))
+                                                           k_folds=0, rtol=TRAIN_RTOL, skip=skipped), skipped=skipped)
         for t in TARGETS:
             coefs = np.array([r.coef for r in c.train[t]])
             c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
+            if skipped:
+                c.hold_pred[t][np.isin(hold_which, list(skipped))] = np.nan
             c.hold_rmse[t] = _rmse_by_group(y[t][hold_rows], c.hold_pred[t], hold_which, G)
         cands[form] = c
     hashes = _data_hashes(inp, ts, bounds, forms, robust_of, gate)
@@ -316,6 +323,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     rmse_of = {f: {t: c.hold_rmse[t].tolist() for t in TARGETS} for f, c in cands.items()}
     mean_of = {t: hold_mean[t].tolist() for t in TARGETS}
     n_list, n_hold_list = n.tolist(), n_hold.tolist()
+    gate_text = describe_gate(gate)
     plans, summaries = [], []
     # the absolute gate, then physical sanity (`sanity`) of the training fits that pass it, all vessels at once
     gated = {f: [_gate(c, g, n_hold_list[g], rmse_of[f], mean_of, gate) for g in range(G)] for f, c in cands.items()}
@@ -359,10 +367,13 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         dropped = sorted({d for t in TARGETS for d in c.train[t][g].dropped})
         if dropped:
             reason += f"; left out (constant, or weather or fouling that came out as a gain): {', '.join(dropped)}"
+        network = "mlp" in cands and g not in cands["mlp"].skipped
+        if "mlp" in cands and not network:
+            reason += f"; mlp not trained: {cands['mlp'].skipped[g]}"
         summary = {"imo": imo, "n": n_list[g], "n_holdout": n_hold_list[g], "form": best, "changed": False,
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
                    "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
-                   "fuel_holdout_rmse": rmse_of[best]["fuel"][g], "gate": describe_gate(gate)}
+                   "fuel_holdout_rmse": rmse_of[best]["fuel"][g], "gate": gate_text, "network": network}
         summary.update(_scores(c.train, g))
         seen = fitted.get(imo, {}).get(hashes[best][g])
         if seen is not None:  # these rows were fitted with this form before: the same model
@@ -382,27 +393,58 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     return _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate), summaries
 
 
-def _designs(form: str, inp) -> dict[str, np.ndarray]:
-    """target → the form's regressors (least-squares forms) or the network's inputs (MLP, both targets)."""
+def _designs(form: str, inp, built: dict | None = None) -> dict[str, np.ndarray]:
+    """target → the form's regressors (least-squares forms) or the network's inputs (MLP, both targets, and under
+    "physical" the physical form's regressors: the network carries that form fitted on the same rows). `built`:
+    form → designs made already."""
     if form == "mlp":
         X = mlp.inputs(*(inp[c] for c in features.MODEL_INPUTS[:-1]))
-        return {t: X for t in TARGETS}
+        return {**{t: X for t in TARGETS}, "physical": (built or {}).get("physical") or fit.designs("physical", inp)}
     return fit.designs(form, inp)
 
 
+def _network_screen(phys: _Candidate, X: dict, y: dict, bounds, hold_from, gate: Gate) -> dict[int, str]:
+    """vessel → why the network is not trained for it: its physical training fit leaves too little structure in
+    speed and in fuel for a model of the network's inputs to reach the switch margin (see `screen`)."""
+    starts = bounds[:-1]
+    rows = _ranges(starts, hold_from)
+    resid = np.column_stack([y[t][rows] - np.einsum("ij,ij->i", phys.X[t][rows], np.repeat(
+        np.array([r.coef for r in phys.train[t]]), hold_from - starts, axis=0)) for t in TARGETS])
+    at = np.r_[0, np.cumsum(hold_from - starts)]
+    r2 = screen.explained(X["speed"][rows], resid, at[:-1], at[1:])
+    need = screen.share_needed(gate.switch_margin)
+    return {g: (f"the physical form's residuals show no structure it could learn (a quadratic in its inputs explains "
+                f"{100 * max(r2[g, 0], 0):.1f} % of speed and {100 * max(r2[g, 1], 0):.1f} % of fuel; "
+                f"{100 * need:.2f} % needed for a {100 * gate.switch_margin:g} % better score)")
+            for g in range(starts.size) if not (np.nanmax(np.r_[r2[g], -1.0]) >= need)}
+
+
 def _fit_form(form, X, y, starts, ends, robust, gate: Gate, *, k_folds=fit.K_FOLDS, start=None, max_solves=None,
-              rtol=fit.ROBUST_RTOL) -> dict:
-    """target → one `fit.FitResult` per group: group g is rows starts[g]:ends[g] of X and y."""
+              rtol=fit.ROBUST_RTOL, skip=None) -> dict:
+    """target → one `fit.FitResult` per group: group g is rows starts[g]:ends[g] of X and y. The network is not
+    trained for the groups in `skip` (their results have NaN parameters)."""
     if form != "mlp":
         return {t: fit.fit_targets(form, t, X[t], y[t], starts, ends=ends, robust=robust, k_folds=k_folds,
                                    start=None if start is None else start[t], max_solves=max_solves, rtol=rtol) for t in TARGETS}
+    skip = skip or {}
+    trained = np.array([g for g in range(starts.size) if g not in skip], dtype=np.int64)
+    phys = {t: fit.fit_targets("physical", t, X["physical"][t], y[t], starts[trained], ends=ends[trained],
+                               robust=fit.robust_default("physical"), k_folds=0) for t in TARGETS}
     Y = np.column_stack([y["speed"], y["fuel"]])
     out = {t: [] for t in TARGETS}
-    for a, b in zip(starts.tolist(), ends.tolist()):
+    nan = np.full(mlp.N_PARAMS, np.nan)
+    j = 0
+    for g, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
+        if g in skip:
+            for t in TARGETS:
+                out[t].append(fit.FitResult("mlp", t, mlp.PARAM_NAMES, nan, 0, np.nan, np.nan, np.nan))
+            continue
         p, _ = mlp.train(X["speed"][a:b], Y[a:b], seed=gate.mlp_seed)
+        p = mlp.with_physical(p, phys["speed"][j].coef, phys["fuel"][j].coef)
+        j += 1
         pred = mlp.forward(p, X["speed"][a:b])
-        for j, t in enumerate(TARGETS):
-            out[t].append(_result("mlp", t, p, Y[a:b, j], np.maximum(pred[:, j], 0.0)))
+        for k, t in enumerate(TARGETS):
+            out[t].append(_result("mlp", t, p, Y[a:b, k], np.maximum(pred[:, k], 0.0)))
     return out
 
 
@@ -435,6 +477,8 @@ def _split(imos, bounds, ts, active, gate: Gate) -> np.ndarray:
 
 def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, gate: Gate) -> str | None:
     """Why candidate c fails the absolute gate for vessel g, or None."""
+    if g in c.skipped:
+        return f"not trained: {c.skipped[g]}"
     for t in TARGETS:
         r = c.train[t][g]
         if c.form == "mlp":  # regularised by early stopping rather than counted per parameter

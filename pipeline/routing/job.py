@@ -24,7 +24,8 @@ from pipeline.routing.voyage import problem_from_voyage
 
 @dataclass(frozen=True)
 class RouteJob:
-    """A voyage of a run: warehouse rows as plain dicts, the vessel's active model as JSON (None: no model)."""
+    """A voyage of a run: warehouse rows as plain dicts, the vessel's active model as JSON (None: no model; then
+    `model_note` says why, e.g. a model stored by an older form definition)."""
 
     voyage: dict
     vessel: dict
@@ -34,6 +35,7 @@ class RouteJob:
     exports: bool = True
     options: RoutingOptions = field(default_factory=RoutingOptions)
     cycle_version: int | None = None  # the cycle's content version when the run started (storage.cube.cycle_versions)
+    model_note: str | None = None  # why there is no usable model (None: the vessel has none)
 
     @property
     def voyage_id(self) -> str:
@@ -44,8 +46,8 @@ def routing_problem(job: RouteJob) -> RoutingProblem:
     """The voyage as a routing problem; RoutingInputError (naming the voyage) when it cannot be routed as given."""
     o = job.options
     if job.model is None:
-        raise RoutingInputError(f"voyage {job.voyage_id}: vessel {job.voyage.get('imo')} has no active performance model; "
-                                "import its noon reports and run `jitroute refit` first")
+        raise RoutingInputError(f"voyage {job.voyage_id}: " + (job.model_note or f"vessel {job.voyage.get('imo')} has no active "
+                                "performance model; import its noon reports and run `jitroute refit` first"))
     model = PerformanceModel.from_json(job.model)
     return problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
                                base=solver_spec(o.solver).base,
@@ -75,6 +77,7 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
     options = solver_spec(o.solver).make_options(o.solver_overrides())
     plan = solve(problem, weather, solver=o.solver, seed=o.seed, options=options, space=space, limits=o.limits,
                  savings=True)
-    if problem.rpm_note:
-        plan.reason = f"{plan.reason}; {problem.rpm_note}" if plan.reason else problem.rpm_note
+    for note in (problem.rpm_note, problem.model.envelope_note(plan.legs, problem.draft_m)):
+        if note:
+            plan.reason = f"{plan.reason}; {note}" if plan.reason else note
     return plan, weather

@@ -27,6 +27,26 @@ class TrueVessel:
     design_fuel_tph: float = 1.6
     k_wind: float = 1.0 / 800.0  # kn lost per kn² of head wind
     k_wave: float = 0.11  # kn lost per m² of head seas
+    fouling_kn: float = 0.01  # kn lost per month^1.3 since dry dock
+    draft_m: tuple[float, float, float, float] = (6.0, 8.5, 10.0, 13.0)  # ballast from–to, laden from–to (m)
+    log_factor: float = 1.0  # the speed log reads this share of the true STW ...
+    log_from_day: int | None = None  # ... from this day of the reports on (None: a sound log)
+    name: str = ""
+
+
+def fleet_of_five(imo0: int = 9150000) -> list[TrueVessel]:
+    """Five ships none of whose truths any form has: a slow tanker, a fast container ship, a bulker that fouls fast,
+    a bulker with a wide draft range and a ship whose speed log reads 12 % low from day 250 on."""
+    return [
+        TrueVessel(imo0, design_speed_kn=11.5, rpm_max=85.0, design_fuel_tph=1.1, k_wave=0.13, name="slow tanker"),
+        TrueVessel(imo0 + 1, design_speed_kn=22.0, rpm_max=100.0, design_fuel_tph=5.5, k_wind=1.0 / 600.0, k_wave=0.16,
+                   name="fast container ship"),
+        TrueVessel(imo0 + 2, design_speed_kn=14.0, design_fuel_tph=1.5, fouling_kn=0.05, name="fouling bulker"),
+        TrueVessel(imo0 + 3, design_speed_kn=14.0, design_fuel_tph=1.6, draft_m=(4.5, 7.0, 11.0, 16.0),
+                   name="wide-draft bulker"),
+        TrueVessel(imo0 + 4, design_speed_kn=14.5, design_fuel_tph=1.7, log_factor=0.88, log_from_day=250,
+                   name="broken speed log"),
+    ]
 
 
 def direction_shape(rel_deg) -> np.ndarray:
@@ -36,7 +56,7 @@ def direction_shape(rel_deg) -> np.ndarray:
 
 
 def speed_kn(v: TrueVessel, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months):
-    calm = v.design_speed_kn * (rpm / v.rpm_max) ** 0.85 - 0.05 * (draft_m - 9.0) - 0.04 * trim_m ** 2 - 0.01 * months ** 1.3
+    calm = v.design_speed_kn * (rpm / v.rpm_max) ** 0.85 - 0.05 * (draft_m - 9.0) - 0.04 * trim_m ** 2 - v.fouling_kn * months ** 1.3
     loss = v.k_wind * wind_kn ** 2 * direction_shape(wind_rel_deg) + v.k_wave * hs_m ** 2 * direction_shape(wave_rel_deg)
     return calm - np.minimum(loss, 0.6 * calm)
 
@@ -54,7 +74,8 @@ def reports(v: TrueVessel, end_utc: str, days: int, seed: int, *, noise: float =
     end = np.datetime64(pd.Timestamp(end_utc).tz_localize(None), "h")
     ts = end - np.arange(days)[::-1].astype("timedelta64[D]").astype("timedelta64[h]")
     rpm = v.rpm_max * rng.uniform(0.5, 1.0, days)
-    draft = np.where(rng.random(days) < 0.5, rng.uniform(6.0, 8.5, days), rng.uniform(10.0, 13.0, days))
+    b0, b1, l0, l1 = v.draft_m
+    draft = np.where(rng.random(days) < 0.5, rng.uniform(b0, b1, days), rng.uniform(l0, l1, days))
     trim = rng.normal(0.5, 0.6, days).clip(-2, 3)
     wind = rng.gamma(3.0, 5.0, days).clip(0, 55)
     wind_rel = rng.uniform(0, 360, days)
@@ -67,6 +88,8 @@ def reports(v: TrueVessel, end_utc: str, days: int, seed: int, *, noise: float =
     rate = true_fuel * rng.normal(1.0, noise, days)
     bad = rng.random(days) < outliers
     stw = np.where(bad, stw * rng.choice([0.7, 1.3], days), stw)
+    if v.log_from_day is not None:  # the log reads wrong from then on (what the truth beside it does not)
+        stw = np.where(np.arange(days) >= v.log_from_day, stw * v.log_factor, stw)
     hours = np.full(days, 24.0)
     df = pd.DataFrame({
         "imo": v.imo, "ts_utc": pd.to_datetime(ts), "lat": 10.0, "lon": 150.0, "rpm": rpm.round(2), "draft_m": draft.round(2),
