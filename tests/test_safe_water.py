@@ -255,3 +255,14 @@ def test_a_strait_routes_when_its_corridor_keeps_the_clearance_and_says_why_not_
         assert plan.min_land_clearance_nm >= 1.0 - 1e-6
     lat, lon = np.array(plan.waypoints).T
     assert not globe.is_land(lat, lon).any()
+
+
+def test_a_short_voyage_gets_more_nodes_along_its_lines_too():
+    """Under 40 NM no closer lines are allowed (they would come within 5 NM of each other), but more nodes along
+    the lines are: inside Tokyo Bay, off Yokohama to the Uraga Channel, 21 nodes a line find no way, 41 do."""
+    from pipeline.routing.search_space import lay_out_lines
+
+    dep, arr = (35.29, 139.79), (34.9, 139.8)
+    assert not reachable(lay_out_lines(dep, arr))
+    space = build_search_space(dep, arr)
+    assert reachable(space) and space.lat.shape[1] == 41

@@ -146,7 +146,7 @@ def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_
     kw.pop("n_points", None)
     for k_lines, k_points in DENSER:
         lines, points = space.n_lines * k_lines, (n_points // 2) * k_points * 2 + 1
-        if lines > most or points > MAX_POINTS:
+        if (k_lines > 1 and lines > most) or points > MAX_POINTS:  # more nodes along the lines suit any length
             continue
         denser = lay_out_lines(dep, arr, n_lines=lines, n_points=points, d_point_nm=d_point * (n_points // 2) / (points // 2),
                                max_shift=None if max_shift is None else max_shift * k_points, **kw)
