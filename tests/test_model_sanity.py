@@ -160,6 +160,7 @@ def test_rpm_settings_beyond_the_models_range_are_clipped_with_a_reason():
     m = PerformanceModel("physical", reference_model().speed_coef, reference_model().fuel_coef, version=3,
                          envelope=json.loads(ENV.to_json()))
     assert m.clip_rpm_options((70, 80, 90)) == ((70.0, 80.0, 90.0), None)
+    assert m.clip_rpm_options((59.0, 80, 101.9)) == ((59.0, 80.0, 101.9), None)  # within 2 % of 100: kept
     opts, note = m.clip_rpm_options((50.0, 70.0, 100.0, 110.0), "voyage V1")
     assert opts == (60.0, 70.0, 100.0)
     assert note == "voyage V1: rpm settings 50, 110 outside the 60–100 rpm the vessel's model v3 was fitted on: clipped to 60, 70, 100"

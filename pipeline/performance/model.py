@@ -113,8 +113,9 @@ class PerformanceModel:
     def clip_rpm_options(self, rpm_options, voyage: str = "") -> tuple[tuple[float, ...], str | None]:
         """(allowed rpm settings within the rpm range the model was fitted on, why some were clipped or None).
 
-        A setting outside that range becomes its nearest end (duplicates merged): no model is trusted beyond
-        the engine speeds it saw, and a data-driven one extrapolates badly there."""
+        A setting more than RPM_SLACK of the range's top outside it becomes its nearest end (duplicates merged):
+        no model is trusted far beyond the engine speeds it saw, and a data-driven one extrapolates badly there.
+        Within the slack a setting is kept: reports sampled up to 99.9 rpm say nothing against 100."""
         from pipeline.performance.sanity import Envelope
 
         opts = tuple(sorted(float(r) for r in rpm_options))
@@ -122,13 +123,17 @@ class PerformanceModel:
         if env is None or not opts:
             return opts, None
         lo, hi = env.rpm
-        out = [r for r in opts if not (lo <= r <= hi)]
+        slack = RPM_SLACK * hi
+        out = [r for r in opts if not (lo - slack <= r <= hi + slack)]
         if not out:
             return opts, None
-        clipped = tuple(sorted({min(max(r, lo), hi) for r in opts}))
+        clipped = tuple(sorted({r if lo - slack <= r <= hi + slack else min(max(r, lo), hi) for r in opts}))
         note = (f"{voyage + ': ' if voyage else ''}rpm settings {', '.join(f'{r:g}' for r in out)} outside the "
                 f"{lo:g}–{hi:g} rpm the vessel's model v{self.version} was fitted on: clipped to {', '.join(f'{r:g}' for r in clipped)}")
         return clipped, note
+
+
+RPM_SLACK = 0.02  # share of the fitted rpm range's top within which a voyage's setting is not clipped
 
 
 def model_from_stored(stored: dict | None, imo: int | None = None) -> PerformanceModel | None:
