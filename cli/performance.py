@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
                                                  "kept in noon_reports_history) instead of being refused."),
                     data: Optional[Path] = DataOpt):
         """Validate and import noon reports; bad rows go to noon_reports_rejected with a reason."""
-        from flows.jobs.refit import import_noon_file
+        from flows.jobs.noon_import import import_noon_file
 
         kw = {"replace": True} if replace else {}
         c = run_job("flows.refit", "import_noon_reports", import_noon_file, path=str(file),

@@ -18,14 +18,17 @@ import json
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from pipeline.performance.refit import Gate
 from pipeline.routing.options import RoutingOptions
 from storage.layout import DataLayout
 from storage.schema_routes import ARRIVAL_NM
 
 RISH_URL_DEFAULT = "https://database.rish.kyoto-u.ac.jp/arch/jmadata/data/gpv/original/"
 OSCAR_URL_DEFAULT = "https://podaac-opendap.jpl.nasa.gov/opendap/allData/oscar/"
+
+if TYPE_CHECKING:
+    from pipeline.performance.refit import Gate
 
 
 @dataclass(frozen=True)
@@ -91,7 +94,7 @@ class Settings:
     data_root: Path = Path("data")
     object_root: str | None = None  # URL of the cube and the exports (s3://bucket/prefix); None: under data_root
     storage_options: dict = field(default_factory=dict, repr=False)  # fsspec options for object_root; may hold keys
-    performance: Gate = field(default_factory=Gate)  # what a refitted model must pass to become active
+    gate: "Gate | None" = None  # what a refitted model must pass to become active; None: the defaults (`performance`)
     grid: GridSettings = field(default_factory=GridSettings)
     sources: SourceSettings = field(default_factory=SourceSettings)
     routing: RoutingSettings = field(default_factory=RoutingSettings)
@@ -101,6 +104,16 @@ class Settings:
     # Retention of the weather cube: after each ingest, cycles initialised more than this many days before the
     # newest one are retired (storage.cube.retire_cycles: hidden, their chunks deleted). None keeps every cycle.
     cube_retention_days: float | None = None
+
+    @property
+    def performance(self) -> "Gate":
+        """What a refitted model must pass to become active: `gate`, or Gate's defaults, made when first read, so a
+        command that does not refit (a noon import) does not load the refit's numba and scipy (~100 MB)."""
+        if self.gate is not None:
+            return self.gate
+        from pipeline.performance.refit import Gate
+
+        return Gate()
 
     @property
     def layout(self) -> DataLayout:
@@ -114,10 +127,13 @@ class Settings:
                 continue
             if "." in key:
                 section, name = key.split(".", 1)
-                s = replace(s, **{section: replace(getattr(s, section), **{name: value})})
+                s = replace(s, **{_FIELD_OF.get(section, section): replace(getattr(s, section), **{name: value})})
             else:
-                s = replace(s, **{key: value})
+                s = replace(s, **{_FIELD_OF.get(key, key): value})
         return s
+
+
+_FIELD_OF = {"performance": "gate"}  # a section read through a property, and the field that holds it
 
 
 class SettingsError(ValueError):

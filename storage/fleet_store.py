@@ -14,14 +14,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from schemas.tables import TABLES
+from schemas.tables.fleet import BUNKER_LOGS, HULL_PERFORMANCE_MONTHLY, PERF_MODELS, VESSELS, VOYAGE_POSITIONS, VOYAGES
+from schemas.tables.fleet import NOON_REPORTS as NOON
+from schemas.tables.fleet import NOON_REPORTS_HISTORY as NOON_HISTORY
+from schemas.tables.fleet import NOON_REPORTS_REJECTED as NOON_REJECTED
 from storage import warehouse
 
-NOON_COLUMNS = ["imo", "ts_utc", "lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t",
-                "fuel_hfo_t", "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
-                "current_dir_rel_deg", "months_since_drydock", "source_file"]
-VESSEL_COLUMNS = ["imo", "name", "type", "dwt", "design_speed_kn", "mcr_kw", "rpm_max", "design_fuel_tph"]
-VOYAGE_COLUMNS = ["voyage_id", "imo", "dep_name", "dep_lat", "dep_lon", "arr_name", "arr_lat", "arr_lon", "depart_utc",
-                  "rta_utc", "draft_m", "trim_m", "rpm_options", "max_hs_m", "max_wind_kn", "status"]
+NOON_COLUMNS = NOON.names
+VESSEL_COLUMNS = VESSELS.names
+VOYAGE_COLUMNS = VOYAGES.names_except("plan_id")  # a voyages file's columns (fleet plans set plan_id)
 
 
 def _utcnow() -> datetime:
@@ -62,7 +64,8 @@ def import_voyages(db_path: Path, df: pd.DataFrame, rejected: pd.DataFrame | Non
 
 
 def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, keys: list[str]) -> None:
-    """Refused rows (`raw`, `reason`, `source_file` + `keys` as far as readable); the same raw row refused
+    """Refused rows (`raw`, `reason`, `source_file` + `keys` as far as readable) into `table` (its definition's
+    columns: schemas/tables); the same raw row refused
     for the same reason is stored once, so re-imports add nothing."""
     if rejected is None or not len(rejected):
         return
@@ -77,6 +80,7 @@ def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, ke
     rej["source_file"] = rejected["source_file"].astype("string") if "source_file" in rejected else None
     rej["rejected_at"] = _utcnow()
     cols = [*keys, "raw", "reason", "source_file", "rejected_at"]
+    TABLES[table].check_keys(cols)
     rej = rej.drop_duplicates(subset=["raw", "reason"])
     with warehouse.connect(db_path) as con:
         con.register("rej_df", rej[cols])
@@ -87,7 +91,7 @@ def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, ke
 def known_imos(db_path: Path) -> set[int]:
     if not Path(db_path).exists():
         return set()
-    with warehouse.connect(db_path) as con:
+    with warehouse.connect(db_path, write=False) as con:
         return {int(r[0]) for r in con.execute("SELECT imo FROM vessels").fetchall()}
 
 
@@ -100,87 +104,103 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame, *, re
     return import_noon_chunks(db_path, [(good, rejected)], replace=replace)
 
 
-IMPORT_MEMORY_LIMIT = "128MB"  # DuckDB's memory while a noon file is imported (it spills the rest to temp files)
+# DuckDB's memory while a noon file is staged (beyond it DuckDB spills to temporary files), and while the staged
+# rows are stored: the commit merges the new keys into noon_reports' primary-key index, held in memory, so that
+# limit grows with the reports (32 MB + 64 bytes a report, stored and new: 96 MB for 1 M reports, which needs
+# more than 72 MB; without a limit DuckDB takes ~600 MB for them)
+IMPORT_MEMORY_LIMIT = "32MB"
+STORE_MEMORY_BASE_MB, STORE_MEMORY_PER_REPORT_B = 32, 64
+_NOON_VALUES = [c for c in NOON.names if c not in ("imo", "ts_utc", "source_file")]
 
 
 def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.DataFrame]], *,
                        replace: bool = False) -> dict[str, int]:
-    """`import_noon` for a file read and validated chunk by chunk: one connection and ONE transaction (a file
-    that fails half-way stores nothing), so memory follows the chunk, not the file. A (vessel, time) already
-    taken by an earlier chunk of the same file is rejected as `duplicate timestamp in file`, as within a chunk.
-    With `replace`, a row differing from the stored report of its vessel and time replaces it (the stored one is
-    kept in noon_reports_history).
+    """`import_noon` for a file read and validated chunk by chunk, all or nothing: each chunk's rows are staged
+    in temporary tables (which DuckDB spills to disk beyond IMPORT_MEMORY_LIMIT and drops with the connection),
+    then ONE transaction stores them, so memory follows the chunk, not the file, and a file that fails half-way
+    stores nothing. (Rows inserted inside a transaction stay in memory until it commits, so the chunks are not
+    inserted in it one by one.) A (vessel, time) already taken by an earlier chunk of the same file is rejected as
+    `duplicate timestamp in file`, as within a chunk. With `replace`, a row differing from the stored report of its
+    vessel and time replaces it (the stored one is kept in noon_reports_history).
 
     Returns counts: inserted, already_present, rejected (incl. conflicts and duplicates), conflicts, replaced,
     duplicates_in_file.
     """
-    value_cols = [c for c in NOON_COLUMNS if c not in ("imo", "ts_utc", "source_file")]
-    same = " AND ".join(f"(n.{c} IS NOT DISTINCT FROM g.{c})" for c in value_cols)
-    counts = {"inserted": 0, "already_present": 0, "rejected": 0, "conflicts": 0, "replaced": 0,
-              "duplicates_in_file": 0}
+    same = " AND ".join(f"(n.{c} IS NOT DISTINCT FROM g.{c})" for c in _NOON_VALUES)
+    cols = ", ".join(NOON.names)
+    rejected_cols = NOON_REJECTED.names
     with warehouse.connect(db_path) as con:
-        # a large file's uncommitted rows spill to disk instead of growing the process (this connection only)
+        # a large file's staged rows spill to disk instead of growing the process (this connection only)
         con.execute(f"SET memory_limit = '{IMPORT_MEMORY_LIMIT}'")
+        con.execute(f"CREATE TEMP TABLE stage AS SELECT {cols}, 0::BIGINT AS seq FROM noon_reports LIMIT 0")
+        con.execute("CREATE TEMP TABLE stage_rejected AS SELECT * FROM noon_reports_rejected LIMIT 0")
+        n_rejected, seq = 0, 0
+        for good, rejected in chunks:
+            good = NOON.take(good).assign(seq=np.arange(seq, seq + len(good), dtype=np.int64))
+            seq += len(good)
+            con.register("g_df", good)
+            con.execute(f"INSERT INTO stage SELECT {cols}, seq FROM g_df")
+            con.unregister("g_df")
+            n_rejected += len(rejected)
+            _stage_noon_rejected(con, rejected)
+        n_reports = con.execute("SELECT (SELECT count(*) FROM noon_reports) + (SELECT count(*) FROM stage)").fetchall()[0][0]
+        con.execute(f"SET memory_limit = '{STORE_MEMORY_BASE_MB + n_reports * STORE_MEMORY_PER_REPORT_B // 2**20}MB'")
         with warehouse.transaction(con):
-            con.execute("CREATE TEMP TABLE file_keys (imo BIGINT, ts_utc TIMESTAMP)")
-            for good, rejected in chunks:
-                good = good.reindex(columns=NOON_COLUMNS)
-                con.register("g_df", good)
-                con.execute("CREATE TEMP TABLE g AS SELECT * FROM g_df")
-                con.unregister("g_df")
-                dups = con.execute("SELECT g.* FROM g SEMI JOIN file_keys k USING (imo, ts_utc)").fetchdf()
-                if len(dups):
-                    con.execute("DELETE FROM g USING file_keys k WHERE g.imo = k.imo AND g.ts_utc = k.ts_utc")
-                con.execute("INSERT INTO file_keys SELECT imo, ts_utc FROM g")
-                present = con.execute(f"SELECT count(*) FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchall()[0][0]
-                conflicts = con.execute(
-                    f"SELECT g.* FROM g JOIN noon_reports n USING (imo, ts_utc) WHERE NOT ({same})").fetchdf()
-                replaced = 0
-                if replace and len(conflicts):
-                    cols = ", ".join(f"n.{c}" for c in NOON_COLUMNS)
-                    con.execute(f"INSERT INTO noon_reports_history SELECT {cols}, ?, 'replaced by ' || "
-                                f"coalesce(nullif(g.source_file, ''), 'a corrected report') FROM noon_reports n "
-                                f"JOIN g USING (imo, ts_utc) WHERE NOT ({same})", [_utcnow()])
-                    con.execute(f"DELETE FROM noon_reports n USING g WHERE n.imo = g.imo AND n.ts_utc = g.ts_utc "
-                                f"AND NOT ({same})")
-                    replaced, conflicts = len(conflicts), conflicts.head(0)
-                # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
-                con.execute("INSERT INTO noon_reports SELECT g.* FROM g ANTI JOIN noon_reports n USING (imo, ts_utc) "
-                            "ORDER BY g.imo, g.ts_utc")
-                n_good = con.execute("SELECT count(*) FROM g").fetchall()[0][0]
-                counts["inserted"] += int(n_good - present - len(conflicts) - replaced)
-                counts["already_present"] += int(present)
-                counts["conflicts"] += len(conflicts)
-                counts["replaced"] += int(replaced)
-                counts["duplicates_in_file"] += len(dups)
-                for extra, why in ((conflicts, "conflicts with a stored report for the same vessel and time"),
-                                   (dups, "duplicate timestamp in file")):
-                    if len(extra):
-                        extra["raw"] = _raw_text(extra[[c for c in NOON_COLUMNS if c != "source_file"]])
-                        extra["reason"] = why
-                        rejected = pd.concat([rejected, extra], ignore_index=True)
-                counts["rejected"] += len(rejected)
-                _insert_noon_rejected(con, rejected)
-                con.execute("DROP TABLE g")
-            con.execute("DROP TABLE file_keys")
-    return counts
+            # a (vessel, time) of an earlier chunk: the first row keeps it (validation did the same within a chunk)
+            dups = con.execute(f"SELECT {cols} FROM stage QUALIFY row_number() OVER (PARTITION BY imo, ts_utc ORDER BY seq) > 1 "
+                               "ORDER BY seq").fetchdf()
+            if len(dups):
+                con.execute("DELETE FROM stage WHERE seq IN (SELECT seq FROM stage QUALIFY "
+                            "row_number() OVER (PARTITION BY imo, ts_utc ORDER BY seq) > 1)")
+            g = "stage g"
+            present = con.execute(f"SELECT count(*) FROM {g} JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchall()[0][0]
+            conflicts = con.execute(f"SELECT g.* EXCLUDE (seq) FROM {g} JOIN noon_reports n USING (imo, ts_utc) "
+                                    f"WHERE NOT ({same}) ORDER BY g.seq").fetchdf()
+            replaced = 0
+            if replace and len(conflicts):
+                con.execute(f"INSERT INTO noon_reports_history ({', '.join(NOON_HISTORY.names)}) "
+                            f"SELECT {', '.join(f'n.{c}' for c in NOON.names)}, ?, 'replaced by ' || "
+                            f"coalesce(nullif(g.source_file, ''), 'a corrected report') FROM noon_reports n "
+                            f"JOIN {g} USING (imo, ts_utc) WHERE NOT ({same})", [_utcnow()])
+                con.execute(f"DELETE FROM noon_reports n USING {g} WHERE n.imo = g.imo AND n.ts_utc = g.ts_utc "
+                            f"AND NOT ({same})")
+                replaced, conflicts = len(conflicts), conflicts.head(0)
+            # stored by vessel and time, so a refit's read is mostly in order already (see `load_for_refit`)
+            con.execute(f"INSERT INTO noon_reports ({cols}) SELECT {', '.join(f'g.{c}' for c in NOON.names)} "
+                        f"FROM {g} ANTI JOIN noon_reports n USING (imo, ts_utc) ORDER BY g.imo, g.ts_utc")
+            n_good = con.execute("SELECT count(*) FROM stage").fetchall()[0][0]
+            for extra, why in ((conflicts, "conflicts with a stored report for the same vessel and time"),
+                               (dups, "duplicate timestamp in file")):
+                if len(extra):
+                    extra["raw"] = _raw_text(extra[[c for c in NOON.names if c != "source_file"]])
+                    extra["reason"] = why
+                    n_rejected += len(extra)
+                    _stage_noon_rejected(con, extra)
+            # the same raw row rejected for the same reason is stored once: re-imports add nothing
+            con.execute(f"INSERT INTO noon_reports_rejected ({', '.join(rejected_cols)}) "
+                        f"SELECT {', '.join(rejected_cols)} FROM stage_rejected r "
+                        "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason) "
+                        "QUALIFY row_number() OVER (PARTITION BY r.raw, r.reason) = 1")
+        con.execute("DROP TABLE stage")
+        con.execute("DROP TABLE stage_rejected")
+    return {"inserted": int(n_good - present - len(conflicts) - replaced), "already_present": int(present),
+            "rejected": n_rejected, "conflicts": len(conflicts), "replaced": int(replaced),
+            "duplicates_in_file": len(dups)}
 
 
-def _insert_noon_rejected(con, rejected: pd.DataFrame) -> None:
-    rej = rejected.reindex(columns=NOON_COLUMNS + ["raw", "reason"])
-    for c in ("lat", "lon", "rpm", "draft_m", "trim_m", "stw_kn", "sog_kn", "dist_nm", "hours", "fuel_t", "fuel_hfo_t",
-              "fuel_mgo_t", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg", "current_kn",
-              "current_dir_rel_deg", "months_since_drydock"):
-        rej[c] = pd.to_numeric(rej[c], errors="coerce")
+def _stage_noon_rejected(con, rejected: pd.DataFrame) -> None:
+    """Refused rows into the temporary `stage_rejected` (as noon_reports_rejected holds them)."""
+    if not len(rejected):
+        return
+    rej = rejected.reindex(columns=NOON_REJECTED.names)  # what validation could read of the row; the rest empty
+    for c in NOON_REJECTED.columns:
+        if c.duckdb == "DOUBLE":
+            rej[c.name] = pd.to_numeric(rej[c.name], errors="coerce")
     rej["imo"] = pd.to_numeric(rej["imo"], errors="coerce").astype("Int64")
     rej["ts_utc"] = pd.to_datetime(rej["ts_utc"], errors="coerce")
     rej["rejected_at"] = _utcnow()
     con.register("rej_df", rej)
-    # the same raw row rejected for the same reason is stored once: re-imports add nothing
-    con.execute(
-        "INSERT INTO noon_reports_rejected SELECT r.* FROM rej_df r "
-        "WHERE NOT EXISTS (SELECT 1 FROM noon_reports_rejected x WHERE x.raw = r.raw AND x.reason = r.reason)"
-    )
+    con.execute(f"INSERT INTO stage_rejected SELECT {', '.join(NOON_REJECTED.names)} FROM rej_df")
     con.unregister("rej_df")
 
 
@@ -191,13 +211,14 @@ def exclude_noon(db_path: Path, imo: int, from_utc, to_utc, reason: str) -> int:
         with warehouse.transaction(con):
             args = [int(imo), pd.Timestamp(from_utc).to_pydatetime(), pd.Timestamp(to_utc).to_pydatetime()]
             n = con.execute("SELECT count(*) FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args).fetchone()[0]
-            con.execute(f"INSERT INTO noon_reports_history SELECT {', '.join(NOON_COLUMNS)}, ?, ? FROM noon_reports "
+            con.execute(f"INSERT INTO noon_reports_history ({', '.join(NOON_HISTORY.names)}) "
+                        f"SELECT {', '.join(NOON_COLUMNS)}, ?, ? FROM noon_reports "
                         "WHERE imo = ? AND ts_utc BETWEEN ? AND ?", [_utcnow(), f"excluded: {reason}", *args])
             con.execute("DELETE FROM noon_reports WHERE imo = ? AND ts_utc BETWEEN ? AND ?", args)
     return int(n)
 
 
-BUNKER_COLUMNS = ["imo", "bill_no", "date_utc", "port", "supplier", "fuel_type", "received_t", "rob_t", "source_file"]
+BUNKER_COLUMNS = BUNKER_LOGS.names
 
 
 def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | None = None) -> dict[str, int]:
@@ -205,7 +226,7 @@ def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | N
     stored row of the same (imo, bill_no, fuel_type) is not stored. Rows refused by validation go to
     `bunker_logs_rejected` with their reason and raw text. Returns counts and the conflicting rows."""
     _store_rejected(db_path, "bunker_logs_rejected", rejected, ["imo", "bill_no"])
-    good = good.reindex(columns=BUNKER_COLUMNS)
+    good = BUNKER_LOGS.take(good)
     key = "imo, bill_no, fuel_type"
     same = " AND ".join(f"(b.{c} IS NOT DISTINCT FROM g.{c})" for c in ("date_utc", "port", "supplier", "received_t", "rob_t"))
     with warehouse.connect(db_path) as con:
@@ -213,7 +234,8 @@ def import_bunkers(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame | N
         with warehouse.transaction(con):
             present = con.execute(f"SELECT count(*) FROM g JOIN bunker_logs b USING ({key}) WHERE {same}").fetchone()[0]
             conflicts = con.execute(f"SELECT g.* FROM g JOIN bunker_logs b USING ({key}) WHERE NOT ({same})").fetchdf()
-            con.execute(f"INSERT INTO bunker_logs SELECT g.* FROM g ANTI JOIN bunker_logs b USING ({key})")
+            con.execute(f"INSERT INTO bunker_logs ({', '.join(BUNKER_COLUMNS)}) SELECT {', '.join(f'g.{c}' for c in BUNKER_COLUMNS)} "
+                        f"FROM g ANTI JOIN bunker_logs b USING ({key})")
     return {"inserted": int(len(good) - present - len(conflicts)), "already_present": int(present), "conflicts": conflicts}
 
 
@@ -333,8 +355,7 @@ def _next_versions(con) -> dict[int, int]:
     return {int(i): int(v) + 1 for i, v in con.execute("SELECT imo, max(version) FROM perf_models GROUP BY imo").fetchall()}
 
 
-FIT_COLUMNS = ["imo", "version", "fitted_at", "form", "target", "coefficients", "n_rows", "r2", "rmse", "cv_rmse", "holdout_rmse",
-               "n_holdout", "status", "reason", "active", "months_dd", "data_hash", "data_to_utc", "envelope", "gate"]
+FIT_COLUMNS = PERF_MODELS.names_except("flag")  # a flag is set on the active model later (`save_fits(flags=…)`)
 
 
 def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[int, str]] | None = None,
@@ -358,9 +379,10 @@ def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[in
                 con.execute("UPDATE perf_models p SET active = true, status = 'active', flag = NULL, reason = a.reason "
                             "FROM again a WHERE p.imo = a.imo AND p.version = a.version")
             if rows:
+                PERF_MODELS.check_rows(rows, columns=[c for c in FIT_COLUMNS if c != "fitted_at"])
                 df = pd.DataFrame(rows)
                 df["fitted_at"] = _utcnow()
-                con.register("fits", df.reindex(columns=FIT_COLUMNS))
+                con.register("fits", df[FIT_COLUMNS])
                 con.execute("UPDATE perf_models SET active = false, status = 'superseded' "
                             "WHERE active AND imo IN (SELECT imo FROM fits WHERE active)")
                 con.execute(f"INSERT INTO perf_models ({', '.join(FIT_COLUMNS)}) SELECT {', '.join(FIT_COLUMNS)} FROM fits")
@@ -398,7 +420,7 @@ def _raw_text(df: pd.DataFrame) -> pd.Series:
     return out.astype(object)
 
 
-HULL_COLUMNS = ["imo", "month", "n_reports", "speed_loss_pct", "flag", "model_version", "computed_at"]
+HULL_COLUMNS = HULL_PERFORMANCE_MONTHLY.names
 
 
 def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd.DataFrame]]) -> None:
@@ -414,7 +436,7 @@ def save_hull_performance(db_path: Path, monthly: dict[int, tuple[int | None, pd
                 df = pd.concat(frames, ignore_index=True)
                 df["computed_at"] = _utcnow()
                 df["month"] = pd.to_datetime(df["month"]).dt.date
-                con.register("hull_df", df.reindex(columns=HULL_COLUMNS))
+                con.register("hull_df", HULL_PERFORMANCE_MONTHLY.take(df))
                 con.execute(f"INSERT INTO hull_performance_monthly ({', '.join(HULL_COLUMNS)}) "
                             f"SELECT {', '.join(HULL_COLUMNS)} FROM hull_df")
 
@@ -453,8 +475,11 @@ def add_position(db_path: Path, voyage_id: str, ts_utc, lat: float, lon: float, 
     t = pd.Timestamp(ts_utc)
     t = t.tz_convert(None) if t.tzinfo else t
     with warehouse.connect(db_path) as con:
-        con.execute("INSERT OR REPLACE INTO voyage_positions VALUES (?, ?, ?, ?, ?, ?)",
-                    [voyage_id, t.to_pydatetime(), float(lat), float(lon), note, _utcnow()])
+        row = {"voyage_id": voyage_id, "ts_utc": t.to_pydatetime(), "lat": float(lat), "lon": float(lon), "note": note,
+               "entered_at": _utcnow()}
+        VOYAGE_POSITIONS.check_keys(row)
+        con.execute(f"INSERT OR REPLACE INTO voyage_positions ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})",
+                    list(row.values()))
 
 
 def voyage_positions(db_path: Path, voyage_ids: list[str]) -> pd.DataFrame:

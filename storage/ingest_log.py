@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from schemas.tables.ingest import CYCLES, INGEST_LOG
 from storage import warehouse
 
-LOG_COLUMNS = ["run_id", "source", "cycle", "file_name", "url", "bytes", "sha256", "status", "error", "started_at", "finished_at"]
+LOG_COLUMNS = INGEST_LOG.names
 
 
 def utcnow() -> datetime:
@@ -18,9 +19,10 @@ def utcnow() -> datetime:
 
 
 def record_files(db_path: Path, rows: list[dict]) -> None:
-    """Append log rows (dicts with LOG_COLUMNS keys) in one transaction."""
+    """Append log rows (dicts with exactly LOG_COLUMNS keys: another key, or one missing, raises) in one transaction."""
     if not rows:
         return
+    INGEST_LOG.check_rows(rows)
     df = pd.DataFrame.from_records(rows, columns=LOG_COLUMNS)
     for c in ("cycle", "started_at", "finished_at"):
         df[c] = pd.to_datetime(df[c])
@@ -44,14 +46,15 @@ def known_checksums(db_path: Path, file_names: list[str]) -> dict[str, str]:
 
 def set_cycle_status(db_path: Path, cycle, *, complete: bool, n_expected: int, n_ok: int, missing: str) -> None:
     with warehouse.connect(db_path) as con:
-        con.execute(
-            "INSERT OR REPLACE INTO cycles VALUES (?, ?, ?, ?, ?, ?)",
-            [pd.Timestamp(np.datetime64(cycle, "ns")).to_pydatetime(), complete, n_expected, n_ok, missing or None, utcnow()],
-        )
+        row = {"cycle": pd.Timestamp(np.datetime64(cycle, "ns")).to_pydatetime(), "complete": complete,
+               "n_files_expected": n_expected, "n_files_ok": n_ok, "missing": missing or None, "written_at": utcnow()}
+        CYCLES.check_keys(row)
+        con.execute(f"INSERT OR REPLACE INTO cycles ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})",
+                    list(row.values()))
 
 
 def cycle_status(db_path: Path) -> pd.DataFrame:
     if not Path(db_path).exists():
-        return pd.DataFrame(columns=["cycle", "complete", "n_files_expected", "n_files_ok", "missing", "written_at"])
+        return pd.DataFrame(columns=CYCLES.names)
     with warehouse.connect(db_path) as con:
         return con.execute("SELECT * FROM cycles ORDER BY cycle").fetchdf()

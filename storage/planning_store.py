@@ -11,22 +11,19 @@ from pathlib import Path
 
 import pandas as pd
 
+from schemas.tables.planning import (CONTRACTS, FLEET_PLAN_LEGS, FLEET_PLAN_UNASSIGNED, FLEET_PLANS, PORT_DISTANCES, PORTS,
+                                     VESSEL_AVAILABILITY)
 from storage import warehouse
 from storage.fleet_store import VOYAGE_COLUMNS, _utcnow
 
-PORT_COLUMNS = ["port", "lat", "lon", "source_file"]
-AVAILABILITY_COLUMNS = ["imo", "from_utc", "from_port", "until_utc", "until_port", "port_hours", "daily_cost", "ports",
-                        "cargo_types", "laden_speed_kn", "ballast_speed_kn", "laden_draft_m", "ballast_draft_m",
-                        "source_file"]
-CONTRACT_COLUMNS = ["code", "cargo_type", "min_t", "max_t", "load_port", "discharge_port", "early_utc", "late_utc",
-                    "penalty", "source_file"]
-DISTANCE_COLUMNS = ["port_a", "port_b", "lat_a", "lon_a", "lat_b", "lon_b", "dist_nm", "gc_nm", "reason", "computed_at"]
-PLAN_COLUMNS = ["plan_id", "created_at", "as_of_utc", "status", "superseded_at", "solver", "solve_status", "gap",
-                "runtime_s", "n_contracts", "n_assigned", "n_unassigned", "n_vessels_used", "fuel_price", "fuel_t",
-                "fuel_cost", "out_of_service_days", "out_of_service_cost", "penalty_cost", "total_cost", "gantt_png"]
-LEG_COLUMNS = ["plan_id", "imo", "seq", "kind", "contract_code", "from_port", "to_port", "dist_nm", "depart_utc",
-               "arrive_utc", "fuel_t", "lift_t", "voyage_id"]
-UNASSIGNED_COLUMNS = ["plan_id", "contract_code", "penalty", "reason"]
+# the tables' columns, from their definitions (schemas/tables/planning.py)
+PORT_COLUMNS = PORTS.names
+AVAILABILITY_COLUMNS = VESSEL_AVAILABILITY.names
+CONTRACT_COLUMNS = CONTRACTS.names
+DISTANCE_COLUMNS = PORT_DISTANCES.names
+PLAN_COLUMNS = FLEET_PLANS.names
+LEG_COLUMNS = FLEET_PLAN_LEGS.names
+UNASSIGNED_COLUMNS = FLEET_PLAN_UNASSIGNED.names
 PLANNED_VOYAGE_COLUMNS = [*VOYAGE_COLUMNS, "plan_id"]
 
 # (table, its columns, key, rejected table, the key kept on a rejected row)

@@ -4,8 +4,9 @@ Parquet dataset per table, hive-partitioned by run: `exports/routes/<table>/run_
 One writer: the flow collects every voyage's rows and calls `write_run_results` once, inside
 one transaction, so a killed run leaves either all of a run's rows or none. The Parquet files follow
 the commit; each appears whole (written under a hidden name, then renamed). Their column types are
-fixed here (`ROUTE_ARROW`, `LEG_ARROW`): times `timestamp[us, tz=UTC]`, and a column name shared by
-both tables has the same type in both, so pyarrow, polars and DuckDB read each folder as one table.
+those of the tables' definitions (schemas/tables/routes.py): times `timestamp[us, tz=UTC]`, and a column name
+shared by both tables has the same type in both, so pyarrow, polars and DuckDB read each folder as one table.
+Rows are checked against the definitions: a key the table does not have, or a column missing, raises.
 """
 
 from __future__ import annotations
@@ -20,48 +21,33 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from schemas.table import Table
+from schemas.tables.routes import ROUTE_LEGS, ROUTE_RUNS, ROUTES
 from storage import warehouse
 
-_UTC = pa.timestamp("us", tz="UTC")
-_F64, _I32, _STR = pa.float64(), pa.int32(), pa.string()
-
-# The Parquet columns of each table (the partition column run_id is the folder name, not in the file).
-ROUTE_ARROW = pa.schema([
-    ("voyage_id", _STR), ("imo", pa.int64()), ("solver", _STR), ("objective", _STR), ("status", _STR),
-    ("reason", _STR), ("depart_utc", _UTC), ("eta_utc", _UTC), ("rta_utc", _UTC), ("hours", _F64),
-    ("fuel_t", _F64), ("baseline_fuel_t", _F64), ("baseline_hours", _F64), ("savings_pct", _F64),
-    ("distance_nm", _F64), ("cost", _F64), ("model_version", _I32), ("cycle", _UTC), ("seed", _I32),
-    ("runtime_s", _F64), ("n_legs", _I32), ("n_legs_beyond_forecast", _I32), ("forecast_flag", _STR),
-    ("hours_beyond_forecast", _F64), ("hours_before_cycle", _F64), ("min_land_clearance_nm", _F64),
-    ("honest_baseline_rpm", _F64), ("honest_baseline_fuel_t", _F64), ("honest_baseline_hours", _F64),
-    ("profile_fuel_t", _F64), ("savings_total_pct", _F64), ("savings_speed_profile_pct", _F64),
-    ("savings_route_pct", _F64), ("min_engine_hold_h", _F64), ("engine_change_cost_t", _F64),
-    ("n_engine_changes", _I32), ("unlimited_fuel_t", _F64), ("limits_fuel_t", _F64),
-    ("start_kind", _STR), ("start_lat", _F64), ("start_lon", _F64), ("start_utc", _UTC), ("start_position_utc", _UTC),
-    ("start_advanced_h", _F64), ("start_note", _STR), ("voyage_fingerprint", _STR),
-])
-LEG_ARROW = pa.schema([
-    ("voyage_id", _STR), ("leg", _I32), ("lat0", _F64), ("lon0", _F64), ("lat1", _F64), ("lon1", _F64),
-    ("course_deg", _F64), ("dist_nm", _F64), ("rpm", _F64), ("stw_kn", _F64), ("sog_kn", _F64), ("hours", _F64),
-    ("fuel_t", _F64), ("etd_utc", _UTC), ("eta_utc", _UTC), ("wind_kn", _F64), ("wind_dir_deg", _F64),
-    ("hs_m", _F64), ("wave_dir_deg", _F64), ("current_kn", _F64), ("beyond_forecast", pa.bool_()),
-])
-ROUTE_COLUMNS = ["run_id", *ROUTE_ARROW.names]
-LEG_COLUMNS = ["run_id", *LEG_ARROW.names]
+# The Parquet columns of each table, from its definition (the partition column run_id is the folder name, not in
+# the file).
+ROUTE_ARROW = ROUTES.arrow_schema(without=["run_id"])
+LEG_ARROW = ROUTE_LEGS.arrow_schema(without=["run_id"])
+ROUTE_COLUMNS = ROUTES.names
+LEG_COLUMNS = ROUTE_LEGS.names
 PARQUET_TABLES = {"routes": ROUTE_ARROW, "route_legs": LEG_ARROW}
+DEFINED = {"routes": ROUTES, "route_legs": ROUTE_LEGS}
 
 
 def _utcnow() -> datetime:
     return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
-def _frame(rows: list[dict], columns: list[str], run_id: str) -> pd.DataFrame:
-    """The rows as the warehouse takes them: times UTC, tz-aware, to the microsecond (DuckDB TIMESTAMP's resolution)."""
-    df = pd.DataFrame.from_records(rows, columns=columns)
+def _frame(rows: list[dict], table: Table, run_id: str) -> pd.DataFrame:
+    """The rows as the warehouse takes them, each checked against `table`'s definition (RowShapeError when a key is
+    not a column or a column is missing): times UTC, tz-aware, to the microsecond (DuckDB TIMESTAMP's resolution)."""
+    table.check_rows(rows)
+    df = pd.DataFrame.from_records(rows, columns=table.names)
     df["run_id"] = run_id
-    for c in columns:
-        if c.endswith("_utc") or c == "cycle":
-            df[c] = pd.to_datetime(df[c], utc=True).dt.floor("us")
+    for c in table.columns:
+        if c.duckdb == "TIMESTAMP":
+            df[c.name] = pd.to_datetime(df[c.name], utc=True).dt.floor("us")
     return df
 
 
@@ -106,8 +92,8 @@ def migrate_old_parquet_layout(exports_dir: Path) -> list[str]:
                 df = pd.read_parquet(f)
                 if table == "routes":
                     df = df.rename(columns={"beyond_forecast": "n_legs_beyond_forecast"})
-                tables[table] = _frame(df.reindex(columns=PARQUET_TABLES[table].names).to_dict("records"),
-                                       PARQUET_TABLES[table].names, run_id)
+                df = df.reindex(columns=DEFINED[table].names)  # columns added since are empty in old runs
+                tables[table] = _frame(df.to_dict("records"), DEFINED[table], run_id)
         _publish_run_parquet(exports_dir, run_id, tables)
         for table in PARQUET_TABLES:
             (old / f"{table}.parquet").unlink(missing_ok=True)
@@ -140,13 +126,17 @@ def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n
     (hours) at the run's nominal time."""
     pid = os.getpid()
     with warehouse.connect(db_path) as con:
-        con.execute(
-            "INSERT INTO route_runs (run_id, started_at, cycle, n_voyages, status, solver, trigger, host, pid, pid_started, "
-            "nominal_utc, cycle_age_h) VALUES (?, ?, ?, ?, 'running', ?, ?, ?, ?, ?, ?, ?)",
-            [run_id, _utcnow(), pd.Timestamp(cycle).to_pydatetime() if cycle is not None else None,
-             n_voyages, solver, trigger, socket.gethostname(), pid, process_started(pid),
-             pd.Timestamp(nominal_utc).to_pydatetime() if nominal_utc is not None else None, cycle_age_h],
-        )
+        row = {"run_id": run_id, "started_at": _utcnow(),
+               "cycle": pd.Timestamp(cycle).to_pydatetime() if cycle is not None else None, "n_voyages": n_voyages,
+               "status": "running", "solver": solver, "trigger": trigger, "host": socket.gethostname(), "pid": pid,
+               "pid_started": process_started(pid),
+               "nominal_utc": pd.Timestamp(nominal_utc).to_pydatetime() if nominal_utc is not None else None,
+               "cycle_age_h": cycle_age_h}
+        columns = list(row)
+        ROUTE_RUNS.check_keys(columns, columns=ROUTE_RUNS.names_except("finished_at", "n_ok", "n_failed", "reason",
+                                                                       "n_export_failed", "export_errors"))
+        con.execute(f"INSERT INTO route_runs ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})",
+                    list(row.values()))
 
 
 def current_plan_legs(db_path: Path, voyage_ids: list[str]) -> dict[str, list[dict]]:
@@ -202,8 +192,8 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
     """Write all rows of a run in one transaction, then its Parquet files; returns (n_ok, n_failed).
 
     `export_errors`: one line per export that failed (voyage, kind, error), kept with the run."""
-    routes = _frame(route_rows, ROUTE_COLUMNS, run_id)
-    legs = _frame(leg_rows, LEG_COLUMNS, run_id)
+    routes = _frame(route_rows, ROUTES, run_id)
+    legs = _frame(leg_rows, ROUTE_LEGS, run_id)
     n_ok = int(routes["status"].isin(["ok", "late"]).sum()) if len(routes) else 0
     n_failed = len(routes) - n_ok
     status = "ok" if n_failed == 0 else ("failed" if n_ok == 0 else "partial")

@@ -6,6 +6,7 @@ degrees (wind/waves coming-from).
 
 import hashlib
 
+from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_LEGS
 from storage.warehouse import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -489,6 +490,9 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE route_runs ADD COLUMN IF NOT EXISTS cycle_age_h DOUBLE;
         """,
     ),
+    # what each leg sailed past the forecast, before the cycle, and through a hole in the wind (the plan's totals
+    # and flags are made of these; they were dropped from the stored legs)
+    Migration("routes_010_leg_forecast_hours", ROUTE_LEGS.add_columns_sql(*LEG_HOURS_ADDED)),
 ]
 
 

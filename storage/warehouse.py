@@ -41,6 +41,9 @@ SNAPSHOT_STORAGE_NUMBER = 64
 # so the older generations stay copies from earlier commands rather than from the same one.
 SNAPSHOT_GENERATIONS = 3
 SNAPSHOT_MIN_AGE_S = 600.0
+# DuckDB's buffer while a warehouse is checked (`verify`): each block is read once, so caching them is no use, and
+# without a limit a check would keep up to the whole file in memory
+CHECK_MEMORY_LIMIT = "32MB"
 
 
 @dataclass(frozen=True)
@@ -163,7 +166,9 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
     con = _open(path, read_only=not write, wait_s=wait_s)
     try:
         if write:
+            con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
             verify(con)  # before anything is written to it
+            con.execute("RESET memory_limit")
             migrate(con)
             from storage.route_store import reap_dead_runs  # here: route_store itself builds on this module
 
@@ -206,7 +211,7 @@ def verify(con: duckdb.DuckDBPyConnection) -> None:
 def check_file(path: Path) -> str | None:
     """None when the DuckDB file `path` opens and passes `verify`, else why not (one line)."""
     try:
-        con = duckdb.connect(str(path), read_only=True)
+        con = duckdb.connect(str(path), read_only=True, config={"memory_limit": CHECK_MEMORY_LIMIT})
     except duckdb.Error as exc:
         return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     try:
@@ -326,5 +331,8 @@ def transaction(con: duckdb.DuckDBPyConnection) -> Iterator[duckdb.DuckDBPyConne
         yield con
         con.execute("COMMIT")
     except Exception:
-        con.execute("ROLLBACK")
+        try:
+            con.execute("ROLLBACK")
+        except duckdb.TransactionException:  # a failed COMMIT has ended the transaction (rolled back): say why it failed
+            pass
         raise

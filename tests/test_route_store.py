@@ -6,22 +6,24 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 import pytest
 
+from schemas.tables.routes import ROUTE_LEGS, ROUTES
 from storage import route_store
 
 
 def _route(voyage_id, status, fuel, base):
-    return {"voyage_id": voyage_id, "imo": 9140607, "solver": "bfoa", "objective": "jit", "status": status,
+    return ROUTES.empty_row(**{"voyage_id": voyage_id, "imo": 9140607, "solver": "bfoa", "objective": "jit", "status": status,
             "reason": None if status == "ok" else "no feasible route", "depart_utc": "2020-12-01T06:00Z",
             "eta_utc": "2020-12-03T06:00Z", "rta_utc": "2020-12-03T06:00Z", "hours": 48.0, "fuel_t": fuel,
             "baseline_fuel_t": base, "savings_pct": None, "distance_nm": 700.0, "cycle": "2020-12-01T00Z",
-            "seed": 1, "runtime_s": 0.5, "n_legs": 2, "n_legs_beyond_forecast": 0}
+            "seed": 1, "runtime_s": 0.5, "n_legs": 2, "n_legs_beyond_forecast": 0})
 
 
 def _leg(voyage_id, leg):
-    return {"voyage_id": voyage_id, "leg": leg, "lat0": 35.0, "lon0": 140.0, "lat1": 34.0, "lon1": 141.0,
+    return ROUTE_LEGS.empty_row(**{"voyage_id": voyage_id, "leg": leg, "lat0": 35.0, "lon0": 140.0, "lat1": 34.0, "lon1": 141.0,
             "course_deg": 140.0, "dist_nm": 70.0, "rpm": 80.0, "stw_kn": 12.0, "sog_kn": 12.5, "hours": 5.6,
             "fuel_t": 4.0, "etd_utc": "2020-12-01T06:00Z", "eta_utc": "2020-12-01T11:36Z", "wind_kn": 15.0,
-            "wind_dir_deg": 270.0, "hs_m": 2.0, "wave_dir_deg": 260.0, "current_kn": 0.5, "beyond_forecast": False}
+            "wind_dir_deg": 270.0, "hs_m": 2.0, "wave_dir_deg": 260.0, "current_kn": 0.5, "beyond_forecast": False,
+                                   "hours_beyond_forecast": 0.0, "hours_before_cycle": 0.0, "hours_without_wind": 0.0})
 
 
 def test_run_results_written_once_in_a_transaction(tmp_path):
@@ -64,7 +66,7 @@ def _two_runs(tmp_path):
     for run_id, voyages in (("r1", ["V1", "V2"]), ("r2", ["V1"])):
         route_store.begin_run(db, run_id, cycle="2020-12-01T00", solver="bfoa", trigger="manual", n_voyages=len(voyages))
         rows = [_route(v, "ok", 90.0, 100.0) for v in voyages[:1]] + [
-            {"voyage_id": v, "imo": 9140607, "status": "failed", "reason": "no cube", "n_legs": 0, "n_legs_beyond_forecast": 0}
+            ROUTES.empty_row(voyage_id=v, imo=9140607, status="failed", reason="no cube", n_legs=0, n_legs_beyond_forecast=0)
             for v in voyages[1:]]
         legs = [dict(_leg("V1", i), beyond_forecast=i == 2) for i in range(3 if run_id == "r1" else 2)]
         route_store.write_run_results(db, exports, run_id, rows, legs)

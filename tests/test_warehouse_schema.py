@@ -21,7 +21,7 @@ def _undescribed(con) -> list[tuple[str, str | None]]:
 
 def test_every_table_view_and_column_is_described_with_units(tmp_path):
     with warehouse.connect(tmp_path / "w.duckdb") as con:
-        assert _undescribed(con) == []  # a column added without a description in storage/schema_docs.py fails here
+        assert _undescribed(con) == []  # a column added without a description (schemas/tables, views in storage/schema_docs.py) fails here
         n = con.execute("SELECT count(*) FROM duckdb_columns() WHERE database_name = current_database() "
                         "AND schema_name = 'main'").fetchone()[0]
         comment = dict(con.execute("SELECT table_name || '.' || column_name, comment FROM duckdb_columns() "

@@ -46,7 +46,7 @@ START_COLUMNS = ("start_kind", "start_lat", "start_lon", "start_utc", "start_pos
 
 
 def start_columns(job: RouteJob) -> dict:
-    return {k: job.voyage.get(k) for k in START_COLUMNS if k in job.voyage}
+    return {k: job.voyage.get(k) for k in START_COLUMNS}  # every column of the row: None where the job has none
 
 
 def failed_result(job: RouteJob, reason: str, log: list | None = None) -> dict:

@@ -17,6 +17,7 @@ import xarray as xr
 from typer.testing import CliRunner
 
 from cli.main import app
+from schemas.tables.routes import ROUTES
 from storage import cube, route_store
 from storage.layout import DataLayout
 from tests.reliability.conftest import CYCLE, REPO, assert_same_cube, child_env, file_urls
@@ -144,10 +145,10 @@ def test_a_corrupt_warehouse_gives_one_line_naming_the_file_and_the_snapshot(roo
 
 
 def _row(vid, status, fuel, reason=None):
-    return {"voyage_id": vid, "imo": 9140607, "solver": "bfoa", "objective": "jit", "status": status, "reason": reason,
+    return ROUTES.empty_row(**{"voyage_id": vid, "imo": 9140607, "solver": "bfoa", "objective": "jit", "status": status, "reason": reason,
             "depart_utc": "2020-12-01T06:00Z", "eta_utc": "2020-12-03T06:00Z" if fuel else None, "rta_utc": "2020-12-03T06:00Z",
             "hours": 48.0 if fuel else None, "fuel_t": fuel, "baseline_fuel_t": 100.0 if fuel else None, "cycle": "2020-12-01T00Z",
-            "seed": 1, "n_legs": 2 if fuel else 0, "n_legs_beyond_forecast": 0}
+            "seed": 1, "n_legs": 2 if fuel else 0, "n_legs_beyond_forecast": 0})
 
 
 def test_latest_routes_keeps_the_last_good_plan_and_flags_a_later_failure(tmp_path):
