@@ -235,12 +235,11 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
             pairs = [(r, by_voyage.get(r["voyage_id"], [])) for r in out["rows"]]
             fig = plots.fleet_map_figure(pairs, title=f"run {run_id} · cycle {cycle_label(c)}")
             out["staged"].add(run_exports.stage(run_id, "fleet_map.png", plots.png_bytes(fig)))
-            for var in ("waves", "wind"):  # the weather of the cycle at its start, for people to look at
-                try:
-                    out["staged"].add(run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png",
-                                                        weather_maps.step_png(layout.cube_store, c, 0, var)))
-                except Exception as exc:  # a picture; the run's data does not depend on it
-                    out["export_errors"].append(f"fleet: weather map {var}: {type(exc).__name__}: {exc}")
+            try:  # the weather of the cycle at its start, for people to look at (its first step read once)
+                for var, png in weather_maps.run_maps_png(layout.cube_store, c, ("waves", "wind")).items():
+                    out["staged"].add(run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png", png))
+            except Exception as exc:  # a picture; the run's data does not depend on it
+                out["export_errors"].append(f"fleet: weather maps: {type(exc).__name__}: {exc}")
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
                                       out["export_errors"])
     except BaseException as exc:
