@@ -283,3 +283,14 @@ def test_cube_retire_takes_its_retention_from_the_option_or_the_setting(tmp_path
     with pytest.raises(SettingsError, match="JITROUTE_CUBE_RETENTION_DAYS"):
         load_settings()
 
+
+def test_every_s3_filesystem_of_a_process_shares_one_botocore_session():
+    import pickle
+
+    from storage.cube_location import fs_options, shared_s3_session
+
+    cube_opts = fs_options("s3://bucket/cubes/weather.zarr", {"key": "k"})
+    export_opts = fs_options("s3a://bucket/exports", {})
+    assert cube_opts["session"] is export_opts["session"] is shared_s3_session() and cube_opts["key"] == "k"
+    assert pickle.loads(pickle.dumps(cube_opts))["session"] is shared_s3_session()  # sent elsewhere: that process's
+    assert "session" not in fs_options("/data/cubes/weather.zarr", {}) and "session" not in fs_options("gs://b/x", {})
