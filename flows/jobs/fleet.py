@@ -113,9 +113,9 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     chosen = [sel for sel in chosen if sel.start is not None]
     fingerprints = fleet_store.voyage_fingerprints(db, [sel.voyage["voyage_id"] for sel in chosen])
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
-    models = {}
+    models, stored = {}, fleet_store.active_models(db) if chosen else {}  # one read for every vessel
     for imo in {int(sel.voyage["imo"]) for sel in chosen}:
-        m = model_from_stored(fleet_store.active_model(db, imo), imo)
+        m = model_from_stored(stored.get(imo), imo)
         models[imo] = m.to_json() if m is not None else None
     cyc = str(np.datetime_as_string(cycle, unit="s"))
     jobs = []
