@@ -222,6 +222,21 @@ def worker_cube_reads(reset: bool = False) -> dict:
     return out
 
 
+def worker_chunk_cache() -> dict:
+    """In a worker: its cube chunk cache's counters (storage/cube_window.py)."""
+    from storage import cube_window
+
+    return cube_window.CHUNK_CACHE.stats()
+
+
+def stored_cycle_mb(root: Path) -> float:
+    """Stored MB of the data chunks a voyage reads, of the bench's one cycle (the S3 copy is chunked the same)."""
+    from pipeline.routing import weather_field as wf
+
+    store = root / "cubes" / "weather.zarr"
+    return sum(f.stat().st_size for v in wf.CUBE_VARIABLES for f in (store / v / "c").rglob("*") if f.is_file()) / 1e6
+
+
 def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
     """The bench on a scheduler and worker processes, with the cube and exports on a local S3 server."""
     import json
@@ -291,8 +306,9 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
                     cpu = _host_cpu_s() - cpu0
                     counts = _s3_counts(endpoint)
                     reads = list(client.run(worker_cube_reads).values())
-                    peak = max(client.run(peak_rss_mb).values())
-                rows[workers] = (seconds, peak, counts, cpu, where, reads)
+                    peaks = sorted(client.run(peak_rss_mb).values())
+                    caches = list(client.run(worker_chunk_cache).values())
+                rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches)
             finally:
                 _stop(cluster[::-1])
     finally:
@@ -304,14 +320,24 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
           "in the timed run to everyone (the flow host's weather maps and cycle checks too) per voyage")
     print(f"{'workers':>7} {'seconds':>8} {'voy/min':>8} {'peak worker MB':>14} {'worker cube MB/voy':>18} {'GET/voy':>8} "
           f"{'HEAD/voy':>8} {'all cube MB/voy':>15} {'export req/voy':>14} {'host CPU s/voy':>14}")
-    for w, (seconds, peak, counts, cpu, where, reads) in rows.items():
-        routed = n + 2 * w
+    for w, (seconds, peaks, counts, cpu, where, reads, caches) in rows.items():
+        routed, peak = n + 2 * w, max(peaks)
         cube_get = counts.get("GET cubes", {"requests": 0, "bytes": 0})
         export_req = sum(v["requests"] for k, v in counts.items() if k.endswith("exports"))
         print(f"{w:>7} {seconds:>8.1f} {n / seconds * 60:>8.1f} {peak:>14.0f} "
               f"{sum(r['bytes'] for r in reads) / 1e6 / routed:>18.3f} {sum(r['get'] for r in reads) / routed:>8.1f} "
               f"{sum(r['head'] for r in reads) / routed:>8.1f} {cube_get['bytes'] / 1e6 / n:>15.3f} {export_req / n:>14.1f} "
               f"{cpu / n:>14.4f}")
+    cycle_mb = stored_cycle_mb(root0)
+    print(f"chunk cache of each worker over the cycle (warm-up and timed run): MB fetched from the store, MB of the "
+          f"distinct chunks among them, their ratio (1.00: no chunk fetched twice; target ≤ 1.2), against the cycle's "
+          f"{cycle_mb:.1f} MB stored (never more); peak MB of each worker")
+    for w, (seconds, peaks, counts, cpu, where, reads, caches) in rows.items():
+        for k, (c, p) in enumerate(zip(caches, peaks)):
+            ratio = c["fetched_bytes"] / c["distinct_bytes"] if c["distinct_bytes"] else float("nan")
+            print(f"  {w} worker(s), worker {k}: fetched {c['fetched_bytes'] / 1e6:.2f} MB, distinct "
+                  f"{c['distinct_bytes'] / 1e6:.2f} MB, ratio {ratio:.2f}, cache bound {c['max_bytes'] / 2**20:.0f} MB; "
+                  f"peak {p:.0f} MB")
     if 1 in rows and 2 in rows:
         print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
     print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))

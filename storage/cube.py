@@ -73,7 +73,7 @@ from zarr.codecs import BloscCodec
 
 from schemas import cube_variables as cv
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
-from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, locate
+from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, fs_options, locate
 from storage.cube_window import cycle_versions  # noqa: F401  (zarr alone; flows ask the cube module for it)
 
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
@@ -565,7 +565,7 @@ def _delete_prefix(loc: Location, prefix: str) -> None:
         return
     import fsspec
 
-    fs, root = fsspec.core.url_to_fs(loc.url, **loc.options)
+    fs, root = fsspec.core.url_to_fs(loc.url, **fs_options(loc.url, loc.options))
     try:
         fs.rm(f"{root}/{prefix}", recursive=True)
     except FileNotFoundError:

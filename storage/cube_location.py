@@ -6,6 +6,7 @@ imports neither.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import NamedTuple
 
@@ -33,7 +34,7 @@ class Location(NamedTuple):
             return str(self.local)
         from zarr.storage import FsspecStore
 
-        options = self.options
+        options = fs_options(self.url, self.options)
         if self.url.startswith(("s3://", "s3a://")):
             # s3fs asks every whole-object read for its size first (a HEAD) to split large objects into
             # concurrent ranges; cube chunks are small, so one GET per chunk, half the requests
@@ -46,7 +47,7 @@ class Location(NamedTuple):
             return (self.local / key).exists()
         import fsspec
 
-        fs, root = fsspec.core.url_to_fs(self.url, **self.options)
+        fs, root = fsspec.core.url_to_fs(self.url, **fs_options(self.url, self.options))
         fs.invalidate_cache()
         return fs.exists(f"{root}/{key}")
 
@@ -55,8 +56,34 @@ class Location(NamedTuple):
             return (self.local / key).read_text()
         import fsspec
 
-        fs, root = fsspec.core.url_to_fs(self.url, **self.options)
+        fs, root = fsspec.core.url_to_fs(self.url, **fs_options(self.url, self.options))
         return fs.cat_file(f"{root}/{key}").decode()
+
+
+S3_SCHEMES = ("s3://", "s3a://")
+
+
+@functools.cache
+def shared_s3_session():
+    """The process's one aiobotocore session, given to every S3 filesystem it opens (fs_options): botocore loads
+    the S3 service model (about 16 MB resident) once per session, and a routing worker opens two filesystems
+    (the cube's reads, asynchronous, and its export staging). Pickled as a reference to this function, so a
+    filesystem sent to another process gets that process's session."""
+    from aiobotocore.session import AioSession
+
+    class _SharedSession(AioSession):
+        def __reduce__(self):
+            return shared_s3_session, ()
+
+    return _SharedSession()
+
+
+def fs_options(url: str, options: dict | None) -> dict:
+    """The fsspec options to open `url` with: `options`, plus the shared session for an S3 URL."""
+    options = dict(options or {})
+    if str(url).startswith(S3_SCHEMES) and "session" not in options:
+        options["session"] = shared_s3_session()
+    return options
 
 
 def locate(store, storage_options: dict | None = None) -> Location:

@@ -48,13 +48,18 @@ class Published(NamedTuple):
 
 class ChunkCache:
     """Chunks as stored (compressed bytes), least recently used dropped first once `max_bytes` is passed; safe
-    across threads. `fetched_bytes`/`fetched_chunks` count what came from the store, `hit_chunks` what did not."""
+    across threads. `fetched_bytes`/`fetched_chunks` count what came from the store, `hit_chunks` what did not;
+    `distinct_bytes` the stored size of the distinct chunks fetched (each counted once), so
+    fetched_bytes / distinct_bytes is how often a chunk was fetched again after being dropped (1.0: never)."""
+
+    SEEN_MAX = 1 << 16  # distinct chunk keys remembered for `distinct_bytes` (a few MB at most)
 
     def __init__(self, max_bytes: int):
         self.max_bytes = int(max_bytes)
         self._items: OrderedDict = OrderedDict()
+        self._seen: set = set()
         self._lock = threading.Lock()
-        self.held_bytes = self.fetched_bytes = self.fetched_chunks = self.hit_chunks = 0
+        self.held_bytes = self.fetched_bytes = self.fetched_chunks = self.hit_chunks = self.distinct_bytes = 0
 
     def get(self, key) -> bytes | None:
         with self._lock:
@@ -68,6 +73,9 @@ class ChunkCache:
         with self._lock:
             self.fetched_bytes += len(data)
             self.fetched_chunks += 1
+            if key not in self._seen and len(self._seen) < self.SEEN_MAX:
+                self._seen.add(key)
+                self.distinct_bytes += len(data)
             if len(data) > self.max_bytes or key in self._items:
                 return
             self._items[key] = data
@@ -79,7 +87,15 @@ class ChunkCache:
     def clear(self) -> None:
         with self._lock:
             self._items.clear()
-            self.held_bytes = self.fetched_bytes = self.fetched_chunks = self.hit_chunks = 0
+            self._seen.clear()
+            self.held_bytes = self.fetched_bytes = self.fetched_chunks = self.hit_chunks = self.distinct_bytes = 0
+
+    def stats(self) -> dict:
+        """The counters and the bound, as plain numbers (what a bench asks a worker for)."""
+        with self._lock:
+            return {"max_bytes": self.max_bytes, "held_bytes": self.held_bytes, "fetched_bytes": self.fetched_bytes,
+                    "fetched_chunks": self.fetched_chunks, "hit_chunks": self.hit_chunks,
+                    "distinct_bytes": self.distinct_bytes}
 
 
 CHUNK_CACHE = ChunkCache(float(os.environ.get("JITROUTE_CUBE_CACHE_MB", "64")) * (1 << 20))

@@ -82,7 +82,9 @@ class RunExports:
     def _located(self) -> tuple:
         import fsspec
 
-        fs, root = fsspec.core.url_to_fs(self.url, **self.storage_options)
+        from storage.cube_location import fs_options
+
+        fs, root = fsspec.core.url_to_fs(self.url, **fs_options(self.url, self.storage_options))
         return fs, root.rstrip("/")
 
     @property

@@ -228,7 +228,9 @@ def test_the_cache_keeps_to_its_byte_bound():
     for k in range(5):
         cache.put(k, bytes(100))
     assert cache.held_bytes == 200 and cache.get(0) is None and cache.get(4) == bytes(100)
-    assert cache.fetched_bytes == 500
+    assert cache.fetched_bytes == 500 and cache.distinct_bytes == 500
+    cache.put(0, bytes(100))  # dropped, then fetched again: counted as fetched twice, once as distinct
+    assert cache.stats()["fetched_bytes"] == 600 and cache.stats()["distinct_bytes"] == 500
 
 
 def test_opening_the_newest_cycle_reads_no_chunk_of_the_cycle_coordinate(store):
@@ -280,3 +282,15 @@ def test_cube_retire_takes_its_retention_from_the_option_or_the_setting(tmp_path
     monkeypatch.setenv("JITROUTE_CUBE_RETENTION_DAYS", "a week")
     with pytest.raises(SettingsError, match="JITROUTE_CUBE_RETENTION_DAYS"):
         load_settings()
+
+
+def test_every_s3_filesystem_of_a_process_shares_one_botocore_session():
+    import pickle
+
+    from storage.cube_location import fs_options, shared_s3_session
+
+    cube_opts = fs_options("s3://bucket/cubes/weather.zarr", {"key": "k"})
+    export_opts = fs_options("s3a://bucket/exports", {})
+    assert cube_opts["session"] is export_opts["session"] is shared_s3_session() and cube_opts["key"] == "k"
+    assert pickle.loads(pickle.dumps(cube_opts))["session"] is shared_s3_session()  # sent elsewhere: that process's
+    assert "session" not in fs_options("/data/cubes/weather.zarr", {}) and "session" not in fs_options("gs://b/x", {})

@@ -113,12 +113,11 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     chosen = [sel for sel in chosen if sel.start is not None]
     fingerprints = fleet_store.voyage_fingerprints(db, [sel.voyage["voyage_id"] for sel in chosen])
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
-    models, notes = {}, {}
+    models, notes, stored = {}, {}, fleet_store.active_models(db) if chosen else {}  # one read for every vessel
     for imo in {int(sel.voyage["imo"]) for sel in chosen}:
-        stored = fleet_store.active_model(db, imo)
-        m = model_from_stored(stored, imo)
+        m = model_from_stored(stored.get(imo), imo)
         models[imo] = m.to_json() if m is not None else None
-        notes[imo] = unusable_reason(stored, imo)
+        notes[imo] = unusable_reason(stored.get(imo), imo)
     cyc = str(np.datetime_as_string(cycle, unit="s"))
     jobs = []
     for sel in chosen:
@@ -238,12 +237,11 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
             pairs = [(r, by_voyage.get(r["voyage_id"], [])) for r in out["rows"]]
             fig = plots.fleet_map_figure(pairs, title=f"run {run_id} · cycle {cycle_label(c)}")
             out["staged"].add(run_exports.stage(run_id, "fleet_map.png", plots.png_bytes(fig)))
-            for var in ("waves", "wind"):  # the weather of the cycle at its start, for people to look at
-                try:
-                    out["staged"].add(run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png",
-                                                        weather_maps.step_png(layout.cube_store, c, 0, var)))
-                except Exception as exc:  # a picture; the run's data does not depend on it
-                    out["export_errors"].append(f"fleet: weather map {var}: {type(exc).__name__}: {exc}")
+            try:  # the weather of the cycle at its start, for people to look at (its first step read once)
+                for var, png in weather_maps.run_maps_png(layout.cube_store, c, ("waves", "wind")).items():
+                    out["staged"].add(run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png", png))
+            except Exception as exc:  # a picture; the run's data does not depend on it
+                out["export_errors"].append(f"fleet: weather maps: {type(exc).__name__}: {exc}")
         route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
                                       out["export_errors"])
     except BaseException as exc:
