@@ -479,16 +479,35 @@ class DpOptions:
     bucket_h: float | None = None  # None: exact labels; a number: merge labels per arrival-time bucket (h), approximate
     upper_bound: float | None = None  # a known plan's cost, to prune with (the baseline's is always used)
     incumbent: str | None = "bfoa"  # also prune with this solver's plan (seed 1, default options); None: no
-    gap: float = 0.0  # > 0: ε-trimming of the labels (see `trim_eps`): the plan costs at most (1 + gap) × the
-    #                   optimum (certified under the same assumption as the dominance); 0: every label kept
+    gap: float = 0.0  # > 0: the plan costs at most (1 + gap) × the optimum. Labels: ε-trimming (see `trim_eps`),
+    #                   certified under the dominance's assumption; grid (slot_h): pruning, certified outright
+    slot_h: float | None = None  # a number: the exact DP of dp_grid.py, departures from nodes on this time grid
+    #                              (h) with waits; the plan then carries its waits (Found.wait_h)
+    max_wait_h: float = 0.0  # grid: a ship may wait this long beyond the first slot after arriving at a node
+    wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
 
 
-
-def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf):
-    """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with (the
-    registry passes its incumbent's, solvers._dp)."""
+def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None):
+    """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with and
+    `incumbent` that plan (nodes, rpm_idx) when known (the registry passes its incumbent solver's, solvers._dp).
+    The grid DP (options.slot_h) prunes only with plans it can sail in its own space: the baseline and
+    `incumbent`, each with the waits of the grid."""
     from pipeline.routing.baseline import evaluate
 
+    if options.slot_h is not None:
+        from pipeline.routing.dp_grid import search_grid, wait_hours
+
+        if not options.slot_h > 0.0:
+            raise ValueError(f"dp option slot_h must be > 0 h, got {options.slot_h}")
+        plans = [(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []
+        if incumbent is not None:
+            plans.append(incumbent)
+        nodes, rpm_idx, slots, cost, n_legs = search_grid(
+            inst, plans, slot_h=float(options.slot_h), max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
+            gap=float(options.gap), bounds=finish_bounds(inst), ld=latest_departures(inst))
+        if nodes is None:
+            return Found(None, None, n_legs)
+        return Found(nodes, rpm_idx, n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, float(options.slot_h)))
     if options.bucket_h is not None:
         nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
                                                     inst.objective)
