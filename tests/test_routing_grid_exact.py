@@ -136,7 +136,7 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, slot_h, int(max_wait_h / slot_h), wait_tph)
     dp = SOLVERS["dp"]
     exact = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
-                                                            incumbent=None))
+                                                            incumbent=None), accept_waits=True)
     if not math.isfinite(best):
         assert exact.nodes is None
         return
@@ -145,7 +145,7 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     assert got == pytest.approx(best, rel=1e-12, abs=1e-12), (got, best)
     assert all(w <= (slot_h + max_wait_h) + 1e-9 for w in exact.wait_h[1:])  # rounding + the extra waits allowed
     trimmed = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
-                                                              gap=GAP))
+                                                              gap=GAP), accept_waits=True)
     cost = _sail_with_waits(inst, trimmed.nodes, trimmed.rpm_idx, trimmed.wait_h, wait_tph)
     assert best - 1e-9 <= cost <= best * (1.0 + GAP) + 1e-9, (cost, best)
     if rta == "impossible":  # least late: every plan is late, the DP compares late plans
@@ -162,7 +162,18 @@ def test_the_window_cases_open_and_close():
     assert lk.sail_leg(*leg, 10.0, 85.0, ves, fld)[lk.CODE] == lk.OK
     for n, rta in itertools.product(range(3), ("loose", "tight")):
         inst, base = _instance("storm-window", rta, "jit", (70, 85, 100), n, 2)
-        found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=2.0, max_wait_h=12.0, incumbent=None))
+        found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=2.0, max_wait_h=12.0, incumbent=None),
+                                     accept_waits=True)
         wait_free = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
         assert wait_free.nodes is None  # every wait-free plan meets the storm at the departure
         assert found.nodes is not None and found.wait_h[0] >= 2.0  # the grid DP's plan waits for it to move on
+
+
+def test_a_caller_that_cannot_carry_waits_is_refused():
+    """solve() sails a plan without waits, so the grid DP through it would report another plan: refused, by name."""
+    from pipeline.routing.problem import RoutingInputError
+    from pipeline.routing.solve import solve
+
+    pr = problem(DEP, ARR, 75.0, n_lines=2, n_points=5, max_shift=2, d_point_nm=25.0)
+    with pytest.raises(RoutingInputError, match="slot_h=1.0.*cannot carry waits"):
+        solve(pr, _weather("static", 0), solver="dp", options=DpOptions(slot_h=1.0))

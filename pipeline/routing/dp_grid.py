@@ -229,6 +229,38 @@ def wait_hours(inst, nodes, rpm_idx, slots, slot_h: float) -> np.ndarray:
     return waits
 
 
+def waited_plan_cost(inst, nodes, rpm_idx, wait_h, wait_tph: float) -> float:
+    """Cost of a plan that waits wait_h[i] (h) at line i's node, burning wait_tph, before sailing its leg."""
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    out = np.empty(N_LEG_OUT)
+    t, fuel = o.t_dep_h, 0.0
+    for i in range(len(nodes) - 1):
+        t += float(wait_h[i])
+        fuel += wait_tph * float(wait_h[i])
+        a, b = int(nodes[i]), int(nodes[i + 1])
+        sail_leg_nb(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], t, v.rpm_options[int(rpm_idx[i])], v,
+                    w, out)
+        if out[CODE] != OK:
+            return math.inf
+        t += out[H]
+        fuel += out[FUEL]
+    return float(route_cost_nb(o, t - o.t_dep_h, fuel))
+
+
+def _incumbents(plans, n_settings: int):
+    """The wait-free plans given, and on each of their routes every setting held throughout and the given settings
+    one step faster: the rounding waits make a plan that was just on time late, and a late incumbent prunes
+    next to nothing, so one that still makes the RTA is worth a few more sails."""
+    for nodes, rpm_idx in plans:
+        if nodes is None:
+            continue
+        nodes, rpm_idx = np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64)
+        yield nodes, rpm_idx
+        yield nodes, np.minimum(rpm_idx + 1, n_settings - 1)
+        for r in range(n_settings):
+            yield nodes, np.full(len(rpm_idx), r, np.int64)
+
+
 def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: float | None, gap: float,
                 bounds, ld) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, float, int]:
     """(nodes, rpm_idx, slots, cost, legs sailed) of the best plan of the grid space, within (1 + gap) of its
@@ -237,9 +269,7 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
     rate = wait_rate_tph(inst, wait_tph)
     n_wait = int(math.floor(max_wait_h / slot_h + 1e-9))
     inc_cost, inc = math.inf, None
-    for nodes, rpm_idx in plans:
-        if nodes is None:
-            continue
+    for nodes, rpm_idx in _incumbents(plans, len(inst.rpm_options)):
         q, s = grid_plan_cost(inst, nodes, rpm_idx, slot_h, rate)
         if q < inc_cost:
             inc_cost, inc = q, (np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s)
