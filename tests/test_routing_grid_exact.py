@@ -177,3 +177,11 @@ def test_a_caller_that_cannot_carry_waits_is_refused():
     pr = problem(DEP, ARR, 75.0, n_lines=2, n_points=5, max_shift=2, d_point_nm=25.0)
     with pytest.raises(RoutingInputError, match="slot_h=1.0.*cannot carry waits"):
         solve(pr, _weather("static", 0), solver="dp", options=DpOptions(slot_h=1.0))
+
+
+@pytest.mark.parametrize("slot_h, max_wait_h", [(0.0, 0.0), (-1.0, 0.0), (1.0, -2.0)])
+def test_a_grid_that_is_no_grid_is_refused(slot_h, max_wait_h):
+    inst, base = _instance("static", "loose", "jit", (70, 85, 100), 0, 2)
+    with pytest.raises(ValueError, match="slot_h must be > 0 h and max_wait_h"):
+        SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, incumbent=None),
+                             accept_waits=True)
