@@ -179,9 +179,11 @@ def test_a_caller_that_cannot_carry_waits_is_refused():
         solve(pr, _weather("static", 0), solver="dp", options=DpOptions(slot_h=1.0))
 
 
-@pytest.mark.parametrize("slot_h, max_wait_h", [(0.0, 0.0), (-1.0, 0.0), (1.0, -2.0)])
-def test_a_grid_that_is_no_grid_is_refused(slot_h, max_wait_h):
+@pytest.mark.parametrize("slot_h, max_wait_h, wait_tph", [(0.0, 0.0, None), (-1.0, 0.0, None), (1.0, -2.0, None),
+                                                      (1.0, 0.0, -0.5)])
+def test_a_grid_that_is_no_grid_is_refused(slot_h, max_wait_h, wait_tph):
+    """A negative waiting rate is refused too: the fuel-to-finish bounds assume waiting burns nothing less than 0."""
     inst, base = _instance("static", "loose", "jit", (70, 85, 100), 0, 2)
-    with pytest.raises(ValueError, match="slot_h must be > 0 h and max_wait_h"):
-        SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, incumbent=None),
-                             accept_waits=True)
+    opts = DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph, incumbent=None)
+    with pytest.raises(ValueError, match="slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0"):
+        SOLVERS["dp"].search(inst, base, seed=1, options=opts, accept_waits=True)

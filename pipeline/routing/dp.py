@@ -513,9 +513,9 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
             refuse_waits(options)
         from pipeline.routing.dp_grid import search_grid, wait_hours
 
-        if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0:
-            raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h ≥ 0 h, got {options.slot_h} and "
-                             f"{options.max_wait_h}")
+        if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0 or not (options.wait_tph or 0.0) >= 0.0:
+            raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0, got {options.slot_h}, "
+                             f"{options.max_wait_h} and {options.wait_tph}")
         plans = [(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []
         if incumbent is not None:
             plans.append(incumbent)
