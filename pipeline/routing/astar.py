@@ -10,6 +10,11 @@ at high rpm), so each route of the sweep then gets the engine plan that meets th
 DP restricted to that route (`engine_limits.best_engine_plan`, within `engine_gap` of the route's best), which
 keeps only plans arriving by the RTA when one can, else the least-late one; a route found again at another α is
 not planned again. The route and plan with the best objective value win.
+
+Not exact, and it does not claim to be: settling each node once at its first label is the label DP's dominance
+(dp.py) taken further, so in weather that changes in time (a storm whose limits close a leg at one start time
+and open it later) a later, dearer label that could have gone on is dropped. A* is a heuristic sweep; the exact
+reference under changing weather is the grid DP (dp_grid.py).
 """
 
 from __future__ import annotations

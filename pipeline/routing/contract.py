@@ -24,12 +24,14 @@ class UnknownSolverError(ValueError):
 @dataclass
 class Found:
     """A solver's answer: node per line and rpm index per leg (None: nothing feasible), the legs or routes it
-    sailed, and for iterative solvers the best cost after each cycle."""
+    sailed, for iterative solvers the best cost after each cycle, and for a solver whose plans may wait at nodes
+    (the grid DP, dp_grid.py) the hours waited at each line's node before its leg (None: no waiting)."""
 
     nodes: np.ndarray | None
     rpm_idx: np.ndarray | None
     n_evals: int = 0
     history: np.ndarray | None = None
+    wait_h: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,11 @@ Every continuation of A then arrives no later than the same continuation of B (l
 first-out), so no later penalty, at most e per hour more early penalty, and no more fuel **as long as the
 rest of the voyage costs the same fuel from either start time**. That holds exactly in weather that does not
 change with time; in time-varying weather it is the one assumption of this solver (a later start through a
-passing storm can be cheaper), which the tests check against exhaustive enumeration on small graphs with
-moving storms. There is no merging of labels into time buckets.
+passing storm can be cheaper, and a weather limit can block a leg started at 116.7 h that is open at 118.7 h),
+so it is exact only over the wait-free plans of weather that holds still; tests/test_routing_exact.py checks it
+against exhaustive enumeration on small graphs with moving storms, where it happens to hold. There is no merging
+of labels into time buckets. `DpOptions(slot_h=...)` selects the DP that needs no such assumption
+(dp_grid.py): departures from nodes on a time grid, with waiting; exact over that space, its plans wait.
 
 ε-trimming (`DpOptions.gap` > 0): sorted by time, a label is kept only when its f − e·t is more than ε below
 every earlier kept one's at its node, with ε = gap·LB / (lines − 1) and LB a certified lower bound on the
@@ -497,16 +500,49 @@ class DpOptions:
     bucket_h: float | None = None  # None: exact labels; a number: merge labels per arrival-time bucket (h), approximate
     upper_bound: float | None = None  # a known plan's cost, to prune with (the baseline's is always used)
     incumbent: str | None = "bfoa"  # also prune with this solver's plan (seed 1, default options); None: no
-    gap: float = 0.0  # > 0: ε-trimming of the labels (see `trim_eps`): the plan costs at most (1 + gap) × the
-    #                   optimum (certified under the same assumption as the dominance); 0: every label kept
+    gap: float = 0.0  # > 0: the plan costs at most (1 + gap) × the optimum. Labels: ε-trimming (see `trim_eps`),
+    #                   certified under the dominance's assumption; grid (slot_h): pruning, certified outright
+    slot_h: float | None = None  # a number: the exact DP of dp_grid.py, departures from nodes on this time grid
+    #                              (h) with waits; the plan then carries its waits (Found.wait_h)
+    max_wait_h: float = 0.0  # grid: a ship may wait this long beyond the first slot after arriving at a node
+    wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
 
 
+def refuse_waits(options: DpOptions) -> None:
+    """The grid DP's plans wait at nodes (Found.wait_h); a caller that sails plans without waits (solve() today)
+    would report another plan than the one found, so it is refused there with this error."""
+    from pipeline.routing.problem import RoutingInputError
 
-def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf):
-    """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with (the
-    registry passes its incumbent's, solvers._dp)."""
+    raise RoutingInputError(f"dp option slot_h={options.slot_h}: the grid DP's plans wait at nodes, and a routed plan "
+                            "cannot carry waits yet; use it through pipeline.routing.dp.search(..., accept_waits=True) "
+                            "(tests, bench/dp_grid.py)")
+
+
+def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None,
+           accept_waits: bool = False):
+    """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with and
+    `incumbent` that plan (nodes, rpm_idx) when known (the registry passes its incumbent solver's, solvers._dp).
+    The grid DP (options.slot_h) prunes only with plans it can sail in its own space: the baseline and
+    `incumbent`, each with the waits of the grid; it runs only for a caller that carries waits (`accept_waits`)."""
     from pipeline.routing.baseline import evaluate
 
+    if options.slot_h is not None:
+        if not accept_waits:
+            refuse_waits(options)
+        from pipeline.routing.dp_grid import search_grid, wait_hours
+
+        if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0 or not (options.wait_tph or 0.0) >= 0.0:
+            raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0, got {options.slot_h}, "
+                             f"{options.max_wait_h} and {options.wait_tph}")
+        plans = [(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []
+        if incumbent is not None:
+            plans.append(incumbent)
+        nodes, rpm_idx, slots, cost, n_legs = search_grid(
+            inst, plans, slot_h=float(options.slot_h), max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
+            gap=float(options.gap), bounds=finish_bounds(inst), ld=latest_departures(inst))
+        if nodes is None:
+            return Found(None, None, n_legs)
+        return Found(nodes, rpm_idx, n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, float(options.slot_h)))
     if options.bucket_h is not None:
         nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
                                                     inst.objective)

@@ -1,0 +1,286 @@
+"""Exact DP when the weather changes in time: departures from every node on a time grid, waiting allowed.
+
+Why: the label DP of dp.py drops a label B when an earlier label A has no more fuel. That is exact only when the
+rest of the voyage costs the same from either start time. Under a passing storm it does not. A weather limit
+(Hs or wind over the vessel's) can block a leg started at 116.7 h and leave it open at 118.7 h, and a later
+start behind a storm can burn less. Here no such assumption is made.
+
+Decision space: a node per line and an engine setting per leg, as everywhere, plus **when the ship leaves each
+node**. Departures are on the grid t_dep + k·`slot_h`. A ship that reaches a node between two grid times waits
+(heaves to, drifting at `wait_tph` t/h) until the next one. It may also wait up to `n_wait` more slots there
+(waiting in front of a storm). Waiting at the departure node is allowed the same way. The arrival at the last
+line is not rounded: the voyage ends when the ship gets there.
+
+Exact: a state is (line, node, departure slot). Two partial plans in the same state have the same futures:
+same place, same departure time, and the fuel so far is all that differs. So the DP keeps one label per state
+(the least fuel) and drops nothing else. The optimum over this space is found; `tests/test_routing_exact.py`
+checks it against exhaustive enumeration of the same space (every route × setting × wait). The price is that
+no two departure times are merged: the work grows with the number of slots a node can be left in.
+
+Bounds (certified; they never drop a label of an optimal plan, as in dp.py):
+  incumbent   `upper`: the cost of a known plan of this space (a wait-free plan sailed with the rounding waits,
+              `grid_sail_nb`). With `gap` > 0, a label is dropped when even its lower bound is above
+              upper / (1 + gap). The plan returned (the DP's or the incumbent) is then within (1 + gap) of the
+              optimum.
+  deadline    with an on-time incumbent, a label must be able to leave its node by the node's latest departure
+              that still makes the RTA (dp.latest_departures; waiting only delays).
+  fuel        dp.finish_bounds: fuel so far + the least fuel to finish in the hours left (the hours left start at
+              the departure slot; waiting burns ≥ 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from pipeline.routing import geodesy as geo
+from pipeline.routing.dp import _grow, _priced_out, fuel_to_finish_lb
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb
+from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
+
+EARLY_SLOT = -1  # grid_sail_nb: a departure slot before the ship reaches the node
+
+
+@numba.njit(cache=True)
+def first_slot(t_h, t_dep_h, slot_h):
+    """The first grid slot k (departure t_dep_h + k·slot_h) at or after t_h; 1e-9 h of rounding is forgiven."""
+    return max(0, int(math.ceil((t_h - t_dep_h) / slot_h - 1e-9)))
+
+
+@numba.njit(cache=True)
+def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, slot_h, wait_tph):
+    """(code, hours, fuel) of a plan of the grid space: leave line i's node at slot slots[i] and sail its leg at
+    rpm_idx[i]; code is a leg_kernel code, or EARLY_SLOT when a slot is before the ship is there. slots[i] < 0:
+    the first slot after arriving (no extra wait). `slots` is filled with the slots used."""
+    lat, lon = g.lat, g.lon
+    out = np.empty(N_LEG_OUT)
+    t, fuel = o.t_dep_h, 0.0
+    L2 = nodes.shape[0]
+    for i in range(L2 - 1):
+        k0 = first_slot(t, o.t_dep_h, slot_h)
+        k = k0 if slots[i] < 0 else slots[i]
+        if k < k0:
+            return EARLY_SLOT, math.nan, math.nan
+        slots[i] = k
+        td = o.t_dep_h + k * slot_h
+        fuel += wait_tph * (td - t)
+        a, b = nodes[i], nodes[i + 1]
+        if not g.edge_ok[i, a, b]:
+            return NO_EDGE, math.nan, math.nan
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], td, v.rpm_options[rpm_idx[i]], v, w, out)
+        if out[CODE] != OK:
+            return int(out[CODE]), math.nan, math.nan
+        t = td + out[H]
+        fuel += out[FUEL]
+        if t - o.t_dep_h > o.max_hours:
+            return TOO_LONG, math.nan, math.nan
+    return OK, t - o.t_dep_h, fuel
+
+
+@numba.njit(cache=True)
+def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, slot_h, n_wait, wait_tph):
+    """(nodes, rpm indexes, departure slots, cost, legs sailed, labels kept) of the best plan of the grid space
+    costing less than `upper` (cost inf when there is none); labels whose lower bound is above `prune_at`
+    (≤ upper; upper / (1 + gap) for a certified gap) are dropped. Bound tables as in dp.dp_exact_nb."""
+    lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
+    t_dep_h, max_hours = o.t_dep_h, o.max_hours
+    L2, P = lat.shape
+    R = rpm_options.shape[0]
+    c = P // 2
+    on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
+    deadline = t_dep_h + (o.t_req_h if on_time else max_hours)
+    tol = 1e-9 * max(1.0, abs(prune_at))
+    # kept labels of every line: node, departure slot, fuel at departure, parent label, setting of the leg to it
+    cap = 1024
+    kk, kf = np.empty(cap, np.int64), np.empty(cap)
+    kpar, knode, kr = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
+    n_kept = 0
+    for q in range(n_wait + 1):  # leave at once, or wait at the departure node
+        td = t_dep_h + q * slot_h
+        if on_time and td > ld[0, c]:
+            break
+        kk[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = q, wait_tph * q * slot_h, -1, c, -1
+        n_kept += 1
+    line_lo, line_hi = 0, n_kept
+    ccap = 1024
+    ck, cf = np.empty(ccap, np.int64), np.empty(ccap)
+    cpar, cnode, cr = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
+    out = np.empty(N_LEG_OUT)
+    n_legs = 0
+    best, best_par, best_r = upper, -1, -1
+    for i in range(L2 - 1):
+        last = i + 1 == L2 - 1
+        n_c = 0
+        for j in range(line_lo, line_hi):
+            a, f0 = knode[j], kf[j]
+            t0 = t_dep_h + kk[j] * slot_h
+            for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                if not edge_ok[i, a, a2]:
+                    continue
+                d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
+                for r in range(R):
+                    t1 = t0 + d_nm * tau[i, a, r]  # the leg at its least hours and fuel first
+                    if on_time and t1 > ld[i + 1, a2]:
+                        continue
+                    lb = f0 + d_nm * phi[i, a, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                                                                      deadline - t1)
+                    if _priced_out(o, lb, prune_at, tol, on_time):
+                        continue
+                    sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
+                    n_legs += 1
+                    if out[CODE] != OK:
+                        continue
+                    t1 = t0 + out[H]
+                    if t1 - t_dep_h > max_hours:
+                        continue
+                    f1 = f0 + out[FUEL]
+                    if last:
+                        q = route_cost_nb(o, t1 - t_dep_h, f1)
+                        if q < best:
+                            best, best_par, best_r = q, j, r
+                        continue
+                    k1 = first_slot(t1, t_dep_h, slot_h)
+                    for k in range(k1, k1 + n_wait + 1):
+                        td = t_dep_h + k * slot_h
+                        if td - t_dep_h > max_hours or (on_time and td > ld[i + 1, a2]):
+                            break
+                        fw = f1 + wait_tph * (td - t1)
+                        lb = fw + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - td)
+                        if _priced_out(o, lb, prune_at, tol, on_time):
+                            break  # a later slot burns no less and has fewer hours left
+                        if n_c >= ck.shape[0]:
+                            ck, cf = _grow(ck, n_c + 1), _grow(cf, n_c + 1)
+                            cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
+                        ck[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = k, fw, j, a2, r
+                        n_c += 1
+        if last or n_c == 0:
+            break
+        # one label per (node, slot): the least fuel (the first of equals, in the order generated)
+        k_lo, k_hi = ck[:n_c].min(), ck[:n_c].max()
+        span = k_hi - k_lo + 1
+        pick = np.full(P * span, -1, np.int64)
+        for q in range(n_c):
+            s = cnode[q] * span + ck[q] - k_lo
+            if pick[s] < 0 or cf[q] < cf[pick[s]]:
+                pick[s] = q
+        line_lo = n_kept
+        for s in range(P * span):
+            q = pick[s]
+            if q < 0:
+                continue
+            if n_kept >= kk.shape[0]:
+                kk, kf = _grow(kk, n_kept + 1), _grow(kf, n_kept + 1)
+                kpar, knode, kr = _grow(kpar, n_kept + 1), _grow(knode, n_kept + 1), _grow(kr, n_kept + 1)
+            kk[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = ck[q], cf[q], cpar[q], cnode[q], cr[q]
+            n_kept += 1
+        line_hi = n_kept
+    nodes = np.full(L2, c, np.int64)
+    rpm_idx = np.zeros(L2 - 1, np.int64)
+    slots = np.zeros(L2 - 1, np.int64)
+    if best_par < 0:
+        return nodes, rpm_idx, slots, np.inf, n_legs, n_kept
+    rpm_idx[L2 - 2] = best_r
+    j = best_par
+    for i in range(L2 - 2, -1, -1):
+        nodes[i] = knode[j]
+        slots[i] = kk[j]
+        if i > 0:
+            rpm_idx[i - 1] = kr[j]
+        j = kpar[j]
+    return nodes, rpm_idx, slots, best, n_legs, n_kept
+
+
+def wait_rate_tph(inst, wait_tph: float | None) -> float:
+    """The fuel rate while waiting (t/h): as given, else the model's calm-water rate at the lowest setting (a ship
+    hove to keeps steerage way at its slowest engine order)."""
+    if wait_tph is not None:
+        return float(wait_tph)
+    p = inst.problem
+    return float(p.model.fuel_tph(float(inst.rpm_options[0]), p.draft_m, p.trim_m))
+
+
+def grid_plan_cost(inst, nodes, rpm_idx, slot_h: float, wait_tph: float, slots=None) -> tuple[float, np.ndarray]:
+    """(cost, slots) of a plan in the grid space; `slots` None: each node left at the first slot after arriving
+    (how a wait-free plan becomes a plan of this space). Cost inf when it cannot be sailed so."""
+    L2 = len(nodes)
+    s = np.full(L2 - 1, -1, np.int64) if slots is None else np.array(slots, np.int64)
+    code, hours, fuel = grid_sail_nb(np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s, inst.graph,
+                                     inst.vessel, inst.wx, inst.objective, float(slot_h), float(wait_tph))
+    if code != OK:
+        return math.inf, s
+    return float(route_cost_nb(inst.objective, hours, fuel)), s
+
+
+def wait_hours(inst, nodes, rpm_idx, slots, slot_h: float) -> np.ndarray:
+    """Hours waited at each line's node before its leg (line 0: at the departure), for the plan's slots."""
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    out = np.empty(N_LEG_OUT)
+    t = o.t_dep_h
+    waits = np.zeros(len(nodes) - 1)
+    for i in range(len(nodes) - 1):
+        td = o.t_dep_h + int(slots[i]) * slot_h
+        waits[i] = td - t
+        a, b = int(nodes[i]), int(nodes[i + 1])
+        sail_leg_nb(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], td,
+                    v.rpm_options[int(rpm_idx[i])], v, w, out)
+        t = td + out[H]
+    return waits
+
+
+def waited_plan_cost(inst, nodes, rpm_idx, wait_h, wait_tph: float) -> float:
+    """Cost of a plan that waits wait_h[i] (h) at line i's node, burning wait_tph, before sailing its leg."""
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    out = np.empty(N_LEG_OUT)
+    t, fuel = o.t_dep_h, 0.0
+    for i in range(len(nodes) - 1):
+        t += float(wait_h[i])
+        fuel += wait_tph * float(wait_h[i])
+        a, b = int(nodes[i]), int(nodes[i + 1])
+        sail_leg_nb(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], t, v.rpm_options[int(rpm_idx[i])], v,
+                    w, out)
+        if out[CODE] != OK:
+            return math.inf
+        t += out[H]
+        fuel += out[FUEL]
+    return float(route_cost_nb(o, t - o.t_dep_h, fuel))
+
+
+def _incumbents(plans, n_settings: int):
+    """The wait-free plans given, and on each of their routes every setting held throughout and the given settings
+    one step faster: the rounding waits make a plan that was just on time late, and a late incumbent prunes
+    next to nothing, so one that still makes the RTA is worth a few more sails."""
+    for nodes, rpm_idx in plans:
+        if nodes is None:
+            continue
+        nodes, rpm_idx = np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64)
+        yield nodes, rpm_idx
+        yield nodes, np.minimum(rpm_idx + 1, n_settings - 1)
+        for r in range(n_settings):
+            yield nodes, np.full(len(rpm_idx), r, np.int64)
+
+
+def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: float | None, gap: float,
+                bounds, ld) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, float, int]:
+    """(nodes, rpm_idx, slots, cost, legs sailed) of the best plan of the grid space, within (1 + gap) of its
+    optimum; `plans` are known wait-free plans (nodes, rpm_idx), each sailed with the rounding waits as the
+    incumbent; `bounds` = dp.finish_bounds(inst), `ld` = dp.latest_departures(inst)."""
+    rate = wait_rate_tph(inst, wait_tph)
+    n_wait = int(math.floor(max_wait_h / slot_h + 1e-9))
+    inc_cost, inc = math.inf, None
+    for nodes, rpm_idx in _incumbents(plans, len(inst.rpm_options)):
+        q, s = grid_plan_cost(inst, nodes, rpm_idx, slot_h, rate)
+        if q < inc_cost:
+            inc_cost, inc = q, (np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s)
+    lams, m_lam, t_min, tau, phi = bounds
+    upper = inc_cost * (1.0 + 1e-12) + 1e-12 if math.isfinite(inc_cost) else math.inf
+    prune_at = upper / (1.0 + gap) if gap > 0.0 else upper
+    nodes, rpm_idx, slots, cost, n_legs, _ = dp_grid_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper,
+                                                        prune_at, lams, m_lam, t_min, tau, phi, ld, float(slot_h),
+                                                        n_wait, rate)
+    if math.isfinite(cost) and cost < inc_cost:
+        return nodes, rpm_idx, slots, float(cost), n_legs
+    if inc is None:
+        return None, None, None, math.inf, n_legs
+    return inc[0], inc[1], inc[2], inc_cost, n_legs

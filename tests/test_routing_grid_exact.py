@@ -1,0 +1,189 @@
+"""The grid DP (dp_grid.py) against exhaustive enumeration of its own decision space on small graphs.
+
+The space: a node per line, an engine setting per leg, and at each node a departure on the grid
+t_dep + k·slot_h: the first slot after arriving, or up to `n_wait` slots later (waiting at `wait_tph`). The
+enumeration below walks every route × setting × wait depth first with the legs' kernel and the objective; it
+shares nothing with the DP but those. The DP keeping every state must equal it to rounding, and the DP with a
+gap must be within that gap. Weather: static, storms moving across the route (with and without Hs/wind limits),
+a storm whose limits close the route and then open it as it moves away, currents; loose, tight and impossible
+RTAs (least late); both objectives; two to five settings."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from tests.routing_cases import field, moving_storm, problem, wavy
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing.baseline import baseline as find_baseline, evaluate
+from pipeline.routing.dp import DpOptions
+from pipeline.routing.objectives import LATE_STEP_T, route_cost_nb
+from pipeline.routing.savings import solver_instance
+from pipeline.routing.solvers import SOLVERS
+
+DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm ≈ 57 h, 100 rpm ≈ 40 h in calm water
+GAP = 0.02
+
+
+@numba.njit(cache=True)
+def _enumerate_nb(g, v, w, o, slot_h, n_wait, wait_tph):
+    """Least cost over every plan of the grid space (inf: none), depth first."""
+    L2, P = g.lat.shape
+    R = v.rpm_options.shape[0]
+    c = P // 2
+    n_choice = (n_wait + 1) * P * R
+    choice = np.full(L2, -1, np.int64)
+    t = np.zeros(L2)
+    f = np.zeros(L2)
+    node = np.zeros(L2, np.int64)
+    t[0], node[0] = o.t_dep_h, c
+    out = np.empty(lk.N_LEG_OUT)
+    best = np.inf
+    i = 0
+    while i >= 0:
+        choice[i] += 1
+        if choice[i] >= n_choice:
+            i -= 1
+            continue
+        q, b, r = choice[i] // (P * R), (choice[i] // R) % P, choice[i] % R
+        if (i == L2 - 2 and b != c) or not g.edge_ok[i, node[i], b]:
+            continue
+        k = max(0, int(math.ceil((t[i] - o.t_dep_h) / slot_h - 1e-9))) + q
+        td = o.t_dep_h + k * slot_h
+        if td - o.t_dep_h > o.max_hours:
+            continue
+        fw = f[i] + wait_tph * (td - t[i])
+        lk.sail_leg_nb(g.lat[i, node[i]], g.lon[i, node[i]], g.lat[i + 1, b], g.lon[i + 1, b], td, v.rpm_options[r],
+                       v, w, out)
+        if out[lk.CODE] != lk.OK or td + out[lk.H] - o.t_dep_h > o.max_hours:
+            continue
+        if i == L2 - 2:
+            best = min(best, route_cost_nb(o, td + out[lk.H] - o.t_dep_h, fw + out[lk.FUEL]))
+            continue
+        t[i + 1], f[i + 1], node[i + 1] = td + out[lk.H], fw + out[lk.FUEL], b
+        i += 1
+        choice[i] = -1
+    return best
+
+
+def _sail_with_waits(inst, nodes, rpm_idx, wait_h, wait_tph) -> float:
+    """Cost of a plan that waits wait_h[i] at line i's node before its leg (checked on its own, leg by leg)."""
+    g, v, o = inst.graph, inst.vessel, inst.objective
+    t, fuel = o.t_dep_h, 0.0
+    for i in range(len(nodes) - 1):
+        assert wait_h[i] >= -1e-9
+        t += wait_h[i]
+        fuel += wait_tph * wait_h[i]
+        a, b = nodes[i], nodes[i + 1]
+        out = lk.sail_leg(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], t, v.rpm_options[rpm_idx[i]], v,
+                          inst.weather)
+        assert out[lk.CODE] == lk.OK
+        t += out[lk.H]
+        fuel += out[lk.FUEL]
+    return float(route_cost_nb(o, t - o.t_dep_h, fuel))
+
+
+def _weather(kind: str, seed: int):
+    if kind == "static":
+        return field(wavy(seed))
+    if kind == "storm":  # drifting west across the route while the ship sails east
+        return field(moving_storm(seed, 31.5, 206.0, drift_kn=(-12.0, 2.0), hs_peak=7.0), step_h=3, hours=200)
+    if kind == "storm-limit":  # a smaller storm along the north of the corridor, against a 4.5 m limit
+        return field(moving_storm(seed, 32.8, 209.0, drift_kn=(-12.0, 0.0), radius_nm=60.0, hs_peak=6.0), step_h=3,
+                     hours=200)
+    if kind == "storm-window":  # on the departure at first, then moving north-east off the route: closed, then open
+        return field(moving_storm(seed, 30.0, 200.5, drift_kn=(4.0, 8.0), radius_nm=90.0, hs_peak=5.0), step_h=1,
+                     hours=200)
+    if kind == "current":
+        return field(lambda LA, LO: dict(uo=1.2 * np.sin(np.radians(40 * (LA - 30))), vo=0.8 * np.cos(np.radians(30 * LO)),
+                                         swh=2.0 + np.cos(np.radians(20 * LO)), mwd_deg=np.full(LA.shape, 250.0)))
+    raise ValueError(kind)
+
+
+LIMITED = ("storm-limit", "storm-window")
+CASES = []
+for n, (kind, rta, obj, waits) in enumerate(itertools.product(("static", "storm", "current", "storm-limit", "storm-window"),
+                                                              ("loose", "tight", "impossible"), ("jit", "thesis"),
+                                                              ("round", "wait"))):
+    rpms = [(70, 85, 100), (75, 100), (60, 70, 80, 90, 100)][n % 3]
+    CASES.append((kind, rta, obj, waits, rpms, n))
+
+
+def _instance(kind, rta, obj, rpms, n, n_lines):
+    calm_h = {"loose": 75.0, "tight": 48.0, "impossible": 30.0}[rta]  # 100 rpm needs ≈ 40 h in calm water
+    pr = problem(DEP, ARR, calm_h, rpm_options=rpms, objective=obj, n_lines=n_lines, n_points=5, max_shift=2,
+                 d_point_nm=25.0, max_hs_m=4.5 if kind in LIMITED else None,
+                 max_wind_kn=45.0 if kind == "storm-window" else None)
+    space = pr.search_space()
+    inst, base_nodes = solver_instance(pr, space, _weather(kind, n))
+    base = find_baseline(inst, base_nodes)
+    if base.ok:
+        inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)  # as solve() sets it
+    return inst, base
+
+
+@pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASES,
+                         ids=[f"{c[0]}-{c[1]}-{c[2]}-{c[3]}-{len(c[4])}rpm" for c in CASES])
+def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
+    slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)  # "wait": up to 3 slots more at a node
+    n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
+    inst, base = _instance(kind, rta, obj, rpms, n, n_lines)
+    wait_tph = 0.3
+    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, slot_h, int(max_wait_h / slot_h), wait_tph)
+    dp = SOLVERS["dp"]
+    exact = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
+                                                            incumbent=None), accept_waits=True)
+    if not math.isfinite(best):
+        assert exact.nodes is None
+        return
+    assert exact.nodes is not None
+    got = _sail_with_waits(inst, exact.nodes, exact.rpm_idx, exact.wait_h, wait_tph)
+    assert got == pytest.approx(best, rel=1e-12, abs=1e-12), (got, best)
+    assert all(w <= (slot_h + max_wait_h) + 1e-9 for w in exact.wait_h[1:])  # rounding + the extra waits allowed
+    trimmed = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
+                                                              gap=GAP), accept_waits=True)
+    cost = _sail_with_waits(inst, trimmed.nodes, trimmed.rpm_idx, trimmed.wait_h, wait_tph)
+    assert best - 1e-9 <= cost <= best * (1.0 + GAP) + 1e-9, (cost, best)
+    if rta == "impossible":  # least late: every plan is late, the DP compares late plans
+        assert best >= (LATE_STEP_T if obj == "jit" else 9999.9)
+
+
+def test_the_window_cases_open_and_close():
+    """storm-window closes the route's first legs at the start and opens them later: leaving at once is refused
+    by the limit, leaving 4 h later is not. No wait-free plan exists; the grid DP's plan waits at the departure."""
+    fld = _weather("storm-window", 0)
+    ves = lk.vessel(problem(DEP, ARR, 75.0).model, max_hs_m=4.5, max_wind_kn=45.0)
+    leg = (30.0, -160.0, 30.7, -157.5)
+    assert lk.sail_leg(*leg, 6.0, 85.0, ves, fld)[lk.CODE] in (lk.WAVE_LIMIT, lk.WIND_LIMIT)  # 06 UTC: departure
+    assert lk.sail_leg(*leg, 10.0, 85.0, ves, fld)[lk.CODE] == lk.OK
+    for n, rta in itertools.product(range(3), ("loose", "tight")):
+        inst, base = _instance("storm-window", rta, "jit", (70, 85, 100), n, 2)
+        found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=2.0, max_wait_h=12.0, incumbent=None),
+                                     accept_waits=True)
+        wait_free = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
+        assert wait_free.nodes is None  # every wait-free plan meets the storm at the departure
+        assert found.nodes is not None and found.wait_h[0] >= 2.0  # the grid DP's plan waits for it to move on
+
+
+def test_a_caller_that_cannot_carry_waits_is_refused():
+    """solve() sails a plan without waits, so the grid DP through it would report another plan: refused, by name."""
+    from pipeline.routing.problem import RoutingInputError
+    from pipeline.routing.solve import solve
+
+    pr = problem(DEP, ARR, 75.0, n_lines=2, n_points=5, max_shift=2, d_point_nm=25.0)
+    with pytest.raises(RoutingInputError, match="slot_h=1.0.*cannot carry waits"):
+        solve(pr, _weather("static", 0), solver="dp", options=DpOptions(slot_h=1.0))
+
+
+@pytest.mark.parametrize("slot_h, max_wait_h, wait_tph", [(0.0, 0.0, None), (-1.0, 0.0, None), (1.0, -2.0, None),
+                                                      (1.0, 0.0, -0.5)])
+def test_a_grid_that_is_no_grid_is_refused(slot_h, max_wait_h, wait_tph):
+    """A negative waiting rate is refused too: the fuel-to-finish bounds assume waiting burns nothing less than 0."""
+    inst, base = _instance("static", "loose", "jit", (70, 85, 100), 0, 2)
+    opts = DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph, incumbent=None)
+    with pytest.raises(ValueError, match="slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0"):
+        SOLVERS["dp"].search(inst, base, seed=1, options=opts, accept_waits=True)
