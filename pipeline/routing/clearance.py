@@ -144,7 +144,9 @@ def widest_corridor_nm(rule: Clearance, pad_deg: float = 0.5) -> float | None:
     LO = geo.wrap180(LO)
     cap = rule.clearance_nm + 1.0  # beyond that the answer is "more than the clearance": the graph is at fault
     d = distance_to_land_nm(LA, LO, limit_nm=cap)
-    dep_nm, arr_nm = _haversine_nm(LA, LO, rule.dep_lat, rule.dep_lon), _haversine_nm(LA, LO, rule.arr_lat, rule.arr_lon)
+    dep_nm, arr_nm = np.empty(LA.shape), np.empty(LA.shape)
+    _distances_from_nb(LA.ravel(), LO.ravel(), rule.dep_lat, rule.dep_lon, dep_nm.reshape(-1))
+    _distances_from_nb(LA.ravel(), LO.ravel(), rule.arr_lat, rule.arr_lon, arr_nm.reshape(-1))
     near = (dep_nm <= rule.approach_nm) | (arr_nm <= rule.approach_nm)
     sea = d > 0.0
     i0, i1 = np.unravel_index(np.argmin(dep_nm), LA.shape), np.unravel_index(np.argmin(arr_nm), LA.shape)
@@ -162,8 +164,8 @@ def widest_corridor_nm(rule: Clearance, pad_deg: float = 0.5) -> float | None:
     return lo_c
 
 
-def _haversine_nm(lat, lon, lat0: float, lon0: float) -> np.ndarray:
-    """geodesy.gc_distance_nm from (lat0, lon0) to every point of the arrays."""
-    p1, p2 = np.radians(lat), np.radians(lat0)
-    a = np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(np.radians(geo.wrap180(lon0 - lon)) / 2) ** 2
-    return 2.0 * geo.EARTH_RADIUS_NM * np.arcsin(np.minimum(1.0, np.sqrt(a)))
+@numba.njit(cache=True)
+def _distances_from_nb(lat, lon, lat0, lon0, out):
+    """out[k] = geodesy.gc_distance_nm from (lat0, lon0) to (lat[k], lon[k])."""
+    for k in range(lat.size):
+        out[k] = geo.gc_distance_nm(lat0, lon0, lat[k], lon[k])

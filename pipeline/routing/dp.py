@@ -158,6 +158,12 @@ def _priced_out(o, fuel_lb, upper, tol, on_time):
 
 
 @numba.njit(cache=True)
+def time_span_nb(t, t_lo, t_span, buckets):
+    """Which of `buckets` equal spans of [t_lo, t_lo + t_span] the time t falls in (the bucketed DPs' labels)."""
+    return min(int((t - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
+
+
+@numba.njit(cache=True)
 def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, buckets=0, lam_t=0.0):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
@@ -251,7 +257,7 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
             if gk < gmin - eps:
                 gmin = gk
                 if buckets > 0:
-                    b = min(int((ct[k] - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
+                    b = time_span_nb(ct[k], t_lo, t_span, buckets)
                     val = gk + lam_t * ct[k]
                     if b == last_b:  # the span has a label at this node: keep the better one
                         if val < last_val:

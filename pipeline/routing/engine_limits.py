@@ -35,7 +35,8 @@ import numpy as np
 
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import evaluate
-from pipeline.routing.dp import _grow, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures, trim_eps
+from pipeline.routing.dp import (_grow, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures,
+                                 time_span_nb, trim_eps)
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
@@ -213,7 +214,7 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                 continue
             gmin[r] = g
             if buckets > 0:
-                b = min(int((ct[k] - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
+                b = time_span_nb(ct[k], t_lo, t_span, buckets)
                 val = g + lam_t * ct[k]
                 if last_slot[r] >= 0 and last_bucket[r] == b:  # the span has a label: keep the better one
                     if val < last_val[r]:
