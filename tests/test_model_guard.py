@@ -12,15 +12,11 @@ import pytest
 from pipeline.performance import features, mlp
 from pipeline.performance.model import PerformanceModel, model_from_stored, unusable_reason
 from pipeline.performance.refit import refit_vessel
-from tests.test_performance import _nonlinear_reports
+from tests.test_performance import _nonlinear_report_frame
 
 
 def _network():
-    cols, X, Y, truth = _nonlinear_reports(n=360)
-    reports = pd.DataFrame({"imo": 9140607, "ts_utc": pd.date_range("2020-01-01", periods=360, freq="D"), "rpm": cols[0],
-                            "draft_m": cols[1], "trim_m": cols[2], "wind_kn": cols[3], "wind_dir_rel_deg": cols[4], "wave_m": cols[5],
-                            "wave_dir_rel_deg": cols[6], "months_since_drydock": 0.0, "stw_kn": Y[:, 0], "fuel_t": Y[:, 1] * 24,
-                            "hours": 24.0})
+    reports = _nonlinear_report_frame()
     rows, s = refit_vessel(9140607, reports, None, 1, form="mlp")
     coef = np.array(list(json.loads(rows[0]["coefficients"]).values()))
     return rows, s, PerformanceModel("mlp", coef, coef, imo=9140607, version=1, envelope=json.loads(rows[0]["envelope"]))

@@ -552,14 +552,20 @@ def test_mlp_is_seeded_stops_early_on_the_newest_rows_and_learns_what_it_is_show
             assert mlp.forward_nb(p1, *X[i], out) == pytest.approx(pred[i - 300, out], rel=1e-12)
 
 
-def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
-    from pipeline.performance.model import PerformanceModel
-
-    cols, X, Y, truth = _nonlinear_reports(n=360)
-    reports = pd.DataFrame({"imo": 9140607, "ts_utc": pd.date_range("2020-01-01", periods=360, freq="D"), "rpm": cols[0],
+def _nonlinear_report_frame(n=360):
+    """Noon reports of vessel 9140607, one a day from 2020-01-01, built from `_nonlinear_reports`."""
+    cols, _, Y, _ = _nonlinear_reports(n=n)
+    reports = pd.DataFrame({"imo": 9140607, "ts_utc": pd.date_range("2020-01-01", periods=n, freq="D"), "rpm": cols[0],
                             "draft_m": cols[1], "trim_m": cols[2], "wind_kn": cols[3], "wind_dir_rel_deg": cols[4], "wave_m": cols[5],
                             "wave_dir_rel_deg": cols[6], "months_since_drydock": 0.0, "stw_kn": Y[:, 0], "fuel_t": Y[:, 1] * 24,
                             "hours": 24.0})
+    return reports
+
+
+def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
+    from pipeline.performance.model import PerformanceModel
+
+    reports = _nonlinear_report_frame()
     # "best" keeps the physical form: the (monotone) network is not better on the held-out rows here
     rows, s = refit_vessel(9140607, reports, None, 1, form="best")
     assert s["changed"] and s["form"] == "physical" and "mlp speed" in s["reason"] and "thesis speed" in s["reason"]
