@@ -147,7 +147,7 @@ def timed_solve(*args, **kw):
 def bfoa_runs(problem, weather, space, seeds, params: BfoaParams, dp_cost: float) -> list[dict]:
     runs = []
     for seed in seeds:
-        p = timed_solve(problem, weather, solver="bfoa", seed=seed, params=params, space=space)
+        p = timed_solve(problem, weather, solver="bfoa", seed=seed, params=params, space=space, continuous=False)
         runs.append({"seed": seed, "status": p.status, "cost": p.cost, "fuel_t": p.fuel_t, "hours": p.hours,
                      "runtime_s": p.runtime_s, "n_evals": p.n_evals, "gap_pct": 100.0 * (p.cost / dp_cost - 1.0)})
     return runs
@@ -240,7 +240,7 @@ def main() -> int:
               f"{dp['fuel_t']:.2f} t, {dp['hours']:.2f} h, CPU time then {dp['runtime_s']:.1f} s")
     else:
         dp_options = DpOptions(gap=DP_GAP) if a.dp_bucket is None else DpOptions(bucket_h=a.dp_bucket)
-        plan = timed_solve(problem, weather, solver="dp", space=space, options=dp_options)
+        plan = timed_solve(problem, weather, solver="dp", space=space, options=dp_options, continuous=False)
         print(f"{dp_name}: status {plan.status}, cost {plan.cost:.2f}, fuel {plan.fuel_t:.2f} t, {plan.hours:.2f} h, "
               f"CPU time {plan.runtime_s:.1f} s, {plan.n_evals:,} legs sailed")
         if plan.status != "ok":
@@ -257,7 +257,7 @@ def main() -> int:
         print(f"baseline (great circle, the constant rpm that meets the RTA): cost {dp['baseline_cost']:.2f}, fuel {dp['baseline_fuel_t']:.2f} t, "
               f"{dp['baseline_hours']:.2f} h; gap to DP {100 * (dp['baseline_cost'] / dp['cost'] - 1):.2f} %")
     print(savings_and_limits(problem, weather, space))
-    ast = timed_solve(problem, weather, solver="astar", space=space)
+    ast = timed_solve(problem, weather, solver="astar", space=space, continuous=False)
     print(f"A* (α sweep, engine plan per route): status {ast.status}, cost {ast.cost:.2f}, fuel {ast.fuel_t:.2f} t, "
           f"{ast.hours:.2f} h, CPU time {ast.runtime_s:.1f} s; gap to DP {100 * (ast.cost / dp['cost'] - 1):.2f} %")
     astar = {"status": ast.status, "cost": ast.cost, "fuel_t": ast.fuel_t, "hours": ast.hours,

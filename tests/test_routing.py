@@ -551,7 +551,8 @@ def test_dp_equals_exhaustive_search_on_a_tiny_graph():
         pr = problem((32.0, -150.0), (29.0, -142.0), 40, rpm_options=rpms, objective=obj, n_lines=3, n_points=5,
                      max_shift=2)
         space = pr.search_space()
-        dp = solve(pr, fld, solver="dp", space=space)
+        dp = solve(pr, fld, solver="dp", space=space, continuous=False)  # over the settings, as enumerated here
+        smooth = solve(pr, fld, solver="dp", space=space)  # the product's: speeds then refined continuously
         inst, _ = solver_instance(pr, space, fld)  # listed settings + the constant-speed rpm
         inst.f_target = dp.baseline.fuel_t  # as solve() sets it
         best = math.inf
@@ -562,6 +563,7 @@ def test_dp_equals_exhaustive_search_on_a_tiny_graph():
         assert math.isfinite(best)
         assert dp.cost == pytest.approx(best, rel=1e-3), obj
         assert dp.cost >= best - 1e-9
+        assert smooth.cost <= dp.cost + 1e-9 and smooth.hours <= pr.t_req_h + 1e-9  # refining never costs more
 
 
 # ---------------------------------------------------------------------------------------------- objectives

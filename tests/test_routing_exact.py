@@ -71,8 +71,8 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
     pr = problem(DEP, ARR, calm_h, rpm_options=rpms, objective=obj, n_lines=n_lines, n_points=5, max_shift=2,
                  d_point_nm=25.0, max_hs_m=4.5 if kind == "storm-limit" else None)
     space = pr.search_space()
-    plan = solve(pr, fld, solver="dp", space=space)
-    trimmed = solve(pr, fld, solver="dp", space=space, options=DpOptions(gap=GAP))
+    plan = solve(pr, fld, solver="dp", space=space, continuous=False)
+    trimmed = solve(pr, fld, solver="dp", space=space, options=DpOptions(gap=GAP), continuous=False)
     inst, _ = solver_instance(pr, space, fld)  # the settings the DP chooses from: listed + constant-speed rpm
     if plan.baseline.legs:
         inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it
@@ -91,7 +91,7 @@ def _case(kind, rta, obj, rpms, n):
     pr = problem(DEP, ARR, {"loose": 75.0, "tight": 48.0, "impossible": 30.0}[rta], rpm_options=rpms, objective=obj,
                  n_lines=2 if len(rpms) == 5 else 3, n_points=5, max_shift=2, d_point_nm=25.0,
                  max_hs_m=4.5 if kind == "storm-limit" else None)
-    return solve(pr, _weather(kind, n), solver="dp")
+    return solve(pr, _weather(kind, n), solver="dp", continuous=False)
 
 
 def test_the_cases_are_not_trivial():

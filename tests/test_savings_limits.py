@@ -106,8 +106,9 @@ def test_limited_plan_holds_every_setting_and_costs_fuel():
     pr = _voyage(80.0, n_lines=8, n_points=7)
     limits = EngineLimits(min_hold_h=12.0, change_cost_t=0.05)
     space = pr.search_space()
-    free = solve(pr, WEATHER, solver="dp", space=space)
-    held = solve(pr, WEATHER, solver="dp", space=space, limits=limits)
+    # over the settings alone (continuous=False), where every engine plan on a route can be enumerated
+    free = solve(pr, WEATHER, solver="dp", space=space, continuous=False)
+    held = solve(pr, WEATHER, solver="dp", space=space, limits=limits, continuous=False)
     assert min(h for _, h in settings_held_h(free.legs)) < limits.min_hold_h  # the limits bind on this voyage
     runs = settings_held_h(held.legs)
     assert len(runs) == 1 or min(h for _, h in runs) >= limits.min_hold_h - 1e-6
@@ -139,9 +140,14 @@ def test_what_the_limits_cost_is_measured_against_the_best_plan_on_the_route_not
     assert poor.status == "ok"
     best_free = _brute_force(inst, nodes, EngineLimits(0.0, 0.0))
     assert poor.cost > best_free * 1.01  # the poor plan burns clearly more than the best on its route
-    held = _with_limits(inst, poor, nodes, EngineLimits(12.0, 0.05))
+    held = _with_limits(inst, poor, nodes, EngineLimits(12.0, 0.05), continuous=False)
     assert held.unlimited_fuel_t == pytest.approx(best_free, rel=1e-3)  # jit on time: cost = fuel
     assert 0.0 <= held.limits_fuel_t < poor.fuel_t - best_free
+    # with continuous speed the reference is at least as good as every plan over the settings, and still no dearer
+    # than the held plan: the limits never look like a saving
+    smooth = _with_limits(inst, poor, nodes, EngineLimits(12.0, 0.05))
+    assert smooth.unlimited_fuel_t <= best_free + 1e-9
+    assert 0.0 <= smooth.limits_fuel_t and smooth.fuel_t <= held.fuel_t + 1e-9
 
 
 def test_honest_baseline_arrives_at_the_rta_and_the_split_adds_up():

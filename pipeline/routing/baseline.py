@@ -97,7 +97,8 @@ def sail_constant(inst, nodes: np.ndarray, rpm: float) -> tuple[float, float]:
 
 def constant_rpm_for_rta(inst, nodes: np.ndarray, tol_h: float = 1e-5) -> tuple[float, float, float] | None:
     """(rpm, hours, fuel) of the one constant rpm between the allowed extremes that arrives at the RTA on `nodes`
-    (bisection: hours fall as rpm rises); None when the route cannot be sailed at the extremes."""
+    (bisection: hours fall as rpm rises; when it lies in one of the engine's barred ranges, the top of that range);
+    None when the route cannot be sailed at the extremes."""
     lo, hi = float(inst.rpm_options[0]), float(inst.rpm_options[-1])
     t_req = inst.problem.t_req_h
     h_lo, f_lo = sail_constant(inst, nodes, lo)
@@ -115,6 +116,10 @@ def constant_rpm_for_rta(inst, nodes: np.ndarray, tol_h: float = 1e-5) -> tuple[
             lo = mid
         if t_req - h_hi <= tol_h:
             break
+    for b_lo, b_hi in inst.problem.barred_rpm:
+        if b_lo < hi < b_hi:  # the engine cannot be held there: the top of the barred range, arriving early
+            h_b, f_b = sail_constant(inst, nodes, b_hi)
+            return (b_hi, h_b, f_b) if math.isfinite(h_b) else None
     return hi, h_hi, f_hi
 
 

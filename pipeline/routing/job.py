@@ -76,7 +76,7 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
     o = job.options
     options = solver_spec(o.solver).make_options(o.solver_overrides())
     plan = solve(problem, weather, solver=o.solver, seed=o.seed, options=options, space=space, limits=o.limits,
-                 savings=True)
+                 savings=True, continuous=o.continuous_speed)
     for note in (problem.rpm_note, problem.model.envelope_note(plan.legs, problem.draft_m)):
         if note:
             plan.reason = f"{plan.reason}; {note}" if plan.reason else note

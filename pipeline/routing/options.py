@@ -39,6 +39,9 @@ class RoutingOptions:
     # change costs this much fuel in the objective (0 and 0: the solver's plan as found, a setting per leg)
     min_engine_hold_h: float = 12.0
     engine_change_cost_t: float = 0.05
+    # speed between the lowest and the highest allowed rpm, refined per run of a setting after the search
+    # (continuous_speed.py); False: plans use only the listed settings and the constant rpm meeting the RTA
+    continuous_speed: bool = True
 
     def __post_init__(self):
         if self.solver not in SOLVER_NAMES:

@@ -79,6 +79,8 @@ class RoutingProblem:
     land_clearance_nm: float = 2.0  # legs keep this far from land, except within port_approach_nm of a port
     port_approach_nm: float = 10.0
     rpm_note: str | None = None  # why allowed rpm settings were clipped to the model's range (said on the plan)
+    # the engine's barred speed ranges: open intervals (lo, hi) of rpm it must not be held in (continuous_speed.py)
+    barred_rpm: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "depart_utc", np.datetime64(self.depart_utc, "s"))
@@ -93,6 +95,16 @@ class RoutingProblem:
             raise RoutingInputError(f"voyage {self.voyage_id}: RTA {self.rta_utc} is {self.t_req_h / 24:.0f} days after departure "
                                     f"{self.depart_utc}, more than the {MAX_VOYAGE_H / 24:.0f} days a voyage can plausibly take; "
                                     "check the RTA (its year)")
+        barred = tuple(sorted((float(lo), float(hi)) for lo, hi in self.barred_rpm))
+        if any(not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo < hi) for lo, hi in barred):
+            raise RoutingInputError(f"voyage {self.voyage_id}: barred rpm ranges must be (low, high) with 0 ≤ low < high, "
+                                    f"got {self.barred_rpm}")
+        object.__setattr__(self, "barred_rpm", barred)
+        inside = [r for r in rpm if any(lo < r < hi for lo, hi in barred)]
+        if inside:
+            raise RoutingInputError(f"voyage {self.voyage_id}: allowed rpm setting(s) {', '.join(f'{r:g}' for r in inside)} "
+                                    f"lie in the engine's barred range(s) "
+                                    f"{', '.join(f'{lo:g}-{hi:g}' for lo, hi in barred)}")
         if self.objective not in OBJECTIVES:
             raise RoutingInputError(f"voyage {self.voyage_id}: unknown objective {self.objective!r}; use one of {sorted(OBJECTIVES)}")
 

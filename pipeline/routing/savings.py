@@ -8,9 +8,9 @@ weather and model (the slowest setting when even that arrives early; the fastest
 time; baseline.constant_rpm_for_rta). solve.py adds that rpm to the settings every solver may use, so it is
 the plan's `baseline` too. Against its fuel F_b:
 
-    speed profile  (F_b − F_p) / F_b   F_p: the best engine plan over the settings on the base route (under the
-                                       same engine-change limits as the plan, when it has them); ≥ 0, as the
-                                       constant-speed voyage is one of those plans
+    speed profile  (F_b − F_p) / F_b   F_p: the best engine plan on the base route, its speeds refined continuously
+                                       (continuous_speed.py; under the same engine-change limits as the plan, when
+                                       it has them); ≥ 0, as the constant-speed voyage is one of those plans
     route          (F_p − F) / F_b     F: the plan's fuel
     total          (F_b − F) / F_b     = speed profile + route
 """
@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
+from pipeline.routing.continuous_speed import as_settings, refine_rpm
 from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, EngineLimits, best_engine_plan, limited_plan
 from pipeline.routing.problem import Instance
 
@@ -43,15 +44,32 @@ class SavingsSplit:
     total_pct: float
 
 
-def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | None = None) -> tuple[np.ndarray, float]:
-    """(rpm index per leg, cost) of the best engine plan on the base route, under `limits` when they are active
-    (within 0.1 % of the best, never dearer than a setting held throughout; cost includes the change costs; inf:
-    none can be sailed)."""
+def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | None = None,
+                 continuous: bool = True) -> tuple[np.ndarray, float]:
+    """(rpm per leg, cost) of the best engine plan on the base route, under `limits` when they are active
+    (within 0.1 % of the best over the settings, never dearer than a setting held throughout), its speeds refined
+    continuously with `continuous` (continuous_speed.refine_rpm); cost includes the change costs; inf: none can be
+    sailed."""
+    hold, change = 0.0, 0.0
     if limits is not None and limits.active:
         best = limited_plan(inst, base_nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
-        return best.rpm_idx, best.cost
-    rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
-    return rpm_idx, cost
+        rpm_idx, cost = best.rpm_idx, best.cost
+        hold, change = limits.min_hold_h, limits.change_cost_t
+    else:
+        rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
+    rpm = inst.rpm_options[rpm_idx]
+    if continuous and math.isfinite(cost):
+        refined = refine_rpm(inst, base_nodes, rpm, min_hold_h=hold, change_cost_t=change,
+                             barred_rpm=inst.problem.barred_rpm)
+        if refined is not None and refined.cost < cost:
+            rpm, cost = refined.rpm, refined.cost
+    return rpm, float(cost)
+
+
+def fuel_of(inst: Instance, nodes: np.ndarray, rpm_per_leg: np.ndarray) -> float:
+    """Fuel (t) of the route sailed at rpm_per_leg[i] on leg i."""
+    at, rpm_idx = as_settings(inst, rpm_per_leg)
+    return float(evaluate(at, nodes, rpm_idx)[2])
 
 
 def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float, limits: EngineLimits | None = None,
@@ -65,10 +83,10 @@ def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float, limits:
     if base is None:
         return None
     rpm, hours, f_b = base
-    rpm_idx, cost = profile if profile is not None else profile_plan(inst, base_nodes, limits)
+    profile_rpm, cost = profile if profile is not None else profile_plan(inst, base_nodes, limits)
     if not math.isfinite(cost):
         return None
-    f_p = evaluate(inst, base_nodes, rpm_idx)[2]
+    f_p = fuel_of(inst, base_nodes, profile_rpm)
     f = plan_fuel_t
     return SavingsSplit(rpm, f_b, hours, f_p, f, 100.0 * (f_b - f_p) / f_b, 100.0 * (f_p - f) / f_b,
                         100.0 * (f_b - f) / f_b)

@@ -28,7 +28,9 @@ from pipeline.routing.baseline import Baseline, baseline as find_baseline, const
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.clearance import least_clearance_nm, widest_corridor_nm
 from pipeline.routing.dp import DpOptions
-from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, limited_plan, unlimited_cost
+from pipeline.routing.continuous_speed import as_settings, refine_rpm
+from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
+                                            limited_plan)
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import profile_plan, solver_instance, split_of
@@ -126,29 +128,55 @@ def _options(spec, options, params: BfoaParams | None, bucket_h: float | None):
     return options
 
 
-def _unlimited_fuel_t(inst: Instance, nodes, known_cost: float, known_fuel_t: float) -> float:
-    """Fuel of the best engine plan on the route without limits (the route's bucketed DP, pruned by a known
-    plan of that route costing `known_cost` and burning `known_fuel_t`, which it is when nothing beats it)."""
-    _, free_fuel_t = unlimited_cost(inst, nodes, known_cost * (1.0 + 1e-9) + 1e-12, gap=PLAN_GAP,
-                                    buckets=REFERENCE_BUCKETS)
-    return free_fuel_t if np.isfinite(free_fuel_t) else known_fuel_t
+def _unlimited_fuel_t(inst: Instance, nodes, known: list[tuple[float, float, np.ndarray]], continuous: bool) -> float:
+    """Fuel of the best engine plan on the route without limits: the route's bucketed DP over the settings, pruned
+    by the cheapest `known` plan of that route ((cost without change costs, fuel, rpm per leg); it is the answer
+    when nothing beats it), and with `continuous` speed that plan's speeds refined (continuous_speed.refine_rpm,
+    no hold, no change cost)."""
+    cost, fuel_t, rpm = min(known, key=lambda k: k[0])
+    idx, dp_cost, _ = best_engine_plan(inst, nodes, cost * (1.0 + 1e-9) + 1e-12, gap=PLAN_GAP, buckets=REFERENCE_BUCKETS)
+    if np.isfinite(dp_cost) and dp_cost < cost:
+        cost, fuel_t, rpm = dp_cost, float(evaluate(inst, nodes, idx)[2]), inst.rpm_options[idx]
+    if continuous:
+        refined = refine_rpm(inst, nodes, rpm)
+        if refined is not None and refined.cost < cost:
+            fuel_t = refined.fuel_t
+    return fuel_t
 
 
-def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits) -> Plan:
+def _refined(inst: Instance, plan: Plan, nodes, rpm_idx, cost: float, limits: EngineLimits | None):
+    """(instance, rpm index per leg, cost) of the plan with its speeds refined continuously under the limits
+    (continuous_speed.refine_rpm; the same when that finds nothing cheaper than `cost`)."""
+    hold, change = (limits.min_hold_h, limits.change_cost_t) if limits is not None and limits.active else (0.0, 0.0)
+    refined = refine_rpm(inst, nodes, inst.rpm_options[rpm_idx], min_hold_h=hold, change_cost_t=change,
+                         barred_rpm=inst.problem.barred_rpm)
+    if refined is None or not refined.cost < cost:
+        return inst, rpm_idx, cost
+    inst2, idx = as_settings(inst, refined.rpm)
+    return inst2, idx, refined.cost
+
+
+def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, continuous: bool = True) -> Plan:
     """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan, within
-    0.1 % of the best such plan and never dearer than a setting held throughout). For what
-    the limits cost, `unlimited_fuel_t` is the best engine plan on the route without limits, so the limits never
-    seem to save fuel and are not blamed for what the solver left on its route."""
+    0.1 % of the best such plan over the settings and never dearer than a setting held throughout), its speeds then
+    refined continuously (`continuous`). For what the limits cost, `unlimited_fuel_t` is the best engine plan on the
+    route without limits, so the limits never seem to save fuel and are not blamed for what the solver left on its
+    route."""
     held = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
-    limited = _plan(inst, plan.solver, nodes, held.rpm_idx, seed=plan.seed, history=plan.history,
+    at, rpm_idx, cost = _refined(inst, plan, nodes, held.rpm_idx, held.cost, limits) if continuous else \
+        (inst, held.rpm_idx, held.cost)
+    limited = _plan(at, plan.solver, nodes, rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
-    limited.cost = held.cost
+    limited.cost = cost
     limited.limits = limits
-    held_objective = held.cost - limits.change_cost_t * held.n_changes  # a plan without limits too
-    known = (held_objective, held.fuel_t) if held_objective < plan.cost else (plan.cost, plan.fuel_t)
-    limited.unlimited_fuel_t = _unlimited_fuel_t(inst, nodes, *known)
+    rpm_of = lambda p: np.array([leg["rpm"] for leg in p.legs])  # noqa: E731
+    known = [(held.cost - limits.change_cost_t * held.n_changes, held.fuel_t, inst.rpm_options[held.rpm_idx]),
+             (cost - limits.change_cost_t * limited.n_engine_changes, limited.fuel_t, rpm_of(limited))]
+    if plan.legs:
+        known.append((plan.cost, plan.fuel_t, rpm_of(plan)))
+    limited.unlimited_fuel_t = _unlimited_fuel_t(inst, nodes, known, continuous)
     if limited.status == "late" and plan.status == "ok":
         limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
                           f"{limited.hours - inst.problem.t_req_h:.1f} h late (without the limits on time, "
@@ -164,28 +192,31 @@ def solver_spec(solver: str):
 
 
 def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, limits: EngineLimits | None, profile,
-                 t0: float) -> Plan:
-    """The solver's plan, or the constant-speed voyage `baseline` (or `profile`, the best engine plan on the base
-    route under the limits) when that costs less: both are plans of every solver's space, so no plan burns more than
-    sailing at constant speed. The plan kept says so in its reason."""
+                 t0: float, continuous: bool = True) -> Plan:
+    """The solver's plan, or the constant-speed voyage `baseline` (or `profile`, (rpm per leg, cost) of the best
+    engine plan on the base route under the limits) when that costs less: both are plans of every solver's space,
+    so no plan burns more than sailing at constant speed. The plan kept says so in its reason."""
     if not base.ok or not baseline.legs:
         return plan
     const_rpm = baseline.legs[0]["rpm"]
-    candidates = [(f"the base route at constant {const_rpm:.1f} rpm", base.rpm_idx, baseline.cost)]
+    candidates = [(f"the base route at constant {const_rpm:.1f} rpm", inst.rpm_options[base.rpm_idx], baseline.cost)]
     if profile is not None and np.isfinite(profile[1]):
         candidates.append(("the best engine plan on the base route", profile[0], profile[1]))
-    what, rpm_idx, cost = min(candidates, key=lambda c: c[2])
+    what, rpm, cost = min(candidates, key=lambda c: c[2])
     if plan.legs and plan.cost <= cost * (1.0 + 1e-9) + 1e-12:
         return plan
+    at, rpm_idx = as_settings(inst, rpm)
     # the base route's clearance is the baseline's: the legs are not traced against the land again
-    kept = _plan(inst, plan.solver, base.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
+    kept = _plan(at, plan.solver, base.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
                  n_evals=plan.n_evals, clearance_nm=baseline.min_land_clearance_nm)
     if not kept.legs:
         return plan
     if limits is not None and limits.active:
         n_changes = kept.n_engine_changes
         kept.limits = limits
-        kept.unlimited_fuel_t = _unlimited_fuel_t(inst, base.nodes, kept.cost, kept.fuel_t)
+        kept.unlimited_fuel_t = _unlimited_fuel_t(
+            inst, base.nodes, [(kept.cost, kept.fuel_t, rpm),
+                               (cost - limits.change_cost_t * n_changes, kept.fuel_t, rpm)], continuous)
         kept.cost = cost if n_changes else kept.cost
     found = (f"the {plan.solver} plan ({plan.fuel_t:.1f} t, {plan.status}) cost more" if plan.legs
              else f"the {plan.solver} search found no plan ({plan.reason})")
@@ -196,14 +227,16 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
 
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa", seed: int = 1, options=None,
           params: BfoaParams | None = None, space: SearchSpace | None = None, bucket_h: float | None = None,
-          limits: EngineLimits | None = None, savings: bool = False) -> Plan:
+          limits: EngineLimits | None = None, savings: bool = False, continuous: bool = True) -> Plan:
     """Route one voyage. Never raises for a voyage that simply cannot be sailed: the plan says why.
 
     `options` are the solver's own (solvers.SOLVERS[solver].options); `params` (BfoaParams, for bfoa) and
     `bucket_h` (for dp) are shorthands for them. With `limits` (engine_limits.EngineLimits) the solver's route
     gets the best engine plan holding each setting; `savings` adds the split against the constant-speed voyage
     (savings.py) to the plan (fleet and CLI plans always have both, see job.plan_voyage). A `space` laid along
-    another base route than the solver's (`rhumb`) is refused.
+    another base route than the solver's (`rhumb`) is refused. With `continuous` (the product's way) the speeds of
+    the solver's plan and of the best engine plan on the base route are refined continuously between the lowest and
+    the highest allowed rpm (continuous_speed.py); without it plans use only the settings.
     """
     spec = solver_spec(solver)
     opts = _options(spec, options, params, bucket_h)
@@ -220,7 +253,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)
     why_not = _infeasible_reason(base, space)  # what a plan that cannot be sailed says
     baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=why_not)
-    profile = profile_plan(inst, base.nodes, limits) if savings and base.ok else None
+    profile = profile_plan(inst, base.nodes, limits, continuous) if savings and base.ok else None
     if spec.is_baseline:  # the constant-speed voyage itself: the plan just made, compared with nothing
         plan = baseline
         plan.solver = solver
@@ -231,8 +264,13 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not)
         if limits is not None and limits.active and plan.legs:
-            plan = _with_limits(inst, plan, found.nodes, limits)
-        plan = _never_worse(inst, plan, baseline, base, limits, profile, t0)
+            plan = _with_limits(inst, plan, found.nodes, limits, continuous)
+        elif continuous and plan.legs:
+            at, rpm_idx, cost = _refined(inst, plan, found.nodes, found.rpm_idx, plan.cost, None)
+            if cost < plan.cost:
+                plan = _plan(at, solver, found.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
+                             n_evals=plan.n_evals, clearance_nm=plan.min_land_clearance_nm)
+        plan = _never_worse(inst, plan, baseline, base, limits, profile, t0, continuous)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:
         plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits, profile)
