@@ -5,7 +5,8 @@ reason. A refused row is kept with its raw text (`raw`) so it can be fixed and r
 
 Vessels: missing imo/name; `not an integer in imo`; `IMO number fails its check digit`
 (`pipeline.validate_ids.is_valid_imo`); `not a number in <col>`; `not a finite number in <col>`;
-`negative <col>`; `control characters or a line break in <col>` (any text column); `duplicate imo in file`.
+`negative <col>`; `control characters or a line break in <col>` (any text column); `bad barred_rpm` (not
+low-high rpm ranges separated by ';'); `duplicate imo in file`.
 
 Voyages: the voyage ID (`pipeline.validate_ids.voyage_id_problem`); `not an integer in imo`;
 `unknown vessel`; timestamps (ISO 8601 only, `pipeline.timestamps`); positions; `bad rpm_options`;
@@ -98,6 +99,32 @@ def _split(df: pd.DataFrame, r: _Reasons, raw: pd.Series, source: str) -> tuple[
     return good.reset_index(drop=True), bad.reset_index(drop=True)
 
 
+_RANGE = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*-\s*(\d+(?:\.\d*)?)\s*$")
+
+
+def parse_barred_rpm(text) -> tuple[tuple[float, float], ...]:
+    """A vessel's barred rpm ranges from 'low-high' texts separated by ';' (empty: none); ValueError saying why."""
+    if text is None or (isinstance(text, float) and math.isnan(text)) or str(text).strip() in _EMPTY:
+        return ()
+    out = []
+    for part in str(text).split(";"):
+        if not part.strip():
+            continue
+        m = _RANGE.match(part)
+        if not m or not float(m.group(1)) < float(m.group(2)):
+            raise ValueError(f"bad barred_rpm {part.strip()!r} (expected low-high rpm, e.g. 52-60, separated by ';')")
+        out.append((float(m.group(1)), float(m.group(2))))
+    return tuple(sorted(out))
+
+
+def _barred_problem(text) -> str | None:
+    try:
+        parse_barred_rpm(text)
+    except ValueError as e:
+        return str(e)
+    return None
+
+
 def validate_vessels(raw: pd.DataFrame, source: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
     """(good vessel rows, typed; rejected rows with `raw`, `reason`, `source_file`)."""
     absent = [c for c in ("imo", "name") if c not in raw.columns]
@@ -114,6 +141,8 @@ def validate_vessels(raw: pd.DataFrame, source: str = "") -> tuple[pd.DataFrame,
     for c in VESSEL_NUMERIC:
         r.flag(df[c] < 0, f"negative {c}")
     _clean_text(df, [c for c in df.columns if c not in ("imo", *VESSEL_NUMERIC)], r)
+    if "barred_rpm" in df.columns:
+        r.flag_each(df["barred_rpm"].map(_barred_problem))
     r.flag(df["imo"].duplicated(keep="first") & r.reason.isna(), "duplicate imo in file")
     df["name"] = df["name"].astype(str)
     return _split(df, r, raw_rows(raw), source)

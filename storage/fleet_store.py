@@ -42,6 +42,8 @@ def _upsert(db_path: Path, table: str, df: pd.DataFrame, columns: list[str], key
 
 def import_vessels(db_path: Path, df: pd.DataFrame, rejected: pd.DataFrame | None = None) -> int:
     """Upsert good vessel rows; rows refused by validation go to `vessels_rejected` with their reason."""
+    df = df.reindex(columns=VESSEL_COLUMNS)
+    df["barred_rpm"] = df["barred_rpm"].astype(object).where(df["barred_rpm"].notna(), None)  # text, NULL when absent
     n = _upsert(db_path, "vessels", df, VESSEL_COLUMNS, "imo")
     _store_rejected(db_path, "vessels_rejected", rejected, ["imo"])
     return n

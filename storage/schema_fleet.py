@@ -209,4 +209,9 @@ MIGRATIONS: list[Migration] = [
         );
         """,
     ),
+    Migration(
+        "fleet_011_vessel_barred_rpm",
+        # an engine's barred speed ranges, never chosen by the continuous speed refinement (routing)
+        "ALTER TABLE vessels ADD COLUMN IF NOT EXISTS barred_rpm VARCHAR;",
+    ),
 ]

@@ -140,3 +140,26 @@ def test_runs_of_and_split_runs():
     cum_t = np.arange(7) * 10.0  # 10 h a leg
     s, e = split_runs(np.full(6, 80.0), cum_t, 20.0)
     assert s.tolist() == [0, 2, 4] and e.tolist() == [2, 4, 6]
+
+
+def test_barred_ranges_come_from_the_vessels_file_and_move_listed_settings_out():
+    import pandas as pd
+
+    from pipeline.fleet_validate import parse_barred_rpm, validate_vessels
+    from pipeline.routing.voyage import problem_from_voyage
+    from routing_cases import MODEL
+
+    raw = pd.DataFrame({"imo": ["9074729", "9176187", "9223100"], "name": ["A", "B", "C"],
+                        "barred_rpm": ["52-60; 70-72.5", "60-52", ""]})
+    good, bad = validate_vessels(raw)
+    assert good["imo"].tolist() == [9074729, 9223100]
+    assert bad["reason"].tolist() == ["bad barred_rpm '60-52' (expected low-high rpm, e.g. 52-60, separated by ';')"]
+    assert parse_barred_rpm("52-60; 70-72.5") == ((52.0, 60.0), (70.0, 72.5)) and parse_barred_rpm(None) == ()
+    voyage = {"voyage_id": "VB", "imo": 9074729, "dep_lat": DEP[0], "dep_lon": DEP[1], "arr_lat": ARR[0],
+              "arr_lon": ARR[1], "depart_utc": np.datetime64("2020-12-01T06"), "rta_utc": np.datetime64("2020-12-07T06"),
+              "rpm_options": [70.0, 83.0, 100.0]}
+    pr = problem_from_voyage(voyage, MODEL, barred_rpm="80-90")
+    assert pr.rpm_options == (70.0, 80.0, 100.0) and pr.barred_rpm == ((80.0, 90.0),)
+    assert "83 rpm lie in the engine's barred range(s) 80-90: moved to 80" in pr.rpm_note
+    with pytest.raises(RoutingInputError, match="voyage VB: vessel 9074729: bad barred_rpm"):
+        problem_from_voyage(voyage, MODEL, barred_rpm="90-80")

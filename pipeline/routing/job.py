@@ -53,7 +53,7 @@ def routing_problem(job: RouteJob) -> RoutingProblem:
                                base=solver_spec(o.solver).base,
                                window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
                                d_point_nm=o.d_point_nm, land_clearance_nm=o.land_clearance_nm,
-                               port_approach_nm=o.port_approach_nm)
+                               port_approach_nm=o.port_approach_nm, barred_rpm=job.vessel.get("barred_rpm"))
 
 
 def calm_weather(problem: RoutingProblem) -> wf.WeatherField:

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from pipeline.fleet_validate import parse_barred_rpm
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 
@@ -30,13 +31,29 @@ def rpm_options_of(voyage: dict, rpm_max: float | None) -> tuple[float, ...]:
 def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float | None = None, objective: str = "jit",
                         window_h: float = 6.0, n_lines: int | None = None, n_points: int = 21,
                         d_point_nm: float | None = None, land_clearance_nm: float = 2.0,
-                        port_approach_nm: float = 10.0, base: str = "gc") -> RoutingProblem:
+                        port_approach_nm: float = 10.0, base: str = "gc", barred_rpm=None) -> RoutingProblem:
+    """The voyage as a routing problem; `barred_rpm` is its vessel's barred speed ranges (the vessels column as
+    text, or (low, high) pairs): a listed setting inside one is moved to the range's nearer edge, said on the plan."""
     vid = str(voyage.get("voyage_id"))
+    try:
+        barred = parse_barred_rpm(barred_rpm) if barred_rpm is None or isinstance(barred_rpm, str) else tuple(barred_rpm)
+    except ValueError as e:
+        raise RoutingInputError(f"voyage {vid}: vessel {voyage.get('imo')}: {e}") from None
     for k in ("dep_lat", "dep_lon", "arr_lat", "arr_lon"):
         if _num(voyage.get(k)) is None:
             raise RoutingInputError(f"voyage {vid}: {k} is missing")
     # the model is consulted only at engine speeds it was fitted on: settings beyond them are clipped (said on the plan)
     rpm_options, rpm_note = model.clip_rpm_options(rpm_options_of(voyage, rpm_max), f"voyage {vid}")
+    moved = {}
+    for r in rpm_options:
+        for lo, hi in barred:
+            if lo < r < hi:
+                moved[r] = lo if r - lo < hi - r else hi
+    if moved:
+        rpm_options = tuple(sorted({moved.get(r, r) for r in rpm_options}))
+        note = (f"voyage {vid}: setting(s) {', '.join(f'{r:g}' for r in moved)} rpm lie in the engine's barred range(s) "
+                f"{', '.join(f'{lo:g}-{hi:g}' for lo, hi in barred)}: moved to {', '.join(f'{v:g}' for v in moved.values())}")
+        rpm_note = note if rpm_note is None else f"{rpm_note}; {note}"
     model = model.fouled_at(np.datetime64(voyage["depart_utc"], "s"))  # the hull as it will be on the voyage
     return RoutingProblem(
         dep=(float(voyage["dep_lat"]), float(voyage["dep_lon"])), arr=(float(voyage["arr_lat"]), float(voyage["arr_lon"])),
@@ -46,4 +63,4 @@ def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float
         max_wind_kn=_num(voyage.get("max_wind_kn")), objective=objective, window_h=window_h, voyage_id=vid,
         imo=int(voyage["imo"]) if voyage.get("imo") is not None else None, dep_name=str(voyage.get("dep_name") or "departure"),
         arr_name=str(voyage.get("arr_name") or "destination"), n_lines=n_lines, n_points=n_points, d_point_nm=d_point_nm,
-        land_clearance_nm=land_clearance_nm, port_approach_nm=port_approach_nm, base=base)
+        land_clearance_nm=land_clearance_nm, port_approach_nm=port_approach_nm, base=base, barred_rpm=barred)

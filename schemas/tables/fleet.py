@@ -13,6 +13,8 @@ VESSELS = Table('vessels', 'the fleet: one row per vessel', (
     Column('mcr_kw', 'DOUBLE', 'kW', 'maximum continuous rating, kW'),
     Column('rpm_max', 'DOUBLE', 'rpm', 'maximum main engine speed, revolutions per minute'),
     Column('design_fuel_tph', 'DOUBLE', 't/h', 'design fuel consumption, tonnes per hour'),
+    Column('barred_rpm', 'VARCHAR', 'rpm', 'barred main engine speed ranges that must not be held, as low-high rpm '
+           'separated by ";" (e.g. 52-60); empty: none'),
 ), primary_key=('imo',))
 
 # the columns of a noon report, shared by the stored, the refused and the replaced reports
