@@ -43,7 +43,7 @@ def plan_table(plan) -> Table:
         t.add_column(col, justify="right", no_wrap=True)
     for g in plan.legs:
         t.add_row(str(g["leg"]), f"{g['lat0']:.2f},{g['lon0']:.2f}", f"{g['lat1']:.2f},{g['lon1']:.2f}", f"{g['course_deg']:.0f}",
-                  f"{g['dist_nm']:.1f}", f"{g['rpm']:g}", f"{g['stw_kn']:.2f}", f"{g['sog_kn']:.2f}", f"{g['hours']:.2f}",
+                  f"{g['dist_nm']:.1f}", f"{g['rpm']:.1f}", f"{g['stw_kn']:.2f}", f"{g['sog_kn']:.2f}", f"{g['hours']:.2f}",
                   f"{g['fuel_t']:.2f}", g["eta_utc"].strftime("%m-%d %H:%M"), f"{g['wind_kn']:.0f}", f"{g['hs_m']:.1f}",
                   "yes" if g["beyond_forecast"] else "")
     return t
@@ -99,7 +99,7 @@ def register(app: typer.Typer) -> None:
         objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
         calm: bool = typer.Option(False, "--calm", help="Ignore the cube: calm water, no current."),
-        rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel)."),
+        rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel); the search uses them, then each run's rpm is refined anywhere between the lowest and the highest (routing.continuous_speed)."),
         png: Optional[Path] = typer.Option(None, help="Write a map of the route, baseline and weather."),
         convergence: Optional[Path] = typer.Option(None, help="Write the BFOA convergence plot."),
         rtz: Optional[Path] = typer.Option(None, help="Write the plan as RTZ 1.1 (validated against the schema)."),
