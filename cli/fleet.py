@@ -165,8 +165,8 @@ def register(app: typer.Typer) -> None:
     def warm(solver: Optional[list[str]] = typer.Option(None, "--solver",
                                                        help="Solvers to compile (default bfoa, the fleet's; repeat "
                                                             "for more: dp, astar, gc, rhumb).")):
-        """Compile the routing kernels into numba's cache (in the checkout's __pycache__) before the first fleet run;
-        `make install` runs it. Quick when the cache is already warm."""
+        """Compile the refit, fleet-planning and routing kernels into numba's cache (in the checkout's __pycache__)
+        before the first fleet run; `make install` runs it. Quick when the cache is already warm."""
         from flows.jobs.warm import warm_job
         from pipeline.routing.solvers import SOLVERS
 
@@ -176,7 +176,7 @@ def register(app: typer.Typer) -> None:
 
             fail(f"unknown solver(s) {', '.join(unknown)}; use {', '.join(SOLVERS)}")
         out = warm_job(solver or None)
-        console.print("routing kernels ready: " + ", ".join(f"{k} {v:.0f} s" for k, v in out["seconds"].items())
+        console.print("kernels ready: " + ", ".join(f"{k} {v:.0f} s" for k, v in out["seconds"].items())
                       + (" (compiled)" if out["compiled"] else " (from the cache)"))
 
     @app.command()

@@ -1,9 +1,9 @@
-"""`jitroute warm`: compile the refit and routing kernels into numba's cache ahead of the first nightly.
+"""`jitroute warm`: compile the refit, fleet-planning and routing kernels into numba's cache ahead of the first nightly.
 
 numba compiles each kernel on its first call and keeps the machine code in the `__pycache__` folders beside the
 sources (inside the checkout), so later processes load it in milliseconds. Without this step the first voyage on
 every dask worker pays the compilation (minutes on 2 cores) in silence. `make install` runs it; it refits a small
-generated fleet in a throw-away data root and routes one short demo voyage in calm water with each solver asked for, through the same code as a fleet run's worker (exports
+generated fleet in a throw-away data root, plans a small generated fleet by column generation and routes one short demo voyage in calm water with each solver asked for, through the same code as a fleet run's worker (exports
 too), then records a stamp of the sources it compiled, so a fleet run can tell (and say) when the cache is cold.
 """
 
@@ -87,6 +87,15 @@ def _warm_refit() -> None:
         refit_job(data_root=str(root))
 
 
+def _warm_planning() -> None:
+    """Plan a small generated fleet by column generation: compiles the fleet planner's pricing kernel (colgen.py)."""
+    from pipeline.planning import milp, problem
+    from pipeline.synthetic.contracts import random_instance
+
+    vessels, contracts, dist = random_instance(3, 8, seed=1, horizon_days=20, n_ports=5)
+    milp.solve(problem.build(vessels, contracts, dist, fuel_price=600.0), max_labels=3)  # too few: column generation
+
+
 def warm_job(solvers: list[str] | None = None) -> dict:
     """Route one short voyage with each solver (default the fleet's, bfoa) so numba compiles and caches every kernel
     a fleet run needs; returns {solver: seconds} and whether anything had to be compiled."""
@@ -102,6 +111,10 @@ def warm_job(solvers: list[str] | None = None) -> dict:
     _warm_refit()
     seconds["refit"] = round(time.monotonic() - t0, 1)
     LOG.info("refit ready (%.1f s)", seconds["refit"])
+    t0 = time.monotonic()
+    _warm_planning()
+    seconds["planning"] = round(time.monotonic() - t0, 1)
+    LOG.info("fleet planner ready (%.1f s)", seconds["planning"])
     for solver in solvers:
         t0 = time.monotonic()
         res = route_one(_warm_job(solver), None)

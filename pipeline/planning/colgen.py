@@ -15,13 +15,12 @@ vessel lifts at most one column; at the LP optimum (no negative reduced cost lef
 from __future__ import annotations
 
 import time
-from collections import deque
-
+import numba
 import numpy as np
 from scipy import sparse
 from scipy.optimize import linprog
 
-from pipeline.planning.problem import HOURS_PER_DAY, PlanData, schedule
+from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, PlanData, schedule
 from pipeline.planning.routes import Column
 
 EPS = 1e-6
@@ -53,87 +52,173 @@ def solve_lp(data: PlanData, columns: list[Column]) -> tuple[float, np.ndarray, 
     return float(res.fun) + const, duals[:n], duals[n:], res.x
 
 
-def _successors(data: PlanData, k: int) -> dict[object, list[tuple]]:
-    """Per origin ('s' or a contract) of vessel k: (j, ballast hours, j's arc, early_j, late_j, dur_j, the
-    out-of-service credit of j's busy hours); cached on the vessel's arcs. The arc's fuel depends on when the vessel
-    is ready (a ballast leg slows down instead of waiting), so pricing costs it per label (PlanData.leg_cost)."""
+@numba.njit(cache=True)
+def _ballast_fuel_t_nb(nm, ready_h, load_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm):
+    """PlanVessel.ballast_leg's fuel, compiled."""
+    if nm <= 0.0:
+        return 0.0
+    fastest_h = nm / speed_kn
+    depart = max(ready_h, load_h - fastest_h / SLOWEST_BALLAST_SHARE)
+    speed = min(speed_kn, nm / max(load_h - depart, fastest_h))
+    if curve_kn.size == 0:
+        return nm * (fuel_t_per_nm * (speed / speed_kn) ** 2)
+    return nm * np.interp(speed, curve_kn, curve_t_per_nm)
+
+
+@numba.njit(cache=True)
+def _price_nb(prize, mu, start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h,
+              early, late, dur, credit, laden_cost, end_travel_h, end_cost, s_to, s_arrive, s_nm, ptr, to, travel_h,
+              nm):
+    """The label setting of `price` on one vessel's arrays (see _pricing_table). Labels are made and processed in
+    one order (first in, first out), so a label's index is its place in the queue. Returns (least reduced cost,
+    labels of negative reduced cost and their reduced costs, every label's parent and contract)."""
+    m = early.size
+    cap = 1024
+    ready_a = np.empty(cap)
+    rc_a = np.empty(cap)
+    parent_a = np.empty(cap, np.int64)
+    node_a = np.empty(cap, np.int64)
+    alive = np.empty(cap, np.bool_)
+    fcap = 8
+    front = np.empty((m, fcap), np.int64)
+    fn = np.zeros(m, np.int64)
+    n = 0
+    head = -1  # -1: the start arcs, then label `head`
+    while head < n:
+        if head == -1:
+            n_out = s_to.size
+            ready0 = start_h
+            rc0 = 0.0
+        else:
+            if not alive[head]:
+                head += 1
+                continue
+            i = node_a[head]
+            n_out = ptr[i + 1] - ptr[i]
+            ready0 = ready_a[head]
+            rc0 = rc_a[head]
+        for q in range(n_out):
+            if head == -1:
+                j = s_to[q]
+                t = max(s_arrive[q], early[j])
+                d = s_nm[q]
+            else:
+                a = ptr[node_a[head]] + q
+                j = to[a]
+                t = ready0 + travel_h[a]
+                if t < early[j]:
+                    t = early[j]
+                elif t > late[j] + 1e-9:
+                    continue
+                d = nm[a]
+            if prize[j] < -1e17:  # blocked contract
+                continue
+            ready = t + dur[j]
+            rc = rc0 + fuel_price * _ballast_fuel_t_nb(d, ready0, t, speed_kn, fuel_t_per_nm, curve_kn,
+                                                       curve_t_per_nm) + laden_cost[j] - credit[j] - prize[j]
+            dominated = False
+            for f in range(fn[j]):
+                lab = front[j, f]
+                if ready_a[lab] <= ready + 1e-9 and rc_a[lab] <= rc + 1e-9:
+                    dominated = True
+                    break
+            if dominated:
+                continue
+            w = 0
+            for f in range(fn[j]):
+                lab = front[j, f]
+                if ready <= ready_a[lab] + 1e-9 and rc <= rc_a[lab] + 1e-9:
+                    alive[lab] = False
+                else:
+                    front[j, w] = lab
+                    w += 1
+            fn[j] = w
+            if w == fcap:
+                fcap *= 2
+                grown = np.empty((m, fcap), np.int64)
+                grown[:, :w] = front[:, :w]
+                front = grown
+            if n == cap:
+                cap *= 2
+                ready_a = np.concatenate((ready_a, np.empty(n)))
+                rc_a = np.concatenate((rc_a, np.empty(n)))
+                parent_a = np.concatenate((parent_a, np.empty(n, np.int64)))
+                node_a = np.concatenate((node_a, np.empty(n, np.int64)))
+                alive = np.concatenate((alive, np.empty(n, np.bool_)))
+            ready_a[n], rc_a[n], parent_a[n], node_a[n], alive[n] = ready, rc, head, j, True
+            front[j, w] = n
+            fn[j] = w + 1
+            n += 1
+        head += 1
+    best = 0.0
+    found = np.empty(n, np.int64)
+    found_rc = np.empty(n)
+    n_found = 0
+    for j in range(m):
+        for f in range(fn[j]):
+            lab = front[j, f]
+            end = ready_a[lab] + end_travel_h[j]
+            if end > end_limit_h + 1e-9:
+                continue
+            total = rc_a[lab] + end_cost[j] + dc_h * (end - start_h) - mu
+            best = min(best, total)
+            if total < -EPS:
+                found[n_found], found_rc[n_found] = lab, total
+                n_found += 1
+    return best, found[:n_found], found_rc[:n_found], parent_a[:n], node_a[:n]
+
+
+def _pricing_table(data: PlanData, k: int) -> tuple:
+    """Vessel k's arcs as arrays for _price_nb (its contracts renumbered 0..m-1 in `va.contracts` order; successors
+    of each contract in CSR form), cached on the vessel's arcs. The arc's fuel depends on when the vessel is ready
+    (a ballast leg slows down instead of waiting), so pricing costs it per label."""
     va = data.per_vessel[k]
     if va.successors is None:
-        dc_h = data.vessels[k].daily_cost / HOURS_PER_DAY
-        succ: dict[object, list[tuple]] = {}
+        v = data.vessels[k]
+        loc = {j: i for i, j in enumerate(va.contracts)}
+        cs = data.contracts
+        early = np.array([cs[j].early_h for j in va.contracts], float)
+        late = np.array([cs[j].late_h for j in va.contracts], float)
+        dur = np.array([va.dur_h[j] for j in va.contracts], float)
+        laden_cost = np.array([data.fuel_price * va.laden_fuel_t[j] for j in va.contracts], float)
+        end_travel = np.array([va.travel_h[(j, "e")] for j in va.contracts], float)
+        end_cost = np.array([data.fuel_cost(k, va.arcs[(j, "e")]) for j in va.contracts], float)
+        out: dict[object, list[tuple[int, float, float]]] = {}
         for (a, b), nm in va.arcs.items():
             if b != "e":
-                c = data.contracts[b]
-                succ.setdefault(a, []).append((b, va.travel_h[(a, b)], (a, b), c.early_h, c.late_h, va.dur_h[b],
-                                               dc_h * va.dur_h[b]))
-        va.successors = succ
+                out.setdefault(a, []).append((loc[b], va.travel_h[(a, b)], nm))
+        start = out.get("s", [])
+        rest = [out.get(j, []) for j in va.contracts]
+        ptr = np.cumsum([0] + [len(r) for r in rest]).astype(np.int64)
+        flat = [x for r in rest for x in r]
+        curve = np.array(v.ballast_curve, float).reshape(-1, 2)
+        va.successors = (
+            np.array(va.contracts, np.int64),
+            (v.start_h, v.end_h, v.ballast_speed_kn, v.ballast_fuel_t_per_nm, np.ascontiguousarray(curve[:, 0]),
+             np.ascontiguousarray(curve[:, 1]), data.fuel_price, v.daily_cost / HOURS_PER_DAY,
+             early, late, dur, v.daily_cost / HOURS_PER_DAY * dur, laden_cost, end_travel, end_cost,
+             np.array([x[0] for x in start], np.int64), np.array([x[1] for x in start], float),
+             np.array([x[2] for x in start], float), ptr, np.array([x[0] for x in flat], np.int64),
+             np.array([x[1] for x in flat], float), np.array([x[2] for x in flat], float)))
     return va.successors
-
-
-def _sequence(label) -> tuple[int, ...]:
-    seq = []
-    while label is not None:
-        seq.append(label[3])
-        label = label[2]
-    return tuple(reversed(seq))
 
 
 def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) -> tuple[float, list[Column]]:
     """(least reduced cost of a column of vessel k — a lower bound, see the module doc —, up to `max_new` elementary
-    columns of negative reduced cost, cheapest first)."""
-    v, va = data.vessels[k], data.per_vessel[k]
-    dc_h = v.daily_cost / HOURS_PER_DAY
-    prize = {j: data.contracts[j].penalty + pi[j] for j in va.contracts}
-    succ = _successors(data, k)
-    front: dict[int, list[list]] = {j: [] for j in va.contracts}  # label: [ready, rc, parent label, j, alive]
-    queue: deque = deque()
-
-    def offer(j, ready, rc, parent):
-        labs = front[j]
-        for lab in labs:
-            if lab[0] <= ready + 1e-9 and lab[1] <= rc + 1e-9:
-                return
-        keep = []
-        for lab in labs:
-            if ready <= lab[0] + 1e-9 and rc <= lab[1] + 1e-9:
-                lab[4] = False
-            else:
-                keep.append(lab)
-        new = [ready, rc, parent, j, True]
-        keep.append(new)
-        front[j] = keep
-        queue.append(new)
-
-    leg_cost = data.leg_cost
-    for j, travel, arc, early, late, dur, credit in succ.get("s", []):
-        t = max(travel, early)  # start arcs: travel is the arrival time
-        offer(j, t + dur, leg_cost(k, arc, v.start_h, t) - credit - prize[j], None)
-    while queue:
-        lab = queue.popleft()
-        if not lab[4]:
-            continue
-        ready, rc, i = lab[0], lab[1], lab[3]
-        for j, travel, arc, early, late, dur, credit in succ.get(i, ()):
-            t = ready + travel
-            if t < early:
-                t = early
-            elif t > late + 1e-9:
-                continue
-            offer(j, t + dur, rc + leg_cost(k, arc, ready, t) - credit - prize[j], lab)
-    best, found = 0.0, []
-    for j, labs in front.items():
-        for lab in labs:
-            end = lab[0] + va.travel_h[(j, "e")]
-            if end > v.end_h + 1e-9:
-                continue
-            total = lab[1] + data.fuel_cost(k, va.arcs[(j, "e")]) + dc_h * (end - v.start_h) - mu
-            best = min(best, total)
-            if total < -EPS:
-                found.append((total, lab))
-    found.sort(key=lambda x: x[0])
+    columns of negative reduced cost, cheapest first). A contract whose dual is below -1e17 is blocked (no path
+    enters it)."""
+    glob, table = _pricing_table(data, k)
+    if glob.size == 0:
+        return 0.0, []
+    prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]
+    best, found, found_rc, parent, node = _price_nb(prize, float(mu), *table)
     out, seen = [], set()
-    for _, lab in found:
-        seq = _sequence(lab)
+    for lab in found[np.argsort(found_rc, kind="stable")]:
+        seq = []
+        while lab >= 0:
+            seq.append(int(glob[node[lab]]))
+            lab = parent[lab]
+        seq = tuple(reversed(seq))
         if seq in seen or len(set(seq)) != len(seq):
             continue
         seen.add(seq)
@@ -142,7 +227,7 @@ def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) 
             out.append(Column(k, seq, s.cost))
         if len(out) >= max_new:
             break
-    return best, out
+    return float(best), out
 
 
 def reduced_costs(data: PlanData, columns: list[Column], pi: np.ndarray, mu: np.ndarray) -> np.ndarray:
@@ -167,7 +252,7 @@ def round_lp(data: PlanData, columns: list[Column], y: np.ndarray) -> dict[int, 
 
 
 def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.0,
-             max_rounds: int = 200) -> tuple[list[Column], float, bool, tuple]:
+             max_rounds: int = 200, max_new: int = 10) -> tuple[list[Column], float, bool, tuple]:
     """(columns with those priced added, the best proven lower bound on the plan cost, LP optimum reached,
     (π, μ, y) of the last LP)."""
     t0 = time.perf_counter()
@@ -178,7 +263,7 @@ def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.
         z, pi, mu, y = solve_lp(data, columns)
         least, added = 0.0, 0
         for k in range(len(data.vessels)):
-            rc, new = price(data, k, pi, float(mu[k]))
+            rc, new = price(data, k, pi, float(mu[k]), max_new=max_new)
             least += min(0.0, rc)
             for col in new:
                 if (col.k, col.sequence) not in have:
@@ -198,9 +283,11 @@ def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.
 
 def dive(data: PlanData, columns: list[Column], *, time_limit_s: float = 20.0,
          reprice: bool = True) -> tuple[dict[int, tuple[int, ...]], list[Column]]:
-    """A plan by diving on the LP: fix the columns the LP (nearly) takes — those at ≥ DIVE_FIX, else the largest —,
-    drop the vessels and contracts they use, re-solve the LP over what is left (pricing new columns for it when
-    `reprice`), until the LP takes nothing more. Returns (vessel → sequence, columns with those priced added)."""
+    """A plan by diving on the LP: fix the column the LP takes most (and every column it takes whole), drop the
+    vessels and contracts they use, bring the LP over what is left back to its optimum (pricing new columns for it,
+    when `reprice`, until none has a negative reduced cost), and repeat until the LP takes nothing more. Past the
+    time limit the dive stops pricing and fixes every column at ≥ DIVE_FIX at once. Returns (vessel → sequence,
+    columns with those priced added)."""
     t0 = time.perf_counter()
     columns = list(columns)
     have = {(c.k, c.sequence) for c in columns}
@@ -211,24 +298,28 @@ def dive(data: PlanData, columns: list[Column], *, time_limit_s: float = 20.0,
         if not free:
             break
         _, pi, mu, y = solve_lp(data, free)
-        if reprice and time.perf_counter() - t0 < time_limit_s:
+        in_time = time.perf_counter() - t0 < time_limit_s
+        while reprice and in_time:
             blocked = pi.copy()
             blocked[list(taken)] = -1e18  # contracts already lifted: no prize
             added = 0
             for k in range(len(data.vessels)):
                 if k in fixed:
                     continue
-                _, new = price(data, k, blocked, float(mu[k]), max_new=5)
+                _, new = price(data, k, blocked, float(mu[k]))
                 for col in new:
-                    if (col.k, col.sequence) not in have and not taken.intersection(col.sequence):
+                    if (col.k, col.sequence) not in have:
                         have.add((col.k, col.sequence))
                         columns.append(col)
                         free.append(col)
                         added += 1
-            if added:
-                _, pi, mu, y = solve_lp(data, free)
+            if not added:
+                break
+            _, pi, mu, y = solve_lp(data, free)
+            in_time = time.perf_counter() - t0 < time_limit_s
         order = np.argsort(-y, kind="stable")
-        pick = [i for i in order if y[i] >= DIVE_FIX] or ([order[0]] if len(order) and y[order[0]] > 1e-6 else [])
+        whole = 1.0 - 1e-6 if in_time and reprice else DIVE_FIX
+        pick = [i for i in order if y[i] >= whole] or ([order[0]] if len(order) and y[order[0]] > 1e-6 else [])
         progress = False
         for i in pick:
             col = free[i]

@@ -126,16 +126,44 @@ def arc_lower_bound(data: PlanData, *, time_limit_s: float = 60.0, integer: bool
     return float(res.fun) if res.status == 0 else -np.inf
 
 
+def _set_partitioning(data: PlanData, columns: list, time_limit_s: float, mip_rel_gap: float, scale: float):
+    """HiGHS on the set-partitioning MILP over `columns`: (vessel → sequence or None, HiGHS's dual bound on the
+    plan cost over these columns, finished)."""
+    n, V, m = len(data.contracts), len(data.vessels), len(columns)
+    penalty_total = sum(ct.penalty for ct in data.contracts)
+    c = np.array([col.cost - sum(data.contracts[j].penalty for j in col.sequence) for col in columns] + [penalty_total])
+    rows = [V + j for col in columns for j in col.sequence] + [col.k for col in columns]
+    cols_idx = [i for i, col in enumerate(columns) for _ in col.sequence] + list(range(m))
+    A = sparse.csr_array((np.ones(len(rows)), (rows, cols_idx)), shape=(V + n, m + 1))
+    res = milp(c * scale, integrality=np.concatenate([np.ones(m), [0]]),
+               bounds=Bounds(np.concatenate([np.zeros(m), [1.0]]), np.ones(m + 1)),
+               constraints=LinearConstraint(A, -np.inf, 1.0),
+               options={"time_limit": max(1.0, float(time_limit_s)), "mip_rel_gap": float(mip_rel_gap),
+                        "presolve": True})
+    sequences = None if res.x is None else {columns[i].k: columns[i].sequence for i in np.flatnonzero(res.x[:m] > 0.5)}
+    dual = getattr(res, "mip_dual_bound", None)
+    bound = float(dual) / scale if dual is not None and np.isfinite(dual) else -np.inf
+    return sequences, bound, res.status == 0
+
+
 def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.0,
-          max_labels: int = 20_000, init_labels: int = 100) -> FleetPlan:
-    """The least-cost plan of `data`: set partitioning over every vessel's feasible contract sequences
-    (routes.vessel_columns), solved by HiGHS — proven optimal when every vessel's sequences were enumerated (at
-    most `max_labels` partial sequences each) and HiGHS finished. Otherwise the columns are the `init_labels`
-    most promising per vessel plus those column generation prices (colgen.py, up to 45 % of the time left); a dive
-    on the LP (up to 75 % of what is left then), improved by local search (local_search.py), gives a plan, the restricted MILP gets the rest of the time, the
-    better of the two is returned, and `gap` is its proven relative gap to colgen's lower bound. The time limit
+          max_labels: int = 20_000) -> FleetPlan:
+    """The least-cost plan of `data`.
+
+    Small and medium fleets: set partitioning over every vessel's feasible contract sequences
+    (routes.vessel_columns, at most `max_labels` partial sequences per vessel), solved by HiGHS — proven optimal
+    when it finishes within half the time limit. Otherwise (enumeration too big, or HiGHS unfinished): column
+    generation (colgen.generate) reaches the LP optimum of the set-partitioning master over *every* feasible
+    sequence, a proven lower bound; a dive on that LP with pricing at each step (colgen.dive, up to 60 % of the
+    time left), improved by local search (local_search.py), gives a plan; HiGHS then searches the columns priced
+    so far (those whose reduced cost exceeds the gap dropped: they are in no better plan) for the rest of the time.
+    The best plan found is returned with `gap`, its proven relative gap to the best lower bound. The time limit
     covers all of it (HiGHS may overrun it by about a second)."""
     t0 = time.perf_counter()
+
+    def left() -> float:
+        return float(time_limit_s) - (time.perf_counter() - t0)
+
     columns, complete = [], True
     for k in range(len(data.vessels)):
         cols, done = vessel_columns(data, k, max_labels=max_labels)
@@ -143,50 +171,42 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         complete &= done
         if not complete:
             break
-    bound, rounded = -np.inf, None
-    if not complete:
-        columns = [c for k in range(len(data.vessels)) for c in vessel_columns(data, k, max_labels=init_labels)[0]]
-        left = float(time_limit_s) - (time.perf_counter() - t0)
-        columns, bound, _, (pi, mu, y) = colgen.generate(data, columns, time_limit_s=max(1.0, 0.45 * left))
-        left = float(time_limit_s) - (time.perf_counter() - t0)
-        dived, columns = colgen.dive(data, columns, time_limit_s=max(1.0, 0.75 * left))
-        left = float(time_limit_s) - (time.perf_counter() - t0)
-        dived = local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left))
-        rounded = assemble(data, dived, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
-        # reduced-cost fixing: a column whose reduced cost exceeds (rounded plan − bound) is in no better plan
-        rc = colgen.reduced_costs(data, columns, pi, mu)
-        keep = rc <= rounded.cost - bound + 1e-6 * abs(rounded.cost)
-        columns = [col for col, kept in zip(columns, keep) if kept]
-    if not columns:
+    if complete and not columns:
         return assemble(data, {}, solver="milp", status="optimal", gap=0.0, runtime_s=time.perf_counter() - t0)
-    n, V, m = len(data.contracts), len(data.vessels), len(columns)
-    penalty_total = sum(ct.penalty for ct in data.contracts)
-    c = np.array([col.cost - sum(data.contracts[j].penalty for j in col.sequence) for col in columns] + [penalty_total])
-    rows = [V + j for col in columns for j in col.sequence] + [col.k for col in columns]
-    cols_idx = [i for i, col in enumerate(columns) for _ in col.sequence] + list(range(m))
-    A = sparse.csr_array((np.ones(len(rows)), (rows, cols_idx)), shape=(V + n, m + 1))
-    # costs of ~1e7 make HiGHS warn and its heuristics weaker; scaled only for large fleets, as HiGHS's absolute gap
-    # tolerance (1e-6) would then allow a small suboptimality in a plan it calls optimal
-    scale = 1.0 if complete else 1.0 / max(1.0, float(np.abs(c).max()))
-    res = milp(c * scale, integrality=np.concatenate([np.ones(m), [0]]),
-               bounds=Bounds(np.concatenate([np.zeros(m), [1.0]]), np.ones(m + 1)),
-               constraints=LinearConstraint(A, -np.inf, 1.0),
-               options={"time_limit": max(1.0, float(time_limit_s) - (time.perf_counter() - t0)),
-                        "mip_rel_gap": float(mip_rel_gap), "presolve": True})
-    if res.x is None and rounded is None:
-        return assemble(data, {}, solver="milp", status="no plan", gap=np.inf, runtime_s=time.perf_counter() - t0,
-                        n_columns=m, left_reason=f"the planner found no plan within {time_limit_s:g} s ({res.message})")
-    sequences = {} if res.x is None else {columns[i].k: columns[i].sequence for i in np.flatnonzero(res.x[:m] > 0.5)}
-    if rounded is not None and (res.x is None or rounded.cost < assemble(data, sequences, solver="milp", status="",
-                                                                          gap=0.0, runtime_s=0.0).cost):
-        sequences = {s.k: s.sequence for s in rounded.schedules}
+    candidates: list[dict[int, tuple[int, ...]]] = []
+    bound = -np.inf
     if complete:
-        dual = getattr(res, "mip_dual_bound", None)
-        bound = float(dual) / scale if dual is not None and np.isfinite(dual) else -np.inf
-        if res.status == 0 and mip_rel_gap == 0:
-            return assemble(data, sequences, solver="milp", status="optimal", gap=0.0,
-                            runtime_s=time.perf_counter() - t0, n_columns=m)
-    plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0, n_columns=m)
-    gap = max(0.0, (plan.cost - bound) / abs(plan.cost)) if np.isfinite(bound) and plan.cost else np.inf
+        sequences, bound, finished = _set_partitioning(data, columns, 0.5 * left(), mip_rel_gap, 1.0)
+        if finished and sequences is not None:
+            status = "optimal" if mip_rel_gap == 0 else "feasible"
+            plan = assemble(data, sequences, solver="milp", status=status, gap=0.0, runtime_s=0.0,
+                            n_columns=len(columns))
+            gap = 0.0 if mip_rel_gap == 0 else max(0.0, (plan.cost - bound) / abs(plan.cost)) if plan.cost else 0.0
+            return assemble(data, sequences, solver="milp", status=status, gap=gap,
+                            runtime_s=time.perf_counter() - t0, n_columns=len(columns))
+        if sequences is not None:
+            candidates.append(sequences)
+    priced, lp_bound, _, (pi, mu, _) = colgen.generate(data, [], time_limit_s=max(1.0, 0.4 * left()))
+    bound = max(bound, lp_bound)
+    dived, priced = colgen.dive(data, priced, time_limit_s=max(1.0, 0.6 * left()))
+    dived = local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left()))
+    candidates.append(dived)
+    best = min((assemble(data, s, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0) for s in candidates),
+               key=lambda p: p.cost)
+    # reduced-cost fixing: a column whose reduced cost exceeds (best plan − LP bound) is in no better plan (at the LP
+    # optimum; otherwise this only narrows the search)
+    rc = colgen.reduced_costs(data, priced, pi, mu)
+    pool = [col for col, r in zip(priced, rc) if r <= best.cost - lp_bound + 1e-6 * abs(best.cost)]
+    if pool and left() > 1.0:
+        # costs of ~1e7 make HiGHS warn and its heuristics weaker: scaled (its absolute gap tolerance of 1e-6 then
+        # allows a small suboptimality, which the proven gap below accounts for)
+        scale = 1.0 / max(1.0, max(abs(col.cost) for col in pool), max(ct.penalty for ct in data.contracts))
+        sequences, _, _ = _set_partitioning(data, pool, left(), mip_rel_gap, scale)
+        if sequences is not None:
+            plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
+            best = min(best, plan, key=lambda p: p.cost)
+    sequences = {s.k: s.sequence for s in best.schedules}
+    gap = max(0.0, (best.cost - bound) / abs(best.cost)) if np.isfinite(bound) and best.cost else np.inf
     status = "optimal" if gap <= 1e-9 else "feasible"
-    return assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0, n_columns=m)
+    return assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0,
+                    n_columns=len(columns) + len(priced))

@@ -116,7 +116,7 @@ class VesselArcs:
     laden_fuel_t: dict[int, float]  # fuel of the laden leg at the weight lifted
     arcs: dict[tuple, float] = field(default_factory=dict)  # arc → ballast NM
     travel_h: dict[tuple, float] = field(default_factory=dict)  # arc → ballast hours
-    successors: dict | None = None  # colgen's pricing table, built on first use
+    successors: tuple | None = None  # colgen's pricing arrays, built on first use
 
 
 @dataclass

@@ -23,13 +23,15 @@ class Column:
     cost: float  # fuel + out-of-service cost of the vessel lifting `sequence` (problem.schedule's cost)
 
 
-def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000) -> tuple[list[Column], bool]:
-    """(least-cost column per set of contracts vessel k can lift in a feasible order, enumeration complete)."""
+def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000,
+                   among: frozenset[int] | set[int] | None = None) -> tuple[list[Column], bool]:
+    """(least-cost column per set of contracts vessel k can lift in a feasible order — of the contracts `among`
+    only, when given —, enumeration complete)."""
     v, va = data.vessels[k], data.per_vessel[k]
     dc_h = v.daily_cost / HOURS_PER_DAY
     succ: dict[object, list[int]] = {}
     for (a, b) in va.arcs:
-        if b != "e":
+        if b != "e" and (among is None or (b in among and (a == "s" or a in among))):
             succ.setdefault(a, []).append(b)
     best: dict[frozenset, Column] = {}
     # label: (set, last) → [(ready_h, fuel cost so far, busy_h, sequence)]
