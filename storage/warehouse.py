@@ -169,9 +169,12 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
             con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
             verify(con)  # before anything is written to it
             con.execute("RESET memory_limit")
-            migrate(con)
-            from storage.route_store import reap_dead_runs  # here: route_store itself builds on this module
+            from storage import route_history  # here: these modules build on this one
+            from storage.route_store import reap_dead_runs
 
+            route_history.check_sizes(con)
+            migrate(con)
+            route_history.keep_legs_in_parquet(con)
             reap_dead_runs(con)
         yield con
         if write:  # while we still hold the file, so no other writer changes it during the copy
@@ -237,6 +240,9 @@ def check_before_writing(path: Path, wait_s: float = 60.0) -> None:
     con = _open(path, read_only=True, wait_s=wait_s)
     try:
         verify(con)
+        from storage import route_history  # here: it builds on this module
+
+        route_history.check_sizes(con)
     except duckdb.Error as exc:
         if _is_corrupt(exc):
             raise _corrupt(path, exc) from exc
