@@ -32,8 +32,8 @@ from storage.warehouse import WarehouseCorruptError, transaction
 VIEW = ROUTE_LEGS.name
 PARTS = ROUTE_LEG_PARTS.name
 PART_FILE = "part-0.parquet"
-# a file with no rows and every column of today's definition: the view's glob always matches a file, and a column
-# no run has written yet reads as NULL (union by name)
+# the folder of a file with no rows and every column of today's definition: the view's glob always matches a file,
+# and a column no run has written yet reads as NULL (union by name)
 COLUMNS_RUN = "_columns"
 _PLAIN_RUN_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._:+-]*")
 
@@ -67,37 +67,45 @@ def _cast_list() -> str:
 
 
 def _view_sql(folder: Path) -> str:
-    glob = _quoted(f"{folder}/run_id=*/{PART_FILE}")
+    glob = _quoted(f"{folder}/run_id=*/*.parquet")
     return (f"CREATE OR REPLACE VIEW {VIEW} AS SELECT {_cast_list()} FROM read_parquet({glob}, hive_partitioning = true, "
             f"union_by_name = true, hive_types = {{'run_id': VARCHAR}}) WHERE run_id IN (SELECT run_id FROM {PARTS})")
 
 
+def _columns_file(folder: Path) -> Path:
+    """The file with no rows and today's columns, named by a digest of them (a new definition, a new file)."""
+    digest = hashlib.sha256(_cast_list().encode()).hexdigest()[:12]
+    return folder / f"run_id={COLUMNS_RUN}" / f"columns-{digest}.parquet"
+
+
 def _kind(con) -> str | None:
-    row = con.execute("SELECT table_type FROM information_schema.tables WHERE table_name = ? "
-                      "AND table_catalog = current_database()", [VIEW]).fetchone()
+    row = con.execute("SELECT 'BASE TABLE' FROM duckdb_tables() WHERE table_name = $1 AND database_name = current_database() "
+                      "UNION ALL SELECT 'VIEW' FROM duckdb_views() WHERE view_name = $1 "
+                      "AND database_name = current_database()", [VIEW]).fetchone()
     return row[0] if row else None
 
 
 def _write_columns_file(con, folder: Path) -> None:
-    target = folder / f"run_id={COLUMNS_RUN}" / PART_FILE
+    target = _columns_file(folder)
     target.parent.mkdir(parents=True, exist_ok=True)
     columns = ", ".join(f"CAST(NULL AS {c.duckdb}) AS {c.name}" for c in ROUTE_LEGS.columns if c.name != "run_id")
-    tmp = target.with_name(f".{PART_FILE}.tmp{os.getpid()}")
+    tmp = target.with_name(f".{target.name}.tmp{os.getpid()}")
     try:
         con.execute(f"COPY (SELECT {columns} WHERE false) TO {_quoted(tmp)} (FORMAT parquet)")
         os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
+    for old in target.parent.glob("*.parquet"):  # the columns of an older definition
+        if old != target:
+            old.unlink(missing_ok=True)
 
 
 def _view_is_current(con, folder: Path) -> bool:
+    """The view reads `folder` and today's columns file is there. Cheap: the view is not bound (binding it reads
+    every file's footer)."""
     row = con.execute("SELECT sql FROM duckdb_views() WHERE view_name = ? AND database_name = current_database()",
                       [VIEW]).fetchone()
-    if row is None or f"{folder}/run_id=*/" not in row[0]:
-        return False
-    got = con.execute("SELECT column_name, data_type FROM information_schema.columns WHERE table_name = ? "
-                      "AND table_catalog = current_database() ORDER BY ordinal_position", [VIEW]).fetchall()
-    return got == [(c.name, c.duckdb) for c in ROUTE_LEGS.columns] and (folder / f"run_id={COLUMNS_RUN}" / PART_FILE).exists()
+    return row is not None and f"'{folder}/run_id=*/*.parquet'" in row[0] and _columns_file(folder).exists()
 
 
 def keep_legs_in_parquet(con: duckdb.DuckDBPyConnection) -> None:
@@ -184,6 +192,12 @@ def _listed(con, run_id: str | None = None) -> list[tuple]:
         return []  # a warehouse before the migration that lists them
     return con.execute(f"SELECT run_id, file, n_bytes, sha256 FROM {PARTS} WHERE ? IS NULL OR run_id = ? ORDER BY run_id",
                        [run_id, run_id]).fetchall()
+
+
+def listed_files(con: duckdb.DuckDBPyConnection) -> list[Path]:
+    """The legs files of the committed runs."""
+    folder = history_dir(warehouse_file(con))
+    return [folder / file for _run_id, file, _n, _sha in _listed(con)]
 
 
 def check_sizes(con: duckdb.DuckDBPyConnection) -> None:

@@ -144,3 +144,20 @@ def test_a_moved_data_root_gets_its_view_at_the_new_place_on_the_next_write(tmp_
         pass
     assert _read(db, "SELECT count(*) FROM route_legs")[0][0] == 6
     assert str(tmp_path / "b" / "w.history") in _read(db, "SELECT sql FROM duckdb_views() WHERE view_name = 'route_legs'")[0][0]
+
+
+def test_warehouse_check_reads_every_legs_file_and_names_the_changed_one(tmp_path):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    db = tmp_path / "warehouse.duckdb"
+    _write_run(db, "r1")
+    result = CliRunner().invoke(app, ["warehouse", "check", "--data", str(tmp_path)])
+    assert result.exit_code == 0 and "1 legs files" in result.output, result.output
+    part = route_history.history_dir(db) / "run_id=r1" / "part-0.parquet"
+    data = bytearray(part.read_bytes())
+    data[10] ^= 0xFF
+    part.write_bytes(bytes(data))
+    result = CliRunner().invoke(app, ["warehouse", "check", "--data", str(tmp_path)])
+    assert result.exit_code == 1 and "run r1 differs" in " ".join(result.output.split()), result.output
