@@ -14,6 +14,10 @@ checks the warehouse (every table read whole, so DuckDB verifies the checksum of
 refuses to write to a damaged one; a new snapshot is published only after the copy passes the same check, and
 the previous `SNAPSHOT_GENERATIONS - 1` verified snapshots are kept as `warehouse.snapshot.1.duckdb`, ….
 
+The big append-only history, `route_legs`, is not in the DuckDB file but in one Parquet file per run beside it
+(storage/route_history.py), so what a write checks and copies does not grow with the years of legs; a writer checks
+that each listed file is there with its recorded size.
+
 Schema lives in `storage/schema_*.py` modules as ordered lists of named migrations; each
 name is applied once and recorded in `schema_migrations`.
 """
