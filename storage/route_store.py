@@ -1,8 +1,10 @@
-"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, `route_legs` and one
-Parquet dataset per table, hive-partitioned by run: `exports/routes/<table>/run_id=<id>/part-0.parquet`.
+"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, the view `route_legs` (its rows are one
+Parquet file per run beside the warehouse: storage/route_history.py) and one exported Parquet dataset per table,
+hive-partitioned by run: `exports/routes/<table>/run_id=<id>/part-0.parquet`.
 
 One writer: the flow collects every voyage's rows and calls `write_run_results` once, inside
-one transaction, so a killed run leaves either all of a run's rows or none. The Parquet files follow
+one transaction, so a killed run leaves either all of a run's rows or none (its legs' file, written before the
+commit, is listed by the commit). The Parquet files follow
 the commit; each appears whole (written under a hidden name, then renamed). Their column types are
 those of the tables' definitions (schemas/tables/routes.py): times `timestamp[us, tz=UTC]`, and a column name
 shared by both tables has the same type in both, so pyarrow, polars and DuckDB read each folder as one table.
@@ -23,7 +25,7 @@ import pyarrow.parquet as pq
 
 from schemas.table import Table
 from schemas.tables.routes import ROUTE_LEGS, ROUTE_RUNS, ROUTES
-from storage import warehouse
+from storage import route_history, warehouse
 
 # The Parquet columns of each table, from its definition (the partition column run_id is the folder name, not in
 # the file).
@@ -198,11 +200,14 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
     n_failed = len(routes) - n_ok
     status = "ok" if n_failed == 0 else ("failed" if n_ok == 0 else "partial")
     with warehouse.connect(db_path) as con:
+        con.register("routes_df", _naive_utc(routes))
+        con.register("legs_df", _naive_utc(legs))
+        # the legs' file is written before the commit and joins route_legs with it (storage/route_history.py)
+        part = route_history.write_part(con, route_history.history_dir(db_path), run_id,
+                                        f"SELECT {', '.join(LEG_COLUMNS)} FROM legs_df")
         with warehouse.transaction(con):
-            con.register("routes_df", _naive_utc(routes))
-            con.register("legs_df", _naive_utc(legs))
             con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
-            con.execute(f"INSERT INTO route_legs ({', '.join(LEG_COLUMNS)}) SELECT {', '.join(LEG_COLUMNS)} FROM legs_df")
+            route_history.record_parts(con, [part])
             con.execute(
                 "UPDATE route_runs SET finished_at = ?, n_ok = ?, n_failed = ?, status = ?, n_export_failed = ?, "
                 "export_errors = ? WHERE run_id = ?",

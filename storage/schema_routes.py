@@ -6,7 +6,7 @@ degrees (wind/waves coming-from).
 
 import hashlib
 
-from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_LEGS
+from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS
 from storage.warehouse import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -493,6 +493,10 @@ MIGRATIONS: list[Migration] = [
     # what each leg sailed past the forecast, before the cycle, and through a hole in the wind (the plan's totals
     # and flags are made of these; they were dropped from the stored legs)
     Migration("routes_010_leg_forecast_hours", ROUTE_LEGS.add_columns_sql(*LEG_HOURS_ADDED)),
+    # the legs leave the DuckDB file for one Parquet file per run (storage/route_history.py moves the rows and makes
+    # route_legs a view over the files listed here). From here on route_legs is a view: a new column of it needs
+    # only its definition (schemas/tables/routes.py), never an ALTER TABLE here.
+    Migration("routes_011_leg_parts", ROUTE_LEG_PARTS.create_sql()),
 ]
 
 

@@ -14,6 +14,10 @@ checks the warehouse (every table read whole, so DuckDB verifies the checksum of
 refuses to write to a damaged one; a new snapshot is published only after the copy passes the same check, and
 the previous `SNAPSHOT_GENERATIONS - 1` verified snapshots are kept as `warehouse.snapshot.1.duckdb`, ….
 
+The big append-only history, `route_legs`, is not in the DuckDB file but in one Parquet file per run beside it
+(storage/route_history.py), so what a write checks and copies does not grow with the years of legs; a writer checks
+that each listed file is there with its recorded size.
+
 Schema lives in `storage/schema_*.py` modules as ordered lists of named migrations; each
 name is applied once and recorded in `schema_migrations`.
 """
@@ -169,9 +173,12 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0) -> Iterator
             con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
             verify(con)  # before anything is written to it
             con.execute("RESET memory_limit")
-            migrate(con)
-            from storage.route_store import reap_dead_runs  # here: route_store itself builds on this module
+            from storage import route_history  # here: these modules build on this one
+            from storage.route_store import reap_dead_runs
 
+            route_history.check_sizes(con)
+            migrate(con)
+            route_history.keep_legs_in_parquet(con)
             reap_dead_runs(con)
         yield con
         if write:  # while we still hold the file, so no other writer changes it during the copy
@@ -237,6 +244,9 @@ def check_before_writing(path: Path, wait_s: float = 60.0) -> None:
     con = _open(path, read_only=True, wait_s=wait_s)
     try:
         verify(con)
+        from storage import route_history  # here: it builds on this module
+
+        route_history.check_sizes(con)
     except duckdb.Error as exc:
         if _is_corrupt(exc):
             raise _corrupt(path, exc) from exc

@@ -58,6 +58,7 @@ def test_an_existing_warehouse_upgrades_keeping_its_rows(tmp_path, monkeypatch):
         con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', now(), 'ok')")
         con.execute("INSERT INTO routes (run_id, voyage_id, status, beyond_forecast, fuel_t) VALUES ('r1', 'V1', 'ok', 3, 5.0)")
         con.execute("INSERT INTO ingest_log (source, file_name, status) VALUES ('GSM', 'f', 'skipped')")
+        con.execute("INSERT INTO route_legs (run_id, voyage_id, leg, fuel_t) VALUES ('r1', 'V1', 0, 2.5), ('r1', 'V1', 1, 2.5)")
     monkeypatch.undo()
     with warehouse.connect(db) as con:
         applied = {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()}
@@ -68,6 +69,11 @@ def test_an_existing_warehouse_upgrades_keeping_its_rows(tmp_path, monkeypatch):
         listed = {r[0] for r in con.execute("SELECT column_name FROM duckdb_columns() WHERE table_name = 'latest_routes'").fetchall()}
         assert {"n_legs_beyond_forecast", "forecast_flag", "newer_attempt_failed"} <= listed and "beyond_forecast" not in listed
         assert con.execute("SELECT n_legs_beyond_forecast FROM latest_routes").fetchall() == [(3,)]
+        # the legs left the DuckDB file for one Parquet file per run, listed in route_leg_parts
+        assert con.execute("SELECT table_type FROM information_schema.tables WHERE table_name = 'route_legs'").fetchone() == ("VIEW",)
+        assert con.execute("SELECT run_id, leg, fuel_t FROM route_legs ORDER BY leg").fetchall() == [("r1", 0, 2.5), ("r1", 1, 2.5)]
+        assert con.execute("SELECT run_id, file, n_rows FROM route_leg_parts").fetchall() == [("r1", "run_id=r1/part-0.parquet", 2)]
+    assert (tmp_path / "w.history" / "route_legs" / "run_id=r1" / "part-0.parquet").exists()
 
 
 @pytest.mark.parametrize("created_by", ["warehouse", "duckdb 2 default format"])
