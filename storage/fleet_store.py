@@ -149,8 +149,10 @@ def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.Da
         con.execute(f"SET memory_limit = '{STORE_MEMORY_BASE_MB + n_reports * STORE_MEMORY_PER_REPORT_B // 2**20}MB'")
         with warehouse.transaction(con):
             # a (vessel, time) of an earlier chunk: the first row keeps it (validation did the same within a chunk)
+            # (a grouped count first, which spills to disk: the window's sort of every staged row may not fit the limit)
+            any_dup = con.execute("SELECT EXISTS (SELECT 1 FROM stage GROUP BY imo, ts_utc HAVING count(*) > 1)").fetchall()[0][0]
             dups = con.execute(f"SELECT {cols} FROM stage QUALIFY row_number() OVER (PARTITION BY imo, ts_utc ORDER BY seq) > 1 "
-                               "ORDER BY seq").fetchdf()
+                               "ORDER BY seq" if any_dup else f"SELECT {cols} FROM stage LIMIT 0").fetchdf()
             if len(dups):
                 con.execute("DELETE FROM stage WHERE seq IN (SELECT seq FROM stage QUALIFY "
                             "row_number() OVER (PARTITION BY imo, ts_utc ORDER BY seq) > 1)")

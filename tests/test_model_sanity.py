@@ -384,3 +384,22 @@ def test_hull_performance_per_month_with_trend_and_flag(tmp_path):
     with duckdb.connect(str(db), read_only=True) as con:
         flags = con.execute("SELECT flag, speed_loss_pct > 0.5 FROM hull_performance").fetchall()
     assert all(f == over for f, over in flags) and any(f for f, _ in flags)
+
+
+@pytest.mark.parametrize("form", ["physical", "thesis"])
+def test_compiled_checks_agree_with_check_one_on_random_models(form):
+    """check_models (one compiled pass over all models) refuses exactly the models check_one refuses, with its message."""
+    rng = np.random.default_rng(3)
+    G = 300
+    base = (np.array([0.6, 0.12, -0.06, -0.05, 1 / 700, 0.09, -0.012]) if form == "physical"
+            else np.array([1.8, 12.6, -0.13, -0.02, -0.097, 0.0, 0.0]))
+    speed = base * rng.normal(1.0, 0.5, (G, 7)) + rng.normal(0.0, 0.01, (G, 7))
+    n_fuel = 6 if form == "physical" else 7
+    fuel = np.abs(rng.normal(0.5, 0.5, (G, n_fuel))) * rng.choice([1.0, -1.0], (G, n_fuel), p=[0.9, 0.1])
+    envs = [sanity.Envelope((rng.uniform(40, 60), rng.uniform(60, 120)), (rng.uniform(5, 8), rng.uniform(8, 14)),
+                        rng.uniform(0, 60), rng.uniform(0, 12), rng.normal(0.5, 0.5), rng.uniform(0, 30)) for _ in range(G)]
+    S, F, grids = sanity.evaluate(form, speed, fuel, envs)
+    expected = [sanity.check_one(S[g], F[g], [c[g] for c in grids]) for g in range(G)]
+    got = sanity.check_models(form, speed, fuel, envs)
+    assert got == expected
+    assert 0 < sum(e is not None for e in expected) < G  # both outcomes occur

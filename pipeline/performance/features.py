@@ -170,18 +170,31 @@ def fuel_row_nb(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_re
 
 @numba.njit(cache=True, inline="always")
 def _stw_physical_nb(coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
-    calm = coef[0] + coef[1] * rpm + coef[2] * draft_m + coef[3] * trim_m + coef[6] * months_dd
     wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+    return stw_physical_terms_nb(coef, rpm, draft_m, trim_m, months_dd, wind_term, wave_term)
+
+
+@numba.njit(cache=True, inline="always")
+def stw_physical_terms_nb(coef, rpm, draft_m, trim_m, months_dd, wind_term, wave_term):
+    """The physical form's STW from its weather loads (`weather_terms_nb`): what `stw_kn_nb` gives, for a caller that
+    evaluates many conditions sharing the same directions (the sanity grid)."""
+    calm = coef[0] + coef[1] * rpm + coef[2] * draft_m + coef[3] * trim_m + coef[6] * months_dd
     loss = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
     return max(calm - min(loss, MAX_SPEED_LOSS_SHARE * max(calm, 0.0)), 0.0)
 
 
 @numba.njit(cache=True, inline="always")
 def _fuel_physical_nb(coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd):
+    wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
+    return fuel_physical_terms_nb(coef, rpm, draft_m, months_dd, wind_term, wave_term)
+
+
+@numba.njit(cache=True, inline="always")
+def fuel_physical_terms_nb(coef, rpm, draft_m, months_dd, wind_term, wave_term):
+    """The physical form's fuel rate from its weather loads (as `stw_physical_terms_nb`)."""
     r = rpm / 100.0
     r3 = r * r * r
     calm = max(coef[0] + coef[1] * r3 + coef[2] * r3 * draft_m + coef[3] * r3 * months_dd, 0.0)
-    wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel_deg, hs_m, wave_rel_deg)
     extra = max(coef[4] * wind_term + coef[5] * wave_term, 0.0)
     return calm + min(extra, MAX_FUEL_ADD_SHARE * calm)
 

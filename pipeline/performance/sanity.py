@@ -18,8 +18,10 @@ A failure names the check and the worst grid point (`check_models`).
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from pipeline.performance import features
@@ -28,6 +30,9 @@ N_RPM, N_DRAFT, N_WIND, N_WAVE = 5, 2, 3, 3
 DIRECTIONS_DEG = (0.0, 45.0, 90.0, 135.0, 180.0)
 AHEAD = (0, 1)  # indices of DIRECTIONS_DEG counted as "from ahead"
 CHECKS = ("head_weather_speed", "weather_fuel", "rpm_speed", "rpm_fuel")
+
+
+_ENVELOPE_JSON = '{"rpm": [%r, %r], "draft_m": [%r, %r], "wind_kn": %r, "hs_m": %r, "trim_m": %r, "months_dd": %r}'
 
 
 @dataclass(frozen=True)
@@ -42,6 +47,9 @@ class Envelope:
     months_dd: float = 0.0  # months since dry dock of the newest report (held fixed on the grid)
 
     def to_json(self) -> str:
+        values = (*self.rpm, *self.draft_m, self.wind_kn, self.hs_m, self.trim_m, self.months_dd)
+        if all(type(v) is float and math.isfinite(v) for v in values):  # what json.dumps writes, from a template
+            return _ENVELOPE_JSON % values
         return json.dumps({"rpm": list(self.rpm), "draft_m": list(self.draft_m), "wind_kn": self.wind_kn,
                            "hs_m": self.hs_m, "trim_m": self.trim_m, "months_dd": self.months_dd})
 
@@ -71,34 +79,42 @@ def envelope_of(inp: dict[str, np.ndarray], start: int, stop: int) -> Envelope:
 
 
 def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
-    """`envelope_of` of the row ranges starts[g]:stops[g] (non-empty ones), in one pass per column: least and
+    """`envelope_of` of the row ranges starts[g]:stops[g] (non-empty ones), in one compiled pass: least and
     largest rpm and draft, largest wind and waves, mean trim, months since dry dock of the last row."""
     starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
     G = starts.size
     if G == 0:
         return []
-    n = stops - starts
-    # reduceat over [start, stop) pairs: every other result; a sentinel element lets a stop equal the length
-    idx = np.column_stack([starts, stops]).ravel()
+    e = np.empty((G, 8))
+    cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m", "months_dd")]
+    _envelopes_nb(*cols, starts, stops, e)
+    return [Envelope((g[0], g[1]), (g[2], g[3]), g[4], g[5], g[6], g[7]) for g in e.tolist()]
 
-    def red(col, fn, fill):
-        v = np.asarray(inp[col], dtype=np.float64)
-        v = np.append(np.where(np.isfinite(v), v, fill), fill)
-        return np.where(n > 0, fn.reduceat(v, idx)[::2], fill)
 
-    rpm_lo, rpm_hi = red("rpm", np.minimum, np.inf), red("rpm", np.maximum, -np.inf)
-    d_lo, d_hi = red("draft_m", np.minimum, np.inf), red("draft_m", np.maximum, -np.inf)
-    wind, hs = red("wind_kn", np.maximum, 0.0), red("hs_m", np.maximum, 0.0)
-    trim = np.asarray(inp["trim_m"], dtype=np.float64)
-    ok = np.isfinite(trim)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        trim_mean = (np.add.reduceat(np.append(np.where(ok, trim, 0.0), 0.0), idx)[::2]
-                     / np.add.reduceat(np.append(ok.astype(np.float64), 0.0), idx)[::2])
-    trim_mean = np.where(n > 0, trim_mean, 0.0)
-    months = np.asarray(inp["months_dd"], dtype=np.float64)[np.maximum(stops - 1, 0)]
-    fin = lambda x: float(x) if np.isfinite(x) else 0.0  # noqa: E731
-    return [Envelope((fin(rpm_lo[g]), fin(rpm_hi[g])), (fin(d_lo[g]), fin(d_hi[g])), fin(wind[g]), fin(hs[g]),
-                     fin(trim_mean[g]), fin(months[g]) if n[g] else 0.0) for g in range(G)]
+@numba.njit(cache=True)
+def _envelopes_nb(rpm, draft, wind, hs, trim, months, starts, stops, out):
+    """out[g] = (least and largest rpm, least and largest draft, largest wind and waves (≥ 0), mean trim, months since
+    dry dock of the last row) of rows starts[g]:stops[g], non-finite values left out; 0 where there is none."""
+    for g in range(starts.size):
+        a, b = starts[g], stops[g]
+        r_lo, r_hi, d_lo, d_hi, w_hi, h_hi = np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0
+        t_sum, t_n = 0.0, 0
+        for i in range(a, b):
+            if np.isfinite(rpm[i]):
+                r_lo, r_hi = min(r_lo, rpm[i]), max(r_hi, rpm[i])
+            if np.isfinite(draft[i]):
+                d_lo, d_hi = min(d_lo, draft[i]), max(d_hi, draft[i])
+            if np.isfinite(wind[i]):
+                w_hi = max(w_hi, wind[i])
+            if np.isfinite(hs[i]):
+                h_hi = max(h_hi, hs[i])
+            if np.isfinite(trim[i]):
+                t_sum += trim[i]
+                t_n += 1
+        m = months[b - 1] if b > a else 0.0
+        vals = (r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum / t_n if t_n else 0.0, m)
+        for k in range(8):
+            out[g, k] = vals[k] if np.isfinite(vals[k]) else 0.0
 
 
 @dataclass(frozen=True)
@@ -199,26 +215,106 @@ def check_one(S: np.ndarray, F: np.ndarray, grid, limits: Limits = Limits()) -> 
 def check_models(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: list[Envelope],
                  limits: Limits = Limits()) -> list[str | None]:
     """Per model g (coefficient rows g, envelope g): why it fails the sanity checks (check and worst point), or None.
-    The checks run on all models at once; only a failing one is looked at again (`check_one`) for its message."""
+    The checks run on all models at once in one compiled pass (`_failing_nb`: the grid, each model's values on it
+    and the checks of `check_one`, vessel by vessel, nothing stored); only a failing one is evaluated again
+    (`check_one`) for its message."""
     if not envelopes:
         return []
-    S, F, grids = evaluate(form, speed_coefs, fuel_coefs, envelopes)
     G = len(envelopes)
-    flat = lambda a: a.reshape(G, -1)  # noqa: E731
-    tol = limits.speed_tol_kn
-    bad = ~(np.isfinite(flat(S)).all(axis=1) & np.isfinite(flat(F)).all(axis=1))
-    ahead = S[..., list(AHEAD)]
-    bad |= flat(np.diff(ahead, axis=3)).max(axis=1, initial=-np.inf) > tol
-    bad |= flat(np.diff(ahead, axis=4)).max(axis=1, initial=-np.inf) > tol
-    calm = F[:, :, :, :1, :1, :1]
-    bad |= flat((calm - F) - limits.fuel_allowance_share * np.abs(calm)).max(axis=1) > 1e-9
-    if N_RPM >= 2:
-        bad |= flat(-np.diff(S, axis=1)).max(axis=1) > tol
-        bad |= flat(-np.diff(F, axis=1)).max(axis=1) > limits.fuel_tol_share * flat(np.abs(F)).max(axis=1)
-        span = np.array([e.rpm[1] - e.rpm[0] > 1e-6 for e in envelopes])
-        bad |= span & ~((S[:, -1, :, 0, 0, 0] - S[:, 0, :, 0, 0, 0]) > 0).all(axis=1)
-        bad |= span & ~((F[:, -1, :, 0, 0, 0] - F[:, 0, :, 0, 0, 0]) > 0).all(axis=1)
-    return [check_one(S[g], F[g], [c[g] for c in grids], limits) if bad[g] else None for g in range(G)]
+    e = np.array([(v.rpm[0], v.rpm[1], v.draft_m[0], v.draft_m[1], max(v.wind_kn, 0.0), max(v.hs_m, 0.0), v.trim_m, v.months_dd)
+                  for v in envelopes], dtype=np.float64).reshape(-1, 8)
+    bad = np.zeros(G, dtype=np.bool_)
+    _failing_nb(features.FORM_IDS[form], np.ascontiguousarray(speed_coefs, dtype=np.float64).reshape(G, -1),
+                np.ascontiguousarray(fuel_coefs, dtype=np.float64).reshape(G, -1), e, _AXES, _DIRECTIONS,
+                limits.speed_tol_kn, limits.fuel_allowance_share, limits.fuel_tol_share, bad)
+    out: list[str | None] = [None] * G
+    failing = np.flatnonzero(bad)
+    if failing.size:
+        S, F, grids = evaluate(form, np.asarray(speed_coefs)[failing], np.asarray(fuel_coefs)[failing],
+                               [envelopes[g] for g in failing])
+        for j, g in enumerate(failing.tolist()):
+            out[g] = check_one(S[j], F[j], [c[j] for c in grids], limits)
+    return out
+
+
+# each axis of the grid in units of the envelope's ranges (`_U` before the meshgrid), and the directions
+_AXES = tuple(np.linspace(0.0, 1.0, n) for n in (N_RPM, N_DRAFT, N_WIND, N_WAVE))
+_DIRECTIONS = np.asarray(DIRECTIONS_DEG, dtype=np.float64)
+
+
+@numba.njit(cache=True)
+def _failing_nb(form, speed_coefs, fuel_coefs, env, axes, directions, tol, allowance, fuel_tol_share, bad):
+    """bad[g]: whether model g fails a check of `check_one` on envelope g's grid (env[g]: rpm least and largest, draft
+    least and largest, wind and waves largest, trim, months since dry dock). The grid's inputs are those of `_grids`
+    (same arithmetic), the values those of `features.stw_kn_nb` / `fuel_tph_nb` — for the physical form from the
+    weather loads of each direction, computed once per grid rather than once per point (the same values)."""
+    ur, ud, uw, uh = axes
+    R, D, W, H, A = ur.size, ud.size, uw.size, uh.size, directions.size
+    S = np.empty((R, D, W, H, A))
+    F = np.empty((R, D, W, H, A))
+    wdir = np.empty(A)
+    for a in range(A):
+        wdir[a] = features.direction_weight(directions[a])
+    for g in range(speed_coefs.shape[0]):
+        cs, cf = speed_coefs[g], fuel_coefs[g]
+        rpm_lo, rpm_hi, d_lo, d_hi, wind_hi, hs_hi, trim, months = env[g]
+        finite = True
+        for r in range(R):
+            rpm = rpm_lo + (rpm_hi - rpm_lo) * ur[r]
+            for d in range(D):
+                draft = d_lo + (d_hi - d_lo) * ud[d]
+                for w in range(W):
+                    wind = wind_hi * uw[w]
+                    for h in range(H):
+                        hs = hs_hi * uh[h]
+                        for a in range(A):
+                            if form == features.FORM_PHYSICAL:
+                                wt, vt = wind * wind * wdir[a], hs * hs * wdir[a]
+                                s = features.stw_physical_terms_nb(cs, rpm, draft, trim, months, wt, vt)
+                                f = features.fuel_physical_terms_nb(cf, rpm, draft, months, wt, vt)
+                            else:
+                                s = features.stw_kn_nb(form, cs, rpm, draft, trim, wind, directions[a], hs, directions[a], months)
+                                f = features.fuel_tph_nb(form, cf, rpm, draft, trim, wind, directions[a], hs, directions[a], months)
+                            S[r, d, w, h, a], F[r, d, w, h, a] = s, f
+                            finite &= np.isfinite(s) & np.isfinite(f)
+        bad[g] = not finite or _fails(S, F, rpm_hi - rpm_lo > 1e-6, tol, allowance, fuel_tol_share)
+
+
+@numba.njit(cache=True)
+def _fails(S, F, span, tol, allowance, fuel_tol_share):
+    """The checks of `check_one` on finite grids S and F (GRID_SHAPE)."""
+    R, D, W, H, A = S.shape
+    top = 0.0
+    for r in range(R):
+        for d in range(D):
+            calm = F[r, d, 0, 0, 0]
+            for w in range(W):
+                for h in range(H):
+                    for a in range(A):
+                        top = max(top, abs(F[r, d, w, h, a]))
+                        if (calm - F[r, d, w, h, a]) - allowance * abs(calm) > 1e-9:
+                            return True  # weather_fuel
+                        if a < 2:  # AHEAD
+                            if w > 0 and S[r, d, w, h, a] - S[r, d, w - 1, h, a] > tol:
+                                return True  # head_weather_speed, along the wind
+                            if h > 0 and S[r, d, w, h, a] - S[r, d, w, h - 1, a] > tol:
+                                return True  # ... along the waves
+    if R < 2:
+        return False
+    for r in range(R - 1):
+        for d in range(D):
+            for w in range(W):
+                for h in range(H):
+                    for a in range(A):
+                        if -(S[r + 1, d, w, h, a] - S[r, d, w, h, a]) > tol:
+                            return True  # rpm_speed
+                        if -(F[r + 1, d, w, h, a] - F[r, d, w, h, a]) > fuel_tol_share * top:
+                            return True  # rpm_fuel
+    if span:
+        for d in range(D):
+            if not (S[R - 1, d, 0, 0, 0] - S[0, d, 0, 0, 0] > 0) or not (F[R - 1, d, 0, 0, 0] - F[0, d, 0, 0, 0] > 0):
+                return True  # calm water does not rise over the rpm range
+    return False
 
 
 def check_model(model, envelope: Envelope, limits: Limits = Limits()) -> str | None:
