@@ -23,6 +23,7 @@ import re
 import numpy as np
 import pandas as pd
 
+from pipeline.engine_ranges import parse_barred_rpm
 from pipeline.timestamps import parse_iso_column
 from pipeline.validate_ids import has_control_characters, is_valid_imo, voyage_id_problem
 
@@ -97,24 +98,6 @@ def _split(df: pd.DataFrame, r: _Reasons, raw: pd.Series, source: str) -> tuple[
     bad["reason"] = r.reason[r.reason.notna()]
     good = df[r.reason.isna()]
     return good.reset_index(drop=True), bad.reset_index(drop=True)
-
-
-_RANGE = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*-\s*(\d+(?:\.\d*)?)\s*$")
-
-
-def parse_barred_rpm(text) -> tuple[tuple[float, float], ...]:
-    """A vessel's barred rpm ranges from 'low-high' texts separated by ';' (empty: none); ValueError saying why."""
-    if text is None or (isinstance(text, float) and math.isnan(text)) or str(text).strip() in _EMPTY:
-        return ()
-    out = []
-    for part in str(text).split(";"):
-        if not part.strip():
-            continue
-        m = _RANGE.match(part)
-        if not m or not float(m.group(1)) < float(m.group(2)):
-            raise ValueError(f"bad barred_rpm {part.strip()!r} (expected low-high rpm, e.g. 52-60, separated by ';')")
-        out.append((float(m.group(1)), float(m.group(2))))
-    return tuple(sorted(out))
 
 
 def _barred_problem(text) -> str | None:

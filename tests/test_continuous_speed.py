@@ -145,7 +145,8 @@ def test_runs_of_and_split_runs():
 def test_barred_ranges_come_from_the_vessels_file_and_move_listed_settings_out():
     import pandas as pd
 
-    from pipeline.fleet_validate import parse_barred_rpm, validate_vessels
+    from pipeline.engine_ranges import parse_barred_rpm
+    from pipeline.fleet_validate import validate_vessels
     from pipeline.routing.voyage import problem_from_voyage
     from routing_cases import MODEL
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from pipeline.fleet_validate import parse_barred_rpm
+from pipeline.engine_ranges import parse_barred_rpm
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 
