@@ -393,15 +393,6 @@ def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: f
     return rpm_idx, float(cost), int(n_legs)
 
 
-def unlimited_cost(inst, nodes: np.ndarray, upper: float, gap: float = 1e-3, buckets: int = 0) -> tuple[float, float]:
-    """(cost, fuel) of the best engine plan on the route without limits, within `gap` of it (`best_engine_plan`),
-    or (upper, nan) when none beats `upper`."""
-    rpm_idx, cost, _ = best_engine_plan(inst, nodes, upper, gap, buckets)
-    if not math.isfinite(cost) or cost >= upper:
-        return upper, math.nan
-    return cost, float(evaluate(inst, nodes, rpm_idx)[2])
-
-
 def limited_plan(inst, nodes: np.ndarray, limits: EngineLimits, gap: float = 0.0, buckets: int = 0) -> LimitedPlan:
     """The best engine plan on the fixed route `nodes` under `limits` (see the module docstring); with gap > 0
     within that share of a known plan's cost of the optimum (faster). The hold itself keeps the labels few:

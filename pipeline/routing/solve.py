@@ -144,7 +144,7 @@ def _unlimited_fuel_t(inst: Instance, nodes, known: list[tuple[float, float, np.
     return fuel_t
 
 
-def _refined(inst: Instance, plan: Plan, nodes, rpm_idx, cost: float, limits: EngineLimits | None):
+def _refined(inst: Instance, nodes, rpm_idx, cost: float, limits: EngineLimits | None):
     """(instance, rpm index per leg, cost) of the plan with its speeds refined continuously under the limits
     (continuous_speed.refine_rpm; the same when that finds nothing cheaper than `cost`)."""
     hold, change = (limits.min_hold_h, limits.change_cost_t) if limits is not None and limits.active else (0.0, 0.0)
@@ -165,7 +165,7 @@ def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, contin
     held = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
-    at, rpm_idx, cost = _refined(inst, plan, nodes, held.rpm_idx, held.cost, limits) if continuous else \
+    at, rpm_idx, cost = _refined(inst, nodes, held.rpm_idx, held.cost, limits) if continuous else \
         (inst, held.rpm_idx, held.cost)
     limited = _plan(at, plan.solver, nodes, rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
@@ -266,7 +266,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         if limits is not None and limits.active and plan.legs:
             plan = _with_limits(inst, plan, found.nodes, limits, continuous)
         elif continuous and plan.legs:
-            at, rpm_idx, cost = _refined(inst, plan, found.nodes, found.rpm_idx, plan.cost, None)
+            at, rpm_idx, cost = _refined(inst, found.nodes, found.rpm_idx, plan.cost, None)
             if cost < plan.cost:
                 plan = _plan(at, solver, found.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
                              n_evals=plan.n_evals, clearance_nm=plan.min_land_clearance_nm)
