@@ -39,13 +39,17 @@ def _utc(text: str, what: str):
 
 def plan_table(plan) -> Table:
     t = Table(title=f"Voyage {plan.voyage_id}: {plan.solver} plan, status {plan.status}")
-    for col in ("leg", "from", "to", "course°", "NM", "rpm", "STW kn", "SOG kn", "h", "fuel t", "ETA (UTC)", "wind kn", "Hs m", "beyond"):
+    waits = plan.wait_h > 0.0  # a plan that heaves to at nodes (the grid DP's): when it waits before each leg
+    cols = ("leg", "from", "to", "course°", "NM", "rpm", "STW kn", "SOG kn", "h", "fuel t") + \
+        (("wait h", "ETD (UTC)") if waits else ()) + ("ETA (UTC)", "wind kn", "Hs m", "beyond")
+    for col in cols:
         t.add_column(col, justify="right", no_wrap=True)
     for g in plan.legs:
+        wait = (f"{g['wait_h']:.1f}" if g["wait_h"] > 0 else "", g["etd_utc"].strftime("%m-%d %H:%M")) if waits else ()
         t.add_row(str(g["leg"]), f"{g['lat0']:.2f},{g['lon0']:.2f}", f"{g['lat1']:.2f},{g['lon1']:.2f}", f"{g['course_deg']:.0f}",
                   f"{g['dist_nm']:.1f}", f"{g['rpm']:.1f}", f"{g['stw_kn']:.2f}", f"{g['sog_kn']:.2f}", f"{g['hours']:.2f}",
-                  f"{g['fuel_t']:.2f}", g["eta_utc"].strftime("%m-%d %H:%M"), f"{g['wind_kn']:.0f}", f"{g['hs_m']:.1f}",
-                  "yes" if g["beyond_forecast"] else "")
+                  f"{g['fuel_t']:.2f}", *wait, g["eta_utc"].strftime("%m-%d %H:%M"), f"{g['wind_kn']:.0f}",
+                  f"{g['hs_m']:.1f}", "yes" if g["beyond_forecast"] else "")
     return t
 
 
@@ -94,7 +98,9 @@ def register(app: typer.Typer) -> None:
                                                 "along the great circle / rhumb line)."),
         solver_option: Optional[list[str]] = typer.Option(
             None, "--solver-option", help="NAME=VALUE of the solver's own options, repeatable (e.g. gap=0 for an "
-                                          "exact dp; dp is certified within 0.1 % by default)."),
+                                          "exact dp; dp is certified within 0.1 % by default in weather that holds "
+                                          "still; slot_h=1 max_wait_h=12 makes it the DP that is exact when the "
+                                          "weather changes, its plan heaving to at nodes on a 1 h grid)."),
         seed: int = typer.Option(1, help="Random seed of the BFOA (same seed, same plan)."),
         objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),

@@ -95,8 +95,8 @@ def latest_position(voyage: dict, positions: list[Position], ref_utc) -> Positio
 
 def position_on_plan(legs: list[dict], at_utc) -> tuple[float, float] | None:
     """Where a plan puts the ship at `at_utc`: along the great circle of the leg sailed then, in proportion to the
-    leg's time (legs: dicts with lat0, lon0, lat1, lon1, etd_utc, eta_utc). Before the first leg: its start;
-    after the last: its end; None without legs."""
+    leg's time (legs: dicts with lat0, lon0, lat1, lon1, etd_utc, eta_utc). Before the first leg, or waiting
+    before a leg: that leg's start; after the last: its end; None without legs."""
     if not legs:
         return None
     at = _t(at_utc)
@@ -105,6 +105,8 @@ def position_on_plan(legs: list[dict], at_utc) -> tuple[float, float] | None:
         return float(legs[0]["lat0"]), float(legs[0]["lon0"])
     for g in legs:
         etd, eta = _t(g["etd_utc"]), _t(g["eta_utc"])
+        if at < etd:  # waiting at the leg's start node (a plan that heaves to before it)
+            return float(g["lat0"]), float(g["lon0"])
         if etd <= at <= eta:
             span = _hours(etd, eta)
             frac = 0.0 if span <= 0 else min(1.0, max(0.0, _hours(etd, at) / span))

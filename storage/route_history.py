@@ -117,7 +117,11 @@ def keep_legs_in_parquet(con: duckdb.DuckDBPyConnection) -> None:
     kind = _kind(con)
     if kind == "BASE TABLE":
         run_ids = [r[0] for r in con.execute(f"SELECT DISTINCT run_id FROM {VIEW} ORDER BY run_id").fetchall()]
-        columns = ", ".join(ROUTE_LEGS.names)
+        present = {r[0] for r in con.execute("SELECT column_name FROM duckdb_columns() WHERE table_name = ? AND "
+                                             "database_name = current_database()", [VIEW]).fetchall()}
+        # a column defined after the table was last altered (e.g. wait_h) is NULL in the moved rows
+        columns = ", ".join(c.name if c.name in present else f"CAST(NULL AS {c.duckdb}) AS {c.name}"
+                            for c in ROUTE_LEGS.columns)
         parts = [write_part(con, folder, rid, f"SELECT {columns} FROM {VIEW} WHERE run_id = {_quoted(rid)}")
                  for rid in run_ids]
         with transaction(con):

@@ -16,11 +16,14 @@ import math
 import numba
 import numpy as np
 import pytest
+from lxml import etree
 
 from tests.routing_cases import field, moving_storm, problem, wavy
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
+from pipeline.export.rtz import route_to_rtz, validate_rtz
 from pipeline.routing.dp import DpOptions
+from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.objectives import LATE_STEP_T, route_cost_nb
 from pipeline.routing.savings import solver_instance
 from pipeline.routing.solvers import SOLVERS
@@ -136,7 +139,7 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, slot_h, int(max_wait_h / slot_h), wait_tph)
     dp = SOLVERS["dp"]
     exact = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
-                                                            incumbent=None), accept_waits=True)
+                                                            incumbent=None))
     if not math.isfinite(best):
         assert exact.nodes is None
         return
@@ -145,7 +148,7 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     assert got == pytest.approx(best, rel=1e-12, abs=1e-12), (got, best)
     assert all(w <= (slot_h + max_wait_h) + 1e-9 for w in exact.wait_h[1:])  # rounding + the extra waits allowed
     trimmed = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
-                                                              gap=GAP), accept_waits=True)
+                                                              gap=GAP))
     cost = _sail_with_waits(inst, trimmed.nodes, trimmed.rpm_idx, trimmed.wait_h, wait_tph)
     assert best - 1e-9 <= cost <= best * (1.0 + GAP) + 1e-9, (cost, best)
     if rta == "impossible":  # least late: every plan is late, the DP compares late plans
@@ -162,21 +165,98 @@ def test_the_window_cases_open_and_close():
     assert lk.sail_leg(*leg, 10.0, 85.0, ves, fld)[lk.CODE] == lk.OK
     for n, rta in itertools.product(range(3), ("loose", "tight")):
         inst, base = _instance("storm-window", rta, "jit", (70, 85, 100), n, 2)
-        found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=2.0, max_wait_h=12.0, incumbent=None),
-                                     accept_waits=True)
+        found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=2.0, max_wait_h=12.0, incumbent=None))
         wait_free = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
         assert wait_free.nodes is None  # every wait-free plan meets the storm at the departure
         assert found.nodes is not None and found.wait_h[0] >= 2.0  # the grid DP's plan waits for it to move on
 
 
-def test_a_caller_that_cannot_carry_waits_is_refused():
-    """solve() sails a plan without waits, so the grid DP through it would report another plan: refused, by name."""
-    from pipeline.routing.problem import RoutingInputError
+def _window_problem(n_lines=2):
+    return problem(DEP, ARR, 75.0, n_lines=n_lines, n_points=5, max_shift=2, d_point_nm=25.0, max_hs_m=4.5,
+                   max_wind_kn=45.0)
+
+
+@pytest.mark.parametrize("limits", [None, EngineLimits(min_hold_h=0.0, change_cost_t=0.05),
+                                    EngineLimits(min_hold_h=200.0, change_cost_t=0.05)], ids=["free", "cost", "hold"])
+def test_route_carries_the_grid_dps_waits(limits):
+    """Through solve() (what `jitroute route --solver dp --solver-option slot_h=2` runs), storm-window: no wait-free
+    plan exists, the grid DP's plan waits at the departure for the storm to move on. The plan's legs carry the wait
+    (etd after it, hours and fuel of the route include it), its cost is the enumerated optimum of the grid space,
+    and its rows fit the route_legs definition. Holding a setting 200 h (longer than the voyage) is met by one
+    setting throughout, so the waits are kept then too."""
+    from pipeline.routing.solve import solve
+    from schemas.tables.routes import ROUTE_LEGS
+
+    pr, fld = _window_problem(), _weather("storm-window", 0)
+    opts = DpOptions(slot_h=2.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None)
+    plan = solve(pr, fld, solver="dp", options=opts, limits=limits, savings=True)
+    assert plan.status == "ok", plan.reason
+    assert plan.legs[0]["wait_h"] >= 2.0 and plan.wait_h == pytest.approx(sum(g["wait_h"] for g in plan.legs))
+    assert "hove to" in plan.reason
+    t = np.datetime64(pr.depart_utc, "s")
+    for g in plan.legs:  # the legs follow each other: arrival, wait, departure
+        assert np.datetime64(g["etd_utc"], "s") - t == np.timedelta64(int(round(g["wait_h"] * 3600)), "s")
+        t = np.datetime64(g["eta_utc"], "s")
+        assert g["wait_fuel_t"] == pytest.approx(0.3 * g["wait_h"])
+    assert plan.hours == pytest.approx(sum(g["hours"] + g["wait_h"] for g in plan.legs))
+    assert plan.fuel_t == pytest.approx(sum(g["fuel_t"] + g["wait_fuel_t"] for g in plan.legs))
+    assert abs(float((t - np.datetime64(pr.depart_utc, "s")) / np.timedelta64(1, "s")) / 3600 - plan.hours) < 1e-3
+    inst, _ = _instance("storm-window", "loose", "jit", (70, 85, 100), 0, 2)
+    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, 2.0, 6, 0.3)
+    changes = (limits.change_cost_t * plan.n_engine_changes) if limits is not None else 0.0
+    assert plan.cost == pytest.approx(best + changes, rel=1e-9)
+    if limits is not None:
+        assert plan.limits == limits and plan.limits_fuel_t == pytest.approx(0.0)
+    row = plan.leg_rows("r1")[0]
+    assert set(row) == {c.name for c in ROUTE_LEGS.columns}
+    if limits is None:  # the RTZ schedule: ETD after ETA where the ship waits, valid against the published schema
+        xml = route_to_rtz(plan.route_row("r1"), plan.leg_rows("r1"), version="1.1")
+        validate_rtz(xml, version="1.1")
+        els = etree.fromstring(xml).findall("r:schedules/r:schedule/r:calculated/r:scheduleElement", {"r": "http://www.cirm.org/RTZ/1/1"})
+        for k, g in enumerate(plan.legs):
+            assert els[k].get("etd") == g["etd_utc"].strftime("%Y-%m-%dT%H:%M:%SZ")
+            if k > 0 and g["wait_h"] > 0.01:
+                assert els[k].get("etd") > els[k].get("eta")
+
+
+@pytest.mark.parametrize("kind, calm_h, rpms, slot_h, max_wait_h", [
+    ("storm", 52.0, (60, 70, 80, 90, 100), 1.0, 6.0),  # a wait-free plan of the route holds: it replaces the waits
+    ("storm-window", 56.0, (70, 85, 100), 2.0, 12.0),  # the storm blocks every wait-free plan: the waits stay
+])
+def test_a_waiting_plan_that_breaks_the_holds(kind, calm_h, rpms, slot_h, max_wait_h):
+    """Held 12 h, a grid-DP plan that changes setting after a leg of about 10 h is re-planned wait-free on its route
+    holding each setting; where the storm at the departure blocks every such plan, the waiting plan is kept, without
+    the limits, and says which hold it breaks."""
     from pipeline.routing.solve import solve
 
-    pr = problem(DEP, ARR, 75.0, n_lines=2, n_points=5, max_shift=2, d_point_nm=25.0)
-    with pytest.raises(RoutingInputError, match="slot_h=1.0.*cannot carry waits"):
-        solve(pr, _weather("static", 0), solver="dp", options=DpOptions(slot_h=1.0))
+    pr = problem(DEP, ARR, calm_h, rpm_options=rpms, n_lines=4, n_points=5, max_shift=2, d_point_nm=25.0,
+                 max_hs_m=4.5 if kind in LIMITED else None, max_wind_kn=45.0 if kind == "storm-window" else None)
+    opts = DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=0.3, incumbent=None)
+    limits = EngineLimits(min_hold_h=12.0)
+    free = solve(pr, _weather(kind, 0), solver="dp", options=opts)
+    assert free.status == "ok" and free.wait_h > 0 and min(h for _, h in settings_held_h(free.legs)) < 12.0
+    held = solve(pr, _weather(kind, 0), solver="dp", options=opts, limits=limits)
+    assert held.status == "ok", held.reason
+    if kind == "storm":
+        assert held.wait_h == 0.0 and held.limits == limits
+        assert "re-planned wait-free holding each setting" in held.reason
+        runs = settings_held_h(held.legs)
+        assert len(runs) == 1 or min(h for _, h in runs) >= 12.0 - 1e-6
+    else:
+        assert held.wait_h == pytest.approx(free.wait_h) and held.limits is None
+        assert "no wait-free plan of its route holds each setting" in held.reason
+
+
+def test_position_on_a_waiting_plan_is_its_wait_node():
+    """A ship on a plan that waits is at the waiting node during the wait, not at the end of the voyage."""
+    from pipeline.enroute import position_on_plan
+    from pipeline.routing.solve import solve
+
+    opts = DpOptions(slot_h=2.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None)
+    plan = solve(_window_problem(), _weather("storm-window", 0), solver="dp", options=opts)
+    first = plan.legs[0]
+    during = np.datetime64(first["etd_utc"], "s") - np.timedelta64(60, "s")
+    assert position_on_plan(plan.legs, during) == (first["lat0"], first["lon0"])
 
 
 @pytest.mark.parametrize("slot_h, max_wait_h, wait_tph", [(0.0, 0.0, None), (-1.0, 0.0, None), (1.0, -2.0, None),
@@ -186,4 +266,4 @@ def test_a_grid_that_is_no_grid_is_refused(slot_h, max_wait_h, wait_tph):
     inst, base = _instance("static", "loose", "jit", (70, 85, 100), 0, 2)
     opts = DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph, incumbent=None)
     with pytest.raises(ValueError, match="slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0"):
-        SOLVERS["dp"].search(inst, base, seed=1, options=opts, accept_waits=True)
+        SOLVERS["dp"].search(inst, base, seed=1, options=opts)

@@ -25,13 +25,20 @@ class UnknownSolverError(ValueError):
 class Found:
     """A solver's answer: node per line and rpm index per leg (None: nothing feasible), the legs or routes it
     sailed, for iterative solvers the best cost after each cycle, and for a solver whose plans may wait at nodes
-    (the grid DP, dp_grid.py) the hours waited at each line's node before its leg (None: no waiting)."""
+    (the grid DP, dp_grid.py) the hours waited at each line's node before its leg (None: no waiting) and the fuel
+    rate while waiting (t/h)."""
 
     nodes: np.ndarray | None
     rpm_idx: np.ndarray | None
     n_evals: int = 0
     history: np.ndarray | None = None
     wait_h: np.ndarray | None = None
+    wait_tph: float = 0.0
+
+    @property
+    def waits(self) -> bool:
+        """Whether the plan waits anywhere (a wait of more than a second)."""
+        return self.wait_h is not None and bool(np.any(np.asarray(self.wait_h) > 1.0 / 3600.0))
 
 
 @dataclass(frozen=True)

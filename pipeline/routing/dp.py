@@ -509,33 +509,21 @@ class DpOptions:
     gap: float = 0.0  # > 0: the plan costs at most (1 + gap) × the optimum. Labels: ε-trimming (see `trim_eps`),
     #                   certified under the dominance's assumption; grid (slot_h): pruning, certified outright
     slot_h: float | None = None  # a number: the exact DP of dp_grid.py, departures from nodes on this time grid
-    #                              (h) with waits; the plan then carries its waits (Found.wait_h)
+    #                              (h) with waits; the plan's legs then carry their waits (wait_h, wait_fuel_t)
     max_wait_h: float = 0.0  # grid: a ship may wait this long beyond the first slot after arriving at a node
     wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
 
 
-def refuse_waits(options: DpOptions) -> None:
-    """The grid DP's plans wait at nodes (Found.wait_h); a caller that sails plans without waits (solve() today)
-    would report another plan than the one found, so it is refused there with this error."""
-    from pipeline.routing.problem import RoutingInputError
-
-    raise RoutingInputError(f"dp option slot_h={options.slot_h}: the grid DP's plans wait at nodes, and a routed plan "
-                            "cannot carry waits yet; use it through pipeline.routing.dp.search(..., accept_waits=True) "
-                            "(tests, bench/dp_grid.py)")
-
-
-def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None,
-           accept_waits: bool = False):
+def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None):
     """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with and
     `incumbent` that plan (nodes, rpm_idx) when known (the registry passes its incumbent solver's, solvers._dp).
     The grid DP (options.slot_h) prunes only with plans it can sail in its own space: the baseline and
-    `incumbent`, each with the waits of the grid; it runs only for a caller that carries waits (`accept_waits`)."""
+    `incumbent`, each with the waits of the grid; its Found carries the waits (Found.wait_h, Found.wait_tph), which
+    solve() puts on the plan's legs."""
     from pipeline.routing.baseline import evaluate
 
     if options.slot_h is not None:
-        if not accept_waits:
-            refuse_waits(options)
-        from pipeline.routing.dp_grid import search_grid, wait_hours
+        from pipeline.routing.dp_grid import search_grid, wait_hours, wait_rate_tph
 
         if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0 or not (options.wait_tph or 0.0) >= 0.0:
             raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0, got {options.slot_h}, "
@@ -548,7 +536,8 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
             gap=float(options.gap), bounds=finish_bounds(inst), ld=latest_departures(inst))
         if nodes is None:
             return Found(None, None, n_legs)
-        return Found(nodes, rpm_idx, n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, float(options.slot_h)))
+        return Found(nodes, rpm_idx, n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, float(options.slot_h)),
+                     wait_tph=wait_rate_tph(inst, options.wait_tph))
     if options.bucket_h is not None:
         nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
                                                     inst.objective)

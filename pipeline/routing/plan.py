@@ -56,11 +56,18 @@ class Plan:
 
     @property
     def hours(self) -> float:
-        return float(sum(leg["hours"] for leg in self.legs)) if self.legs else math.nan
+        """Hours from departure to arrival: the legs sailed and the waits at their start nodes."""
+        return float(sum(leg["hours"] + leg.get("wait_h", 0.0) for leg in self.legs)) if self.legs else math.nan
 
     @property
     def fuel_t(self) -> float:
-        return float(sum(leg["fuel_t"] for leg in self.legs)) if self.legs else math.nan
+        """Fuel of the voyage: the legs sailed and the waits at their start nodes."""
+        return float(sum(leg["fuel_t"] + leg.get("wait_fuel_t", 0.0) for leg in self.legs)) if self.legs else math.nan
+
+    @property
+    def wait_h(self) -> float:
+        """Hours the plan waits at nodes (hove to in front of weather; 0 for a wait-free plan)."""
+        return float(sum(leg.get("wait_h", 0.0) for leg in self.legs))
 
     @property
     def distance_nm(self) -> float:
@@ -176,8 +183,11 @@ class Plan:
         return out
 
 
-def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[dict], int, int]:
-    """Sail the route leg by leg and describe each leg; returns (legs, failure code, failing leg)."""
+def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarray | None = None,
+                  wait_tph: float = 0.0) -> tuple[list[dict], int, int]:
+    """Sail the route leg by leg and describe each leg; returns (legs, failure code, failing leg). With `wait_h`
+    the ship waits wait_h[i] hours at line i's node before leg i (hove to, burning `wait_tph` t/h): the leg's
+    `etd_utc` is after the wait, its `wait_h` and `wait_fuel_t` say what the wait took."""
     lat, lon = inst.space.lat, inst.space.lon
     t = inst.t_dep_h
     horizon_h = float(inst.weather.times_h[-1])  # hours after t_ref of the last valid time
@@ -188,6 +198,8 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
         if not inst.space.edge_ok[i, a, b]:
             return legs, lk.NO_EDGE, i
         rpm = float(inst.rpm_options[rpm_idx[i]])
+        wait = max(0.0, float(wait_h[i])) if wait_h is not None else 0.0
+        t += wait
         o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vessel, inst.weather)
         if o[lk.CODE] != lk.OK:
             return legs, int(o[lk.CODE]), i
@@ -201,6 +213,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray) -> tuple[list[di
             "dist_nm": float(geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
             "rpm": rpm, "stw_kn": float(o[lk.STW_KN]), "sog_kn": float(o[lk.SOG_KN]), "hours": float(o[lk.H]),
             "fuel_t": float(o[lk.FUEL]), "etd_utc": _utc(etd), "eta_utc": _utc(eta),
+            "wait_h": wait, "wait_fuel_t": wait * float(wait_tph),
             "wind_kn": float(o[lk.WIND_KN]),
             "wind_dir_deg": float(np.degrees(np.arctan2(o[lk.WIND_FX], o[lk.WIND_FY])) % 360.0),
             "hs_m": float(o[lk.HS]),

@@ -14,6 +14,10 @@ route, returns that plan instead and says so, so no plan on time burns more than
 speed. With engine-change limits the solver's route is re-planned so every setting is held; `unlimited_fuel_t`
 is the best engine plan on the same route without them, for what the limits cost. The savings against the
 constant-speed voyage are split into speed profile and route (savings.py).
+
+A solver whose plans wait at nodes (`dp` with `slot_h`, the grid DP that is exact when the weather changes in time,
+dp_grid.py) hands its waits over in Found.wait_h: the plan's legs carry them (wait_h, wait_fuel_t, etd after the
+wait) and its hours, fuel and cost include them; `_waiting_plan_limits` says what the engine-change limits do to it.
 """
 
 from __future__ import annotations
@@ -30,7 +34,8 @@ from pipeline.routing.clearance import least_clearance_nm, widest_corridor_nm
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.continuous_speed import as_settings, refine_rpm
 from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
-                                            limited_plan)
+                                            limited_plan, settings_held_h)
+from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import profile_plan, solver_instance, split_of
@@ -43,22 +48,27 @@ _evaluate = evaluate  # the name tests and scripts have used
 
 
 def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, history=None, n_evals=0,
-          reason_if_infeasible: str | None = None, clearance_nm: float | None = None) -> Plan:
-    """The plan of a route and its engine settings; `clearance_nm`, when known (the same route planned before),
-    is taken as its least distance to land instead of tracing the legs again."""
+          reason_if_infeasible: str | None = None, clearance_nm: float | None = None, wait_h=None,
+          wait_tph: float = 0.0) -> Plan:
+    """The plan of a route and its engine settings, waiting wait_h[i] hours at line i's node before leg i when
+    given (burning `wait_tph`); `clearance_nm`, when known (the same route planned before), is taken as its least
+    distance to land instead of tracing the legs again."""
     p = inst.problem
     plan = Plan(voyage_id=p.voyage_id, imo=p.imo, solver=solver, objective=p.objective, status="infeasible",
                 reason=reason_if_infeasible, depart_utc=p.depart_utc, rta_utc=p.rta_utc, seed=seed, history=history,
                 n_evals=n_evals, model_version=p.model.version, cycle=inst.weather.cycle)
     if nodes is not None:
-        legs, code, bad_leg = legs_of_route(inst, nodes, rpm_idx)
+        legs, code, bad_leg = legs_of_route(inst, nodes, rpm_idx, wait_h, wait_tph)
         if code == lk.OK:
             plan.legs = legs
             if clearance_nm is not None:
                 plan.min_land_clearance_nm = clearance_nm
             elif inst.space.clearance is not None:
                 plan.min_land_clearance_nm = least_clearance_nm(plan.waypoints, inst.space.clearance)
-            plan.cost, _, _, _ = evaluate(inst, nodes, rpm_idx)
+            if wait_h is None:
+                plan.cost, _, _, _ = evaluate(inst, nodes, rpm_idx)
+            else:  # the legs as sailed after their waits, and the waits' fuel
+                plan.cost = float(route_cost_nb(inst.objective, plan.hours, plan.fuel_t))
             late_h = plan.hours - p.t_req_h
             if late_h > 1e-6:
                 plan.status = "late"
@@ -68,6 +78,10 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                 early_h = p.t_req_h - p.window_h - plan.hours
                 plan.reason = f"arrives {early_h:.1f} h before the arrival window" if early_h > 1e-6 else None
             notes = []
+            if plan.wait_h > 1e-9:
+                waited = [(leg["leg"], leg["wait_h"]) for leg in plan.legs if leg["wait_h"] > 1e-9]
+                where = ", ".join(f"{h:.1f} h before leg {i}" for i, h in waited[:5]) + (", …" if len(waited) > 5 else "")
+                notes.append(f"waits {plan.wait_h:.1f} h hove to ({where}; {sum(leg['wait_fuel_t'] for leg in plan.legs):.2f} t)")
             if plan.hours_beyond_forecast > 1e-9:
                 n = plan.n_beyond_forecast
                 notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({n} leg{'s' if n != 1 else ''}) beyond "
@@ -184,6 +198,41 @@ def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, contin
     return limited
 
 
+def _holds(legs: list[dict], limits: EngineLimits) -> bool:
+    """Whether every setting of the legs is held at least the limits' hours (a voyage of one setting always is)."""
+    runs = settings_held_h(legs)
+    return len(runs) == 1 or min(h for _, h in runs) >= limits.min_hold_h - 1e-9
+
+
+def _waiting_plan_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits | None, continuous: bool) -> Plan:
+    """A plan that waits at nodes (the grid DP's) under the engine-change limits. Its waits are kept when its
+    settings are already held: a wait is sailed as a pause of the setting around it (hove to, the order is not
+    changed), so holds count the hours sailed; the change cost is added per change. Otherwise its route is
+    re-planned wait-free with the limits as any solver's (_with_limits), and the plan says the waits were given up.
+    Where a storm blocks every wait-free plan of the route that holds, the waiting plan is kept without the limits
+    (`limits` None) and says which hold it breaks. Speeds are not refined continuously on a plan that waits (the
+    refinement sails wait-free)."""
+    if limits is None or not limits.active:
+        return plan
+    if _holds(plan.legs, limits):
+        plan.limits = limits
+        plan.unlimited_fuel_t = plan.fuel_t  # the waiting plan is the solver's own optimum: the limits cost nothing
+        plan.cost += limits.change_cost_t * plan.n_engine_changes
+        return plan
+    note = (f"the {plan.solver} plan waits {plan.wait_h:.1f} h ({plan.fuel_t:.1f} t) but changes setting within "
+            f"{limits.min_hold_h:g} h: re-planned wait-free holding each setting")
+    # the wait-free re-plan is compared with nothing of the waiting plan's (its fuel is not a plan of that route)
+    held = _with_limits(inst, replace(plan, legs=[], status="infeasible"), nodes, limits, continuous)
+    if not held.legs:  # no wait-free plan of the route holds its settings (a storm blocks it): the waiting plan stays
+        shortest = min(h for _, h in settings_held_h(plan.legs))
+        note = (f"holds a setting only {shortest:.1f} h (less than the {limits.min_hold_h:g} h asked): no wait-free "
+                "plan of its route holds each setting")
+        plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+        return plan
+    held.reason = note if held.reason is None else f"{held.reason}; {note}"
+    return held
+
+
 def solver_spec(solver: str):
     """The registered solver of that name; RoutingInputError listing the known ones otherwise."""
     if solver not in REGISTRY:
@@ -261,9 +310,13 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
         plan = _plan(inst, solver, None, None, seed=seed, t0=t0, reason_if_infeasible=why_not)
     else:
         found = spec.search(inst, base, seed=int(seed), options=opts)
+        waits = found.waits
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
-                     history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not)
-        if limits is not None and limits.active and plan.legs:
+                     history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not,
+                     wait_h=found.wait_h if waits else None, wait_tph=found.wait_tph)
+        if waits and plan.legs:
+            plan = _waiting_plan_limits(inst, plan, found.nodes, limits, continuous)
+        elif limits is not None and limits.active and plan.legs:
             plan = _with_limits(inst, plan, found.nodes, limits, continuous)
         elif continuous and plan.legs:
             at, rpm_idx, cost = _refined(inst, found.nodes, found.rpm_idx, plan.cost, None)

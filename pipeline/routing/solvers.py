@@ -24,21 +24,17 @@ def _bfoa(inst, base: Baseline, *, seed: int, options: BfoaParams) -> Found:
     return Found(nodes if ok else None, rpm_idx if ok else None, n_evals, history)
 
 
-def _dp(inst, base: Baseline, *, seed: int, options: dp.DpOptions, accept_waits: bool = False) -> Found:
-    """The DP, pruned by the cost of the incumbent solver's plan when it names one (seed 1, default options).
-    `accept_waits`: the caller carries Found.wait_h (the grid DP's plans wait at nodes; see dp.search)."""
+def _dp(inst, base: Baseline, *, seed: int, options: dp.DpOptions) -> Found:
+    """The DP, pruned by the cost of the incumbent solver's plan when it names one (seed 1, default options)."""
     upper = math.inf if options.upper_bound is None else float(options.upper_bound)
     incumbent = None
-    if options.slot_h is not None and not accept_waits:
-        dp.refuse_waits(options)
     if options.bucket_h is None and options.incumbent is not None:
         spec = SOLVERS[options.incumbent]
         found = spec.search(inst, base, seed=1, options=spec.options())
         if found.nodes is not None:
             upper = min(upper, evaluate(inst, found.nodes, found.rpm_idx)[0])
             incumbent = (found.nodes, found.rpm_idx)
-    return dp.search(inst, base, seed=seed, options=options, upper=upper, incumbent=incumbent,
-                     accept_waits=accept_waits)
+    return dp.search(inst, base, seed=seed, options=options, upper=upper, incumbent=incumbent)
 
 
 def _baseline(inst, base: Baseline, *, seed: int, options: NoOptions) -> Found:

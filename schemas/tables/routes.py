@@ -38,8 +38,8 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('depart_utc', 'TIMESTAMP', 'UTC', 'planned departure (UTC)'),
     Column('eta_utc', 'TIMESTAMP', 'UTC', 'planned arrival (UTC)'),
     Column('rta_utc', 'TIMESTAMP', 'UTC', 'required time of arrival (UTC)'),
-    Column('hours', 'DOUBLE', 'h', 'planned passage time, hours'),
-    Column('fuel_t', 'DOUBLE', 't', 'planned fuel burnt in tonnes'),
+    Column('hours', 'DOUBLE', 'h', 'planned passage time, hours (waits at nodes included)'),
+    Column('fuel_t', 'DOUBLE', 't', 'planned fuel burnt in tonnes (waits at nodes included)'),
     Column('baseline_fuel_t', 'DOUBLE', 't',
            'fuel burnt in tonnes on the baseline (great circle, constant speed) route'),
     Column('baseline_hours', 'DOUBLE', None, 'passage time of the baseline route, hours'),
@@ -108,9 +108,9 @@ ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met 
     Column('rpm', 'DOUBLE', 'rpm', 'main engine speed, revolutions per minute'),
     Column('stw_kn', 'DOUBLE', 'kn', 'speed through water, knots'),
     Column('sog_kn', 'DOUBLE', 'kn', 'speed over ground, knots'),
-    Column('hours', 'DOUBLE', 'h', 'leg time, hours'),
-    Column('fuel_t', 'DOUBLE', 't', 'fuel burnt in tonnes on the leg'),
-    Column('etd_utc', 'TIMESTAMP', 'UTC', 'leg start time (UTC)'),
+    Column('hours', 'DOUBLE', 'h', 'leg sailing time, hours (the wait before it is wait_h)'),
+    Column('fuel_t', 'DOUBLE', 't', 'fuel burnt in tonnes sailing the leg (the wait before it is wait_fuel_t)'),
+    Column('etd_utc', 'TIMESTAMP', 'UTC', 'leg start time (UTC), after any wait at its start node'),
     Column('eta_utc', 'TIMESTAMP', 'UTC', 'leg end time (UTC)'),
     Column('wind_kn', 'DOUBLE', 'kn', 'true wind speed on the leg, knots'),
     Column('wind_dir_deg', 'DOUBLE', 'degree', 'wind coming from, degrees true'),
@@ -123,6 +123,10 @@ ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met 
     Column('hours_before_cycle', 'DOUBLE', 'h', "hours of the leg sailed before the forecast cycle's init time"),
     Column('hours_without_wind', 'DOUBLE', 'h',
            "hours of the leg sailed where the cube's wind is missing (a hole, sailed as calm; the plan's reason names the leg)"),
+    Column('wait_h', 'DOUBLE', 'h',
+           'hours the ship waits (hove to) at the leg\'s start node before sailing it, e.g. for weather to pass; 0 for most '
+           'plans; the route\'s hours include it'),
+    Column('wait_fuel_t', 'DOUBLE', 't', 'fuel burnt in tonnes while waiting before the leg; the route\'s fuel_t includes it'),
 ), primary_key=('run_id', 'voyage_id', 'leg'))
 
 # the columns routing added to route_legs after they were first made (DDL from the definition above)
