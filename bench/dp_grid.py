@@ -58,7 +58,7 @@ def main() -> int:
         for slot_h in a.slot_h:
             opts = DpOptions(slot_h=slot_h, max_wait_h=a.max_wait_h, gap=a.gap)
             t0 = time.thread_time()
-            got = search(inst, base, seed=1, options=opts, incumbent=(found.nodes, found.rpm_idx), accept_waits=True)
+            got = search(inst, base, seed=1, options=opts, incumbent=(found.nodes, found.rpm_idx))
             cpu_s = time.thread_time() - t0
             if got.nodes is None:
                 print(f"{spec.name:16s} slot {slot_h:g} h: no plan; CPU {cpu_s:.1f} s, {got.n_evals:,} legs")
