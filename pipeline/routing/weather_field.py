@@ -184,6 +184,17 @@ def _bilinear(cells, iy, ix0, ix1, it, v, wy, wx):
     return s / w
 
 
+@numba.njit(cache=True, inline="always")
+def _time_index_nb(times_h, t_h):
+    """The index of the last valid time ≤ t_h, for times_h[0] < t_h < times_h[-1]: where the steps would put it
+    were they even (a field's steps mostly are), else by bisection (hundreds of steps over a voyage)."""
+    nt = times_h.shape[0]
+    k = min(max(int((t_h - times_h[0]) / (times_h[nt - 1] - times_h[0]) * (nt - 1)), 0), nt - 2)
+    if times_h[k] <= t_h < times_h[k + 1]:
+        return k
+    return np.searchsorted(times_h, t_h, side="right") - 1
+
+
 @numba.njit(cache=True)
 def sample_nb(w, t_h, lat, lon, out):
     """Fill out[0:7] with the weather `w` (a `Weather`) at (t_h, lat, lon); return True when t_h is past the last
@@ -196,8 +207,7 @@ def sample_nb(w, t_h, lat, lon, out):
     elif t_h >= times_h[nt - 1]:
         i0, i1, wt = nt - 1, nt - 1, 0.0
     else:
-        # the last valid time ≤ t_h, by bisection: hourly fields over a voyage have hundreds of steps
-        i0 = np.searchsorted(times_h, t_h, side="right") - 1
+        i0 = _time_index_nb(times_h, t_h)
         i1 = i0 + 1
         wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
     g = w.grid
