@@ -8,6 +8,9 @@ along course), and advances. Hours and fuel (rate × time) accumulate; weather l
 make the leg infeasible with a code. Where the wind is missing (a hole in the cube: every corner and both
 bracketing times NaN; GSM wind has no land mask, so this is never land) the step is sailed as calm but its
 hours are counted in NO_WIND_H, so the plan can say so instead of passing the hole off as calm weather.
+The weather met along the leg (mean wind, Hs, directions, current, STW) is what a plan's legs show; the
+searches, which sail a leg hundreds of thousands of times a voyage, skip it (`sail_leg_nb` against
+`sail_leg_weather_nb`).
 
 The ship comes as a `Vessel` (its performance model at the voyage's draft and trim, weather limits,
 the allowed engine settings and the integration step), the weather as a `weather_field.Weather`.
@@ -22,7 +25,8 @@ import numba
 import numpy as np
 
 # numba caches this module by its own source only: a change to the performance functions it compiles
-# in (features.stw_kn_nb, fuel_tph_nb) needs a change here, or cleared __pycache__, to be seen.
+# in (features.stw_kn_nb, fuel_tph_nb and the physical form's term functions) needs a change here, or
+# cleared __pycache__, to be seen.
 from pipeline.performance.features import (FORM_PHYSICAL, fuel_physical_terms_nb, fuel_tph_nb, stw_kn_nb,
                                            stw_physical_terms_nb, weather_terms_nb)
 from pipeline.routing import geodesy as geo
