@@ -76,14 +76,11 @@ class WeatherField:
     @cached_property
     def max_over_time(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(wind speed in kn, Hs in m, current speed in kn) per grid point (nlat, nlon): the largest at any valid
-        time, missing values as 0. Computed once per field (the exact solvers' bounds ask for it per route)."""
-        def var(k):
-            return np.nan_to_num(self.cells[..., k].astype(np.float64), nan=0.0)
-
-        wind = np.hypot(var(U10), var(V10)).max(axis=2) * KN_PER_MS
-        hs = var(SWH).max(axis=2)
-        cur = np.hypot(var(UO), var(VO)).max(axis=2) * KN_PER_MS
-        return wind, hs, cur
+        time, missing values as 0. Computed once per field (the exact solvers' bounds ask for it per route), in one
+        compiled pass over the cells."""
+        wind_ms, hs, cur_ms = (np.empty(self.cells.shape[:2]) for _ in range(3))
+        _max_over_time_nb(self.cells, wind_ms, hs, cur_ms)
+        return wind_ms * KN_PER_MS, hs, cur_ms * KN_PER_MS
 
     @property
     def values(self) -> np.ndarray:
@@ -167,6 +164,32 @@ def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0,
     return from_arrays(la, lo, times, u10=np.full(shape, wind_ms[0]), v10=np.full(shape, wind_ms[1]),
                        swh=np.full(shape, swh_m), mwd_deg=np.full(shape, wave_from_deg),
                        uo=np.full(shape, current_ms[0]), vo=np.full(shape, current_ms[1]))
+
+
+@numba.njit(cache=True, inline="always")
+def _finite(x):
+    """numpy.nan_to_num of one value: NaN 0, ±inf the largest finite float64 of that sign."""
+    if math.isnan(x):
+        return 0.0
+    if math.isinf(x):
+        return 1.7976931348623157e308 if x > 0.0 else -1.7976931348623157e308
+    return x
+
+
+@numba.njit(cache=True)
+def _max_over_time_nb(cells, wind_ms, hs_m, cur_ms):
+    """Per grid point of `cells` (nlat, nlon, nt, 7): the largest wind speed (m/s), Hs (m) and current speed (m/s)
+    at any valid time, missing values taken as 0 (`WeatherField.max_over_time`)."""
+    nlat, nlon, nt = cells.shape[0], cells.shape[1], cells.shape[2]
+    for i in range(nlat):
+        for j in range(nlon):
+            w_hi, h_hi, c_hi = -np.inf, -np.inf, -np.inf
+            for k in range(nt):
+                c = cells[i, j, k]
+                w_hi = max(w_hi, math.hypot(_finite(np.float64(c[U10])), _finite(np.float64(c[V10]))))
+                h_hi = max(h_hi, _finite(np.float64(c[SWH])))
+                c_hi = max(c_hi, math.hypot(_finite(np.float64(c[UO])), _finite(np.float64(c[VO]))))
+            wind_ms[i, j], hs_m[i, j], cur_ms[i, j] = w_hi, h_hi, c_hi
 
 
 @numba.njit(cache=True, inline="always")
