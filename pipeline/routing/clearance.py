@@ -95,10 +95,16 @@ def least_clearance_nb(grid, c, lat, lon):
         dist = geo.gc_distance_nm(lat[k], lon[k], lat[k + 1], lon[k + 1])
         chord = geo.chord(lat[k], lon[k], lat[k + 1], lon[k + 1])
         s = 0.0
+        outside_to = -1.0  # up to here along the leg no point is inside a port approach (known from an earlier point)
         while True:
             f = min(1.0, s / dist) if dist > 0.0 else 1.0
             plat, plon = geo.chord_point(chord, f)
-            inside, gap = _approach(c, plat, plon)
+            if s < outside_to:
+                inside, gap = False, 0.0
+            else:
+                inside, gap = _approach(c, plat, plon)
+                if not inside:  # the next `gap` NM along the leg cannot reach an approach (margin for rounding)
+                    outside_to = s + gap - 1e-6
             if inside:
                 step = gap
             else:

@@ -8,6 +8,9 @@ along course), and advances. Hours and fuel (rate × time) accumulate; weather l
 make the leg infeasible with a code. Where the wind is missing (a hole in the cube: every corner and both
 bracketing times NaN; GSM wind has no land mask, so this is never land) the step is sailed as calm but its
 hours are counted in NO_WIND_H, so the plan can say so instead of passing the hole off as calm weather.
+The weather met along the leg (mean wind, Hs, directions, current, STW) is what a plan's legs show; the
+searches, which sail a leg hundreds of thousands of times a voyage, skip it (`sail_leg_nb` against
+`sail_leg_weather_nb`).
 
 The ship comes as a `Vessel` (its performance model at the voyage's draft and trim, weather limits,
 the allowed engine settings and the integration step), the weather as a `weather_field.Weather`.
@@ -22,8 +25,10 @@ import numba
 import numpy as np
 
 # numba caches this module by its own source only: a change to the performance functions it compiles
-# in (features.stw_kn_nb, fuel_tph_nb) needs a change here, or cleared __pycache__, to be seen.
-from pipeline.performance.features import fuel_tph_nb, stw_kn_nb
+# in (features.stw_kn_nb, fuel_tph_nb and the physical form's term functions) needs a change here, or
+# cleared __pycache__, to be seen.
+from pipeline.performance.features import (FORM_PHYSICAL, fuel_physical_terms_nb, fuel_tph_nb, stw_kn_nb,
+                                           stw_physical_terms_nb, weather_terms_nb)
 from pipeline.routing import geodesy as geo
 from pipeline.routing.weather_field import N_VARS, SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, sample_nb
 
@@ -73,13 +78,25 @@ def vessel(model, *, draft_m: float = 10.0, trim_m: float = 0.0, max_hs_m: float
                   np.ascontiguousarray(np.sort(np.asarray(rpm_options, dtype=np.float64))))
 
 
-@numba.njit(cache=True)
-def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
-    """Sail one leg starting at t0_h (hours after the weather's t_ref) at `rpm`; results in out[0:N_LEG_OUT]."""
+@numba.njit(cache=True, inline="always")
+def _stw_and_fuel_rate(ves, rpm, wind_kn, wind_rel, hs, wave_rel):
+    """(STW kn, fuel rate t/h) of the vessel in one condition: `stw_kn_nb` and `fuel_tph_nb`, the physical form's
+    weather loads worked out once for both (the same numbers)."""
+    if ves.form_id == FORM_PHYSICAL:
+        wind_term, wave_term = weather_terms_nb(wind_kn, wind_rel, hs, wave_rel)
+        return (stw_physical_terms_nb(ves.speed_coef, rpm, ves.draft_m, ves.trim_m, ves.months_dd, wind_term, wave_term),
+                fuel_physical_terms_nb(ves.fuel_coef, rpm, ves.draft_m, ves.months_dd, wind_term, wave_term))
+    return (stw_kn_nb(ves.form_id, ves.speed_coef, rpm, ves.draft_m, ves.trim_m, wind_kn, wind_rel, hs, wave_rel,
+                      ves.months_dd),
+            fuel_tph_nb(ves.form_id, ves.fuel_coef, rpm, ves.draft_m, ves.trim_m, wind_kn, wind_rel, hs, wave_rel,
+                        ves.months_dd))
+
+
+@numba.njit(cache=True, inline="always")
+def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
+    """The leg, with the weather met accumulated when `weather_met` (a constant of each caller)."""
     for k in range(N_LEG_OUT):
         out[k] = 0.0
-    form = ves.form_id
-    speed_coef, fuel_coef = ves.speed_coef, ves.fuel_coef
     dist = geo.gc_distance_nm(lat0, lon0, lat1, lon1)
     if dist < 1e-6:
         return
@@ -110,7 +127,7 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
         wave_from = math.degrees(math.atan2(wave_x, wave_y))
         wind_rel = wind_from - hdg
         wave_rel = wave_from - hdg
-        stw = stw_kn_nb(form, speed_coef, rpm, ves.draft_m, ves.trim_m, wind_kn, wind_rel, hs, wave_rel, ves.months_dd)
+        stw, fuel_tph = _stw_and_fuel_rate(ves, rpm, wind_kn, wind_rel, hs, wave_rel)
         cur = geo.along_course(uo, vo, hdg) * geo.KN_PER_MS
         sog = stw + cur
         if sog < MIN_SOG_KN:
@@ -118,17 +135,17 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
             return
         ds = min(dist - done, sog * ves.max_step_h)
         dt = ds / sog
-        fuel += fuel_tph_nb(form, fuel_coef, rpm, ves.draft_m, ves.trim_m, wind_kn, wind_rel, hs, wave_rel,
-                            ves.months_dd) * dt
-        out[WIND_KN] += wind_kn * dt
-        out[WIND_FX] += math.sin(math.radians(wind_from)) * dt
-        out[WIND_FY] += math.cos(math.radians(wind_from)) * dt
-        out[HS] += hs * dt
-        out[WAVE_FX] += wave_x * dt
-        out[WAVE_FY] += wave_y * dt
-        out[CUR_ALONG_KN] += cur * dt
-        out[STW_KN] += stw * dt
-        out[CUR_KN] += math.sqrt(uo * uo + vo * vo) * geo.KN_PER_MS * dt
+        fuel += fuel_tph * dt
+        if weather_met:
+            out[WIND_KN] += wind_kn * dt
+            out[WIND_FX] += math.sin(math.radians(wind_from)) * dt
+            out[WIND_FY] += math.cos(math.radians(wind_from)) * dt
+            out[HS] += hs * dt
+            out[WAVE_FX] += wave_x * dt
+            out[WAVE_FY] += wave_y * dt
+            out[CUR_ALONG_KN] += cur * dt
+            out[STW_KN] += stw * dt
+            out[CUR_KN] += math.sqrt(uo * uo + vo * vo) * geo.KN_PER_MS * dt
         if no_wind:
             out[NO_WIND_H] += dt
         t += dt
@@ -138,9 +155,23 @@ def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
         return
     out[H] = hours
     out[FUEL] = fuel
-    for k in (WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, CUR_KN):
-        out[k] /= hours
+    if weather_met:
+        for k in (WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, CUR_KN):
+            out[k] /= hours
     out[SOG_KN] = dist / hours
+
+
+@numba.njit(cache=True)
+def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
+    """Sail one leg starting at t0_h (hours after the weather's t_ref) at `rpm`; results in out[0:N_LEG_OUT], the
+    weather met (WIND_KN … CUR_KN, which no search reads) left 0: `sail_leg_weather_nb` fills those too."""
+    _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, False)
+
+
+@numba.njit(cache=True)
+def sail_leg_weather_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
+    """`sail_leg_nb` with the weather met along the leg (time-weighted means) in out: what a plan's legs show."""
+    _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, True)
 
 
 @numba.njit(cache=True)
@@ -171,15 +202,15 @@ def sail_route_nb(nodes, rpm_idx, start_line, g, ves, wx, obj, cum_t, cum_f):
 
 
 def sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves: Vessel, field) -> np.ndarray:
-    """Python entry: one leg in a `WeatherField`; returns the N_LEG_OUT array."""
+    """Python entry: one leg in a `WeatherField`, with the weather met; returns the N_LEG_OUT array."""
     out = np.empty(N_LEG_OUT)
-    sail_leg_nb(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves, field.kernel, out)
+    sail_leg_weather_nb(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves, field.kernel, out)
     return out
 
 
 def sail_leg_python(lat0, lon0, lat1, lon1, t0_h, rpm, ves: Vessel, field) -> np.ndarray:
     """The same leg through the interpreted (non-compiled) code path, for verification."""
     out = np.empty(N_LEG_OUT)
-    sail_leg_nb.py_func(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves,
-                        field.kernel, out)
+    _sail_leg.py_func(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves, field.kernel,
+                      out, True)
     return out

@@ -76,14 +76,11 @@ class WeatherField:
     @cached_property
     def max_over_time(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(wind speed in kn, Hs in m, current speed in kn) per grid point (nlat, nlon): the largest at any valid
-        time, missing values as 0. Computed once per field (the exact solvers' bounds ask for it per route)."""
-        def var(k):
-            return np.nan_to_num(self.cells[..., k].astype(np.float64), nan=0.0)
-
-        wind = np.hypot(var(U10), var(V10)).max(axis=2) * KN_PER_MS
-        hs = var(SWH).max(axis=2)
-        cur = np.hypot(var(UO), var(VO)).max(axis=2) * KN_PER_MS
-        return wind, hs, cur
+        time, missing values as 0. Computed once per field (the exact solvers' bounds ask for it per route), in one
+        compiled pass over the cells."""
+        wind_ms, hs, cur_ms = (np.empty(self.cells.shape[:2]) for _ in range(3))
+        _max_over_time_nb(self.cells, wind_ms, hs, cur_ms)
+        return wind_ms * KN_PER_MS, hs, cur_ms * KN_PER_MS
 
     @property
     def values(self) -> np.ndarray:
@@ -170,6 +167,32 @@ def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0,
 
 
 @numba.njit(cache=True, inline="always")
+def _finite(x):
+    """numpy.nan_to_num of one value: NaN 0, ±inf the largest finite float64 of that sign."""
+    if math.isnan(x):
+        return 0.0
+    if math.isinf(x):
+        return 1.7976931348623157e308 if x > 0.0 else -1.7976931348623157e308
+    return x
+
+
+@numba.njit(cache=True)
+def _max_over_time_nb(cells, wind_ms, hs_m, cur_ms):
+    """Per grid point of `cells` (nlat, nlon, nt, 7): the largest wind speed (m/s), Hs (m) and current speed (m/s)
+    at any valid time, missing values taken as 0 (`WeatherField.max_over_time`)."""
+    nlat, nlon, nt = cells.shape[0], cells.shape[1], cells.shape[2]
+    for i in range(nlat):
+        for j in range(nlon):
+            w_hi, h_hi, c_hi = -np.inf, -np.inf, -np.inf
+            for k in range(nt):
+                c = cells[i, j, k]
+                w_hi = max(w_hi, math.hypot(_finite(np.float64(c[U10])), _finite(np.float64(c[V10]))))
+                h_hi = max(h_hi, _finite(np.float64(c[SWH])))
+                c_hi = max(c_hi, math.hypot(_finite(np.float64(c[UO])), _finite(np.float64(c[VO]))))
+            wind_ms[i, j], hs_m[i, j], cur_ms[i, j] = w_hi, h_hi, c_hi
+
+
+@numba.njit(cache=True, inline="always")
 def _bilinear(cells, iy, ix0, ix1, it, v, wy, wx):
     """Variable v at valid time index it, bilinear between the 4 corners, NaN corners left out."""
     v00, v01 = cells[iy, ix0, it, v], cells[iy, ix1, it, v]
@@ -184,6 +207,17 @@ def _bilinear(cells, iy, ix0, ix1, it, v, wy, wx):
     return s / w
 
 
+@numba.njit(cache=True, inline="always")
+def _time_index_nb(times_h, t_h):
+    """The index of the last valid time ≤ t_h, for times_h[0] < t_h < times_h[-1]: where the steps would put it
+    were they even (a field's steps mostly are), else by bisection (hundreds of steps over a voyage)."""
+    nt = times_h.shape[0]
+    k = min(max(int((t_h - times_h[0]) / (times_h[nt - 1] - times_h[0]) * (nt - 1)), 0), nt - 2)
+    if times_h[k] <= t_h < times_h[k + 1]:
+        return k
+    return np.searchsorted(times_h, t_h, side="right") - 1
+
+
 @numba.njit(cache=True)
 def sample_nb(w, t_h, lat, lon, out):
     """Fill out[0:7] with the weather `w` (a `Weather`) at (t_h, lat, lon); return True when t_h is past the last
@@ -196,8 +230,7 @@ def sample_nb(w, t_h, lat, lon, out):
     elif t_h >= times_h[nt - 1]:
         i0, i1, wt = nt - 1, nt - 1, 0.0
     else:
-        # the last valid time ≤ t_h, by bisection: hourly fields over a voyage have hundreds of steps
-        i0 = np.searchsorted(times_h, t_h, side="right") - 1
+        i0 = _time_index_nb(times_h, t_h)
         i1 = i0 + 1
         wt = (t_h - times_h[i0]) / (times_h[i1] - times_h[i0])
     g = w.grid
