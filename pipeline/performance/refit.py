@@ -40,6 +40,7 @@ from pipeline.performance import features, fit, mlp, sanity, screen
 TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
 BEST = "best"  # fit every candidate form and propose the best on held-out rows
+DEFAULT_FORM = "physical"  # what a refit fits unless told otherwise (see `refit_fleet`)
 REPORT_COLUMNS = ("imo", "ts_utc", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
 TRAIN_RTOL = 1e-2  # robust re-weighting of a candidate on its training rows stops when no coefficient moves more
 ALL_ROWS_SOLVES = 1  # robust solves of an accepted model's refit on all rows, from the training fit
@@ -130,7 +131,7 @@ def check_form(form: str) -> str:
     return form
 
 
-def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = BEST,
+def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = DEFAULT_FORM,
                  robust: bool | None = None, gate: Gate = Gate(), fitted: dict | None = None) -> tuple[list[dict], dict]:
     """(perf_models rows, summary) for one vessel's time-ordered reports; see `refit_fleet`."""
     imo = int(imo)
@@ -141,7 +142,7 @@ def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: 
     return rows, summaries[0]
 
 
-def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = BEST,
+def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = DEFAULT_FORM,
                 robust: bool | None = None, gate: Gate = Gate(), fitted: dict[int, dict] | None = None
                 ) -> tuple[list[dict], list[dict]]:
     """Refit every vessel in `reports` (time-ordered within each vessel), fitted together.
@@ -150,7 +151,9 @@ def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, f
     with `fit.INPUT_COLUMNS` and "imo" ("ts_utc" if there, else row order is time). `active`:
     imo → active model (`fleet_store.active_models`); `versions`: imo → version of new rows (1 if
     absent); `fitted`: imo → {data_hash: (version, active)} of stored models (`fitted_from_rows`).
-    `form`: one of `FORMS`, or "best" for every form in `gate.candidates`; `robust`: Huber
+    `form`: one of `FORMS` (default `DEFAULT_FORM`, the physical form: against truths outside every form it
+    is what "best" chooses for each ship of `bench/models.py`, at a fraction of the cost, and the network chosen
+    on a thin margin is what a router exploited), or "best" for every form in `gate.candidates`; `robust`: Huber
     re-weighting, None for each form's default. Returns (perf_models rows to insert, one summary
     per vessel in IMO order); a summary's "reactivate" names a stored version to make active again,
     its "flag" a contradiction between new reports and the active model.
