@@ -124,13 +124,12 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     flip = np.array([target == "speed" and nm in features.NON_POSITIVE_SPEED for nm in names], dtype=np.bool_)
     warm = start is not None
     beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
+    sign = np.where(flip, -1.0, 1.0)  # the kernel fits on X·diag(sign): no copy of X
     if flip.any():
-        X = X.copy()
-        X[:, flip] *= -1.0
         nonneg = nonneg | flip
         beta0 = np.ascontiguousarray(np.where(flip, -beta0, beta0))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
-    fit_kernels.fit_groups_nb(X, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
+    fit_kernels.fit_groups_nb(X, sign, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
                               max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
     if flip.any():
         coef[:, flip] *= -1.0
