@@ -345,7 +345,8 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
         pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
         sl = slice(hold_bounds[g], hold_bounds[g + 1])
-        best, choice = _choose(pool, score, forms, {f: cands[f] for f in pool}, sl, hold_rows, y, mean_of, g, gate)
+        best, choice = (pool[0], "") if len(pool) == 1 else _choose(pool, score, forms, {f: cands[f] for f in pool}, sl,
+                                                                     hold_rows, y, mean_of, g, gate)
         c = cands[best]
         act = active.get(imo)
         why = act_flag.get(g) or verdicts[best]  # a contradiction with the active model is the first thing to fix
@@ -377,7 +378,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
                    "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
                    "fuel_holdout_rmse": rmse_of[best]["fuel"][g], "gate": gate_text, "network": network}
-        summary.update(_scores(c.train, g))
+        summary.update(_scores({t: c.train[t][g] for t in TARGETS}))
         seen = fitted.get(imo, {}).get(hashes[best][g])
         if seen is not None:  # these rows were fitted with this form before: the same model
             version, is_active = seen
@@ -598,22 +599,29 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
     return hold, flags
 
 
-def _coefficients_json(r: fit.FitResult) -> str:
-    """`json.dumps(r.coefficients())`, formatted from a template where every value is finite (cheaper)."""
-    values = r.coef.tolist()
-    if not all(map(math.isfinite, values)):
-        return json.dumps(r.coefficients())
-    template = _TEMPLATES.get(r.names)
-    if template is None:
-        template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
-    return template % tuple(values)
+def _coefficients_json_of(results: list[fit.FitResult]) -> list[str]:
+    """`json.dumps(r.coefficients())` of each result, formatted from a template where every value is finite (cheaper)."""
+    out = []
+    for r in results:
+        values = r.coef.tolist()
+        if not all(map(math.isfinite, values)):
+            out.append(json.dumps(r.coefficients()))
+            continue
+        template = _TEMPLATES.get(r.names)
+        if template is None:
+            template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
+        out.append(template % tuple(values))
+    return out
 
 
 _TEMPLATES: dict[tuple, str] = {}
 
 
-def _scores(results: dict, g: int) -> dict:
-    return {f"{t}_{k}": float(getattr(results[t][g], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")}
+def _scores(result: dict) -> dict:
+    """Summary fields of a vessel's fit statistics: target → `fit.FitResult`."""
+    s, f = result["speed"], result["fuel"]
+    return {"speed_r2": s.r2, "speed_rmse": s.rmse, "speed_cv_rmse": s.cv_rmse,
+            "fuel_r2": f.r2, "fuel_rmse": f.rmse, "fuel_cv_rmse": f.cv_rmse}
 
 
 def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> list[dict]:
@@ -641,25 +649,29 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
             full[int(g)] = {t: res[t][j] for t in TARGETS}
             envs[int(g)] = (env[j], sane[j])
     out = []
-    first, end = bounds[:-1].tolist(), bounds[1:].tolist()
+    g_all = np.array([p[0] for p in plans], dtype=np.int64)
+    last = bounds[1:][g_all] - 1
+    used = (last >= bounds[:-1][g_all]).tolist()
+    last = np.maximum(last, 0)
+    months_of, data_to_of = inp["months_dd"][last].tolist(), ts[last].tolist()  # .tolist(): floats and datetimes
+    coef_json = _coefficients_json_of([full[p[0]][t] for p in plans for t in TARGETS])
     n_hold = n_hold.tolist()
-    for g, imo, form, activate, summary, data_hash in plans:
+    for j, (g, imo, form, activate, summary, data_hash) in enumerate(plans):
         env, refused = envs[g]
         if activate and refused:
             activate = False
             summary.update(changed=False, why=f"{refused} (fitted on all rows)",
                            reason=f"{form}: refused after its fit on all rows: {refused}; {summary['reason']}")
         res = full[g]
-        last = end[g] - 1
-        used = last >= first[g]
-        summary.update({f"{t}_{k}": float(getattr(res[t], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")})
-        months, data_to = (float(inp["months_dd"][last]), ts[last].item()) if used else (0.0, None)  # .item(): a datetime
-        for t in TARGETS:
+        summary.update(_scores(res))
+        months, data_to = (months_of[j], data_to_of[j]) if used[j] else (0.0, None)
+        env_json, status, reason, gate_text = env.to_json(), "active" if activate else "rejected", summary["reason"], summary.get("gate")
+        for i, t in enumerate(TARGETS):
             r = res[t]
             out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,
-                        "coefficients": _coefficients_json(r), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
+                        "coefficients": coef_json[2 * j + i], "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
                         "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": n_hold[g],
-                        "status": "active" if activate else "rejected", "reason": summary["reason"], "active": activate,
+                        "status": status, "reason": reason, "active": activate,
                         "months_dd": months, "data_hash": data_hash, "data_to_utc": data_to,
-                        "envelope": env.to_json(), "gate": summary.get("gate")})
+                        "envelope": env_json, "gate": gate_text})
     return out
