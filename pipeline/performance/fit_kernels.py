@@ -64,10 +64,19 @@ def _fit_group(X, sign, y, a, b, intercept, nonneg, robust, max_solves, rtol, hu
             beta[i] = beta0[i] * scale[i] if keep[i] else 0.0
         _residuals(Z, beta, 0, m, r)
         med, s = huber_weights(r, m, huber_k, med, s, buf, w)
+    do_cv = do_cv and m >= 2 * n_keep
+    A = np.empty((k, k + 1))
     for it in range(max_solves):
-        _grams(Z, w, full, end, T, gram)
+        if do_cv:  # the folds' blocks, summed: the cross-validation below reuses the last solve's blocks
+            _grams(Z, w, lo, hi, T, gram)
+            A[:] = gram[0]
+            for f in range(1, F):
+                A += gram[f]
+        else:
+            _grams(Z, w, full, end, T, gram)
+            A[:] = gram[0]
         prev[:] = beta
-        _solve_nonneg(gram[0], keep, nonneg, beta, Z, m)
+        _solve_nonneg(A, keep, nonneg, beta, Z, m)
         if it > 0 or started:
             step, big = 0.0, 0.0
             for i in range(k):
@@ -86,11 +95,16 @@ def _fit_group(X, sign, y, a, b, intercept, nonneg, robust, max_solves, rtol, hu
         stats[0] = 1.0 - ssr / sst
     for i in range(k):
         coef[i] = beta[i] / scale[i] if keep[i] else 0.0
-    # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block
-    if do_cv and m >= 2 * n_keep:
-        _grams(Z, w, lo, hi, T, gram)
-        A = np.zeros((k, k + 1))
-        for f in range(F):
+    # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block; the blocks
+    # are the last solve's, less the rows and columns of regressors it left out (as if their columns were zero)
+    if do_cv:
+        for i in range(k):
+            if not keep[i]:
+                for f in range(F):
+                    gram[f, i, :] = 0.0
+                    gram[f, :, i] = 0.0
+        A[:] = gram[0]
+        for f in range(1, F):
             A += gram[f]
         beta_f = np.empty(k)
         cv = 0.0
