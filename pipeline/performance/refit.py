@@ -310,7 +310,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, bounds[:-1], hold_from, robust_of[form], gate,
                                                            k_folds=0, rtol=TRAIN_RTOL, skip=skipped), skipped=skipped)
         for t in TARGETS:
-            coefs = np.array([r.coef for r in c.train[t]])
+            coefs = fit.coef_matrix(c.train[t])
             c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
             if skipped:
                 c.hold_pred[t][np.isin(hold_which, list(skipped))] = np.nan
@@ -334,9 +334,8 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         c.sane = [None] * G
         todo = [g for g in range(G) if gated[f][g] is None] if gate.sanity else []
         if todo:
-            why = sanity.check_models(f, np.array([c.train["speed"][g].coef for g in todo]),
-                                      np.array([c.train["fuel"][g].coef for g in todo]), [train_env[g] for g in todo],
-                                      gate.limits)
+            why = sanity.check_models(f, fit.coef_matrix(c.train["speed"], todo), fit.coef_matrix(c.train["fuel"], todo),
+                                      [train_env[g] for g in todo], gate.limits)
             for g, w in zip(todo, why):
                 c.sane[g] = w
     for g, imo in enumerate(imos.tolist()):
@@ -413,7 +412,7 @@ def _network_screen(phys: _Candidate, X: dict, y: dict, bounds, hold_from, gate:
     starts = bounds[:-1]
     rows = _ranges(starts, hold_from)
     resid = np.column_stack([y[t][rows] - np.einsum("ij,ij->i", phys.X[t][rows], np.repeat(
-        np.array([r.coef for r in phys.train[t]]), hold_from - starts, axis=0)) for t in TARGETS])
+        fit.coef_matrix(phys.train[t]), hold_from - starts, axis=0)) for t in TARGETS])
     at = np.r_[0, np.cumsum(hold_from - starts)]
     r2 = screen.explained(X["speed"][rows], resid, at[:-1], at[1:])
     need = screen.share_needed(gate.switch_margin)
@@ -636,13 +635,13 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
         # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
-                        start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
+                        start={t: fit.coef_matrix(c.train[t], gs) for t in TARGETS})
         env = sanity.envelopes(inp, bounds[gs], bounds[gs + 1])
         active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
         sane = [None] * gs.size
         if gate.sanity and active:
-            why = sanity.check_models(form, np.array([res["speed"][j].coef for j in active]),
-                                      np.array([res["fuel"][j].coef for j in active]), [env[j] for j in active], gate.limits)
+            why = sanity.check_models(form, fit.coef_matrix(res["speed"], active), fit.coef_matrix(res["fuel"], active),
+                                      [env[j] for j in active], gate.limits)
             for j, w in zip(active, why):
                 sane[j] = w
         for j, g in enumerate(gs):
