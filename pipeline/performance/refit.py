@@ -298,7 +298,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
 
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
-    train_env = sanity.envelopes(inp, bounds[:-1], hold_from)
+    train_env, all_env = sanity.envelopes_until(inp, bounds[:-1], hold_from, bounds[1:])  # of training rows, all rows
     cands = {}
     for form in sorted(forms, key=lambda f: f == "mlp"):  # the network last: its screen looks at the physical fit
         X = _designs(form, inp, {f: c.X for f, c in cands.items()})
@@ -393,7 +393,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         summary.update(changed=activate, version=versions.get(imo, 1))
         plans.append((g, imo, best, activate, summary, hashes[best][g]))
         summaries.append(summary)
-    return _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate), summaries
+    return _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate), summaries
 
 
 def _designs(form: str, inp, built: dict | None = None) -> dict[str, np.ndarray]:
@@ -623,7 +623,7 @@ def _scores(result: dict) -> dict:
             "fuel_r2": f.r2, "fuel_rmse": f.rmse, "fuel_cv_rmse": f.cv_rmse}
 
 
-def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> list[dict]:
+def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list[dict]:
     """perf_models rows: every proposed model validated on the held-out rows and then refitted on all its vessel's
     rows (what is stored, active or not); an accepted one is activated only if that fit passes the sanity checks
     over the envelope of all the rows."""
@@ -636,7 +636,7 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: fit.coef_matrix(c.train[t], gs) for t in TARGETS})
-        env = sanity.envelopes(inp, bounds[gs], bounds[gs + 1])
+        env = [all_env[g] for g in gs.tolist()]
         active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
         sane = [None] * gs.size
         if gate.sanity and active:
