@@ -341,8 +341,8 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     for g, imo in enumerate(imos.tolist()):
         verdicts = {f: gated[f][g] or cands[f].sane[g] for f in cands}
         score = {f: scores_of[f][g] for f in forms}
-        passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
-        pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
+        passing = [f for f in forms if verdicts[f] is None and math.isfinite(score[f])]
+        pool = passing or [f for f in forms if math.isfinite(score[f])] or list(forms)
         sl = slice(hold_bounds[g], hold_bounds[g + 1])
         best, choice = (pool[0], "") if len(pool) == 1 else _choose(pool, score, forms, {f: cands[f] for f in pool}, sl,
                                                                      hold_rows, y, mean_of, g, gate)
@@ -377,9 +377,9 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
                    "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
                    "fuel_holdout_rmse": rmse_of[best]["fuel"][g], "gate": gate_text, "network": network}
-        summary.update(_scores({t: c.train[t][g] for t in TARGETS}))
         seen = fitted.get(imo, {}).get(hashes[best][g])
         if seen is not None:  # these rows were fitted with this form before: the same model
+            summary.update(_scores({t: c.train[t][g] for t in TARGETS}))  # (a stored fit gets those of its fit on all rows)
             version, is_active = seen
             if is_active:
                 summary.update(why="same as the active model", reason=f"same rows and form as the active v{version}: nothing new")
