@@ -5,7 +5,8 @@ Five ships from `pipeline.synthetic.truth.fleet_of_five` (a slow tanker, a fast 
 a wide-draft bulker, a ship whose speed log reads 12 % low from day 250), each with quadratic weather losses and
 its own direction shape, 5 % noise and 2 % outliers: every form is fitted to a year of daily reports and scored on
 the following 35 days, which were never imported — speed RMSE beside the noise floor (the truth against the
-observations), fuel MAPE against the true rate — and the form the default refit ("best") chooses is named. For
+observations), fuel MAPE against the true rate — and the form `--form best` chooses is named (the refit's default,
+`physical`, is the form it should choose when nothing else is significantly better). For
 each chosen model: its physical sanity, the fuel of a 120 NM leg at 98 % rpm in calm water and in 3 m head seas,
 and the exact DP on a ~600 NM voyage beside a band of 3 m head seas (`pipeline.synthetic.exploit`): a model with
 head-sea gains pulls the route into the band.
@@ -40,7 +41,7 @@ def main() -> int:
     for k, v in enumerate(truth.fleet_of_five()):
         df, true = truth.reports(v, "2020-12-01", a.days + a.later, seed=k + 1)
         fitted, later = df.iloc[: a.days], df.iloc[a.days:]
-        rows, chosen = refit_vessel(v.imo, fitted, None, 1)
+        rows, chosen = refit_vessel(v.imo, fitted, None, 1, form="best")
         t = score_forms(fitted, later, true.iloc[a.days:])
         t.insert(0, "ship", v.name)
         t["chosen"] = t["form"] == chosen["form"]

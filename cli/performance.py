@@ -92,9 +92,10 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def refit(imo: Optional[list[int]] = typer.Option(None, "--imo", help="Vessel(s) to refit; default all."),
-              form: str = typer.Option("best", help="Model form: best (default: every form scored on the newest "
-                                                    "reports; the physical one kept unless another is significantly "
-                                                    "better), physical, thesis or mlp."),
+              form: str = typer.Option("physical", help="Model form: physical (default), thesis, mlp, or best (opt-in: "
+                                                        "every form scored on the newest reports, the physical one "
+                                                        "kept unless another is significantly better; trains the "
+                                                        "network where it could win, many times the CPU)."),
               gate: Optional[list[str]] = typer.Option(None, "--gate", metavar="NAME=VALUE",
                                                        help="Override a gate setting for this refit (repeatable), e.g. "
                                                             "min_rows_per_coef=3, min_r2=0.1, sanity=false; the table's "

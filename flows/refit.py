@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from prefect import flow
 
-from flows.jobs.refit import import_bunker_file, import_fleet_folder, import_noon_file, refit_job
+from flows.jobs.refit import DEFAULT_FORM, import_bunker_file, import_fleet_folder, import_noon_file, refit_job
 from flows.runner import InPrefect, register_flow
 from flows.settings import refuse_served_overrides
 
@@ -36,7 +36,7 @@ def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
 
 @register_flow
 @flow(name="refit-performance")
-def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
+def refit_performance(imos: list[int] | None = None, data_root: str | None = None, form: str = DEFAULT_FORM,
                       robust: bool | None = None, gate: list[str] | None = None) -> list[dict]:
     """Refit every (or the given) vessel's speed and fuel model; activation only for a model that is not worse."""
     refuse_served_overrides(data_root=data_root)

@@ -397,6 +397,25 @@ def test_refit_refuses_a_form_that_does_not_exist_in_one_line(form, tmp_path, mo
     assert not (tmp_path / "d").exists()  # refused before anything was created
 
 
+def test_refit_fits_the_physical_form_unless_told_otherwise():
+    """One default everywhere a refit starts (pipeline, job, Prefect flow, command line); `best` is opt-in."""
+    import inspect
+
+    import typer
+
+    from cli.main import app
+    from flows.jobs.refit import refit_job
+    from flows.refit import refit_performance
+    from pipeline.performance.refit import DEFAULT_FORM
+
+    assert DEFAULT_FORM == "physical"
+    for fn in (refit_fleet, refit_vessel, refit_job, refit_performance.fn):
+        assert inspect.signature(fn).parameters["form"].default == DEFAULT_FORM, fn.__name__
+    cmd = typer.main.get_command(app).commands["refit"]
+    option = next(p for p in cmd.params if p.name == "form")
+    assert option.default == DEFAULT_FORM and "best (opt-in" in option.help
+
+
 def test_calm_water_speed_and_fuel_do_not_depend_on_heading():
     """No wind and no waves: every form gives one speed and one fuel rate whatever the (meaningless)
     relative direction, including the −180° routing gets from atan2(−0, −0); and a leg sailed north
@@ -601,14 +620,14 @@ def test_fuzzy_model_from_the_command_line(monkeypatch):
 @pytest.mark.parametrize("imo,seed", [(9140607, 1), (9140619, 2)])
 def test_forms_scored_against_a_truth_outside_all_of_them(imo, seed):
     """Quadratic losses with their own head/beam/following shape, 5 % noise, 2 % outliers; the 55 days after
-    the fitted year are never part of the fit. The form a refit chooses is within 10 % of the noise floor on
+    the fitted year are never part of the fit. The form `--form best` chooses is within 10 % of the noise floor on
     speed and within 5 % fuel MAPE; the thesis form is told apart as worse."""
     from pipeline.performance.benchmark import score_forms
     from pipeline.synthetic import truth
 
     df, true = truth.reports(truth.TrueVessel(imo), "2020-12-01", 420, seed)
     fitted, later, true_later = df.iloc[:365], df.iloc[365:], true.iloc[365:]
-    _, chosen = refit_vessel(imo, fitted, None, 1)
+    _, chosen = refit_vessel(imo, fitted, None, 1, form="best")  # every form, chosen with a margin
     assert chosen["changed"]
     scores = score_forms(fitted, later, true_later).set_index("form")
     print(f"\n{scores.round(3).to_string()}\nchosen: {chosen['form']}")

@@ -13,8 +13,8 @@ from flows.runner import PLAIN
 from flows.settings import load_settings
 from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.performance.bunker import validate_bunker
-from pipeline.performance.refit import (REPORT_COLUMNS, Gate, check_form, fitted_from_rows, gate_with, refit_fleet,
-                                        storage_actions)
+from pipeline.performance.refit import (DEFAULT_FORM, REPORT_COLUMNS, Gate, check_form, fitted_from_rows, gate_with,
+                                        refit_fleet, storage_actions)
 from pipeline.performance.validate import reason_counts, validate_noon
 from storage import fleet_store
 
@@ -102,10 +102,10 @@ def update_hull_performance(db: Path, imos: list[int], flag_pct: float) -> int:
     return len(out)
 
 
-def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = "best",
+def refit_job(imos: list[int] | None = None, data_root: str | None = None, form: str = DEFAULT_FORM,
               robust: bool | None = None, gate: list[str] | None = None, *, run=PLAIN) -> list[dict]:
-    """Refit every (or the given) vessel's speed and fuel model ("best": every form, the physical one kept
-    unless another is significantly better on held-out reports); a model becomes active only if it passes
+    """Refit every (or the given) vessel's speed and fuel model in `form` (default the physical form; "best": every
+    form, the physical one kept unless another is significantly better on held-out reports); a model becomes active only if it passes
     the gate (settings.performance, with `gate` "NAME=VALUE" overrides) and is not worse than the active
     one on the same held-out reports."""
     check_form(form)  # before anything is read

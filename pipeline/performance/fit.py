@@ -47,6 +47,21 @@ class FitResult:
         return {k: float(v) for k, v in zip(self.names, self.coef)}
 
 
+class FitBatch(list):
+    """`FitResult`s of a batch of groups (one per group), with their coefficients as one matrix: `coef` (groups ×
+    regressors), whose rows are the results' `coef`."""
+
+    coef: np.ndarray
+
+
+def coef_matrix(results: list[FitResult], groups=None) -> np.ndarray:
+    """The coefficients of `results` (of `results[groups]`) as a matrix, one row per result."""
+    m = getattr(results, "coef", None)
+    if m is None:
+        m = np.array([r.coef for r in results])
+    return m if groups is None else m[np.asarray(groups, dtype=np.int64)]
+
+
 INPUT_COLUMNS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_dir_rel_deg", "wave_m", "wave_dir_rel_deg",
                  "months_since_drydock", "stw_kn", "fuel_t", "hours")  # noon-report columns a fit reads
 
@@ -95,7 +110,7 @@ def fit_target(form: str, target: str, X: np.ndarray, y: np.ndarray, *, robust: 
 
 def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np.ndarray, *, robust: bool = False,
                 k_folds: int = K_FOLDS, start: np.ndarray | None = None, max_solves: int | None = None,
-                ends: np.ndarray | None = None, rtol: float = ROBUST_RTOL) -> list[FitResult]:
+                ends: np.ndarray | None = None, rtol: float = ROBUST_RTOL) -> FitBatch:
     """`fit_target` for many groups (vessels) at once; group g is rows bounds[g]:bounds[g+1] of X and y
     — or, with `ends`, rows bounds[g]:ends[g] (groups need not tile X: no copy of the rows fitted).
 
@@ -124,17 +139,17 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
     flip = np.array([target == "speed" and nm in features.NON_POSITIVE_SPEED for nm in names], dtype=np.bool_)
     warm = start is not None
     beta0 = np.ascontiguousarray(start, dtype=np.float64) if warm else np.zeros((G, k))
+    sign = np.where(flip, -1.0, 1.0)  # the kernel fits on X·diag(sign): no copy of X
     if flip.any():
-        X = X.copy()
-        X[:, flip] *= -1.0
         nonneg = nonneg | flip
         beta0 = np.ascontiguousarray(np.where(flip, -beta0, beta0))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
-    fit_kernels.fit_groups_nb(X, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
+    fit_kernels.fit_groups_nb(X, sign, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
                               max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
     if flip.any():
         coef[:, flip] *= -1.0
-    out, dropped_for = [], {}
+    out, dropped_for = FitBatch(), {}
+    out.coef = coef
     for g, (kept, n_g, (r2, rmse, cv)) in enumerate(zip(map(tuple, keep.tolist()), n.tolist(), stats.tolist())):
         if kept not in dropped_for:
             dropped_for[kept] = [nm for nm, kp in zip(names, kept) if not kp]

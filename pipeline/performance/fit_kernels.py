@@ -13,11 +13,13 @@ from pipeline.performance.huber import huber_weights
 
 
 @numba.njit(cache=True)
-def fit_groups_nb(X, y, starts, ends, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep, n_out,
-                  stats):
-    """Fit every group (group g: rows starts[g]:ends[g]; see `fit_targets`); writes coef (unscaled, 0 where dropped), keep, row counts and
-    stats[g] = (R², RMSE, CV-RMSE) (NaN where not defined). With `warm` (and `robust`), group g's first
-    Huber weights come from the coefficients beta0[g] (e.g. a fit of most of the same rows)."""
+def fit_groups_nb(X, sign, y, starts, ends, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep,
+                  n_out, stats):
+    """Fit every group (group g: rows starts[g]:ends[g]; see `fit_targets`) on the regressors X·diag(sign) (sign ±1 per
+    column: a coefficient held ≤ 0 is fitted as a ≥ 0 one on its negated regressor, without a copy of X); writes coef
+    (unscaled, of X·diag(sign), 0 where dropped), keep, row counts and stats[g] = (R², RMSE, CV-RMSE) (NaN where not
+    defined). With `warm` (and `robust`), group g's first Huber weights come from the coefficients beta0[g] (e.g. a fit
+    of most of the same rows)."""
     k = X.shape[1]
     G = starts.size
     nmax = 0
@@ -30,12 +32,12 @@ def fit_groups_nb(X, y, starts, ends, intercept, nonneg, robust, max_solves, rto
     gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
     lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
     for g in range(G):
-        n_out[g] = _fit_group(X, y, starts[g], ends[g], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
+        n_out[g] = _fit_group(X, sign, y, starts[g], ends[g], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
                               warm, beta0[g], coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
 
 
 @numba.njit(cache=True)
-def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, warm, beta0, coef, keep, stats, Z, T, w,
+def _fit_group(X, sign, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, warm, beta0, coef, keep, stats, Z, T, w,
                r, buf, rows, gram, lo, hi):
     """Fit rows a:b of X and y; returns how many were finite (see `_fit_groups_nb` for the outputs;
     Z … hi are scratch).
@@ -46,7 +48,7 @@ def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k,
     """
     k = X.shape[1]
     F = lo.size
-    m = _pack(X, y, a, b, F, rows, lo, hi, Z)
+    m = _pack(X, sign, y, a, b, F, rows, lo, hi, Z)
     scale = np.empty(k)
     n_keep = _scale(Z, m, intercept, keep, scale)
     if m == 0 or n_keep == 0:
@@ -62,10 +64,19 @@ def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k,
             beta[i] = beta0[i] * scale[i] if keep[i] else 0.0
         _residuals(Z, beta, 0, m, r)
         med, s = huber_weights(r, m, huber_k, med, s, buf, w)
+    do_cv = do_cv and m >= 2 * n_keep
+    A = np.empty((k, k + 1))
     for it in range(max_solves):
-        _grams(Z, w, full, end, T, gram)
+        if do_cv:  # the folds' blocks, summed: the cross-validation below reuses the last solve's blocks
+            _grams(Z, w, lo, hi, T, gram)
+            A[:] = gram[0]
+            for f in range(1, F):
+                A += gram[f]
+        else:
+            _grams(Z, w, full, end, T, gram)
+            A[:] = gram[0]
         prev[:] = beta
-        _solve_nonneg(gram[0], keep, nonneg, beta, Z, m)
+        _solve_nonneg(A, keep, nonneg, beta, Z, m)
         if it > 0 or started:
             step, big = 0.0, 0.0
             for i in range(k):
@@ -84,11 +95,16 @@ def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k,
         stats[0] = 1.0 - ssr / sst
     for i in range(k):
         coef[i] = beta[i] / scale[i] if keep[i] else 0.0
-    # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block
-    if do_cv and m >= 2 * n_keep:
-        _grams(Z, w, lo, hi, T, gram)
-        A = np.zeros((k, k + 1))
-        for f in range(F):
+    # k-fold CV: every fold's fit is the total normal equations (last weights) minus that fold's block; the blocks
+    # are the last solve's, less the rows and columns of regressors it left out (as if their columns were zero)
+    if do_cv:
+        for i in range(k):
+            if not keep[i]:
+                for f in range(F):
+                    gram[f, i, :] = 0.0
+                    gram[f, :, i] = 0.0
+        A[:] = gram[0]
+        for f in range(1, F):
             A += gram[f]
         beta_f = np.empty(k)
         cv = 0.0
@@ -105,8 +121,8 @@ def _fit_group(X, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k,
 
 
 @numba.njit(cache=True)
-def _pack(X, y, a, b, F, rows, lo, hi, Z):
-    """Copy the finite rows among a:b of X and y into Z[:, :m] (regressors, then the target) fold by fold:
+def _pack(X, sign, y, a, b, F, rows, lo, hi, Z):
+    """Copy the finite rows among a:b of X·diag(sign) and y into Z[:, :m] (regressors, then the target) fold by fold:
     the p-th of them goes to fold p mod F, and fold f is slots lo[f]:hi[f]. Returns m."""
     k = X.shape[1]
     if _all_finite(X[a:b].ravel()) and _all_finite(y[a:b]):
@@ -127,7 +143,7 @@ def _pack(X, y, a, b, F, rows, lo, hi, Z):
         for p in range(f, m, F):
             row = rows[p]
             for i in range(k):
-                Z[i, s] = X[row, i]
+                Z[i, s] = X[row, i] * sign[i]
             Z[k, s] = y[row]
             s += 1
         hi[f] = s

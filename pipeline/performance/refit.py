@@ -40,6 +40,7 @@ from pipeline.performance import features, fit, mlp, sanity, screen
 TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
 BEST = "best"  # fit every candidate form and propose the best on held-out rows
+DEFAULT_FORM = "physical"  # what a refit fits unless told otherwise (see `refit_fleet`)
 REPORT_COLUMNS = ("imo", "ts_utc", *fit.INPUT_COLUMNS)  # what a refit reads of the noon reports
 TRAIN_RTOL = 1e-2  # robust re-weighting of a candidate on its training rows stops when no coefficient moves more
 ALL_ROWS_SOLVES = 1  # robust solves of an accepted model's refit on all rows, from the training fit
@@ -130,7 +131,7 @@ def check_form(form: str) -> str:
     return form
 
 
-def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = BEST,
+def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: int, *, form: str = DEFAULT_FORM,
                  robust: bool | None = None, gate: Gate = Gate(), fitted: dict | None = None) -> tuple[list[dict], dict]:
     """(perf_models rows, summary) for one vessel's time-ordered reports; see `refit_fleet`."""
     imo = int(imo)
@@ -141,7 +142,7 @@ def refit_vessel(imo: int, reports: pd.DataFrame, active: dict | None, version: 
     return rows, summaries[0]
 
 
-def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = BEST,
+def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, form: str = DEFAULT_FORM,
                 robust: bool | None = None, gate: Gate = Gate(), fitted: dict[int, dict] | None = None
                 ) -> tuple[list[dict], list[dict]]:
     """Refit every vessel in `reports` (time-ordered within each vessel), fitted together.
@@ -150,7 +151,9 @@ def refit_fleet(reports, active: dict[int, dict], versions: dict[int, int], *, f
     with `fit.INPUT_COLUMNS` and "imo" ("ts_utc" if there, else row order is time). `active`:
     imo → active model (`fleet_store.active_models`); `versions`: imo → version of new rows (1 if
     absent); `fitted`: imo → {data_hash: (version, active)} of stored models (`fitted_from_rows`).
-    `form`: one of `FORMS`, or "best" for every form in `gate.candidates`; `robust`: Huber
+    `form`: one of `FORMS` (default `DEFAULT_FORM`, the physical form: against truths outside every form it
+    is what "best" chooses for each ship of `bench/models.py`, at a fraction of the cost, and the network chosen
+    on a thin margin is what a router exploited), or "best" for every form in `gate.candidates`; `robust`: Huber
     re-weighting, None for each form's default. Returns (perf_models rows to insert, one summary
     per vessel in IMO order); a summary's "reactivate" names a stored version to make active again,
     its "flag" a contradiction between new reports and the active model.
@@ -295,7 +298,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
 
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
-    train_env = sanity.envelopes(inp, bounds[:-1], hold_from)
+    train_env, all_env = sanity.envelopes_until(inp, bounds[:-1], hold_from, bounds[1:])  # of training rows, all rows
     cands = {}
     for form in sorted(forms, key=lambda f: f == "mlp"):  # the network last: its screen looks at the physical fit
         X = _designs(form, inp, {f: c.X for f, c in cands.items()})
@@ -307,7 +310,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         c = _Candidate(form, robust_of[form], X, _fit_form(form, X, y, bounds[:-1], hold_from, robust_of[form], gate,
                                                            k_folds=0, rtol=TRAIN_RTOL, skip=skipped), skipped=skipped)
         for t in TARGETS:
-            coefs = np.array([r.coef for r in c.train[t]])
+            coefs = fit.coef_matrix(c.train[t])
             c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
             if skipped:
                 c.hold_pred[t][np.isin(hold_which, list(skipped))] = np.nan
@@ -331,18 +334,18 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         c.sane = [None] * G
         todo = [g for g in range(G) if gated[f][g] is None] if gate.sanity else []
         if todo:
-            why = sanity.check_models(f, np.array([c.train["speed"][g].coef for g in todo]),
-                                      np.array([c.train["fuel"][g].coef for g in todo]), [train_env[g] for g in todo],
-                                      gate.limits)
+            why = sanity.check_models(f, fit.coef_matrix(c.train["speed"], todo), fit.coef_matrix(c.train["fuel"], todo),
+                                      [train_env[g] for g in todo], gate.limits)
             for g, w in zip(todo, why):
                 c.sane[g] = w
     for g, imo in enumerate(imos.tolist()):
         verdicts = {f: gated[f][g] or cands[f].sane[g] for f in cands}
         score = {f: scores_of[f][g] for f in forms}
-        passing = [f for f in forms if verdicts[f] is None and np.isfinite(score[f])]
-        pool = passing or [f for f in forms if np.isfinite(score[f])] or list(forms)
+        passing = [f for f in forms if verdicts[f] is None and math.isfinite(score[f])]
+        pool = passing or [f for f in forms if math.isfinite(score[f])] or list(forms)
         sl = slice(hold_bounds[g], hold_bounds[g + 1])
-        best, choice = _choose(pool, score, forms, {f: cands[f] for f in pool}, sl, hold_rows, y, mean_of, g, gate)
+        best, choice = (pool[0], "") if len(pool) == 1 else _choose(pool, score, forms, {f: cands[f] for f in pool}, sl,
+                                                                     hold_rows, y, mean_of, g, gate)
         c = cands[best]
         act = active.get(imo)
         why = act_flag.get(g) or verdicts[best]  # a contradiction with the active model is the first thing to fix
@@ -374,9 +377,9 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
                    "why": why, "reason": reason, "version": act.get("version") if act else None,
                    "flag": act_flag.get(g), "speed_holdout_rmse": rmse_of[best]["speed"][g],
                    "fuel_holdout_rmse": rmse_of[best]["fuel"][g], "gate": gate_text, "network": network}
-        summary.update(_scores(c.train, g))
         seen = fitted.get(imo, {}).get(hashes[best][g])
         if seen is not None:  # these rows were fitted with this form before: the same model
+            summary.update(_scores({t: c.train[t][g] for t in TARGETS}))  # (a stored fit gets those of its fit on all rows)
             version, is_active = seen
             if is_active:
                 summary.update(why="same as the active model", reason=f"same rows and form as the active v{version}: nothing new")
@@ -390,7 +393,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         summary.update(changed=activate, version=versions.get(imo, 1))
         plans.append((g, imo, best, activate, summary, hashes[best][g]))
         summaries.append(summary)
-    return _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate), summaries
+    return _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate), summaries
 
 
 def _designs(form: str, inp, built: dict | None = None) -> dict[str, np.ndarray]:
@@ -409,7 +412,7 @@ def _network_screen(phys: _Candidate, X: dict, y: dict, bounds, hold_from, gate:
     starts = bounds[:-1]
     rows = _ranges(starts, hold_from)
     resid = np.column_stack([y[t][rows] - np.einsum("ij,ij->i", phys.X[t][rows], np.repeat(
-        np.array([r.coef for r in phys.train[t]]), hold_from - starts, axis=0)) for t in TARGETS])
+        fit.coef_matrix(phys.train[t]), hold_from - starts, axis=0)) for t in TARGETS])
     at = np.r_[0, np.cumsum(hold_from - starts)]
     r2 = screen.explained(X["speed"][rows], resid, at[:-1], at[1:])
     need = screen.share_needed(gate.switch_margin)
@@ -595,25 +598,32 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
     return hold, flags
 
 
-def _coefficients_json(r: fit.FitResult) -> str:
-    """`json.dumps(r.coefficients())`, formatted from a template where every value is finite (cheaper)."""
-    values = r.coef.tolist()
-    if not all(map(math.isfinite, values)):
-        return json.dumps(r.coefficients())
-    template = _TEMPLATES.get(r.names)
-    if template is None:
-        template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
-    return template % tuple(values)
+def _coefficients_json_of(results: list[fit.FitResult]) -> list[str]:
+    """`json.dumps(r.coefficients())` of each result, formatted from a template where every value is finite (cheaper)."""
+    out = []
+    for r in results:
+        values = r.coef.tolist()
+        if not all(map(math.isfinite, values)):
+            out.append(json.dumps(r.coefficients()))
+            continue
+        template = _TEMPLATES.get(r.names)
+        if template is None:
+            template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
+        out.append(template % tuple(values))
+    return out
 
 
 _TEMPLATES: dict[tuple, str] = {}
 
 
-def _scores(results: dict, g: int) -> dict:
-    return {f"{t}_{k}": float(getattr(results[t][g], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")}
+def _scores(result: dict) -> dict:
+    """Summary fields of a vessel's fit statistics: target → `fit.FitResult`."""
+    s, f = result["speed"], result["fuel"]
+    return {"speed_r2": s.r2, "speed_rmse": s.rmse, "speed_cv_rmse": s.cv_rmse,
+            "fuel_r2": f.r2, "fuel_rmse": f.rmse, "fuel_cv_rmse": f.cv_rmse}
 
 
-def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> list[dict]:
+def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list[dict]:
     """perf_models rows: every proposed model validated on the held-out rows and then refitted on all its vessel's
     rows (what is stored, active or not); an accepted one is activated only if that fit passes the sanity checks
     over the envelope of all the rows."""
@@ -625,38 +635,42 @@ def _rows(plans, cands, bounds, inp, ts, y, hold_from, n_hold, gate: Gate) -> li
         # re-weighting starts from the training fit's coefficients: ALL_ROWS_SOLVES weighted solves take it to
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
-                        start={t: np.array([c.train[t][g].coef for g in gs]) for t in TARGETS})
-        env = sanity.envelopes(inp, bounds[gs], bounds[gs + 1])
+                        start={t: fit.coef_matrix(c.train[t], gs) for t in TARGETS})
+        env = [all_env[g] for g in gs.tolist()]
         active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
         sane = [None] * gs.size
         if gate.sanity and active:
-            why = sanity.check_models(form, np.array([res["speed"][j].coef for j in active]),
-                                      np.array([res["fuel"][j].coef for j in active]), [env[j] for j in active], gate.limits)
+            why = sanity.check_models(form, fit.coef_matrix(res["speed"], active), fit.coef_matrix(res["fuel"], active),
+                                      [env[j] for j in active], gate.limits)
             for j, w in zip(active, why):
                 sane[j] = w
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
             envs[int(g)] = (env[j], sane[j])
     out = []
-    first, end = bounds[:-1].tolist(), bounds[1:].tolist()
+    g_all = np.array([p[0] for p in plans], dtype=np.int64)
+    last = bounds[1:][g_all] - 1
+    used = (last >= bounds[:-1][g_all]).tolist()
+    last = np.maximum(last, 0)
+    months_of, data_to_of = inp["months_dd"][last].tolist(), ts[last].tolist()  # .tolist(): floats and datetimes
+    coef_json = _coefficients_json_of([full[p[0]][t] for p in plans for t in TARGETS])
     n_hold = n_hold.tolist()
-    for g, imo, form, activate, summary, data_hash in plans:
+    for j, (g, imo, form, activate, summary, data_hash) in enumerate(plans):
         env, refused = envs[g]
         if activate and refused:
             activate = False
             summary.update(changed=False, why=f"{refused} (fitted on all rows)",
                            reason=f"{form}: refused after its fit on all rows: {refused}; {summary['reason']}")
         res = full[g]
-        last = end[g] - 1
-        used = last >= first[g]
-        summary.update({f"{t}_{k}": float(getattr(res[t], k)) for t in TARGETS for k in ("r2", "rmse", "cv_rmse")})
-        months, data_to = (float(inp["months_dd"][last]), ts[last].item()) if used else (0.0, None)  # .item(): a datetime
-        for t in TARGETS:
+        summary.update(_scores(res))
+        months, data_to = (months_of[j], data_to_of[j]) if used[j] else (0.0, None)
+        env_json, status, reason, gate_text = env.to_json(), "active" if activate else "rejected", summary["reason"], summary.get("gate")
+        for i, t in enumerate(TARGETS):
             r = res[t]
             out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,
-                        "coefficients": _coefficients_json(r), "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
+                        "coefficients": coef_json[2 * j + i], "n_rows": r.n, "r2": r.r2, "rmse": r.rmse,
                         "cv_rmse": r.cv_rmse, "holdout_rmse": summary[f"{t}_holdout_rmse"], "n_holdout": n_hold[g],
-                        "status": "active" if activate else "rejected", "reason": summary["reason"], "active": activate,
+                        "status": status, "reason": reason, "active": activate,
                         "months_dd": months, "data_hash": data_hash, "data_to_utc": data_to,
-                        "envelope": env.to_json(), "gate": summary.get("gate")})
+                        "envelope": env_json, "gate": gate_text})
     return out

@@ -81,25 +81,36 @@ def envelope_of(inp: dict[str, np.ndarray], start: int, stop: int) -> Envelope:
 def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
     """`envelope_of` of the row ranges starts[g]:stops[g] (non-empty ones), in one compiled pass: least and
     largest rpm and draft, largest wind and waves, mean trim, months since dry dock of the last row."""
-    starts, stops = np.asarray(starts, dtype=np.int64), np.asarray(stops, dtype=np.int64)
+    return envelopes_until(inp, starts, stops, stops)[1]
+
+
+def envelopes_until(inp: dict[str, np.ndarray], starts, splits, stops) -> tuple[list[Envelope], list[Envelope]]:
+    """(`envelopes` of starts[g]:splits[g], `envelopes` of starts[g]:stops[g]) in one pass over the rows (e.g. of
+    each vessel's training rows and of all its rows)."""
+    starts, splits, stops = (np.asarray(a, dtype=np.int64) for a in (starts, splits, stops))
     G = starts.size
     if G == 0:
-        return []
-    e = np.empty((G, 8))
+        return [], []
+    e = np.empty((2, G, 8))
     cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m", "months_dd")]
-    _envelopes_nb(*cols, starts, stops, e)
-    return [Envelope((g[0], g[1]), (g[2], g[3]), g[4], g[5], g[6], g[7]) for g in e.tolist()]
+    _envelopes_nb(*cols, starts, splits, stops, e)
+    return tuple([Envelope((g[0], g[1]), (g[2], g[3]), g[4], g[5], g[6], g[7]) for g in part.tolist()] for part in e)
 
 
 @numba.njit(cache=True)
-def _envelopes_nb(rpm, draft, wind, hs, trim, months, starts, stops, out):
-    """out[g] = (least and largest rpm, least and largest draft, largest wind and waves (≥ 0), mean trim, months since
-    dry dock of the last row) of rows starts[g]:stops[g], non-finite values left out; 0 where there is none."""
+def _envelopes_nb(rpm, draft, wind, hs, trim, months, starts, splits, stops, out):
+    """out[1, g] = (least and largest rpm, least and largest draft, largest wind and waves (≥ 0), mean trim, months since
+    dry dock of the last row) of rows starts[g]:stops[g], non-finite values left out, 0 where there is none; out[0, g]
+    the same of rows starts[g]:splits[g] (starts ≤ splits ≤ stops)."""
     for g in range(starts.size):
         a, b = starts[g], stops[g]
         r_lo, r_hi, d_lo, d_hi, w_hi, h_hi = np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0
         t_sum, t_n = 0.0, 0
-        for i in range(a, b):
+        for i in range(a, b + 1):
+            if i == splits[g]:
+                _envelope_row(r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum, t_n, months[i - 1] if i > a else 0.0, out[0, g])
+            if i == b:
+                break
             if np.isfinite(rpm[i]):
                 r_lo, r_hi = min(r_lo, rpm[i]), max(r_hi, rpm[i])
             if np.isfinite(draft[i]):
@@ -111,10 +122,14 @@ def _envelopes_nb(rpm, draft, wind, hs, trim, months, starts, stops, out):
             if np.isfinite(trim[i]):
                 t_sum += trim[i]
                 t_n += 1
-        m = months[b - 1] if b > a else 0.0
-        vals = (r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum / t_n if t_n else 0.0, m)
-        for k in range(8):
-            out[g, k] = vals[k] if np.isfinite(vals[k]) else 0.0
+        _envelope_row(r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum, t_n, months[b - 1] if b > a else 0.0, out[1, g])
+
+
+@numba.njit(cache=True, inline="always")
+def _envelope_row(r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum, t_n, m, row):
+    vals = (r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum / t_n if t_n else 0.0, m)
+    for k in range(8):
+        row[k] = vals[k] if np.isfinite(vals[k]) else 0.0
 
 
 @dataclass(frozen=True)

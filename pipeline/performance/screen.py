@@ -1,6 +1,6 @@
-"""Whether a vessel's physical form leaves structure the network form could learn (`needs_network`).
+"""Whether a vessel's physical form leaves structure the network form could learn (`explained`, `share_needed`).
 
-A refit with the default form ("best") trains the MLP only where it could be chosen. It replaces the
+A refit with `--form best` trains the MLP only where it could be chosen. It replaces the
 physical form only with a held-out score lower by `Gate.switch_margin` (5 %); the score adds the speed
 and fuel RMSEs relative to their means, so at least one of them must fall by that share, i.e. a model of
 the network's inputs would have to explain at least 1 − (1 − margin)² (9.75 %) of the variance of the
