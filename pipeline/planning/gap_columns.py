@@ -16,6 +16,8 @@ grows fast with it); `max_labels` caps the work and reports the enumeration inco
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from pipeline.planning.colgen import _ballast_fuel_t_nb, _pricing_table
@@ -47,9 +49,10 @@ def completion_bound(table: tuple, prize: np.ndarray, mu: float) -> np.ndarray:
 
 
 def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, slack: float,
-                          max_labels: int = 500_000) -> tuple[list[Column], bool]:
+                          max_labels: int = 500_000, deadline: float = np.inf) -> tuple[list[Column], bool]:
     """(least-cost column per set of contracts vessel k can lift whose reduced cost under (π, μ) is ≤ `slack`,
-    enumeration complete)."""
+    enumeration complete). Past `max_labels` partial sequences or the `deadline` (time.perf_counter()) it stops:
+    ([], False)."""
     glob, table = _pricing_table(data, k)
     if glob.size == 0:
         return [], True
@@ -100,7 +103,7 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
                     kept[:] = [x for x in kept if not (lab[0] <= x[0] + 1e-9 and lab[1] <= x[1] + 1e-9)]
                     kept.append(lab)
         n_labels += sum(len(x) for x in nxt.values())
-        if n_labels > max_labels:
+        if n_labels > max_labels or time.perf_counter() > deadline:
             return [], False
         level = nxt
     columns = []

@@ -165,7 +165,7 @@ def _exact_within_gap(data: PlanData, pool: list, best: FleetPlan, bound: float,
 
 
 def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.0,
-          max_labels: int = 20_000, max_gap_labels: int = 400_000) -> FleetPlan:
+          max_labels: int = 20_000, max_gap_labels: int = 200_000) -> FleetPlan:
     """The least-cost plan of `data`.
 
     First a lower bound, the LP optimum of the set-partitioning master over every feasible sequence, and a plan:
@@ -176,8 +176,8 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
       step (colgen.dive), improved by local search.
     Then the exact finish (gap_columns.py): HiGHS solves the set-partitioning MILP over every column whose reduced
     cost is at most the gap between plan and bound — the enumerated ones filtered, or, for large fleets, enumerated
-    afresh under that reduced cost (at most `max_gap_labels` partial sequences per vessel). That MILP holds every
-    cheaper plan: solved, the plan is proven optimal; stopped by the time limit, its dual bound is a proven bound.
+    afresh under that reduced cost (at most `max_gap_labels` partial sequences per vessel, and half the time
+    left). That MILP holds every cheaper plan: solved, the plan is proven optimal; stopped by the time limit, its dual bound is a proven bound.
     When the gap is too wide for that enumeration, HiGHS searches the columns priced so far instead (a plan, no
     better bound). The best plan is returned with `gap`, its proven relative gap to the best lower bound. The time
     limit covers all of it (HiGHS may overrun it by about a second)."""
@@ -217,12 +217,11 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     dived, priced = colgen.dive(data, priced, time_limit_s=max(1.0, 0.6 * left()))
     best = plan_of(local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left())))
     if converged and left() > 1.0:
-        pool, complete = [], True
+        pool, complete, deadline = [], True, time.perf_counter() + 0.5 * left()  # leave HiGHS the other half
         for k in range(len(data.vessels)):
             cols, complete = gap_columns.vessel_columns_within(data, k, pi, float(mu[k]), _slack(best.cost, bound),
-                                                                max_labels=max_gap_labels)
-            if not complete or left() < 1.0:
-                complete = False
+                                                                max_labels=max_gap_labels, deadline=deadline)
+            if not complete:
                 break
             pool += cols
         if complete:
