@@ -176,12 +176,13 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
       step (colgen.dive), improved by local search.
     Then the exact finish (gap_columns.py): HiGHS solves the set-partitioning MILP over every column whose reduced
     cost is at most the gap between plan and bound — the enumerated ones filtered, or, for large fleets, enumerated
-    afresh under that reduced cost (at most `max_gap_labels` partial sequences per vessel, and half the time
-    left). That MILP holds every cheaper plan: solved, the plan is proven optimal; stopped by the time limit, its
-    dual bound is a proven bound. For large fleets HiGHS first searches the columns priced so far (a better plan,
-    so a narrower gap to enumerate within); when the gap stays too wide for the enumeration, that plan is the
-    answer. The best plan is returned with `gap`, its proven relative gap to the best lower bound. The time
-    limit covers all of it (HiGHS may overrun it by about a second)."""
+    afresh under that reduced cost (at most `max_gap_labels` partial sequences per vessel, and a tenth of the
+    time limit). That MILP holds every cheaper plan: solved, the plan is proven optimal; stopped by the time
+    limit, its dual bound is a proven bound. For large fleets HiGHS first searches the columns priced so far for
+    half the time left (a better plan, so a narrower gap to enumerate within); when the gap stays too wide for the
+    enumeration, HiGHS searches them again for the rest of the time. The best plan is returned with `gap`, its
+    proven relative gap to the best lower bound. The time limit covers all of it (HiGHS may overrun it by about a
+    second)."""
     t0 = time.perf_counter()
 
     def left() -> float:
@@ -217,19 +218,11 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     priced, bound, converged, (pi, mu, _) = colgen.generate(data, [], time_limit_s=max(1.0, 0.4 * left()))
     dived, priced = colgen.dive(data, priced, time_limit_s=max(1.0, 0.6 * left()))
     best = plan_of(local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left())))
-    # a plan from the columns priced so far, those whose reduced cost exceeds the gap dropped (they are in no better
-    # plan; at the LP optimum, otherwise this only narrows the search): a narrower gap for the exact finish
-    rc = colgen.reduced_costs(data, priced, pi, mu)
-    pool = [col for col, r in zip(priced, rc) if r <= _slack(best.cost, bound)]
-    if pool and left() > 1.0:
-        # costs of ~1e7 make HiGHS warn and its heuristics weaker: scaled (its absolute gap tolerance of 1e-6 then
-        # allows a small suboptimality; this search proves nothing either way)
-        scale = 1.0 / max(1.0, max(abs(col.cost) for col in pool), max(ct.penalty for ct in data.contracts))
-        sequences, _, _ = _set_partitioning(data, pool, (0.3 if converged else 1.0) * left(), mip_rel_gap, scale)
-        if sequences is not None:
-            best = min(best, plan_of(sequences), key=lambda p: p.cost)
+    best = _search_priced(data, priced, pi, mu, best, bound, (0.5 if converged else 1.0) * left(), mip_rel_gap)
     if converged and left() > 1.0:
-        pool, complete, deadline = [], True, time.perf_counter() + 0.5 * left()  # leave HiGHS the other half
+        # a short try: when the gap is too wide the enumeration grows past any budget, and HiGHS gets the time back
+        pool, complete = [], True
+        deadline = time.perf_counter() + min(0.5 * left(), 0.1 * float(time_limit_s))
         for k in range(len(data.vessels)):
             cols, complete = gap_columns.vessel_columns_within(data, k, pi, float(mu[k]), _slack(best.cost, bound),
                                                                 max_labels=max_gap_labels, deadline=deadline)
@@ -239,7 +232,26 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         if complete:
             best, bound, optimal = _exact_within_gap(data, pool, best, bound, left(), mip_rel_gap)
             return result(best, bound, optimal, len(priced) + len(pool))
+        best = _search_priced(data, priced, pi, mu, best, bound, left(), mip_rel_gap)
     return result(best, bound, False, len(priced))
+
+
+def _search_priced(data: PlanData, priced: list, pi: np.ndarray, mu: np.ndarray, best: FleetPlan, bound: float,
+                   time_limit_s: float, mip_rel_gap: float) -> FleetPlan:
+    """The better of `best` and HiGHS's plan over the priced columns whose reduced cost is within the gap (the others
+    are in no better plan; at the LP optimum, otherwise this only narrows the search)."""
+    rc = colgen.reduced_costs(data, priced, pi, mu)
+    pool = [col for col, r in zip(priced, rc) if r <= _slack(best.cost, bound)]
+    if not pool or time_limit_s <= 1.0:
+        return best
+    # costs of ~1e7 make HiGHS warn and its heuristics weaker: scaled (its absolute gap tolerance of 1e-6 then allows a
+    # small suboptimality; this search proves nothing either way)
+    scale = 1.0 / max(1.0, max(abs(col.cost) for col in pool), max(ct.penalty for ct in data.contracts))
+    sequences, _, _ = _set_partitioning(data, pool, time_limit_s, mip_rel_gap, scale)
+    if sequences is None:
+        return best
+    plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
+    return min(best, plan, key=lambda p: p.cost)
 
 
 def _slack(incumbent: float, bound: float) -> float:
