@@ -91,6 +91,71 @@ def test_column_generation_reaches_an_lp_bound_never_above_the_optimum_and_price
     assert tight > 30  # small instances mostly have LP = optimum
 
 
+def test_the_exact_finish_reaches_the_optimum_where_the_lp_bound_is_below_it():
+    """Column generation forced (max_labels=3), then the MILP over every column within the gap: proven optimal and
+    equal to the reference — brute force on small instances, HiGHS on the MILP over every enumerated column on
+    instances with wider windows, where the LP bound is often strictly below the optimum (so rounding or a dive
+    alone need not be optimal, and the LP bound alone proves nothing)."""
+    from pipeline.planning import colgen
+    from pipeline.planning.routes import vessel_columns
+
+    rng = np.random.default_rng(23)
+    fractional = 0
+    for seed in range(40):
+        small = seed % 2 == 0
+        if small:
+            vessels, contracts, dist = random_instance(int(rng.integers(2, 4)), int(rng.integers(4, 7)),
+                                                       seed=300 + seed, horizon_days=20, n_ports=5)
+        else:
+            vessels, contracts, dist = random_instance(5, 20, seed=700 + seed, horizon_days=25, n_ports=8,
+                                                       window_days=6)
+        data = problem.build(_with_ends(vessels, rng) if small else vessels, contracts, dist, fuel_price=600.0)
+        if small:
+            best = brute.solve(data).cost
+        else:
+            every = [col for k in range(len(vessels)) for col in vessel_columns(data, k)[0]]
+            sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
+            assert finished
+            best = problem.assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
+        _, bound, _, _ = colgen.generate(data, [], time_limit_s=30)
+        fractional += bound < best - 1.0
+        plan = milp.solve(data, max_labels=3)
+        assert plan.status == "optimal" and plan.gap == 0.0, f"seed {seed}"
+        assert plan.cost == pytest.approx(best, rel=1e-9), f"seed {seed}"
+    assert fractional >= 5  # the case the finish is for is exercised
+
+
+def test_columns_within_a_reduced_cost_are_exactly_those_brute_force_finds():
+    """gap_columns.vessel_columns_within under random duals and slacks: the same sets of contracts as brute force
+    with reduced cost ≤ the slack, each at its least cost (the completion bound never prunes one of them)."""
+    from pipeline.planning import gap_columns
+
+    rng = np.random.default_rng(29)
+    n_sets = n_cut = 0
+    for seed in range(80):
+        vessels, contracts, dist = random_instance(int(rng.integers(1, 3)), int(rng.integers(3, 8)), seed=500 + seed,
+                                                   horizon_days=20, n_ports=5)
+        data = problem.build(_with_ends(vessels, rng), contracts, dist, fuel_price=600.0)
+        pi = -rng.uniform(0, 1.2, len(contracts)) * np.array([c.penalty for c in contracts])
+        for k in range(len(vessels)):
+            mu = -float(rng.uniform(0, 2e5))
+            rc = {key: c - sum(contracts[j].penalty + pi[j] for j in seq) - mu
+                  for key, (c, seq) in brute.best_per_subset(data, k).items() if seq}
+            ranked = sorted(rc.values()) + [np.inf]  # a slack between two reduced costs: no tie to round
+            cut = int(rng.integers(1, len(ranked))) if rc else 0
+            slack = 0.5 * (ranked[cut - 1] + ranked[cut]) if 0 < cut < len(ranked) - 1 else ranked[0] + 1.0
+            cols, complete = gap_columns.vessel_columns_within(data, k, pi, mu, slack)
+            assert complete
+            got = {frozenset(c.sequence): c.cost for c in cols}
+            want = {key: brute.best_per_subset(data, k)[key][0] for key, r in rc.items() if r <= slack}
+            assert got.keys() == want.keys(), f"seed {seed} vessel {k}"
+            for key, cost in want.items():
+                assert got[key] == pytest.approx(cost, rel=1e-9), f"seed {seed} vessel {k}"
+            n_sets += len(want)
+            n_cut += len(want) < len(rc)
+    assert n_sets > 100 and n_cut > 20  # the slack does cut
+
+
 def test_local_search_from_an_empty_or_a_worse_plan_ends_feasible_between_the_optimum_and_its_start():
     from pipeline.planning import local_search
     from pipeline.planning.problem import assemble

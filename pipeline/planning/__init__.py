@@ -10,6 +10,7 @@ routes.py      every feasible contract sequence per vessel, best order per set (
 milp.py        the planner: set partitioning on HiGHS (scipy.optimize.milp); the arc-flow model for a bound
 colgen.py      column generation and an LP dive for fleets too big to enumerate, with a proven lower bound
 local_search   moves of single contracts between vessels and the spot market, after the dive
+gap_columns    every column whose reduced cost is within the gap between plan and bound (the exact finish)
 brute.py       the brute-force reference for small instances (tests, bench)
 voyages.py     a plan's legs as voyage rows
 """

@@ -1,9 +1,11 @@
 """The fleet planner: mixed-integer programmes solved by HiGHS through `scipy.optimize.milp`.
 
-`solve` — set partitioning (with column generation, colgen.py, when enumeration is too big): a binary y per column (a vessel lifting a set of contracts in its best feasible order,
+`solve` — set partitioning: a binary y per column (a vessel lifting a set of contracts in its best feasible order,
 routes.vessel_columns), each vessel at most one column, each contract in at most one; minimised: Σ column cost
-(fuel + out of service) + Σ penalty of the contracts in no chosen column. With every vessel's sequences
-enumerated this is the exact problem, and its LP relaxation is tight, so HiGHS proves optimality fast.
+(fuel + out of service) + Σ penalty of the contracts in no chosen column. Its LP relaxation (over every column:
+enumerated, or by column generation, colgen.py) bounds the cost from below; HiGHS then solves the MILP over only
+the columns that can be in a plan cheaper than the best one found (gap_columns.py), which proves that plan optimal
+or gives a proven gap.
 
 `arc_lower_bound` — the arc-flow model, an independent check of the bound (tests):
 - x[k, a] ∈ {0, 1} for each feasible arc a of vessel k: start → contract j, contract i → j, contract j → end;
@@ -28,7 +30,7 @@ from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, FleetPlan, PlanData, assemble
-from pipeline.planning import colgen, local_search
+from pipeline.planning import colgen, gap_columns, local_search
 from pipeline.planning.routes import vessel_columns
 
 
@@ -146,23 +148,55 @@ def _set_partitioning(data: PlanData, columns: list, time_limit_s: float, mip_re
     return sequences, bound, res.status == 0
 
 
+def _exact_within_gap(data: PlanData, pool: list, best: FleetPlan, bound: float, time_limit_s: float,
+                      mip_rel_gap: float) -> tuple[FleetPlan, float, bool]:
+    """HiGHS on the set-partitioning MILP over `pool`, every column of reduced cost ≤ best.cost − bound
+    (gap_columns.py): it holds every plan cheaper than `best`. Returns (the better plan, the proven lower bound,
+    solved to optimality)."""
+    if not pool:  # no column can be in a cheaper plan
+        return best, best.cost, True
+    sequences, pool_bound, finished = _set_partitioning(data, pool, time_limit_s, mip_rel_gap, 1.0)
+    if sequences is not None:
+        plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
+        best = min(best, plan, key=lambda p: p.cost)
+    if finished and mip_rel_gap == 0:
+        return best, best.cost, True
+    return best, max(bound, min(pool_bound, best.cost)), False
+
+
 def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.0,
-          max_labels: int = 20_000) -> FleetPlan:
+          max_labels: int = 20_000, max_gap_labels: int = 200_000) -> FleetPlan:
     """The least-cost plan of `data`.
 
-    Small and medium fleets: set partitioning over every vessel's feasible contract sequences
-    (routes.vessel_columns, at most `max_labels` partial sequences per vessel), solved by HiGHS — proven optimal
-    when it finishes within half the time limit. Otherwise (enumeration too big, or HiGHS unfinished): column
-    generation (colgen.generate) reaches the LP optimum of the set-partitioning master over *every* feasible
-    sequence, a proven lower bound; a dive on that LP with pricing at each step (colgen.dive, up to 60 % of the
-    time left), improved by local search (local_search.py), gives a plan; HiGHS then searches the columns priced
-    so far (those whose reduced cost exceeds the gap dropped: they are in no better plan) for the rest of the time.
-    The best plan found is returned with `gap`, its proven relative gap to the best lower bound. The time limit
-    covers all of it (HiGHS may overrun it by about a second)."""
+    First a lower bound, the LP optimum of the set-partitioning master over every feasible sequence, and a plan:
+    - small and medium fleets (every vessel's feasible sequences enumerated, routes.vessel_columns, at most
+      `max_labels` partial sequences per vessel): the LP over all of them, and the plan of its rounding improved by
+      local search (local_search.py);
+    - otherwise: column generation (colgen.generate) to the LP optimum, and a dive on that LP with pricing at each
+      step (colgen.dive), improved by local search.
+    Then the exact finish (gap_columns.py): HiGHS solves the set-partitioning MILP over every column whose reduced
+    cost is at most the gap between plan and bound — the enumerated ones filtered, or, for large fleets, enumerated
+    afresh under that reduced cost (at most `max_gap_labels` partial sequences per vessel, and a tenth of the
+    time limit). That MILP holds every cheaper plan: solved, the plan is proven optimal; stopped by the time
+    limit, its dual bound is a proven bound. For large fleets HiGHS first searches the columns priced so far for
+    half the time left (a better plan, so a narrower gap to enumerate within); when the gap stays too wide for the
+    enumeration, HiGHS searches them again for the rest of the time. The best plan is returned with `gap`, its
+    proven relative gap to the best lower bound. The time limit covers all of it (HiGHS may overrun it by about a
+    second)."""
     t0 = time.perf_counter()
 
     def left() -> float:
         return float(time_limit_s) - (time.perf_counter() - t0)
+
+    def plan_of(sequences: dict) -> FleetPlan:
+        return assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
+
+    def result(best: FleetPlan, bound: float, optimal: bool, n_columns: int) -> FleetPlan:
+        gap = 0.0 if optimal else (max(0.0, (best.cost - bound) / abs(best.cost)) if np.isfinite(bound) and best.cost
+                                   else np.inf)
+        status = "optimal" if optimal or gap <= 1e-9 else "feasible"
+        return assemble(data, {s.k: s.sequence for s in best.schedules}, solver="milp", status=status, gap=gap,
+                        runtime_s=time.perf_counter() - t0, n_columns=n_columns)
 
     columns, complete = [], True
     for k in range(len(data.vessels)):
@@ -173,40 +207,54 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
             break
     if complete and not columns:
         return assemble(data, {}, solver="milp", status="optimal", gap=0.0, runtime_s=time.perf_counter() - t0)
-    candidates: list[dict[int, tuple[int, ...]]] = []
-    bound = -np.inf
     if complete:
-        sequences, bound, finished = _set_partitioning(data, columns, 0.5 * left(), mip_rel_gap, 1.0)
-        if finished and sequences is not None:
-            status = "optimal" if mip_rel_gap == 0 else "feasible"
-            plan = assemble(data, sequences, solver="milp", status=status, gap=0.0, runtime_s=0.0,
-                            n_columns=len(columns))
-            gap = 0.0 if mip_rel_gap == 0 else max(0.0, (plan.cost - bound) / abs(plan.cost)) if plan.cost else 0.0
-            return assemble(data, sequences, solver="milp", status=status, gap=gap,
-                            runtime_s=time.perf_counter() - t0, n_columns=len(columns))
-        if sequences is not None:
-            candidates.append(sequences)
-    priced, lp_bound, _, (pi, mu, _) = colgen.generate(data, [], time_limit_s=max(1.0, 0.4 * left()))
-    bound = max(bound, lp_bound)
+        bound, pi, mu, y = colgen.solve_lp(data, columns)
+        best = plan_of(local_search.improve(data, colgen.round_lp(data, columns, y),
+                                            time_limit_s=max(0.5, 0.1 * left())))
+        rc = colgen.reduced_costs(data, columns, pi, mu)
+        pool = [col for col, r in zip(columns, rc) if r <= _slack(best.cost, bound)]
+        best, bound, optimal = _exact_within_gap(data, pool, best, bound, left(), mip_rel_gap)
+        return result(best, bound, optimal, len(columns))
+    priced, bound, converged, (pi, mu, _) = colgen.generate(data, [], time_limit_s=max(1.0, 0.4 * left()))
     dived, priced = colgen.dive(data, priced, time_limit_s=max(1.0, 0.6 * left()))
-    dived = local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left()))
-    candidates.append(dived)
-    best = min((assemble(data, s, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0) for s in candidates),
-               key=lambda p: p.cost)
-    # reduced-cost fixing: a column whose reduced cost exceeds (best plan − LP bound) is in no better plan (at the LP
-    # optimum; otherwise this only narrows the search)
+    best = plan_of(local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left())))
+    best = _search_priced(data, priced, pi, mu, best, bound, (0.5 if converged else 1.0) * left(), mip_rel_gap)
+    if converged and left() > 1.0:
+        # a short try: when the gap is too wide the enumeration grows past any budget, and HiGHS gets the time back
+        pool, complete = [], True
+        deadline = time.perf_counter() + min(0.5 * left(), 0.1 * float(time_limit_s))
+        for k in range(len(data.vessels)):
+            cols, complete = gap_columns.vessel_columns_within(data, k, pi, float(mu[k]), _slack(best.cost, bound),
+                                                                max_labels=max_gap_labels, deadline=deadline)
+            if not complete:
+                break
+            pool += cols
+        if complete:
+            best, bound, optimal = _exact_within_gap(data, pool, best, bound, left(), mip_rel_gap)
+            return result(best, bound, optimal, len(priced) + len(pool))
+        best = _search_priced(data, priced, pi, mu, best, bound, left(), mip_rel_gap)
+    return result(best, bound, False, len(priced))
+
+
+def _search_priced(data: PlanData, priced: list, pi: np.ndarray, mu: np.ndarray, best: FleetPlan, bound: float,
+                   time_limit_s: float, mip_rel_gap: float) -> FleetPlan:
+    """The better of `best` and HiGHS's plan over the priced columns whose reduced cost is within the gap (the others
+    are in no better plan; at the LP optimum, otherwise this only narrows the search)."""
     rc = colgen.reduced_costs(data, priced, pi, mu)
-    pool = [col for col, r in zip(priced, rc) if r <= best.cost - lp_bound + 1e-6 * abs(best.cost)]
-    if pool and left() > 1.0:
-        # costs of ~1e7 make HiGHS warn and its heuristics weaker: scaled (its absolute gap tolerance of 1e-6 then
-        # allows a small suboptimality, which the proven gap below accounts for)
-        scale = 1.0 / max(1.0, max(abs(col.cost) for col in pool), max(ct.penalty for ct in data.contracts))
-        sequences, _, _ = _set_partitioning(data, pool, left(), mip_rel_gap, scale)
-        if sequences is not None:
-            plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
-            best = min(best, plan, key=lambda p: p.cost)
-    sequences = {s.k: s.sequence for s in best.schedules}
-    gap = max(0.0, (best.cost - bound) / abs(best.cost)) if np.isfinite(bound) and best.cost else np.inf
-    status = "optimal" if gap <= 1e-9 else "feasible"
-    return assemble(data, sequences, solver="milp", status=status, gap=gap, runtime_s=time.perf_counter() - t0,
-                    n_columns=len(columns) + len(priced))
+    pool = [col for col, r in zip(priced, rc) if r <= _slack(best.cost, bound)]
+    if not pool or time_limit_s <= 1.0:
+        return best
+    # costs of ~1e7 make HiGHS warn and its heuristics weaker: scaled (its absolute gap tolerance of 1e-6 then allows a
+    # small suboptimality; this search proves nothing either way)
+    scale = 1.0 / max(1.0, max(abs(col.cost) for col in pool), max(ct.penalty for ct in data.contracts))
+    sequences, _, _ = _set_partitioning(data, pool, time_limit_s, mip_rel_gap, scale)
+    if sequences is None:
+        return best
+    plan = assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
+    return min(best, plan, key=lambda p: p.cost)
+
+
+def _slack(incumbent: float, bound: float) -> float:
+    """The reduced cost a column may have and still be in a plan cheaper than `incumbent` (with a margin for the
+    LP's tolerances)."""
+    return incumbent - bound + 1e-6 * max(1.0, abs(incumbent))
