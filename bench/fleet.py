@@ -105,6 +105,24 @@ def peak_rss_mb() -> float:
     return _status_mb("VmHWM")
 
 
+BIG_LIBRARIES = ("pandas", "pyarrow", "xarray", "matplotlib", "duckdb", "scipy", "PIL", "numba", "zarr", "s3fs")
+
+
+def worker_memory() -> dict:
+    """In a worker: its memory now (MB) from /proc/self/smaps_rollup (Rss; Pss, which splits pages shared with other
+    processes between them; Private, its own pages; Anonymous, heap and stacks), the high-water mark, and which of
+    the big libraries it has imported."""
+    import sys
+
+    now = {}
+    for line in Path("/proc/self/smaps_rollup").read_text().splitlines()[1:]:
+        key, value = line.split(":", 1)
+        now[key] = int(value.split()[0]) / 1024.0
+    return {"rss": now["Rss"], "pss": now["Pss"], "private": now["Private_Clean"] + now["Private_Dirty"],
+            "anonymous": now["Anonymous"], "peak": peak_rss_mb(),
+            "imported": sorted({m.split(".")[0] for m in sys.modules} & set(BIG_LIBRARIES))}
+
+
 def baseline_mb() -> tuple[float, float]:
     """(resident MB of a fresh interpreter that imported what a worker routes with, what loading the land structure
     adds to it): the part of a worker's peak that is not the voyages' weather and work."""
@@ -306,9 +324,10 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
                     cpu = _host_cpu_s() - cpu0
                     counts = _s3_counts(endpoint)
                     reads = list(client.run(worker_cube_reads).values())
-                    peaks = sorted(client.run(peak_rss_mb).values())
                     caches = list(client.run(worker_chunk_cache).values())
-                rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches)
+                    memory = list(client.run(worker_memory).values())
+                    peaks = [m["peak"] for m in memory]
+                rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches, memory)
             finally:
                 _stop(cluster[::-1])
     finally:
@@ -320,7 +339,7 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
           "in the timed run to everyone (the flow host's weather maps and cycle checks too) per voyage")
     print(f"{'workers':>7} {'seconds':>8} {'voy/min':>8} {'peak worker MB':>14} {'worker cube MB/voy':>18} {'GET/voy':>8} "
           f"{'HEAD/voy':>8} {'all cube MB/voy':>15} {'export req/voy':>14} {'host CPU s/voy':>14}")
-    for w, (seconds, peaks, counts, cpu, where, reads, caches) in rows.items():
+    for w, (seconds, peaks, counts, cpu, where, reads, caches, memory) in rows.items():
         routed, peak = n + 2 * w, max(peaks)
         cube_get = counts.get("GET cubes", {"requests": 0, "bytes": 0})
         export_req = sum(v["requests"] for k, v in counts.items() if k.endswith("exports"))
@@ -332,12 +351,13 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
     print(f"chunk cache of each worker over the cycle (warm-up and timed run): MB fetched from the store, MB of the "
           f"distinct chunks among them, their ratio (1.00: no chunk fetched twice; target ≤ 1.2), against the cycle's "
           f"{cycle_mb:.1f} MB stored (never more); peak MB of each worker")
-    for w, (seconds, peaks, counts, cpu, where, reads, caches) in rows.items():
-        for k, (c, p) in enumerate(zip(caches, peaks)):
+    for w, (seconds, peaks, counts, cpu, where, reads, caches, memory) in rows.items():
+        for k, (c, m) in enumerate(zip(caches, memory)):
             ratio = c["fetched_bytes"] / c["distinct_bytes"] if c["distinct_bytes"] else float("nan")
             print(f"  {w} worker(s), worker {k}: fetched {c['fetched_bytes'] / 1e6:.2f} MB, distinct "
                   f"{c['distinct_bytes'] / 1e6:.2f} MB, ratio {ratio:.2f}, cache bound {c['max_bytes'] / 2**20:.0f} MB; "
-                  f"peak {p:.0f} MB")
+                  f"peak {m['peak']:.0f} MB; at the end Rss {m['rss']:.0f}, Pss {m['pss']:.0f}, private {m['private']:.0f}, "
+                  f"anonymous {m['anonymous']:.0f} MB; imported {', '.join(m['imported'])}")
     if 1 in rows and 2 in rows:
         print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
     print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))
