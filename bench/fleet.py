@@ -22,7 +22,7 @@ the S3 server served under `cubes/`), export requests per voyage, and the flow h
 process: user + system time over the timed run). `--code DIR` runs another checkout's code (e.g. an export of
 the main branch) in this process and in the workers, so before/after figures come from one sitting.
 
-    .venv/bin/python bench/fleet.py --s3 [--exports] [--voyages 60] [--code /tmp/main-export]
+    .venv/bin/python bench/fleet.py --s3 [--exports] [--voyages 60] [--code /tmp/main-export] [--profile-host FILE]
 """
 
 from __future__ import annotations
@@ -255,7 +255,18 @@ def stored_cycle_mb(root: Path) -> float:
     return sum(f.stat().st_size for v in wf.CUBE_VARIABLES for f in (store / v / "c").rglob("*") if f.is_file()) / 1e6
 
 
-def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
+def _host_profiler(path: Path | None):
+    """A started cProfile of the flow host (this process) when `--profile-host` asked for one, else None."""
+    if path is None:
+        return None
+    import cProfile
+
+    profiler = cProfile.Profile()
+    profiler.enable()
+    return profiler
+
+
+def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: Path | None = None) -> None:
     """The bench on a scheduler and worker processes, with the cube and exports on a local S3 server."""
     import json
     import shutil
@@ -320,8 +331,12 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
                     run(root, address, ids[: 2 * workers], exports)  # warm-up: imports in the workers
                     _s3_counts(endpoint, reset=True)
                     cpu0 = _host_cpu_s()
+                    profiler = _host_profiler(profile_host)
                     seconds = run(root, address, ids, exports)
                     cpu = _host_cpu_s() - cpu0
+                    if profiler is not None:
+                        profiler.disable()
+                        profiler.dump_stats(profile_host.with_suffix(f".{workers}w.prof"))
                     counts = _s3_counts(endpoint)
                     reads = list(client.run(worker_cube_reads).values())
                     caches = list(client.run(worker_chunk_cache).values())
@@ -376,6 +391,9 @@ def main() -> None:
                     help="workers also render each voyage's RTZ, GeoJSON and PNGs, as the demo and the nightly do")
     ap.add_argument("--s3", action="store_true", help="scheduler and worker processes, cube and exports on a local S3")
     ap.add_argument("--code", default=str(REPO), help="checkout whose code runs (default this one)")
+    ap.add_argument("--profile-host", type=Path, default=None, metavar="FILE",
+                    help="with --s3: cProfile the flow host's timed run into FILE.<N>w.prof (its CPU figure then "
+                         "includes the profiler's overhead)")
     args = ap.parse_args()
     sizes = [int(w) for w in args.workers.split(",")]
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
@@ -384,7 +402,7 @@ def main() -> None:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     if args.s3:
-        s3_processes(args.voyages, sizes, args.exports)
+        s3_processes(args.voyages, sizes, args.exports, args.profile_host)
         return
     root = prepare(args.voyages)
     ids = [f"B{k:04d}" for k in range(args.voyages)]
