@@ -22,7 +22,7 @@ the S3 server served under `cubes/`), export requests per voyage, and the flow h
 process: user + system time over the timed run). `--code DIR` runs another checkout's code (e.g. an export of
 the main branch) in this process and in the workers, so before/after figures come from one sitting.
 
-    .venv/bin/python bench/fleet.py --s3 [--exports] [--voyages 60] [--code /tmp/main-export]
+    .venv/bin/python bench/fleet.py --s3 [--exports] [--voyages 60] [--code /tmp/main-export] [--profile-host FILE]
 """
 
 from __future__ import annotations
@@ -103,6 +103,24 @@ def peak_rss_mb() -> float:
     """This process's resident-memory high-water mark in MB: VmHWM, which starts afresh with the process image
     (getrusage's ru_maxrss would carry over the peak of the parent a worker process was forked from)."""
     return _status_mb("VmHWM")
+
+
+BIG_LIBRARIES = ("pandas", "pyarrow", "xarray", "matplotlib", "duckdb", "scipy", "PIL", "numba", "zarr", "s3fs")
+
+
+def worker_memory() -> dict:
+    """In a worker: its memory now (MB) from /proc/self/smaps_rollup (Rss; Pss, which splits pages shared with other
+    processes between them; Private, its own pages; Anonymous, heap and stacks), the high-water mark, and which of
+    the big libraries it has imported."""
+    import sys
+
+    now = {}
+    for line in Path("/proc/self/smaps_rollup").read_text().splitlines()[1:]:
+        key, value = line.split(":", 1)
+        now[key] = int(value.split()[0]) / 1024.0
+    return {"rss": now["Rss"], "pss": now["Pss"], "private": now["Private_Clean"] + now["Private_Dirty"],
+            "anonymous": now["Anonymous"], "peak": peak_rss_mb(),
+            "imported": sorted({m.split(".")[0] for m in sys.modules} & set(BIG_LIBRARIES))}
 
 
 def baseline_mb() -> tuple[float, float]:
@@ -237,7 +255,18 @@ def stored_cycle_mb(root: Path) -> float:
     return sum(f.stat().st_size for v in wf.CUBE_VARIABLES for f in (store / v / "c").rglob("*") if f.is_file()) / 1e6
 
 
-def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
+def _host_profiler(path: Path | None):
+    """A started cProfile of the flow host (this process) when `--profile-host` asked for one, else None."""
+    if path is None:
+        return None
+    import cProfile
+
+    profiler = cProfile.Profile()
+    profiler.enable()
+    return profiler
+
+
+def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: Path | None = None) -> None:
     """The bench on a scheduler and worker processes, with the cube and exports on a local S3 server."""
     import json
     import shutil
@@ -302,13 +331,18 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
                     run(root, address, ids[: 2 * workers], exports)  # warm-up: imports in the workers
                     _s3_counts(endpoint, reset=True)
                     cpu0 = _host_cpu_s()
+                    profiler = _host_profiler(profile_host)
                     seconds = run(root, address, ids, exports)
                     cpu = _host_cpu_s() - cpu0
+                    if profiler is not None:
+                        profiler.disable()
+                        profiler.dump_stats(profile_host.with_suffix(f".{workers}w.prof"))
                     counts = _s3_counts(endpoint)
                     reads = list(client.run(worker_cube_reads).values())
-                    peaks = sorted(client.run(peak_rss_mb).values())
                     caches = list(client.run(worker_chunk_cache).values())
-                rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches)
+                    memory = list(client.run(worker_memory).values())
+                    peaks = [m["peak"] for m in memory]
+                rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches, memory)
             finally:
                 _stop(cluster[::-1])
     finally:
@@ -320,7 +354,7 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
           "in the timed run to everyone (the flow host's weather maps and cycle checks too) per voyage")
     print(f"{'workers':>7} {'seconds':>8} {'voy/min':>8} {'peak worker MB':>14} {'worker cube MB/voy':>18} {'GET/voy':>8} "
           f"{'HEAD/voy':>8} {'all cube MB/voy':>15} {'export req/voy':>14} {'host CPU s/voy':>14}")
-    for w, (seconds, peaks, counts, cpu, where, reads, caches) in rows.items():
+    for w, (seconds, peaks, counts, cpu, where, reads, caches, memory) in rows.items():
         routed, peak = n + 2 * w, max(peaks)
         cube_get = counts.get("GET cubes", {"requests": 0, "bytes": 0})
         export_req = sum(v["requests"] for k, v in counts.items() if k.endswith("exports"))
@@ -332,12 +366,13 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool) -> None:
     print(f"chunk cache of each worker over the cycle (warm-up and timed run): MB fetched from the store, MB of the "
           f"distinct chunks among them, their ratio (1.00: no chunk fetched twice; target ≤ 1.2), against the cycle's "
           f"{cycle_mb:.1f} MB stored (never more); peak MB of each worker")
-    for w, (seconds, peaks, counts, cpu, where, reads, caches) in rows.items():
-        for k, (c, p) in enumerate(zip(caches, peaks)):
+    for w, (seconds, peaks, counts, cpu, where, reads, caches, memory) in rows.items():
+        for k, (c, m) in enumerate(zip(caches, memory)):
             ratio = c["fetched_bytes"] / c["distinct_bytes"] if c["distinct_bytes"] else float("nan")
             print(f"  {w} worker(s), worker {k}: fetched {c['fetched_bytes'] / 1e6:.2f} MB, distinct "
                   f"{c['distinct_bytes'] / 1e6:.2f} MB, ratio {ratio:.2f}, cache bound {c['max_bytes'] / 2**20:.0f} MB; "
-                  f"peak {p:.0f} MB")
+                  f"peak {m['peak']:.0f} MB; at the end Rss {m['rss']:.0f}, Pss {m['pss']:.0f}, private {m['private']:.0f}, "
+                  f"anonymous {m['anonymous']:.0f} MB; imported {', '.join(m['imported'])}")
     if 1 in rows and 2 in rows:
         print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
     print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))
@@ -356,6 +391,9 @@ def main() -> None:
                     help="workers also render each voyage's RTZ, GeoJSON and PNGs, as the demo and the nightly do")
     ap.add_argument("--s3", action="store_true", help="scheduler and worker processes, cube and exports on a local S3")
     ap.add_argument("--code", default=str(REPO), help="checkout whose code runs (default this one)")
+    ap.add_argument("--profile-host", type=Path, default=None, metavar="FILE",
+                    help="with --s3: cProfile the flow host's timed run into FILE.<N>w.prof (its CPU figure then "
+                         "includes the profiler's overhead)")
     args = ap.parse_args()
     sizes = [int(w) for w in args.workers.split(",")]
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
@@ -364,7 +402,7 @@ def main() -> None:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     if args.s3:
-        s3_processes(args.voyages, sizes, args.exports)
+        s3_processes(args.voyages, sizes, args.exports, args.profile_host)
         return
     root = prepare(args.voyages)
     ids = [f"B{k:04d}" for k in range(args.voyages)]

@@ -197,3 +197,21 @@ def test_batches_are_sized_from_the_cluster_and_capped():
     batches = dask_pool.batches(jobs, 16, length_nm=lambda j: j)
     assert sorted(j for b in batches for j in b) == jobs and max(map(len, batches)) <= 16
     assert [b[0] for b in batches] == [39, 38, 37]  # the longest voyages dealt first, one to each batch
+
+
+def test_a_routing_batch_stops_the_dask_workers_task_profiler():
+    """The profiler of a `dask worker` (on by default) kept a profile per second of routing; the first batch stops it."""
+    from distributed import Client, LocalCluster
+
+    from flows.jobs.route_worker import route_batch, stop_task_profiler
+
+    assert stop_task_profiler() is False  # not in a dask worker: nothing to do
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        def profiling(dask_worker):
+            return sorted({"profile", "profile-cycle"} & set(dask_worker.periodic_callbacks))
+
+        assert list(client.run(profiling).values()) == [["profile", "profile-cycle"]]  # dask's default
+        assert client.submit(route_batch, [], None, pure=False).result() == []  # an empty batch still stops it
+        assert list(client.run(profiling).values()) == [[]]
+        assert client.submit(stop_task_profiler, pure=False).result() is False  # already off

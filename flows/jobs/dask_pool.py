@@ -49,7 +49,8 @@ def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
     import dask
     from distributed import Client, LocalCluster
 
-    quiet = {"distributed.admin.system-monitor.gil.enabled": False}
+    # no GIL monitor, no task profiler (flows/jobs/route_worker.stop_task_profiler says why) in the workers
+    quiet = {"distributed.admin.system-monitor.gil.enabled": False, "distributed.worker.profile.enabled": False}
     for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.scheduler",
                  "distributed.core", "distributed.process", "distributed.http.proxy"):
         logging.getLogger(name).setLevel(logging.ERROR)  # progress is reported per voyage instead
