@@ -198,12 +198,6 @@ def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, contin
     return limited
 
 
-def _holds(legs: list[dict], limits: EngineLimits) -> bool:
-    """Whether every setting of the legs is held at least the limits' hours (a voyage of one setting always is)."""
-    runs = settings_held_h(legs)
-    return len(runs) == 1 or min(h for _, h in runs) >= limits.min_hold_h - 1e-9
-
-
 def _waiting_plan_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits | None, continuous: bool) -> Plan:
     """A plan that waits at nodes (the grid DP's) under the engine-change limits. Its waits are kept when its
     settings are already held: a wait is sailed as a pause of the setting around it (hove to, the order is not
@@ -214,7 +208,9 @@ def _waiting_plan_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits
     refinement sails wait-free)."""
     if limits is None or not limits.active:
         return plan
-    if _holds(plan.legs, limits):
+    runs = settings_held_h(plan.legs)
+    shortest = min(h for _, h in runs)
+    if len(runs) == 1 or shortest >= limits.min_hold_h - 1e-9:  # a voyage of one setting always holds it
         plan.limits = limits
         plan.unlimited_fuel_t = plan.fuel_t  # the waiting plan is the solver's own optimum: the limits cost nothing
         plan.cost += limits.change_cost_t * plan.n_engine_changes
@@ -224,7 +220,6 @@ def _waiting_plan_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits
     # the wait-free re-plan is compared with nothing of the waiting plan's (its fuel is not a plan of that route)
     held = _with_limits(inst, replace(plan, legs=[], status="infeasible"), nodes, limits, continuous)
     if not held.legs:  # no wait-free plan of the route holds its settings (a storm blocks it): the waiting plan stays
-        shortest = min(h for _, h in settings_held_h(plan.legs))
         note = (f"holds a setting only {shortest:.1f} h (less than the {limits.min_hold_h:g} h asked): no wait-free "
                 "plan of its route holds each setting")
         plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
