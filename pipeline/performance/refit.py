@@ -197,7 +197,7 @@ def _timestamps(reports, n: int) -> np.ndarray:
     ts = np.asarray(ts)
     if ts.dtype.kind != "M":
         ts = pd.to_datetime(pd.Series(ts), utc=True).dt.tz_localize(None).to_numpy()
-    return ts.astype("datetime64[us]")
+    return ts.astype("datetime64[us]", copy=False)
 
 
 def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
@@ -245,9 +245,8 @@ def _usable(model: dict | None) -> bool:
 
 def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]]:
     """form → per vessel, a digest of its rows (every value and timestamp), the form and the fit settings."""
-    # one array type for all (contiguous, writable: a read-only one is copied) so numba takes them as one tuple type
-    cols = tuple(np.require(inp[c], np.float64, ("C", "W")).view(np.uint64) for c in _HASHED)
-    cols += (np.require(ts.astype("datetime64[us]"), None, ("C", "W")).view(np.uint64),)
+    # one array type for all (contiguous, read-only views: no copy) so numba takes them as one tuple type
+    cols = tuple(_read_only_bits(inp[c]) for c in _HASHED) + (_read_only_bits(ts.astype("datetime64[us]", copy=False)),)
     h = np.empty((bounds.size - 1, 2), dtype=np.uint64)
     _row_hashes_nb(cols, np.ascontiguousarray(bounds, dtype=np.int64), h)
     digests = [f"{a:016x}{b:016x}" for a, b in h.tolist()]
@@ -256,6 +255,13 @@ def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]
         tag = hashlib.blake2b(f"{f}|robust={robust_of[f]}|holdout={gate.holdout_frac}".encode(), digest_size=4).hexdigest()
         out[f] = [d + tag for d in digests]
     return out
+
+
+def _read_only_bits(values: np.ndarray) -> np.ndarray:
+    """The 8-byte values' bit patterns as a contiguous, read-only uint64 view (a copy only if not contiguous)."""
+    bits = np.ascontiguousarray(values).view(np.uint64)
+    bits.flags.writeable = False
+    return bits
 
 
 @numba.njit(cache=True)
