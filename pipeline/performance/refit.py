@@ -605,17 +605,19 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
 
 
 def _coefficients_json_of(results: list[fit.FitResult]) -> list[str]:
-    """`json.dumps(r.coefficients())` of each result, formatted from a template where every value is finite (cheaper)."""
-    out = []
-    for r in results:
-        values = r.coef.tolist()
-        if not all(map(math.isfinite, values)):
-            out.append(json.dumps(r.coefficients()))
-            continue
-        template = _TEMPLATES.get(r.names)
+    """`json.dumps(r.coefficients())` of each result, formatted from a template where every value is finite (cheaper):
+    one template per list of regressors, its results' coefficients checked and made Python floats together."""
+    out: list[str] = [""] * len(results)
+    by_names: dict[tuple, list[int]] = {}
+    for i, r in enumerate(results):
+        by_names.setdefault(r.names, []).append(i)
+    for names, at in by_names.items():
+        template = _TEMPLATES.get(names)
         if template is None:
-            template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
-        out.append(template % tuple(values))
+            template = _TEMPLATES[names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in names) + "}"
+        coefs = np.array([results[i].coef for i in at], dtype=np.float64).reshape(len(at), len(names))
+        for i, values, finite in zip(at, map(tuple, coefs.tolist()), np.isfinite(coefs).all(axis=1).tolist()):
+            out[i] = template % values if finite else json.dumps(results[i].coefficients())
     return out
 
 
