@@ -304,7 +304,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
 
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
-    train_env, all_env = sanity.envelopes_until(inp, bounds[:-1], hold_from, bounds[1:])  # of training rows, all rows
+    train_env, all_env = sanity.envelope_rows_until(inp, bounds[:-1], hold_from, bounds[1:])  # of training rows, all rows
     cands = {}
     for form in sorted(forms, key=lambda f: f == "mlp"):  # the network last: its screen looks at the physical fit
         X = _designs(form, inp, {f: c.X for f, c in cands.items()})
@@ -341,7 +341,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         todo = [g for g in range(G) if gated[f][g] is None] if gate.sanity else []
         if todo:
             why = sanity.check_models(f, fit.coef_matrix(c.train["speed"], todo), fit.coef_matrix(c.train["fuel"], todo),
-                                      [train_env[g] for g in todo], gate.limits)
+                                      train_env.take(todo), gate.limits)
             for g, w in zip(todo, why):
                 c.sane[g] = w
     for g, imo in enumerate(imos.tolist()):
@@ -644,17 +644,17 @@ def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: fit.coef_matrix(c.train[t], gs) for t in TARGETS})
-        env = [all_env[g] for g in gs.tolist()]
+        env = all_env.take(gs)
         active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
         sane = [None] * gs.size
         if gate.sanity and active:
             why = sanity.check_models(form, fit.coef_matrix(res["speed"], active), fit.coef_matrix(res["fuel"], active),
-                                      [env[j] for j in active], gate.limits)
+                                      env.take(active), gate.limits)
             for j, w in zip(active, why):
                 sane[j] = w
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
-            envs[int(g)] = (env[j], sane[j])
+            envs[int(g)] = (env.json(j), sane[j])
     out = []
     g_all = np.array([p[0] for p in plans], dtype=np.int64)
     last = bounds[1:][g_all] - 1
@@ -664,7 +664,7 @@ def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list
     coef_json = _coefficients_json_of([full[p[0]][t] for p in plans for t in TARGETS])
     n_hold = n_hold.tolist()
     for j, (g, imo, form, activate, summary, data_hash) in enumerate(plans):
-        env, refused = envs[g]
+        env_json, refused = envs[g]
         if activate and refused:
             activate = False
             summary.update(changed=False, why=f"{refused} (fitted on all rows)",
@@ -672,7 +672,7 @@ def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list
         res = full[g]
         summary.update(_scores(res))
         months, data_to = (months_of[j], data_to_of[j]) if used[j] else (0.0, None)
-        env_json, status, reason, gate_text = env.to_json(), "active" if activate else "rejected", summary["reason"], summary.get("gate")
+        status, reason, gate_text = "active" if activate else "rejected", summary["reason"], summary.get("gate")
         for i, t in enumerate(TARGETS):
             r = res[t]
             out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,
