@@ -259,9 +259,6 @@ def load_reports(db_path: Path, imos: list[int] | None = None, columns: Sequence
         return con.execute(f"SELECT {select} FROM noon_reports ORDER BY imo, ts_utc").fetchdf()
 
 
-REFIT_READ_BATCH_ROWS = 1 << 30  # one Arrow batch for any fleet: its columns become numpy arrays without a copy
-
-
 def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
                    ) -> tuple[dict[str, np.ndarray], dict[int, dict], dict[int, int], list[tuple]]:
     """What a refit reads, in one read-only connection: (noon-report `columns` as float64 arrays — "imo"
@@ -271,9 +268,7 @@ def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
     The rows come as stored, through Arrow (no pandas), and are put in order here, which is cheaper
     than an ORDER BY in the query: `import_noon` stores each import by vessel and time, so one
     import is in order already and chronological imports need only a stable sort by vessel.
-    NULLs read as NaN. The scan runs on one thread, so the rows come in one Arrow batch per column, which
-    the arrays then share (read-only, no copy); a parallel scan returns a batch per thread and row group,
-    which would be copied into one array each.
+    NULLs read as NaN.
     """
     unknown = sorted(set(columns) - set(NOON_COLUMNS))
     if unknown:
@@ -281,18 +276,18 @@ def load_for_refit(db_path: Path, imos: list[int] | None, columns: Sequence[str]
     cols = [c for c in dict.fromkeys(["imo", *columns]) if c != "ts_utc"]
     query = f"SELECT {', '.join(cols)}, epoch_us(ts_utc) AS ts_us FROM noon_reports"
     with warehouse.connect(db_path, write=False) as con:
-        con.execute("SET threads = 1")
-        rel = (con.sql(query + " WHERE imo IN (SELECT unnest(?))", params=[list(map(int, imos))]) if imos
-               else con.sql(query))
-        table = rel.to_arrow_table(batch_size=REFIT_READ_BATCH_ROWS)
+        if imos:
+            table = con.sql(query + " WHERE imo IN (SELECT unnest(?))", params=[list(map(int, imos))]).to_arrow_table()
+        else:
+            table = con.sql(query).to_arrow_table()
         active, versions, fitted = _active_models(con), _next_versions(con), _fitted_models(con)
     arrays = {c: table.column(c).to_numpy() for c in table.column_names}
-    imo, ts_us = arrays.pop("imo").astype(np.int64, copy=False), arrays.pop("ts_us")
+    imo, ts_us = arrays.pop("imo").astype(np.int64), arrays.pop("ts_us")
     order = None if _ordered(imo, ts_us) else _order(imo, ts_us)
     out = {"imo": imo if order is None else imo[order]}
     for c in columns:
         if c == "ts_utc":
-            v = ts_us.view("datetime64[us]")
+            v = ts_us.astype("datetime64[us]")
         elif c == "imo":
             continue
         else:
