@@ -364,15 +364,16 @@ FIT_COLUMNS = PERF_MODELS.names_except("flag")  # a flag is set on the active mo
 
 
 def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[int, str]] | None = None,
-              flags: dict[int, str] | None = None) -> None:
+              flags: dict[int, str] | None = None) -> dict[int, dict]:
     """Store fit rows (one per vessel and target); activating one deactivates the vessel's older models.
 
     `reactivate`: imo → (stored version, reason) to make active again (instead of storing a copy);
     `flags`: imo → why new reports contradict its active model (kept on the active rows). One transaction.
+    Returns the active models afterwards (as `active_models`), read in the same connection.
     """
     reactivate, flags = reactivate or {}, flags or {}
     if not rows and not reactivate and not flags:
-        return
+        return active_models(db_path)
     with warehouse.connect(db_path) as con:
         with warehouse.transaction(con):
             for imo, text in flags.items():
@@ -391,6 +392,7 @@ def save_fits(db_path: Path, rows: list[dict], *, reactivate: dict[int, tuple[in
                 con.execute("UPDATE perf_models SET active = false, status = 'superseded' "
                             "WHERE active AND imo IN (SELECT imo FROM fits WHERE active)")
                 con.execute(f"INSERT INTO perf_models ({', '.join(FIT_COLUMNS)}) SELECT {', '.join(FIT_COLUMNS)} FROM fits")
+        return _active_models(con)
 
 
 def load_vessels(db_path: Path) -> pd.DataFrame:

@@ -403,3 +403,9 @@ def test_compiled_checks_agree_with_check_one_on_random_models(form):
     got = sanity.check_models(form, speed, fuel, envs)
     assert got == expected
     assert 0 < sum(e is not None for e in expected) < G  # both outcomes occur
+    # the fleet's envelopes as rows of one array (what a refit passes): the same envelopes, verdicts and JSON
+    rows = sanity.EnvelopeRows(np.array([(*e.rpm, *e.draft_m, e.wind_kn, e.hs_m, e.trim_m, e.months_dd) for e in envs]))
+    assert [rows[g] for g in range(G)] == envs and [rows.json(g) for g in range(G)] == [e.to_json() for e in envs]
+    assert sanity.check_models(form, speed, fuel, rows) == expected
+    some = [5, 17, 120]
+    assert sanity.check_models(form, speed[some], fuel[some], rows.take(some)) == [expected[g] for g in some]

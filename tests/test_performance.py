@@ -175,7 +175,7 @@ def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
         fleet_store.import_vessels(db, fleet.vessels)
         for part in imports:
             fleet_store.import_noon(db, part.sample(frac=1.0, random_state=0), bad.head(0))
-        fleet_store.save_fits(db, rows)
+        assert fleet_store.save_fits(db, rows) == fleet_store.active_models(db)  # what it returns is what it stored
         for imos in (None, [int(fleet.vessels.imo[2]), imo]):
             arrays, active, versions, _ = fleet_store.load_for_refit(db, imos, cols)
             df = fleet_store.load_reports(db, imos, columns=cols)
@@ -184,6 +184,56 @@ def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
                 np.testing.assert_array_equal(arrays[c], df[c].to_numpy(), err_msg=c)
             assert active == fleet_store.active_models(db) and imo in active
             assert versions == fleet_store.next_versions(db) == {imo: 2}
+
+def test_refit_read_of_a_table_larger_than_a_row_group_matches_the_ordered_table_read(fleet, tmp_path):
+    """Past one DuckDB row group (122,880 rows) the refit read still gives every row once, in vessel and time order:
+    a year of four vessels repeated 90 times, 400 days apart (131,400 rows), imported newest first."""
+    good, bad = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    ts = pd.to_datetime(good["ts_utc"])
+    years = [good.assign(ts_utc=(ts + pd.Timedelta(days=400 * k)).dt.strftime("%Y-%m-%dT%H:%M:%S")) for k in range(90)]
+    db = tmp_path / "w.duckdb"
+    fleet_store.import_vessels(db, fleet.vessels)
+    fleet_store.import_noon(db, pd.concat(years[::-1], ignore_index=True), bad.head(0))
+    arrays, *_ = fleet_store.load_for_refit(db, None, REPORT_COLUMNS)
+    df = fleet_store.load_reports(db, None, columns=REPORT_COLUMNS)
+    assert len(df) == len(arrays["imo"]) == 90 * len(good) > 122_880
+    for c in REPORT_COLUMNS:
+        np.testing.assert_array_equal(arrays[c], df[c].to_numpy(), err_msg=c)
+
+
+def test_stored_data_hashes_do_not_change_with_how_the_reports_are_held(fleet):
+    """A model's data_hash (its rows, form and fit settings) is what a refit with nothing new compares with the stored
+    models: it must stay the value stored before (pinned), whether the reports come as a DataFrame or as the read-only
+    arrays the warehouse read shares with Arrow; else every vessel would get a new model version after an upgrade."""
+    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    imo = int(fleet.vessels.imo[0])
+    rows_df = good[good.imo == imo].sort_values("ts_utc")
+    arrays = {c: rows_df[c].to_numpy(dtype="datetime64[us]" if c == "ts_utc" else float) for c in REPORT_COLUMNS if c != "imo"}
+    for a in arrays.values():
+        a.flags.writeable = False
+    for form, pinned in (("physical", "112ce623a4ed32ce03eedf02bc060995405eac69"),
+                         ("thesis", "112ce623a4ed32ce03eedf02bc06099596d7d340")):
+        for reports in (rows_df, arrays):
+            rows, _ = refit_vessel(imo, reports, None, 1, form=form)
+            assert {r["data_hash"] for r in rows} == {pinned}, form
+
+
+def test_coefficients_json_equals_json_dumps_for_every_kind_of_result():
+    """The stored coefficients' text, made from a template per regressor list, is `json.dumps` of the coefficients,
+    for several lists of regressors in one batch and for results with a non-finite value (NaN, inf)."""
+    from pipeline.performance.refit import _coefficients_json_of
+
+    rng = np.random.default_rng(5)
+    results = []
+    for i in range(12):
+        form, target = (("physical", "speed"), ("physical", "fuel"), ("thesis", "speed"))[i % 3]
+        names = (features.SPEED_REGRESSORS if target == "speed" else features.FUEL_REGRESSORS)[features.FORM_IDS[form]]
+        coef = rng.normal(size=len(names)) * 10.0 ** rng.integers(-8, 8, size=len(names))
+        if i in (4, 7):
+            coef[1] = (np.nan, np.inf)[i == 7]
+        results.append(fit.FitResult(form, target, names, coef, 100, 0.9, 0.1, 0.1))
+    assert _coefficients_json_of(results) == [json.dumps(r.coefficients()) for r in results]
+
 
 def test_underdetermined_model_is_refused():
     fl = generate_fleet("2020-12-01T00", n_vessels=1, days=120, seed=5)

@@ -83,21 +83,22 @@ HULL_REPORT_COLUMNS = ("imo", "ts_utc", "rpm", "draft_m", "trim_m", "wind_kn", "
                        "wave_dir_rel_deg", "stw_kn")
 
 
-def update_hull_performance(db: Path, imos: list[int], flag_pct: float) -> int:
-    """Speed loss against a clean hull, per month, of each vessel's reports under its active model (stored in
-    hull_performance_monthly); returns the number of vessels with a model."""
+def update_hull_performance(db: Path, reports: dict[str, np.ndarray], active: dict, imos: list[int], flag_pct: float) -> int:
+    """Speed loss against a clean hull, per month, of vessels `imos`' reports (as `load_reports` read them for the
+    refit: no second read) under their `active` models (as `fleet_store.save_fits` returns them), stored in
+    hull_performance_monthly; returns the number of vessels with a model."""
     from pipeline.performance.hull import monthly_speed_loss
     from pipeline.performance.model import model_from_stored
 
     if not imos:
         return 0
-    active = fleet_store.active_models(db)
-    reports = fleet_store.load_reports(db, imos, columns=HULL_REPORT_COLUMNS)
+    rows = pd.DataFrame({c: reports[c] for c in HULL_REPORT_COLUMNS})
+    rows = rows[rows["imo"].isin(imos)]
     out = {}
-    for imo, rows in reports.groupby("imo", sort=True):
+    for imo, vessel_rows in rows.groupby("imo", sort=True):
         m = model_from_stored(active.get(int(imo)), int(imo))
         if m is not None:
-            out[int(imo)] = (m.version, monthly_speed_loss(m, rows, flag_pct))
+            out[int(imo)] = (m.version, monthly_speed_loss(m, vessel_rows, flag_pct))
     fleet_store.save_hull_performance(db, out)
     return len(out)
 
@@ -129,7 +130,7 @@ def refit_job(imos: list[int] | None = None, data_root: str | None = None, form:
     for imo, text in flags.items():
         if text:
             LOG.warning("vessel %s: %s", imo, text)
-    run.step(fleet_store.save_fits, db, rows, reactivate=reactivate, flags=flags, name="save-fits")
-    run.step(update_hull_performance, db, sorted({int(x["imo"]) for x in summaries}), s.performance.hull_flag_pct,
-             name="hull-performance")
+    active = run.step(fleet_store.save_fits, db, rows, reactivate=reactivate, flags=flags, name="save-fits")
+    run.step(update_hull_performance, db, reports, active, sorted({int(x["imo"]) for x in summaries}),
+             s.performance.hull_flag_pct, name="hull-performance")
     return sorted(summaries + summaries_missing, key=lambda d: d["imo"])

@@ -197,7 +197,7 @@ def _timestamps(reports, n: int) -> np.ndarray:
     ts = np.asarray(ts)
     if ts.dtype.kind != "M":
         ts = pd.to_datetime(pd.Series(ts), utc=True).dt.tz_localize(None).to_numpy()
-    return ts.astype("datetime64[us]")
+    return ts.astype("datetime64[us]", copy=False)
 
 
 def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
@@ -245,9 +245,8 @@ def _usable(model: dict | None) -> bool:
 
 def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]]:
     """form → per vessel, a digest of its rows (every value and timestamp), the form and the fit settings."""
-    # one array type for all (contiguous, writable: a read-only one is copied) so numba takes them as one tuple type
-    cols = tuple(np.require(inp[c], np.float64, ("C", "W")).view(np.uint64) for c in _HASHED)
-    cols += (np.require(ts.astype("datetime64[us]"), None, ("C", "W")).view(np.uint64),)
+    # one array type for all (contiguous, read-only views: no copy) so numba takes them as one tuple type
+    cols = tuple(_read_only_bits(inp[c]) for c in _HASHED) + (_read_only_bits(ts.astype("datetime64[us]", copy=False)),)
     h = np.empty((bounds.size - 1, 2), dtype=np.uint64)
     _row_hashes_nb(cols, np.ascontiguousarray(bounds, dtype=np.int64), h)
     digests = [f"{a:016x}{b:016x}" for a, b in h.tolist()]
@@ -256,6 +255,13 @@ def _data_hashes(inp, ts, bounds, forms, robust_of, gate) -> dict[str, list[str]
         tag = hashlib.blake2b(f"{f}|robust={robust_of[f]}|holdout={gate.holdout_frac}".encode(), digest_size=4).hexdigest()
         out[f] = [d + tag for d in digests]
     return out
+
+
+def _read_only_bits(values: np.ndarray) -> np.ndarray:
+    """The 8-byte values' bit patterns as a contiguous, read-only uint64 view (a copy only if not contiguous)."""
+    bits = np.ascontiguousarray(values).view(np.uint64)
+    bits.flags.writeable = False
+    return bits
 
 
 @numba.njit(cache=True)
@@ -298,7 +304,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
 
     robust_of = {f: fit.robust_default(f) if robust is None else bool(robust) for f in forms}
-    train_env, all_env = sanity.envelopes_until(inp, bounds[:-1], hold_from, bounds[1:])  # of training rows, all rows
+    train_env, all_env = sanity.envelope_rows_until(inp, bounds[:-1], hold_from, bounds[1:])  # of training rows, all rows
     cands = {}
     for form in sorted(forms, key=lambda f: f == "mlp"):  # the network last: its screen looks at the physical fit
         X = _designs(form, inp, {f: c.X for f, c in cands.items()})
@@ -335,7 +341,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
         todo = [g for g in range(G) if gated[f][g] is None] if gate.sanity else []
         if todo:
             why = sanity.check_models(f, fit.coef_matrix(c.train["speed"], todo), fit.coef_matrix(c.train["fuel"], todo),
-                                      [train_env[g] for g in todo], gate.limits)
+                                      train_env.take(todo), gate.limits)
             for g, w in zip(todo, why):
                 c.sane[g] = w
     for g, imo in enumerate(imos.tolist()):
@@ -599,17 +605,19 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
 
 
 def _coefficients_json_of(results: list[fit.FitResult]) -> list[str]:
-    """`json.dumps(r.coefficients())` of each result, formatted from a template where every value is finite (cheaper)."""
-    out = []
-    for r in results:
-        values = r.coef.tolist()
-        if not all(map(math.isfinite, values)):
-            out.append(json.dumps(r.coefficients()))
-            continue
-        template = _TEMPLATES.get(r.names)
+    """`json.dumps(r.coefficients())` of each result, formatted from a template where every value is finite (cheaper):
+    one template per list of regressors, its results' coefficients checked and made Python floats together."""
+    out: list[str] = [""] * len(results)
+    by_names: dict[tuple, list[int]] = {}
+    for i, r in enumerate(results):
+        by_names.setdefault(r.names, []).append(i)
+    for names, at in by_names.items():
+        template = _TEMPLATES.get(names)
         if template is None:
-            template = _TEMPLATES[r.names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in r.names) + "}"
-        out.append(template % tuple(values))
+            template = _TEMPLATES[names] = "{" + ", ".join(json.dumps(nm) + ": %r" for nm in names) + "}"
+        coefs = np.array([results[i].coef for i in at], dtype=np.float64).reshape(len(at), len(names))
+        for i, values, finite in zip(at, map(tuple, coefs.tolist()), np.isfinite(coefs).all(axis=1).tolist()):
+            out[i] = template % values if finite else json.dumps(results[i].coefficients())
     return out
 
 
@@ -636,17 +644,17 @@ def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list
         # all rows (the Huber weights of the rows it was fitted on hardly change)
         res = _fit_form(form, c.X, y, bounds[gs], bounds[gs + 1], c.robust, gate, max_solves=ALL_ROWS_SOLVES,
                         start={t: fit.coef_matrix(c.train[t], gs) for t in TARGETS})
-        env = [all_env[g] for g in gs.tolist()]
+        env = all_env.take(gs)
         active = [j for j, g in enumerate(gs.tolist()) if g in accepted]
         sane = [None] * gs.size
         if gate.sanity and active:
             why = sanity.check_models(form, fit.coef_matrix(res["speed"], active), fit.coef_matrix(res["fuel"], active),
-                                      [env[j] for j in active], gate.limits)
+                                      env.take(active), gate.limits)
             for j, w in zip(active, why):
                 sane[j] = w
         for j, g in enumerate(gs):
             full[int(g)] = {t: res[t][j] for t in TARGETS}
-            envs[int(g)] = (env[j], sane[j])
+            envs[int(g)] = (env.json(j), sane[j])
     out = []
     g_all = np.array([p[0] for p in plans], dtype=np.int64)
     last = bounds[1:][g_all] - 1
@@ -656,7 +664,7 @@ def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list
     coef_json = _coefficients_json_of([full[p[0]][t] for p in plans for t in TARGETS])
     n_hold = n_hold.tolist()
     for j, (g, imo, form, activate, summary, data_hash) in enumerate(plans):
-        env, refused = envs[g]
+        env_json, refused = envs[g]
         if activate and refused:
             activate = False
             summary.update(changed=False, why=f"{refused} (fitted on all rows)",
@@ -664,7 +672,7 @@ def _rows(plans, cands, bounds, inp, ts, y, all_env, n_hold, gate: Gate) -> list
         res = full[g]
         summary.update(_scores(res))
         months, data_to = (months_of[j], data_to_of[j]) if used[j] else (0.0, None)
-        env_json, status, reason, gate_text = env.to_json(), "active" if activate else "rejected", summary["reason"], summary.get("gate")
+        status, reason, gate_text = "active" if activate else "rejected", summary["reason"], summary.get("gate")
         for i, t in enumerate(TARGETS):
             r = res[t]
             out.append({"imo": imo, "version": summary["version"], "form": form, "target": t,

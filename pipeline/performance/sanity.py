@@ -87,14 +87,41 @@ def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
 def envelopes_until(inp: dict[str, np.ndarray], starts, splits, stops) -> tuple[list[Envelope], list[Envelope]]:
     """(`envelopes` of starts[g]:splits[g], `envelopes` of starts[g]:stops[g]) in one pass over the rows (e.g. of
     each vessel's training rows and of all its rows)."""
+    return tuple([part[g] for g in range(len(part))] for part in envelope_rows_until(inp, starts, splits, stops))
+
+
+class EnvelopeRows:
+    """Envelopes as the rows of one (G, 8) array (least and largest rpm, least and largest draft, largest wind and
+    waves, trim, months since dry dock), for a fleet: `check_models` reads the array, an `Envelope` is made only
+    for the rows asked for (`rows[g]`), and `json(g)` is `rows[g].to_json()` without making it."""
+
+    def __init__(self, values: np.ndarray):
+        self.values = np.ascontiguousarray(values, dtype=np.float64).reshape(-1, 8)
+        self._rows = self.values.tolist()  # Python floats, as `Envelope` holds them
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def __getitem__(self, g: int) -> Envelope:
+        v = self._rows[g]
+        return Envelope((v[0], v[1]), (v[2], v[3]), v[4], v[5], v[6], v[7])
+
+    def take(self, groups) -> "EnvelopeRows":
+        return EnvelopeRows(self.values[np.asarray(groups, dtype=np.int64)])
+
+    def json(self, g: int) -> str:
+        v = self._rows[g]
+        return _ENVELOPE_JSON % tuple(v) if all(map(math.isfinite, v)) else self[g].to_json()
+
+
+def envelope_rows_until(inp: dict[str, np.ndarray], starts, splits, stops) -> tuple[EnvelopeRows, EnvelopeRows]:
+    """`envelopes_until` as `EnvelopeRows` (no `Envelope` made)."""
     starts, splits, stops = (np.asarray(a, dtype=np.int64) for a in (starts, splits, stops))
-    G = starts.size
-    if G == 0:
-        return [], []
-    e = np.empty((2, G, 8))
-    cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m", "months_dd")]
-    _envelopes_nb(*cols, starts, splits, stops, e)
-    return tuple([Envelope((g[0], g[1]), (g[2], g[3]), g[4], g[5], g[6], g[7]) for g in part.tolist()] for part in e)
+    e = np.empty((2, starts.size, 8))
+    if starts.size:
+        cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m", "months_dd")]
+        _envelopes_nb(*cols, starts, splits, stops, e)
+    return EnvelopeRows(e[0]), EnvelopeRows(e[1])
 
 
 @numba.njit(cache=True)
@@ -227,17 +254,21 @@ def check_one(S: np.ndarray, F: np.ndarray, grid, limits: Limits = Limits()) -> 
     return None
 
 
-def check_models(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: list[Envelope],
+def check_models(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelopes: "list[Envelope] | EnvelopeRows",
                  limits: Limits = Limits()) -> list[str | None]:
     """Per model g (coefficient rows g, envelope g): why it fails the sanity checks (check and worst point), or None.
     The checks run on all models at once in one compiled pass (`_failing_nb`: the grid, each model's values on it
     and the checks of `check_one`, vessel by vessel, nothing stored); only a failing one is evaluated again
     (`check_one`) for its message."""
-    if not envelopes:
+    if not len(envelopes):
         return []
     G = len(envelopes)
-    e = np.array([(v.rpm[0], v.rpm[1], v.draft_m[0], v.draft_m[1], max(v.wind_kn, 0.0), max(v.hs_m, 0.0), v.trim_m, v.months_dd)
-                  for v in envelopes], dtype=np.float64).reshape(-1, 8)
+    if isinstance(envelopes, EnvelopeRows):
+        e = envelopes.values.copy()
+        e[:, 4:6] = np.maximum(e[:, 4:6], 0.0)
+    else:
+        e = np.array([(v.rpm[0], v.rpm[1], v.draft_m[0], v.draft_m[1], max(v.wind_kn, 0.0), max(v.hs_m, 0.0), v.trim_m,
+                       v.months_dd) for v in envelopes], dtype=np.float64).reshape(-1, 8)
     bad = np.zeros(G, dtype=np.bool_)
     _failing_nb(features.FORM_IDS[form], np.ascontiguousarray(speed_coefs, dtype=np.float64).reshape(G, -1),
                 np.ascontiguousarray(fuel_coefs, dtype=np.float64).reshape(G, -1), e, _AXES, _DIRECTIONS,
