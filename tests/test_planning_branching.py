@@ -21,6 +21,11 @@ def _instance(rng, seed):
     return problem.build(vessels, contracts, dist, fuel_price=600.0)
 
 
+def _pairs(data):
+    """Every vessel–contract pair a vessel could lift."""
+    return [(k, j) for k in range(len(data.vessels)) for j in data.per_vessel[k].contracts]
+
+
 def _root(data):
     master = MasterLP(data)
     bound, converged = branch_price.solve_root(data, master, time.perf_counter() + 30)
@@ -46,8 +51,8 @@ def test_pricing_under_branch_decisions_blocks_forbidden_pairs_and_finds_the_lea
     for seed in range(30):
         data = _instance(rng, 1000 + seed)
         V, n = len(data.vessels), len(data.contracts)
+        pairs = _pairs(data)
         master, _ = _root(data)
-        pairs = [(k, j) for k in range(V) for j in data.per_vessel[k].contracts]
         picks = rng.choice(len(pairs), size=min(3, len(pairs)), replace=False)
         decisions = tuple((*pairs[i], bool(q == 0)) for q, i in enumerate(picks))
         blocked, compulsory = branch_price.node_constraints(decisions, V, n)
@@ -95,8 +100,7 @@ def test_a_node_bound_never_exceeds_the_best_plan_that_keeps_its_decisions():
     for seed in range(20):
         data = _instance(rng, 1100 + seed)
         V, n = len(data.vessels), len(data.contracts)
-        master, _ = _root(data)
-        pairs = [(k, j) for k in range(V) for j in data.per_vessel[k].contracts]
+        pairs, (master, _) = _pairs(data), _root(data)
         i = int(rng.integers(len(pairs)))
         for lifts in (True, False):
             decisions = ((*pairs[i], lifts),)
