@@ -146,3 +146,20 @@ def test_branching_reaches_the_exact_optimum_where_the_root_lp_is_fractional():
         assert out.plan.cost == pytest.approx(best, rel=1e-9), f"seed {seed}"
         assert out.bound == pytest.approx(best, rel=1e-9)
     assert fractional >= 5  # the branching is exercised where the LP bound proves nothing
+
+
+def test_a_dive_past_its_deadline_still_returns_a_feasible_plan():
+    """Cut short (the deadline already passed, at a node whose decisions need new columns), the dive rounds its
+    last LP: a plan whose sequences are all feasible and that keeps the node's forbidden pairs."""
+    for seed in range(4):
+        vessels, contracts, dist = random_instance(5, 20, seed=1500 + seed, horizon_days=25, n_ports=8, window_days=6)
+        data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+        master, _ = _root(data)
+        _, _, _, y = master.solve()
+        x = master.lifted_by(y)
+        forbid = tuple((int(k), int(j), False) for k, j in np.argwhere(x > 1e-6))  # everything the root LP lifts
+        n_columns = len(master.columns)
+        plan = branch_price.dive(data, master, forbid, time.perf_counter())
+        assert len(master.columns) == n_columns  # past the deadline nothing priced is added
+        assert not any(j in plan.get(k, ()) for k, j, _ in forbid)
+        assemble(data, plan, solver="t", status="", gap=0.0, runtime_s=0.0)  # raises on an infeasible sequence

@@ -89,7 +89,7 @@ def solve_node(data: PlanData, master: MasterLP, blocked: np.ndarray, compulsory
         bound = max(bound, z + least)
         if least > -colgen.EPS * max(1.0, abs(z)):
             return max(bound, z), y, True
-        if bound >= cutoff or not master.add(new) or time.perf_counter() > deadline:
+        if bound >= cutoff or time.perf_counter() > deadline or not master.add(new):  # y: one per pool column
             return bound, y, False
 
 
