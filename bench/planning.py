@@ -3,7 +3,8 @@
 Random instances (`pipeline/synthetic/contracts.py`: ports on a 3,000 NM square, load windows of 1–4 days over
 60 days, 2–4 of 4 cargo types per vessel, three deadweight classes). Per size and seed:
 - the planner (`pipeline.planning.milp.solve`: the set-partitioning LP bound, by column generation when enumerating
-  every sequence is too big, then HiGHS over the columns within the gap), wall time including the enumeration,
+  every sequence is too big, then HiGHS over the columns within the gap, then branch-and-price for the time left),
+  wall time including the enumeration,
   cost, status and proven gap;
 - the reference, in the same run: the textbook arc-flow MILP (per-vessel arcs, big-M time windows) on the same
   HiGHS with the same time limit — its best objective (ballast legs costed at their slowest speed, so at most its

@@ -24,7 +24,6 @@ from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, Plan
 from pipeline.planning.routes import Column
 
 EPS = 1e-6
-DIVE_FIX = 0.8  # a dive fixes every column the LP takes at least this much (lower: faster, worse plans)
 
 
 def _master(data: PlanData, columns: list[Column]):
@@ -279,57 +278,3 @@ def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.
     if not converged:  # the last LP without the columns priced after it
         z, pi, mu, y = solve_lp(data, columns)
     return columns, bound, converged, (pi, mu, y)
-
-
-def dive(data: PlanData, columns: list[Column], *, time_limit_s: float = 20.0,
-         reprice: bool = True) -> tuple[dict[int, tuple[int, ...]], list[Column]]:
-    """A plan by diving on the LP: fix the column the LP takes most (and every column it takes whole), drop the
-    vessels and contracts they use, bring the LP over what is left back to its optimum (pricing new columns for it,
-    when `reprice`, until none has a negative reduced cost), and repeat until the LP takes nothing more. Past the
-    time limit the dive stops pricing and fixes every column at ≥ DIVE_FIX at once. Returns (vessel → sequence,
-    columns with those priced added)."""
-    t0 = time.perf_counter()
-    columns = list(columns)
-    have = {(c.k, c.sequence) for c in columns}
-    fixed: dict[int, tuple[int, ...]] = {}
-    taken: set[int] = set()
-    while True:
-        free = [c for c in columns if c.k not in fixed and not taken.intersection(c.sequence)]
-        if not free:
-            break
-        _, pi, mu, y = solve_lp(data, free)
-        in_time = time.perf_counter() - t0 < time_limit_s
-        while reprice and in_time:
-            blocked = pi.copy()
-            blocked[list(taken)] = -1e18  # contracts already lifted: no prize
-            added = 0
-            for k in range(len(data.vessels)):
-                if k in fixed:
-                    continue
-                _, new = price(data, k, blocked, float(mu[k]))
-                for col in new:
-                    if (col.k, col.sequence) not in have:
-                        have.add((col.k, col.sequence))
-                        columns.append(col)
-                        free.append(col)
-                        added += 1
-            if not added:
-                break
-            _, pi, mu, y = solve_lp(data, free)
-            in_time = time.perf_counter() - t0 < time_limit_s
-        order = np.argsort(-y, kind="stable")
-        whole = 1.0 - 1e-6 if in_time and reprice else DIVE_FIX
-        pick = [i for i in order if y[i] >= whole] or ([order[0]] if len(order) and y[order[0]] > 1e-6 else [])
-        progress = False
-        for i in pick:
-            col = free[i]
-            if col.k in fixed or taken.intersection(col.sequence):
-                continue
-            if col.cost - sum(data.contracts[j].penalty for j in col.sequence) >= 0:
-                continue
-            fixed[col.k] = col.sequence
-            taken.update(col.sequence)
-            progress = True
-        if not progress:
-            break
-    return fixed, columns

@@ -56,6 +56,8 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
     glob, table = _pricing_table(data, k)
     if glob.size == 0:
         return [], True
+    if time.perf_counter() > deadline:  # before the completion bound, which alone takes a while on a large fleet
+        return [], False
     (start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h, early, late, dur,
      credit, laden_cost, end_travel_h, end_cost, s_to, s_arrive, s_nm, ptr, to, travel_h, nm) = table
     prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]

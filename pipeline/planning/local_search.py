@@ -4,8 +4,8 @@ Moves, each judged exactly (problem.schedule's earliest schedule and cost of the
 - relocate: take a contract off its vessel (or off the spot market) and insert it into another vessel's sequence at
   the best position, or leave it to the spot market (its penalty);
 - exchange: a contract of one vessel and a contract of another (or a contract left) trade places.
-First improvement, repeated until no move saves anything or the time is up. Used on large fleets after the LP dive
-(colgen.dive), whose plan the restricted MILP does not always improve within its time.
+First improvement, repeated until no move saves anything or the time is up. Used on large fleets after each LP dive
+(branch_price.dive), whose plans it often improves.
 """
 
 from __future__ import annotations

@@ -30,8 +30,13 @@ from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, FleetPlan, PlanData, assemble
-from pipeline.planning import colgen, gap_columns, local_search
+from pipeline.planning import branch_price, colgen, gap_columns, local_search
+from pipeline.planning.master_lp import MasterLP
 from pipeline.planning.routes import vessel_columns
+
+# the reduced-cost enumeration is tried on large fleets only when the plan is within this share of the LP bound (it
+# completed at 1.2 % on 20 x 80; at 2 % on 50 x 200 it runs out of time after ~10 s spent on completion bounds)
+ENUMERABLE_GAP = 0.015
 
 
 def _arc_model(data: PlanData):
@@ -172,17 +177,17 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     - small and medium fleets (every vessel's feasible sequences enumerated, routes.vessel_columns, at most
       `max_labels` partial sequences per vessel): the LP over all of them, and the plan of its rounding improved by
       local search (local_search.py);
-    - otherwise: column generation (colgen.generate) to the LP optimum, and a dive on that LP with pricing at each
-      step (colgen.dive), improved by local search.
+    - otherwise: column generation to the LP optimum (branch_price.solve_root, the LP kept warm in
+      master_lp.MasterLP), and a dive on that LP fixing vessel–contract pairs with pricing at each step
+      (branch_price.dive), improved by local search, then HiGHS over the priced columns for a better plan.
     Then the exact finish (gap_columns.py): HiGHS solves the set-partitioning MILP over every column whose reduced
     cost is at most the gap between plan and bound — the enumerated ones filtered, or, for large fleets, enumerated
     afresh under that reduced cost (at most `max_gap_labels` partial sequences per vessel, and a tenth of the
-    time limit). That MILP holds every cheaper plan: solved, the plan is proven optimal; stopped by the time
-    limit, its dual bound is a proven bound. For large fleets HiGHS first searches the columns priced so far for
-    half the time left (a better plan, so a narrower gap to enumerate within); when the gap stays too wide for the
-    enumeration, HiGHS searches them again for the rest of the time. The best plan is returned with `gap`, its
-    proven relative gap to the best lower bound. The time limit covers all of it (HiGHS may overrun it by about a
-    second)."""
+    time limit; half the time left for HiGHS). That MILP holds every cheaper plan: solved, the plan is proven
+    optimal; stopped by the time limit, its dual bound is a proven bound. For large fleets not proven optimal so
+    far, branch-and-price (branch_price.search) takes the rest of the time: it raises the bound by branching on
+    vessel–contract pairs and dives for better plans. The best plan is returned with `gap`, its proven relative gap
+    to the best lower bound. The time limit covers all of it (HiGHS may overrun it by about a second)."""
     t0 = time.perf_counter()
 
     def left() -> float:
@@ -215,12 +220,15 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         pool = [col for col, r in zip(columns, rc) if r <= _slack(best.cost, bound)]
         best, bound, optimal = _exact_within_gap(data, pool, best, bound, left(), mip_rel_gap)
         return result(best, bound, optimal, len(columns))
-    priced, bound, converged, (pi, mu, _) = colgen.generate(data, [], time_limit_s=max(1.0, 0.4 * left()))
-    dived, priced = colgen.dive(data, priced, time_limit_s=max(1.0, 0.6 * left()))
-    best = plan_of(local_search.improve(data, dived, time_limit_s=max(0.5, 0.2 * left())))
-    best = _search_priced(data, priced, pi, mu, best, bound, (0.5 if converged else 1.0) * left(), mip_rel_gap)
-    if converged and left() > 1.0:
-        # a short try: when the gap is too wide the enumeration grows past any budget, and HiGHS gets the time back
+    master = MasterLP(data)
+    bound, converged = branch_price.solve_root(data, master, deadline=t0 + 0.4 * float(time_limit_s))
+    _, pi, mu, _ = master.solve()
+    dived = branch_price.dive(data, master, (), time.perf_counter() + 0.3 * left())
+    best = plan_of(local_search.improve(data, dived, time_limit_s=max(0.5, 0.1 * left())))
+    best = _search_priced(data, master.columns, pi, mu, best, bound, 0.3 * left(), mip_rel_gap)
+    finish_bound = -np.inf
+    if converged and left() > 1.0 and best.cost - bound <= ENUMERABLE_GAP * best.cost:
+        # a short try: when the gap is too wide the enumeration grows past any budget, and the branching gets the time
         pool, complete = [], True
         deadline = time.perf_counter() + min(0.5 * left(), 0.1 * float(time_limit_s))
         for k in range(len(data.vessels)):
@@ -230,10 +238,11 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
                 break
             pool += cols
         if complete:
-            best, bound, optimal = _exact_within_gap(data, pool, best, bound, left(), mip_rel_gap)
-            return result(best, bound, optimal, len(priced) + len(pool))
-        best = _search_priced(data, priced, pi, mu, best, bound, left(), mip_rel_gap)
-    return result(best, bound, False, len(priced))
+            best, finish_bound, optimal = _exact_within_gap(data, pool, best, bound, 0.5 * left(), mip_rel_gap)
+            if optimal:
+                return result(best, finish_bound, True, len(master.columns) + len(pool))
+    tree = branch_price.search(data, master, best, t0 + float(time_limit_s), root_bound=bound, rel_gap=mip_rel_gap)
+    return result(tree.plan, max(tree.bound, finish_bound), tree.closed and mip_rel_gap == 0, len(master.columns))
 
 
 def _search_priced(data: PlanData, priced: list, pi: np.ndarray, mu: np.ndarray, best: FleetPlan, bound: float,

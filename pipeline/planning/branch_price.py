@@ -1,0 +1,205 @@
+"""Branch-and-price: raises the set-partitioning LP bound by branching until the plan is proven within the gap asked.
+
+The LP bound alone can sit more than 1 % under the optimum (its solution splits vessels between columns); branching
+cuts those splits off. A node is the list of decisions on vessel–contract pairs taken from the root:
+- (k, j, True): vessel k lifts contract j — j is compulsory (master_lp: leaving it costs more than any plan) and
+  every other vessel is forbidden it;
+- (k, j, False): vessel k does not lift j.
+Each plan of the parent keeps exactly one of the two, so the children share its plans between them. When every
+vessel–contract pair is whole in a node's LP, each vessel's columns there hold one and the same set of contracts:
+the LP solution is a plan, and the node is solved.
+
+Node LP: column generation over the pool shared by every node (master_lp.MasterLP: the columns a node forbids are
+closed, the others kept, so a node starts from everything its parent priced), pricing (colgen.price) with the
+node's forbidden pairs blocked, until no column has a negative reduced cost; its LP value is then the node's bound.
+Before that, Lasdon's bound (LP value + Σ per vessel least reduced cost, colgen.py) is valid too and prunes the
+node as soon as it reaches the incumbent.
+
+Search: best bound first (ties: deepest first, towards plans), so the proven bound — the least bound of the open
+nodes — rises as fast as the nodes are solved; the children of a node are opened with its bound. Branching pair:
+the most fractional x[k, j] (how much of j vessel k lifts in the LP). New plans: each node's LP rounded
+(colgen.round_lp) and whole node solutions; the caller may add plans from elsewhere through `improve`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from pipeline.planning import colgen, local_search
+from pipeline.planning.master_lp import MasterLP
+from pipeline.planning.problem import FleetPlan, PlanData, assemble
+
+BLOCKED = -1e18  # a contract dual this low blocks the contract in pricing (colgen.price)
+
+
+@dataclass(order=True)
+class Node:
+    bound: float
+    neg_depth: int
+    seq: int
+    decisions: tuple[tuple[int, int, bool], ...] = field(compare=False)
+
+
+@dataclass
+class Outcome:
+    """What the search proved: the best plan found, the least bound of the nodes left open (its own cost when
+    none is), whether the tree was closed, and how many nodes were solved."""
+
+    plan: FleetPlan
+    bound: float
+    closed: bool
+    nodes: int
+
+
+def node_constraints(decisions, n_vessels: int, n_contracts: int) -> tuple[np.ndarray, np.ndarray]:
+    """(blocked[k, j]: vessel k may not lift j, compulsory[j]) of a node's decisions."""
+    blocked = np.zeros((n_vessels, n_contracts), bool)
+    compulsory = np.zeros(n_contracts, bool)
+    for k, j, lifts in decisions:
+        if lifts:
+            blocked[:, j] = True
+            blocked[k, j] = False
+            compulsory[j] = True
+        else:
+            blocked[k, j] = True
+    return blocked, compulsory
+
+
+def solve_node(data: PlanData, master: MasterLP, blocked: np.ndarray, compulsory: np.ndarray, cutoff: float,
+               deadline: float, max_new: int = 10) -> tuple[float, np.ndarray | None, bool]:
+    """Column generation at one node: (bound, y of its last LP, LP optimum reached). The bound is the LP value
+    when reached, else the best Lasdon bound met (at least `cutoff` when the node can be pruned)."""
+    master.set_node(blocked, compulsory)
+    bound = -np.inf
+    while True:
+        z, pi, mu, y = master.solve()
+        least, new = 0.0, []
+        for k in range(master.V):
+            pik = pi.copy()
+            pik[blocked[k]] = BLOCKED
+            rc, cols = colgen.price(data, k, pik, float(mu[k]), max_new=max_new)
+            least += min(0.0, rc)
+            new += cols
+        bound = max(bound, z + least)
+        if least > -colgen.EPS * max(1.0, abs(z)):
+            return max(bound, z), y, True
+        if bound >= cutoff or time.perf_counter() > deadline or not master.add(new):  # y: one per pool column
+            return bound, y, False
+
+
+def solve_root(data: PlanData, master: MasterLP, deadline: float) -> tuple[float, bool]:
+    """Column generation at the root (no decisions): (the LP bound, or Lasdon's past the deadline; LP optimum
+    reached)."""
+    blocked, compulsory = node_constraints((), len(data.vessels), len(data.contracts))
+    bound, _, converged = solve_node(data, master, blocked, compulsory, np.inf, deadline)
+    return bound, converged
+
+
+def _whole_plan(master: MasterLP, y: np.ndarray) -> dict[int, tuple[int, ...]] | None:
+    """The plan an LP solution is, when every vessel–contract pair is whole in it (None otherwise)."""
+    x = master.lifted_by(y)
+    if np.any(np.minimum(x, 1.0 - x) > 1e-6):
+        return None
+    out: dict[int, tuple[int, float]] = {}
+    for i in np.flatnonzero(y > 1e-6):
+        col = master.columns[i]
+        if col.k not in out or y[i] > out[col.k][1]:
+            out[col.k] = (i, y[i])
+    return {k: master.columns[i].sequence for k, (i, _) in out.items()}
+
+
+def dive(data: PlanData, master: MasterLP, decisions: tuple, deadline: float, *, fix_at: float = 0.7
+         ) -> dict[int, tuple[int, ...]]:
+    """A plan by diving from a node: fix "vessel k lifts j" for every pair the node's LP takes at least `fix_at`
+    (or else its largest fractional pair), re-solve the LP with pricing, until it is whole. Past the deadline, or
+    when a fixing leaves the LP unable to lift a compulsory contract, the last LP is rounded (colgen.round_lp)."""
+    n, V = len(data.contracts), len(data.vessels)
+    while True:
+        blocked, compulsory = node_constraints(decisions, V, n)
+        _, y, _ = solve_node(data, master, blocked, compulsory, np.inf, deadline)
+        whole = _whole_plan(master, y)
+        if whole is not None:
+            return whole
+        if time.perf_counter() > deadline or np.any(master.slack()[compulsory] > 1e-6):
+            return colgen.round_lp(data, master.columns, y * master.allowed(blocked))
+        x = master.lifted_by(y)
+        x[np.minimum(x, 1.0 - x) <= 1e-6] = 0.0  # whole pairs are not decisions to take
+        pairs = np.argwhere(x >= fix_at)
+        if not len(pairs):
+            pairs = [np.unravel_index(np.argmax(x), x.shape)]
+        decisions = decisions + tuple((int(k), int(j), True) for k, j in pairs)
+
+
+def branching_pair(master: MasterLP, y: np.ndarray) -> tuple[int, int]:
+    """The vessel–contract pair (k, j) whose x[k, j] is nearest ½."""
+    x = master.lifted_by(y)
+    k, j = np.unravel_index(np.argmin(np.abs(x - 0.5)), x.shape)
+    return int(k), int(j)
+
+
+def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: float, *, root_bound: float = -np.inf,
+           rel_gap: float = 0.0, dive_share: float = 0.3, improve: Callable[[FleetPlan, float], FleetPlan] | None = None) -> Outcome:
+    """Best-bound branch-and-price from the root (whose columns `master` holds, `root_bound` proven) until the plan is proven within
+    `rel_gap` of the optimum, the tree is closed or the deadline passes. Up to `dive_share` of the time goes to
+    dives (`dive`, then local_search) from the node just solved, for better plans. `improve(best, bound)`, when
+    given, is called after each node and may return a better plan."""
+    n, V = len(data.contracts), len(data.vessels)
+    best = incumbent
+    counter = itertools.count()
+    open_nodes = [Node(root_bound, 0, next(counter), ())]
+    solved = 0
+    t0, diving_s = time.perf_counter(), 0.0
+    floor = np.inf  # the least bound of the nodes dropped only because they are within `rel_gap` of the incumbent
+
+    def cutoff() -> float:
+        return best.cost * (1 - rel_gap) - 1e-6 * max(1.0, abs(best.cost))
+
+    def plan_of(sequences) -> FleetPlan:
+        return assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
+
+    while open_nodes and time.perf_counter() < deadline:
+        node = heapq.heappop(open_nodes)
+        if node.bound >= cutoff():
+            floor = min(floor, node.bound)
+            continue
+        blocked, compulsory = node_constraints(node.decisions, V, n)
+        bound, y, converged = solve_node(data, master, blocked, compulsory, cutoff(), deadline)
+        bound = max(bound, node.bound)
+        solved += 1
+        if not converged:
+            if bound < cutoff():  # cut short by the deadline: still open
+                heapq.heappush(open_nodes, Node(bound, node.neg_depth, node.seq, node.decisions))
+            else:
+                floor = min(floor, bound)
+            continue
+        whole = _whole_plan(master, y)
+        if whole is not None:
+            plan = plan_of(whole)
+            if plan.cost < best.cost:
+                best = plan
+            continue
+        rounded = plan_of(colgen.round_lp(data, master.columns, y * master.allowed(blocked)))
+        if rounded.cost < best.cost:
+            best = rounded
+        if diving_s < dive_share * (time.perf_counter() - t0):
+            t1 = time.perf_counter()
+            dived = local_search.improve(data, dive(data, master, node.decisions, deadline), time_limit_s=1.0)
+            best = min(best, plan_of(dived), key=lambda p: p.cost)
+            diving_s += time.perf_counter() - t1
+        if improve is not None:
+            best = min(best, improve(best, min([bound] + [o.bound for o in open_nodes])), key=lambda p: p.cost)
+        if bound >= cutoff():
+            floor = min(floor, bound)
+            continue
+        k, j = branching_pair(master, y)
+        depth = node.neg_depth - 1
+        for lifts in (True, False):
+            heapq.heappush(open_nodes, Node(bound, depth, next(counter), node.decisions + ((k, j, lifts),)))
+    live = [o.bound for o in open_nodes]
+    return Outcome(best, min(live + [floor, best.cost]), not live, solved)
