@@ -2,10 +2,12 @@
 
 Voyages go out over dask in batches (flows/jobs/dask_pool.py); workers route with plain functions, stage
 their voyages' export files in the run's staging area themselves (under the local data root or the object root,
-storage/export_store.py) and return rows and manifest entries. This process puts the run's rows into DuckDB in
-one transaction, then publishes the staged exports with their manifest (a run that fails or is killed
-publishes nothing). A voyage that fails (bad input, no model, no way through,
-even a lost worker) is recorded with status and reason and never fails the others.
+storage/export_store.py) and return rows and manifest entries. This process stores the rows of each batch as it
+finishes (DuckDB and Parquet, route_store.write_batch: a killed run keeps the batches it stored), then publishes
+the staged exports with their manifest (a run that fails or is killed publishes nothing). The run's own pictures
+and, on an object store, the publish's copies are done by the workers too, so this process spends little per
+voyage. A voyage that fails (bad input, no model, no way through, even a lost worker) is recorded with status and
+reason and never fails the others.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import numpy as np
 from flows.jobs import dask_pool, run_pictures
 from flows.jobs.ingest import ingest_cycle
 from flows.jobs.refit import refit_job
-from flows.jobs.route_worker import failed_result, route_batch
+from flows.jobs.route_worker import copy_staged, failed_result, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline import enroute
@@ -136,10 +138,11 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
     export files under `run_exports`), storing the rows of each batch as it finishes in the warehouse and the Parquet
     exports `store_to` = (warehouse, exports folder) of the jobs' run (route_store.write_batch). With `pictures_of`
     = (run_id, cycle) and exports, workers also draw the run's weather maps (while the voyages route) and its fleet
-    map (after them) and stage them (flows/jobs/run_pictures.py). Returns the export errors, the names of the staged
-    files and the number of voyages stored."""
+    map (after them) and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files
+    to the run's folder (`copied`: all copies done). Returns the export errors, the names of the staged files, the
+    number of voyages stored and `copied`."""
     export_errors, staged, tracks, pending = [], set(), [], {"rows": [], "legs": []}
-    done, stored = 0, 0
+    done, stored, copied = 0, 0, False
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
 
     def on_done(batch, results, error):
@@ -194,7 +197,14 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
                     future, lambda exc: ([], [f"fleet: pictures: {type(exc).__name__}: {exc}"]))
                 staged.update(names)
                 export_errors.extend(errors)
-    return {"export_errors": export_errors, "staged": staged, "n_stored": stored}
+            if exports_to is not None and staged and not run_exports.local:  # the copies of the publish, shared out
+                names, n = sorted(staged), dask_pool.worker_slots(client)
+                copies = [client.submit(copy_staged, exports_to, jobs[0].run_id, names[k::n], pure=False)
+                          for k in range(min(n, len(names)))]
+                copied = all([dask_pool.result_or(f, lambda exc: LOG.warning(
+                    "exports: a worker's share of the copies failed (%s: %s); this process copies them",
+                    type(exc).__name__, exc)) for f in copies])
+    return {"export_errors": export_errors, "staged": staged, "n_stored": stored, "copied": copied}
 
 
 def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
@@ -262,7 +272,7 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
         run_exports.discard(run_id)
         route_store.fail_run(layout.warehouse, run_id, f"{type(exc).__name__}: {exc}")
         raise
-    manifest = run_exports.publish(run_id, only=out["staged"]) if exports else None
+    manifest = run_exports.publish(run_id, only=out["staged"], copied=out["copied"]) if exports else None
     files = [f["name"] for f in manifest["files"]] if manifest else []
     out_url = run_exports.run_url(run_id)
     summary.update(run_id=run_id, exports_dir=out_url if manifest else None,
