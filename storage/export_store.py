@@ -136,6 +136,7 @@ class RunExports:
         before its voyages were given up); others are left out of the manifest. `copied`: on an object store, the
         files are in the run's folder already (`copy_staged`)."""
         fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
+        fs.invalidate_cache(self._runs())  # other processes (the workers) wrote there since this one last listed it
         if not fs.exists(src):
             return None
         base = fs._strip_protocol(src).rstrip("/") + "/"

@@ -79,6 +79,14 @@ def test_copies_shared_out_before_the_publish_and_a_failed_run_s_copies_removed(
     assert all(runs.fs.cat_file(f"{runs.run_url('r1')}/{n}") == n.encode() for n in names)
     assert not runs.fs.exists(runs._staging("r1"))
     runs.discard("r2")  # failed after its copies: neither its staging nor its unpublished folder stays
+    # files staged by other processes after this one listed the runs (as a run's host does first) are published
+    import s3fs
+
+    assert runs.discard_stale({"r3"}) == []
+    elsewhere = s3fs.S3FileSystem(skip_instance_cache=True, endpoint_url=env["AWS_ENDPOINT_URL"],
+                                  key=env["AWS_ACCESS_KEY_ID"], secret=env["AWS_SECRET_ACCESS_KEY"])
+    elsewhere.pipe_file(f"{runs._staging('r3')}/V1.rtz", b"<rtz/>")
+    assert runs.publish("r3", only={"V1.rtz"})["files"] == [{"name": "V1.rtz", "bytes": 6}]
     assert not runs.fs.exists(runs._staging("r2")) and not runs.fs.exists(runs.run_url("r2"))
     assert runs.manifest("r1") == manifest  # a published run is never discarded
     runs.discard("r1")
