@@ -56,7 +56,7 @@ def _frame(rows: list[dict], table: Table, run_id: str) -> pd.DataFrame:
 
 def _naive_utc(df: pd.DataFrame) -> pd.DataFrame:
     """The frame with its tz-aware columns as naive UTC, as the warehouse's TIMESTAMP columns hold them."""
-    return df.assign(**{c: df[c].dt.tz_localize(None) for c in df.columns if isinstance(df[c].dtype, pd.DatetimeTZDtype)})
+    return df.assign(**{c: df[c].dt.tz_localize(None) for c, t in df.dtypes.items() if isinstance(t, pd.DatetimeTZDtype)})
 
 
 def parquet_dir(exports_dir: Path, table: str) -> Path:

@@ -163,8 +163,12 @@ def test_a_run_that_fails_after_some_batches_keeps_them_once_and_publishes_nothi
     from flows.jobs.fleet import route_fleet_job
     from storage import route_store
 
+    import flows.jobs.fleet as fleet
+
     root = _copy(routed_root, tmp_path / "data")
     monkeypatch.setenv("JITROUTE_DASK_WORKERS", "1")
+    settings = fleet.load_settings  # every batch stored as soon as it finishes
+    monkeypatch.setattr(fleet, "load_settings", lambda **kw: settings(**kw, **{"routing.store_every_s": 0.0}))
     last = _sql(root, "SELECT voyage_id FROM voyages ORDER BY (arr_lat - dep_lat)^2 + (arr_lon - dep_lon)^2 LIMIT 1")[0][0]
     real, calls = route_store.write_batch, []
 
@@ -281,3 +285,20 @@ def test_sigterm_stops_route_fleet_cleanly_and_leaves_no_process(routed_root, tm
     assert _sql(root, "SELECT count(*) FROM routes")[0][0] == 0  # all or nothing
     runs = root / "exports" / "runs"
     assert not runs.exists() or not any(runs.iterdir()), list(runs.iterdir())
+
+
+def test_a_run_s_weather_maps_leave_the_chunk_cache_to_the_voyages(routed_root):
+    """The run's weather maps are drawn in a routing worker: their read of the whole grid bypasses the worker's
+    chunk cache, which a voyage's window read fills."""
+    import numpy as np
+
+    from flows.jobs import weather_maps
+    from storage import cube_window
+
+    store, cycle = routed_root / "cubes" / "weather.zarr", np.datetime64("2020-12-01T00", "ns")
+    before = cube_window.CHUNK_CACHE.stats()["fetched_bytes"]
+    maps = weather_maps.run_maps_png(store, cycle)
+    assert set(maps) == {"waves", "wind"} and all(png[:8] == b"\x89PNG\r\n\x1a\n" for png in maps.values())
+    assert cube_window.CHUNK_CACHE.stats()["fetched_bytes"] == before
+    weather_maps.step_fields(store, cycle, 0, stride=2)  # the same read through the cache
+    assert cube_window.CHUNK_CACHE.stats()["fetched_bytes"] > before

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
@@ -133,10 +134,11 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
 
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None, store_to: tuple[Path, Path],
-                  pictures_of: tuple[str, np.datetime64] | None = None) -> dict:
+                  pictures_of: tuple[str, np.datetime64] | None = None, store_every_s: float = 0.0) -> dict:
     """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves and stage their
-    export files under `run_exports`), storing the rows of each batch as it finishes in the warehouse and the Parquet
-    exports `store_to` = (warehouse, exports folder) of the jobs' run (route_store.write_batch). With `pictures_of`
+    export files under `run_exports`), storing the rows of the batches as they finish in the warehouse and the Parquet
+    exports `store_to` = (warehouse, exports folder) of the jobs' run (route_store.write_batch): those finished since
+    the last store, at most every `store_every_s` seconds, and the rest at the end. With `pictures_of`
     = (run_id, cycle) and exports, workers also draw the run's weather maps (while the voyages route) and its fleet
     map (after them) and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files
     to the run's folder (`copied`: all copies done). Returns the export errors, the names of the staged files, the
@@ -171,11 +173,14 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             LOG.info("routed %d/%d: %s %s%s", done, len(jobs), printable(r["voyage_id"]), r["status"],
                      f" ({printable(r['reason'])})" if r.get("reason") else "")
 
-    def store() -> None:  # the batches finished since the last store, in one transaction
-        nonlocal stored
-        if pending["rows"]:
+    last_store = time.monotonic()
+
+    def store(final: bool = False) -> None:  # the batches finished since the last store, in one transaction
+        nonlocal stored, last_store
+        if pending["rows"] and (final or time.monotonic() - last_store >= store_every_s):
             stored += len(route_store.write_batch(*store_to, jobs[0].run_id, pending["rows"], pending["legs"]))
             pending["rows"], pending["legs"] = [], []
+            last_store = time.monotonic()
 
     if jobs:
         with dask_pool.dask_client(dask_address, n_workers) as client:
@@ -189,6 +194,7 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
                                               pure=False))
             dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_store.url,
                                   cube_store.options, exports_to, on_done=on_done, on_group_done=store)
+            store(final=True)
             if pictures:
                 pictures.append(client.submit(run_pictures.stage_fleet_map, exports_to, run_id,
                                               f"run {run_id} · cycle {cycle_label(cycle)}", tracks, pure=False))
@@ -266,7 +272,7 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     try:
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
                        s.dask_address, s.dask_workers, s.routing.voyages_per_task, (layout.warehouse, layout.exports),
-                       (run_id, c), name="route-voyages", timeout_s=s.routing.task_timeout_s)
+                       (run_id, c), s.routing.store_every_s, name="route-voyages", timeout_s=s.routing.task_timeout_s)
         summary = route_store.finish_run(layout.warehouse, layout.exports, run_id, out["export_errors"])
     except BaseException as exc:
         run_exports.discard(run_id)
