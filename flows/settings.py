@@ -81,6 +81,9 @@ class RoutingSettings(RoutingOptions):
     lookahead_h: float = 120.0  # route voyages departing within this many hours of the cycle
     voyages_per_task: int | None = None  # None: about three batches per dask worker thread, ≤ 16 voyages each
     task_timeout_s: float = 6 * 3600.0  # Prefect task timeout of a fleet's routing
+    # a fleet run stores the batches finished since its last store at most this often (and at its end): a killed run
+    # loses at most this long of finished voyages; each store costs its process about 0.1–0.2 s CPU
+    store_every_s: float = 60.0
     # voyages at sea (pipeline/enroute.py): re-planned from their latest position; a report older than this at the
     # run's time is advanced along the current plan; a position this close to the destination means arrived
     max_report_age_h: float = 30.0

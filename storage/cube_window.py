@@ -160,10 +160,11 @@ def _lead_hours(arr) -> np.ndarray:
     return step_hours(np.asarray(arr[:]))
 
 
-def open_published(path, storage_options: dict | None = None) -> Published:
+def open_published(path, storage_options: dict | None = None, cache_chunks: bool = True) -> Published:
     """The published view of the store at `path` (a local path or URL with fsspec options). A local store written
     before publication existed is read as it is (cycle_state still hides unfinished cycles) until its next ingest
-    publishes it; a store never published raises FileNotFoundError naming the fix."""
+    publishes it; a store never published raises FileNotFoundError naming the fix. `cache_chunks=False`: its data
+    chunks bypass CHUNK_CACHE (a read of the whole grid, e.g. a weather map, would fill a routing worker's cache)."""
     loc = locate(path, storage_options)
     if loc.local is not None and not loc.has("zarr.json"):
         from storage.cube import require_store  # names what is damaged, or says the store is missing
@@ -186,7 +187,8 @@ def open_published(path, storage_options: dict | None = None) -> Published:
     else:  # published before `cycle_rows` existed (or opened without consolidated metadata)
         rows = {c: i for i, c in enumerate(_times(group["cycle"]))}
     versions = {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
-    by_row.update({r: (str(np.datetime64(c, "s")), versions[c]) for c, r in rows.items() if c in versions})
+    if cache_chunks:  # a chunk whose row is not known here is read from the store every time
+        by_row.update({r: (str(np.datetime64(c, "s")), versions[c]) for c, r in rows.items() if c in versions})
     return Published(group, rows, _lead_hours(group["step"]), np.asarray(group["lat"][:]), np.asarray(group["lon"][:]))
 
 

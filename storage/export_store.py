@@ -2,11 +2,13 @@
 
 A run's files go under an exports root that is a local folder or an object-store URL (`s3://bucket/prefix/exports`,
 through fsspec). While the run routes they are written under `runs/.staging-<run_id>/` (by the routing workers
-themselves, each its own voyages' files); after the warehouse commit they are moved to `runs/<run_id>/` and then,
-LAST, `runs/<run_id>/_SUCCESS` is written: a JSON manifest listing every file with its size. On a local disk the
-move is one rename of the staging folder; on an object store a move is a copy per object, issued concurrently,
-so a reader may see a run folder fill up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run
-never publishes: its staging prefix is removed (by the run itself, or by the next run when the process died).
+themselves, each its own voyages' files); once the run's rows are stored they are moved to `runs/<run_id>/` and
+then, LAST, `runs/<run_id>/_SUCCESS` is written: a JSON manifest listing every file with its size. On a local disk
+the move is one rename of the staging folder; on an object store a move is a copy per object, issued concurrently
+(a fleet run shares the copies out among its dask workers: `copy_staged`), so a reader may see a run folder fill
+up: readers trust only runs with a manifest, and only the files it lists. A failed or killed run never publishes:
+its staging prefix is removed (by the run itself, with any files it had copied; or by the next run when the
+process died).
 
 A run's files are named by keys of one to three plain names joined by `/`: the run's own files at the top
 (`fleet_map.png`, `weather_waves_<cycle>.png`, the manifest), each voyage's under `voyages/<voyage_id>/`, so no
@@ -112,11 +114,29 @@ class RunExports:
         fs.pipe_file(path, data)
         return name
 
-    def publish(self, run_id: str, only: set[str] | None = None) -> dict | None:
+    @property
+    def local(self) -> bool:
+        """The root is a local folder: publishing is one rename there (elsewhere a copy per file)."""
+        return _is_local(self.fs)
+
+    def copy_staged(self, run_id: str, names: list[str]) -> None:
+        """Copy these staged files (keys) to `runs/<run_id>/`, in one call (an async filesystem such as s3fs copies
+        them concurrently). On an object store a run's copies can be shared out this way (among its dask workers),
+        then `publish(copied=True)` only writes the manifest."""
+        fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
+        names = [check_key(n) for n in names]
+        for folder in sorted({dst} | {f"{dst}/{n.rsplit('/', 1)[0]}" for n in names if "/" in n}):
+            fs.makedirs(folder, exist_ok=True)
+        if names:
+            fs.copy([f"{src}/{n}" for n in names], [f"{dst}/{n}" for n in names])
+
+    def publish(self, run_id: str, only: set[str] | None = None, copied: bool = False) -> dict | None:
         """Move the staged files to `runs/<run_id>/`, then write the manifest last; returns the manifest
         (None when nothing was staged). `only`: the names the run vouches for (e.g. not those a lost worker staged
-        before its voyages were given up); others are left out of the manifest."""
+        before its voyages were given up); others are left out of the manifest. `copied`: on an object store, the
+        files are in the run's folder already (`copy_staged`)."""
         fs, src, dst = self.fs, self._staging(run_id), self._run(run_id)
+        fs.invalidate_cache(self._runs())  # other processes (the workers) wrote there since this one last listed it
         if not fs.exists(src):
             return None
         base = fs._strip_protocol(src).rstrip("/") + "/"
@@ -126,14 +146,11 @@ class RunExports:
         names = sorted(sizes)
         if _is_local(fs) and not fs.exists(dst):
             fs.mv(src, dst, recursive=True)  # one rename of the folder, however many files it holds
-        elif names:
-            for folder in sorted({dst} | {f"{dst}/{n.rsplit('/', 1)[0]}" for n in names if "/" in n}):
-                fs.makedirs(folder, exist_ok=True)
-            # one call for all files: an async filesystem (s3fs) copies them concurrently, then deletes in batches
-            fs.copy([f"{src}/{n}" for n in names], [f"{dst}/{n}" for n in names])
+        elif names and not (copied and not _is_local(fs)):
+            self.copy_staged(run_id, names)  # deleted in batches by `discard` below
         manifest = {"run_id": run_id, "files": [{"name": n, "bytes": sizes[n]} for n in sorted(sizes)]}
         fs.pipe_file(f"{dst}/{MANIFEST}", json.dumps(manifest, indent=1).encode())
-        self.discard(run_id)
+        self._remove(src)
         return manifest
 
     def manifest(self, run_id: str) -> dict | None:
@@ -144,9 +161,15 @@ class RunExports:
             return None
 
     def discard(self, run_id: str) -> None:
-        """Remove the run's staging prefix (nothing there is fine)."""
+        """Remove the run's staging prefix, and its run folder when that holds no manifest (files copied there
+        before the run failed); nothing there is fine."""
+        self._remove(self._staging(run_id))
+        if self.manifest(run_id) is None:
+            self._remove(self._run(run_id))
+
+    def _remove(self, prefix: str) -> None:
         try:
-            self.fs.rm(self._staging(run_id), recursive=True)
+            self.fs.rm(prefix, recursive=True)
         except FileNotFoundError:
             pass
 
@@ -160,6 +183,6 @@ class RunExports:
             name = p.rstrip("/").rsplit("/", 1)[-1]
             rid = name[len(STAGING_PREFIX):] if name.startswith(STAGING_PREFIX) else None
             if rid is not None and rid not in live_run_ids:
-                self.discard(rid)
+                self._remove(self._staging(rid))
                 gone.append(rid)
         return gone

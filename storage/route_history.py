@@ -1,12 +1,14 @@
-"""The warehouse's big append-only history, `route_legs`, kept out of the DuckDB file: one Parquet file per run beside
-the warehouse, `<name>.history/route_legs/run_id=<id>/part-0.parquet`, and `route_legs` a view over the files of the
-runs listed in `route_leg_parts`.
+"""The warehouse's big append-only history, `route_legs`, kept out of the DuckDB file: Parquet files beside the
+warehouse, one per run and batch of voyages it stored, `<name>.history/route_legs/run_id=<id>/part-<k>.parquet`
+(k = 0, 1, … in the order the run stored its batches), and `route_legs` a view over the files listed in
+`route_leg_parts`.
 
 Every write to the warehouse checks the DuckDB file whole and copies it to the analysts' snapshot
 (storage/warehouse.py); with the legs out of it, what is checked and copied no longer grows with the years of legs
 (a night's legs are ~40 times its routes). A run's file is written whole (a hidden name, then a rename), read back and
-compared with the rows before its run commits; the commit lists it in `route_leg_parts` (rows, bytes, SHA-256) in the
-same transaction as the run's routes, so a run killed before it commits leaves a file that no view shows, and the
+compared with the rows before its batch commits; the commit lists it in `route_leg_parts` (rows, bytes, SHA-256) in
+the same transaction as the batch's routes, so a run killed before a batch commits leaves a file that no view shows
+(the view reads only the listed files, not every file of a listed run), and the
 snapshot, a copy of the DuckDB file, shows exactly the legs of the runs it holds (the files are never rewritten).
 Every writer checks that each listed file is there with its recorded size (a stat a run); `check_digests` reads
 them all against their SHA-256 (`jitroute warehouse check`).
@@ -31,7 +33,6 @@ from storage.warehouse import WarehouseCorruptError, transaction
 
 VIEW = ROUTE_LEGS.name
 PARTS = ROUTE_LEG_PARTS.name
-PART_FILE = "part-0.parquet"
 # the folder of a file with no rows and every column of today's definition: the view's glob always matches a file,
 # and a column no run has written yet reads as NULL (union by name)
 COLUMNS_RUN = "_columns"
@@ -56,10 +57,15 @@ def history_dir(db_path: Path) -> Path:
     return db_path.with_name(db_path.stem + ".history") / VIEW
 
 
-def part_path(folder: Path, run_id: str) -> Path:
+def part_name(index: int) -> str:
+    """The file name of a run's `index`-th stored batch of legs (0 for a run stored whole)."""
+    return f"part-{int(index)}.parquet"
+
+
+def part_path(folder: Path, run_id: str, index: int = 0) -> Path:
     if not _PLAIN_RUN_ID.fullmatch(run_id) or run_id == COLUMNS_RUN:
         raise ValueError(f"run id {run_id!r} is not a plain name: its legs cannot be stored")
-    return folder / f"run_id={run_id}" / PART_FILE
+    return folder / f"run_id={run_id}" / part_name(index)
 
 
 def _cast_list() -> str:
@@ -68,8 +74,11 @@ def _cast_list() -> str:
 
 def _view_sql(folder: Path) -> str:
     glob = _quoted(f"{folder}/run_id=*/*.parquet")
+    # the run filter prunes whole folders; the file filter hides a file its run wrote but never listed (killed)
     return (f"CREATE OR REPLACE VIEW {VIEW} AS SELECT {_cast_list()} FROM read_parquet({glob}, hive_partitioning = true, "
-            f"union_by_name = true, hive_types = {{'run_id': VARCHAR}}) WHERE run_id IN (SELECT run_id FROM {PARTS})")
+            f"union_by_name = true, filename = true, hive_types = {{'run_id': VARCHAR}}) "
+            f"WHERE run_id IN (SELECT run_id FROM {PARTS}) AND filename IN (SELECT {_quoted(str(folder) + '/')} || file "
+            f"FROM {PARTS})")
 
 
 def _columns_file(folder: Path) -> Path:
@@ -105,7 +114,8 @@ def _view_is_current(con, folder: Path) -> bool:
     every file's footer)."""
     row = con.execute("SELECT sql FROM duckdb_views() WHERE view_name = ? AND database_name = current_database()",
                       [VIEW]).fetchone()
-    return row is not None and f"'{folder}/run_id=*/*.parquet'" in row[0] and _columns_file(folder).exists()
+    return (row is not None and f"'{folder}/run_id=*/*.parquet'" in row[0] and "filename IN" in row[0]
+            and _columns_file(folder).exists())
 
 
 def keep_legs_in_parquet(con: duckdb.DuckDBPyConnection) -> None:
@@ -135,15 +145,18 @@ def keep_legs_in_parquet(con: duckdb.DuckDBPyConnection) -> None:
     con.execute(comment_sql([ROUTE_LEGS]))
 
 
-def write_part(con: duckdb.DuckDBPyConnection, folder: Path, run_id: str, select_sql: str) -> dict:
-    """Write the legs `select_sql` gives (columns of route_legs, run_id `run_id` only) as the run's file, whole or not
-    at all, read it back and compare it with the rows; returns its `route_leg_parts` row (not yet recorded).
+def write_part(con: duckdb.DuckDBPyConnection, folder: Path, run_id: str, select_sql: str, index: int = 0) -> dict:
+    """Write the legs `select_sql` gives (columns of route_legs, run_id `run_id` only) as the run's `index`-th file,
+    whole or not at all, read it back and compare it with the rows; returns its `route_leg_parts` row (not yet
+    recorded).
 
     Raises ValueError when the rows repeat a (voyage_id, leg) or lack one (the table's key, which no view enforces)."""
-    target = part_path(Path(folder), run_id)
-    if _listed(con, run_id):  # a committed run's file is never replaced (a snapshot may show it)
-        raise duckdb.ConstraintException(f"Duplicate key \"run_id: {run_id}\": the legs of run {run_id} are stored")
-    tmp = target.with_name(f".{PART_FILE}.tmp{os.getpid()}")
+    target = part_path(Path(folder), run_id, index)
+    if any(file == str(target.relative_to(folder)) for _r, file, _n, _s in _listed(con, run_id)):
+        # a committed file is never replaced (a snapshot may show it)
+        raise duckdb.ConstraintException(f"Duplicate key \"run_id: {run_id}\": the legs of run {run_id} "
+                                         f"({target.name}) are stored")
+    tmp = target.with_name(f".{target.name}.tmp{os.getpid()}")
     others = ", ".join(n for n in ROUTE_LEGS.names if n != "run_id")
     src = f"(SELECT * FROM ({select_sql}) WHERE run_id = {_quoted(run_id)})"
     n, n_keys, bad_keys, digest = con.execute(

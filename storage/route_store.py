@@ -1,11 +1,12 @@
-"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, the view `route_legs` (its rows are one
-Parquet file per run beside the warehouse: storage/route_history.py) and one exported Parquet dataset per table,
-hive-partitioned by run: `exports/routes/<table>/run_id=<id>/part-0.parquet`.
+"""Persistence of fleet routing runs: DuckDB tables `route_runs`, `routes`, the view `route_legs` (its rows are
+Parquet files beside the warehouse: storage/route_history.py) and one exported Parquet dataset per table,
+hive-partitioned by run: `exports/routes/<table>/run_id=<id>/part-<k>.parquet`.
 
-One writer: the flow collects every voyage's rows and calls `write_run_results` once, inside
-one transaction, so a killed run leaves either all of a run's rows or none (its legs' file, written before the
-commit, is listed by the commit). The Parquet files follow
-the commit; each appears whole (written under a hidden name, then renamed). Their column types are
+One writer: a fleet run stores each batch of voyages as it finishes (`write_batch`: its routes and its legs' file
+in one transaction, the legs' file written before the commit and listed by it), then ends with `finish_run`; so a
+killed run keeps every batch it stored, whole, and none of the others, and a batch stored twice (a retried step)
+adds nothing the second time. `write_run_results` stores a whole run at once. The Parquet files follow each
+commit, one part per batch; each appears whole (written under a hidden name, then renamed). Their column types are
 those of the tables' definitions (schemas/tables/routes.py): times `timestamp[us, tz=UTC]`, and a column name
 shared by both tables has the same type in both, so pyarrow, polars and DuckDB read each folder as one table.
 Rows are checked against the definitions: a key the table does not have, or a column missing, raises.
@@ -55,7 +56,7 @@ def _frame(rows: list[dict], table: Table, run_id: str) -> pd.DataFrame:
 
 def _naive_utc(df: pd.DataFrame) -> pd.DataFrame:
     """The frame with its tz-aware columns as naive UTC, as the warehouse's TIMESTAMP columns hold them."""
-    return df.assign(**{c: df[c].dt.tz_localize(None) for c in df.columns if isinstance(df[c].dtype, pd.DatetimeTZDtype)})
+    return df.assign(**{c: df[c].dt.tz_localize(None) for c, t in df.dtypes.items() if isinstance(t, pd.DatetimeTZDtype)})
 
 
 def parquet_dir(exports_dir: Path, table: str) -> Path:
@@ -63,11 +64,11 @@ def parquet_dir(exports_dir: Path, table: str) -> Path:
     return Path(exports_dir) / "routes" / table
 
 
-def _publish_parquet(df: pd.DataFrame, schema: pa.Schema, folder: Path) -> Path:
-    """Write `df` as `folder/part-0.parquet`, whole or not at all (a hidden temp name, then a rename)."""
+def _publish_parquet(df: pd.DataFrame, schema: pa.Schema, folder: Path, index: int = 0) -> Path:
+    """Write `df` as `folder/part-<index>.parquet`, whole or not at all (a hidden temp name, then a rename)."""
     folder.mkdir(parents=True, exist_ok=True)
-    final = folder / "part-0.parquet"
-    tmp = folder / f".part-0.parquet.tmp{os.getpid()}"
+    final = folder / route_history.part_name(index)
+    tmp = folder / f".{final.name}.tmp{os.getpid()}"
     try:
         pq.write_table(pa.Table.from_pandas(df[schema.names], schema=schema, preserve_index=False), tmp)
         os.replace(tmp, final)
@@ -76,9 +77,9 @@ def _publish_parquet(df: pd.DataFrame, schema: pa.Schema, folder: Path) -> Path:
     return final
 
 
-def _publish_run_parquet(exports_dir: Path, run_id: str, tables: dict[str, pd.DataFrame]) -> None:
+def _publish_run_parquet(exports_dir: Path, run_id: str, tables: dict[str, pd.DataFrame], index: int = 0) -> None:
     for table, df in tables.items():
-        _publish_parquet(df, PARQUET_TABLES[table], parquet_dir(exports_dir, table) / f"run_id={run_id}")
+        _publish_parquet(df, PARQUET_TABLES[table], parquet_dir(exports_dir, table) / f"run_id={run_id}", index)
 
 
 def migrate_old_parquet_layout(exports_dir: Path) -> list[str]:
@@ -123,9 +124,10 @@ def process_alive(pid: int | None, started: str | None) -> bool:
 
 
 def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n_voyages: int,
-              nominal_utc=None, cycle_age_h: float | None = None) -> None:
+              nominal_utc=None, cycle_age_h: float | None = None) -> set[str]:
     """Record a run as `running`, owned by this host and process (see `reap_dead_runs`), with the cycle's age
-    (hours) at the run's nominal time."""
+    (hours) at the run's nominal time. Returns the ids of the runs running now (this one included), read after the
+    dead ones were reaped."""
     pid = os.getpid()
     with warehouse.connect(db_path) as con:
         row = {"run_id": run_id, "started_at": _utcnow(),
@@ -139,6 +141,7 @@ def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n
                                                                        "n_export_failed", "export_errors"))
         con.execute(f"INSERT INTO route_runs ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})",
                     list(row.values()))
+        return {r[0] for r in con.execute("SELECT run_id FROM route_runs WHERE status = 'running'").fetchall()}
 
 
 def current_plan_legs(db_path: Path, voyage_ids: list[str]) -> dict[str, list[dict]]:
@@ -161,9 +164,12 @@ def current_plan_legs(db_path: Path, voyage_ids: list[str]) -> dict[str, list[di
 def stale_plans(db_path: Path) -> list[dict]:
     """Current plans (latest_routes) made for a voyage that has changed since: voyage_id, imo, status, reason."""
     with warehouse.connect(db_path, write=False) as con:
-        return con.execute(
-            "SELECT voyage_id, imo, 'stale' AS status, stale_reason AS reason FROM latest_routes WHERE stale "
-            "ORDER BY voyage_id").fetchdf().to_dict("records")
+        return _stale_plans(con)
+
+
+def _stale_plans(con) -> list[dict]:
+    return con.execute("SELECT voyage_id, imo, 'stale' AS status, stale_reason AS reason FROM latest_routes WHERE stale "
+                       "ORDER BY voyage_id").fetchdf().to_dict("records")
 
 
 def reap_dead_runs(con) -> list[str]:
@@ -189,6 +195,70 @@ def running_run_ids(db_path: Path) -> set[str]:
         return {r[0] for r in con.execute("SELECT run_id FROM route_runs WHERE status = 'running'").fetchall()}
 
 
+def _store(con, db_path: Path, run_id: str, routes: pd.DataFrame, legs: pd.DataFrame, index: int) -> None:
+    """On a writer connection: the legs as the run's `index`-th file, then the routes and that file's listing in one
+    transaction."""
+    con.register("routes_df", _naive_utc(routes))
+    con.register("legs_df", _naive_utc(legs))
+    # the legs' file is written before the commit and joins route_legs with it (storage/route_history.py)
+    part = route_history.write_part(con, route_history.history_dir(db_path), run_id,
+                                    f"SELECT {', '.join(LEG_COLUMNS)} FROM legs_df", index)
+    with warehouse.transaction(con):
+        con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
+        route_history.record_parts(con, [part])
+    con.unregister("routes_df")
+    con.unregister("legs_df")
+
+
+def write_batch(db_path: Path, exports_dir: Path, run_id: str, route_rows: list[dict], leg_rows: list[dict]) -> list[str]:
+    """Store one finished batch of a running run's voyages: its routes and its legs (one more file of the run's
+    history) in one transaction, then its Parquet part. Voyages the run has stored already are left out, so a batch
+    stored again adds nothing. Returns the voyage ids stored.
+
+    The writer is not checked and publishes no snapshot (`warehouse.connect(checked=False)`): the run's
+    `begin_run` checked the warehouse, and its `finish_run` or `fail_run` publishes the snapshot."""
+    routes = _frame(route_rows, ROUTES, run_id)
+    legs = _frame(leg_rows, ROUTE_LEGS, run_id)
+    with warehouse.connect(db_path, checked=False) as con:
+        stored = {r[0] for r in con.execute("SELECT voyage_id FROM routes WHERE run_id = ? AND voyage_id IN "
+                                            "(SELECT unnest(?))", [run_id, list(routes["voyage_id"])]).fetchall()}
+        if stored:
+            routes = routes[~routes["voyage_id"].isin(stored)]
+            legs = legs[~legs["voyage_id"].isin(stored)]
+        if not len(routes):
+            return []
+        index = con.execute(f"SELECT count(*) FROM {route_history.PARTS} WHERE run_id = ?", [run_id]).fetchall()[0][0]
+        _store(con, db_path, run_id, routes, legs, index)
+    _publish_run_parquet(exports_dir, run_id, {"routes": routes, "route_legs": legs}, index)
+    return [str(v) for v in routes["voyage_id"]]
+
+
+def _finish(con, run_id: str, export_errors: list[str] | None) -> tuple[int, int]:
+    """On a writer connection: the run's counts from its stored routes, its status and finish time."""
+    n, n_ok = con.execute("SELECT count(*), count(*) FILTER (WHERE status IN ('ok', 'late')) FROM routes "
+                          "WHERE run_id = ?", [run_id]).fetchall()[0]
+    n_failed = n - n_ok
+    status = "ok" if n_failed == 0 else ("failed" if n_ok == 0 else "partial")
+    con.execute(
+        "UPDATE route_runs SET finished_at = ?, n_ok = ?, n_failed = ?, status = ?, n_export_failed = ?, "
+        "export_errors = ? WHERE run_id = ?",
+        [_utcnow(), n_ok, n_failed, status, len(export_errors or []),
+         "\n".join(export_errors) if export_errors else None, run_id],
+    )
+    return int(n_ok), int(n_failed)
+
+
+def finish_run(db_path: Path, exports_dir: Path, run_id: str, export_errors: list[str] | None = None) -> dict:
+    """End a run whose batches are stored (`write_batch`): its counts and status from its stored routes, and
+    `export_errors` (one line per export that failed: voyage, kind, error) kept with it; the snapshot follows.
+    Returns the run's summary (`run_summary`), read on the same connection."""
+    with warehouse.connect(db_path) as con:
+        _finish(con, run_id, export_errors)
+        summary = _run_summary(con, run_id)
+    migrate_old_parquet_layout(exports_dir)
+    return summary
+
+
 def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows: list[dict],
                       leg_rows: list[dict], export_errors: list[str] | None = None) -> tuple[int, int]:
     """Write all rows of a run in one transaction, then its Parquet files; returns (n_ok, n_failed).
@@ -196,27 +266,12 @@ def write_run_results(db_path: Path, exports_dir: Path, run_id: str, route_rows:
     `export_errors`: one line per export that failed (voyage, kind, error), kept with the run."""
     routes = _frame(route_rows, ROUTES, run_id)
     legs = _frame(leg_rows, ROUTE_LEGS, run_id)
-    n_ok = int(routes["status"].isin(["ok", "late"]).sum()) if len(routes) else 0
-    n_failed = len(routes) - n_ok
-    status = "ok" if n_failed == 0 else ("failed" if n_ok == 0 else "partial")
     with warehouse.connect(db_path) as con:
-        con.register("routes_df", _naive_utc(routes))
-        con.register("legs_df", _naive_utc(legs))
-        # the legs' file is written before the commit and joins route_legs with it (storage/route_history.py)
-        part = route_history.write_part(con, route_history.history_dir(db_path), run_id,
-                                        f"SELECT {', '.join(LEG_COLUMNS)} FROM legs_df")
-        with warehouse.transaction(con):
-            con.execute(f"INSERT INTO routes ({', '.join(ROUTE_COLUMNS)}) SELECT {', '.join(ROUTE_COLUMNS)} FROM routes_df")
-            route_history.record_parts(con, [part])
-            con.execute(
-                "UPDATE route_runs SET finished_at = ?, n_ok = ?, n_failed = ?, status = ?, n_export_failed = ?, "
-                "export_errors = ? WHERE run_id = ?",
-                [_utcnow(), n_ok, n_failed, status, len(export_errors or []),
-                 "\n".join(export_errors) if export_errors else None, run_id],
-            )
+        _store(con, db_path, run_id, routes, legs, 0)
+        counts = _finish(con, run_id, export_errors)
     migrate_old_parquet_layout(exports_dir)
     _publish_run_parquet(exports_dir, run_id, {"routes": routes, "route_legs": legs})
-    return n_ok, n_failed
+    return counts
 
 
 def fail_run(db_path: Path, run_id: str, reason: str) -> None:
@@ -229,39 +284,43 @@ def fail_run(db_path: Path, run_id: str, reason: str) -> None:
 def run_summary(db_path: Path, run_id: str) -> dict:
     """The run's row, counts and fuel-weighted savings (as the fleet_savings view), and the voyages needing attention."""
     with warehouse.connect(db_path, write=False) as con:
-        run = con.execute("SELECT * FROM route_runs WHERE run_id = ?", [run_id]).fetchdf()
-        totals = con.execute(
-            """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
-                      count(*) FILTER (WHERE status = 'late') AS n_late,
-                      count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
-                      count(*) FILTER (WHERE coalesce(start_kind, 'port') = 'port') AS n_from_port,
-                      count(*) FILTER (WHERE coalesce(start_kind, 'port') <> 'port') AS n_replanned,
-                      sum(fuel_t) AS fuel_t
-               FROM routes WHERE run_id = ?""",
-            [run_id],
-        ).fetchdf()
-        savings = con.execute(
-            "SELECT n_compared, honest_baseline_fuel_t, profile_fuel_t, savings_total_pct, savings_speed_profile_pct, "
-            "savings_route_pct, limits_fuel_t, unlimited_fuel_t, discrete_baseline_fuel_t, savings_vs_discrete_pct "
-            "FROM fleet_savings WHERE run_id = ?",
-            [run_id],
-        ).fetchdf()
-        problems = con.execute(
-            "SELECT voyage_id, imo, CASE WHEN status = 'ok' THEN 'ok, ' || forecast_flag ELSE status END AS status, reason "
-            "FROM routes WHERE run_id = ? AND (status <> 'ok' OR forecast_flag IS NOT NULL) ORDER BY voyage_id",
-            [run_id],
-        ).fetchdf()
-        # voyages made by a fleet plan (voyages.plan_id): which plans the run routed, and how many of their voyages
-        from_plans = dict(con.execute(
-            "SELECT v.plan_id, count(*) FROM routes r JOIN voyages v USING (voyage_id) "
-            "WHERE r.run_id = ? AND v.plan_id IS NOT NULL GROUP BY v.plan_id ORDER BY v.plan_id", [run_id]).fetchall())
+        return _run_summary(con, run_id)
+
+
+def _run_summary(con, run_id: str) -> dict:
+    run = con.execute("SELECT * FROM route_runs WHERE run_id = ?", [run_id]).fetchdf()
+    totals = con.execute(
+        """SELECT count(*) AS n, count(*) FILTER (WHERE status = 'ok') AS n_ok,
+                  count(*) FILTER (WHERE status = 'late') AS n_late,
+                  count(*) FILTER (WHERE status NOT IN ('ok', 'late')) AS n_failed,
+                  count(*) FILTER (WHERE coalesce(start_kind, 'port') = 'port') AS n_from_port,
+                  count(*) FILTER (WHERE coalesce(start_kind, 'port') <> 'port') AS n_replanned,
+                  sum(fuel_t) AS fuel_t
+           FROM routes WHERE run_id = ?""",
+        [run_id],
+    ).fetchdf()
+    savings = con.execute(
+        "SELECT n_compared, honest_baseline_fuel_t, profile_fuel_t, savings_total_pct, savings_speed_profile_pct, "
+        "savings_route_pct, limits_fuel_t, unlimited_fuel_t, discrete_baseline_fuel_t, savings_vs_discrete_pct "
+        "FROM fleet_savings WHERE run_id = ?",
+        [run_id],
+    ).fetchdf()
+    problems = con.execute(
+        "SELECT voyage_id, imo, CASE WHEN status = 'ok' THEN 'ok, ' || forecast_flag ELSE status END AS status, reason "
+        "FROM routes WHERE run_id = ? AND (status <> 'ok' OR forecast_flag IS NOT NULL) ORDER BY voyage_id",
+        [run_id],
+    ).fetchdf()
+    # voyages made by a fleet plan (voyages.plan_id): which plans the run routed, and how many of their voyages
+    from_plans = dict(con.execute(
+        "SELECT v.plan_id, count(*) FROM routes r JOIN voyages v USING (voyage_id) "
+        "WHERE r.run_id = ? AND v.plan_id IS NOT NULL GROUP BY v.plan_id ORDER BY v.plan_id", [run_id]).fetchall())
     out = run.iloc[0].to_dict() if len(run) else {"run_id": run_id}
     out.update({k: (int(v) if k.startswith("n") and v == v else v) for k, v in totals.iloc[0].to_dict().items()})
     if len(savings):
         out.update({k: (None if v is None or v != v else (int(v) if k.startswith("n_") else float(v)))
                     for k, v in savings.iloc[0].to_dict().items()})
     out["problems"] = problems.to_dict("records")
-    out["stale"] = stale_plans(db_path)
+    out["stale"] = _stale_plans(con)
     out["from_plans"] = {str(k): int(v) for k, v in from_plans.items()}
     errors = out.get("export_errors")
     out["export_failures"] = errors.splitlines() if isinstance(errors, str) and errors else []

@@ -497,6 +497,14 @@ MIGRATIONS: list[Migration] = [
     # route_legs a view over the files listed here). From here on route_legs is a view: a new column of it needs
     # only its definition (schemas/tables/routes.py), never an ALTER TABLE here.
     Migration("routes_011_leg_parts", ROUTE_LEG_PARTS.create_sql()),
+    # a run stores its voyages batch by batch as they finish, each batch's legs one more file of the run: the key
+    # becomes (run_id, file)
+    Migration("routes_012_leg_parts_per_batch", f"""
+        {ROUTE_LEG_PARTS.create_sql().replace(ROUTE_LEG_PARTS.name, ROUTE_LEG_PARTS.name + '_new', 1)}
+        INSERT INTO route_leg_parts_new SELECT run_id, file, n_rows, n_bytes, sha256, written_at FROM route_leg_parts;
+        DROP TABLE route_leg_parts;
+        ALTER TABLE route_leg_parts_new RENAME TO route_leg_parts;
+        """),
 ]
 
 

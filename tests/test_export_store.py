@@ -58,6 +58,41 @@ def test_publish_lists_only_the_files_the_run_vouches_for(tmp_path, request, whe
     assert not runs.fs.exists(runs._staging("r1"))  # staging gone
 
 
+def test_copies_shared_out_before_the_publish_and_a_failed_run_s_copies_removed(request):
+    """On an object store the workers copy shares of the staged files into the run folder; the publish then only
+    writes the manifest (no file copied twice, none missing). A run that fails after its copies removes them."""
+    env = request.getfixturevalue("s3_endpoint")
+    runs = RunExports("s3://jitroute/shares/exports", {"endpoint_url": env["AWS_ENDPOINT_URL"],
+                                                       "key": env["AWS_ACCESS_KEY_ID"], "secret": env["AWS_SECRET_ACCESS_KEY"]})
+    assert not runs.local
+    names = [f"voyages/V{k}/V{k}.rtz" for k in range(7)] + ["fleet_map.png"]
+    for rid in ("r1", "r2"):
+        for n in names:
+            runs.stage(rid, n, n.encode())
+        for share in (names[0::2], names[1::2]):
+            runs.copy_staged(rid, share)
+    copies = []
+    runs.fs.copy = lambda *a, **k: copies.append(a)  # the publish must not copy again
+    manifest = runs.publish("r1", only=set(names), copied=True)
+    del runs.fs.copy
+    assert copies == [] and [f["name"] for f in manifest["files"]] == sorted(names)
+    assert all(runs.fs.cat_file(f"{runs.run_url('r1')}/{n}") == n.encode() for n in names)
+    assert not runs.fs.exists(runs._staging("r1"))
+    runs.discard("r2")  # failed after its copies: neither its staging nor its unpublished folder stays
+    # files staged by other processes after this one listed the runs (as a run's host does first) are published
+    import s3fs
+
+    assert runs.discard_stale({"r3"}) == []
+    elsewhere = s3fs.S3FileSystem(skip_instance_cache=True, endpoint_url=env["AWS_ENDPOINT_URL"],
+                                  key=env["AWS_ACCESS_KEY_ID"], secret=env["AWS_SECRET_ACCESS_KEY"])
+    elsewhere.pipe_file(f"{runs._staging('r3')}/V1.rtz", b"<rtz/>")
+    assert runs.publish("r3", only={"V1.rtz"})["files"] == [{"name": "V1.rtz", "bytes": 6}]
+    assert not runs.fs.exists(runs._staging("r2")) and not runs.fs.exists(runs.run_url("r2"))
+    assert runs.manifest("r1") == manifest  # a published run is never discarded
+    runs.discard("r1")
+    assert runs.manifest("r1") == manifest
+
+
 def test_a_worker_stages_its_voyages_exports_and_returns_only_their_entries(tmp_path):
     import numpy as np
 

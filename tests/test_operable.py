@@ -135,7 +135,11 @@ def test_a_killed_run_is_marked_failed_by_the_next_command_and_publishes_nothing
     kill_tagged(tag)
     run_id, status = _sql(root, "SELECT run_id, status FROM route_runs")[0]
     assert status == "running"  # nobody has looked yet
-    assert _sql(root, "SELECT count(*) FROM routes")[0][0] == 0
+    # the batches stored before the kill are kept, each voyage once, with exactly their legs (a legs file written
+    # for a batch that never committed is not shown)
+    n, distinct, n_legs = _sql(root, "SELECT count(*), count(DISTINCT voyage_id), coalesce(sum(n_legs), 0) FROM routes")[0]
+    assert n == distinct <= 3
+    assert _sql(root, "SELECT count(*) FROM route_legs")[0][0] == n_legs
     r = jitroute("route-fleet", "--data", str(root), "--voyage", "V20001", "--solver", "gc",
                  env=tagged_env(tag, JITROUTE_DASK_WORKERS="1"), timeout_s=300)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -148,6 +152,52 @@ def test_a_killed_run_is_marked_failed_by_the_next_command_and_publishes_nothing
     left = wait_until_gone(tag, 30)
     kill_tagged(tag)
     assert not left, describe(left)
+
+
+def test_a_run_that_fails_after_some_batches_keeps_them_once_and_publishes_nothing(routed_root, tmp_path, monkeypatch):
+    """Each batch is stored as it finishes; the run then fails (the store of the shortest voyage's batch, routed
+    last, raises): the batches stored before stay, each voyage once, in the tables and the Parquet exports; the run
+    is failed and publishes no files; storing a stored batch again adds nothing."""
+    import pandas as pd
+
+    from flows.jobs.fleet import route_fleet_job
+    from storage import route_store
+
+    import flows.jobs.fleet as fleet
+
+    root = _copy(routed_root, tmp_path / "data")
+    monkeypatch.setenv("JITROUTE_DASK_WORKERS", "1")
+    settings = fleet.load_settings  # every batch stored as soon as it finishes
+    monkeypatch.setattr(fleet, "load_settings", lambda **kw: settings(**kw, **{"routing.store_every_s": 0.0}))
+    last = _sql(root, "SELECT voyage_id FROM voyages ORDER BY (arr_lat - dep_lat)^2 + (arr_lon - dep_lon)^2 LIMIT 1")[0][0]
+    real, calls = route_store.write_batch, []
+
+    def store_then_fail_on_the_last(*args):
+        if last in {r["voyage_id"] for r in args[3]}:
+            raise OSError(f"disk gone while storing {last}")
+        calls.append((args, real(*args)))
+        return calls[-1][1]
+
+    monkeypatch.setattr(route_store, "write_batch", store_then_fail_on_the_last)
+    with pytest.raises(OSError, match="disk gone"):
+        route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc", batch_size=1)
+    stored = sorted(v for _args, ids in calls for v in ids)
+    assert stored and last not in stored and len(set(stored)) == len(stored)
+    run_id, status, reason = _sql(root, "SELECT run_id, status, reason FROM route_runs")[0]
+    assert status == "failed" and "disk gone" in reason
+    assert sorted(v for (v,) in _sql(root, "SELECT voyage_id FROM routes")) == stored
+    n_legs = _sql(root, "SELECT sum(n_legs) FROM routes")[0][0]
+    assert n_legs > 0 and _sql(root, "SELECT count(*) FROM route_legs")[0][0] == n_legs
+    parts = sorted(route_store.parquet_dir(root / "exports", "routes").glob(f"run_id={run_id}/*.parquet"))
+    assert [p.name for p in parts] == [f"part-{k}.parquet" for k in range(len(calls))]
+    assert sorted(pd.concat([pd.read_parquet(p) for p in parts])["voyage_id"]) == stored
+    runs = root / "exports" / "runs"
+    assert not (runs / run_id).exists() and not list(runs.glob(".staging-*"))
+    # the first batch stored again (a retried step): nothing added, no new file
+    assert real(*calls[0][0]) == []
+    assert sorted(v for (v,) in _sql(root, "SELECT voyage_id FROM routes")) == stored
+    assert _sql(root, "SELECT count(*) FROM route_legs")[0][0] == n_legs
+    assert len(list(parts[0].parent.glob("*.parquet"))) == len(calls)
 
 
 def test_a_failed_export_is_counted_and_the_others_still_written(routed_root, tmp_path, monkeypatch):
@@ -235,3 +285,20 @@ def test_sigterm_stops_route_fleet_cleanly_and_leaves_no_process(routed_root, tm
     assert _sql(root, "SELECT count(*) FROM routes")[0][0] == 0  # all or nothing
     runs = root / "exports" / "runs"
     assert not runs.exists() or not any(runs.iterdir()), list(runs.iterdir())
+
+
+def test_a_run_s_weather_maps_leave_the_chunk_cache_to_the_voyages(routed_root):
+    """The run's weather maps are drawn in a routing worker: their read of the whole grid bypasses the worker's
+    chunk cache, which a voyage's window read fills."""
+    import numpy as np
+
+    from flows.jobs import weather_maps
+    from storage import cube_window
+
+    store, cycle = routed_root / "cubes" / "weather.zarr", np.datetime64("2020-12-01T00", "ns")
+    before = cube_window.CHUNK_CACHE.stats()["fetched_bytes"]
+    maps = weather_maps.run_maps_png(store, cycle)
+    assert set(maps) == {"waves", "wind"} and all(png[:8] == b"\x89PNG\r\n\x1a\n" for png in maps.values())
+    assert cube_window.CHUNK_CACHE.stats()["fetched_bytes"] == before
+    weather_maps.step_fields(store, cycle, 0, stride=2)  # the same read through the cache
+    assert cube_window.CHUNK_CACHE.stats()["fetched_bytes"] > before

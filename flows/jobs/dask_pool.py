@@ -79,16 +79,33 @@ def worker_slots(client) -> int:
         return 1
 
 
-def map_batches(client, fn: Callable, batches_: list[list], *args, on_done: Callable[[list, list | None, BaseException | None], None]) -> None:
-    """Run `fn(batch, *args)` for every batch on the cluster; `on_done(batch, results, error)` as each finishes."""
+def map_batches(client, fn: Callable, batches_: list[list], *args, on_done: Callable[[list, list | None, BaseException | None], None],
+                on_group_done: Callable[[], None] | None = None) -> None:
+    """Run `fn(batch, *args)` for every batch on the cluster; `on_done(batch, results, error)` as each finishes, and
+    `on_group_done()` after each group of batches found finished together (one store of their rows, however many)."""
     from distributed import as_completed
 
     futures = {client.submit(fn, b, *args, pure=False): b for b in batches_}
-    for fut in as_completed(list(futures)):
-        batch = futures[fut]
-        try:
-            on_done(batch, fut.result(), None)
-        except Exception as exc:  # lost worker (KilledWorker), unpicklable result, …: the batch's voyages fail
-            on_done(batch, None, exc)
-        finally:
-            fut.release()
+    for group in as_completed(list(futures)).batches():
+        for fut in group:
+            batch = futures[fut]
+            try:
+                results = fut.result()
+            except Exception as exc:  # lost worker (KilledWorker), unpicklable result, …: the batch's voyages fail
+                on_done(batch, None, exc)
+            else:
+                on_done(batch, results, None)
+            finally:
+                fut.release()
+        if on_group_done is not None:
+            on_group_done()
+
+
+def result_or(future, on_error: Callable[[BaseException], object]):
+    """The future's result, or `on_error(exception)` when its task failed or its worker was lost."""
+    try:
+        return future.result()
+    except Exception as exc:  # lost worker (KilledWorker), an error in the task, …
+        return on_error(exc)
+    finally:
+        future.release()

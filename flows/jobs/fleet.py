@@ -2,26 +2,29 @@
 
 Voyages go out over dask in batches (flows/jobs/dask_pool.py); workers route with plain functions, stage
 their voyages' export files in the run's staging area themselves (under the local data root or the object root,
-storage/export_store.py) and return rows and manifest entries. This process puts the run's rows into DuckDB in
-one transaction, then publishes the staged exports with their manifest (a run that fails or is killed
-publishes nothing). A voyage that fails (bad input, no model, no way through,
-even a lost worker) is recorded with status and reason and never fails the others.
+storage/export_store.py) and return rows and manifest entries. This process stores the rows of each batch as it
+finishes (DuckDB and Parquet, route_store.write_batch: a killed run keeps the batches it stored), then publishes
+the staged exports with their manifest (a run that fails or is killed publishes nothing). The run's own pictures
+and, on an object store, the publish's copies are done by the workers too, so this process spends little per
+voyage. A voyage that fails (bad input, no model, no way through, even a lost worker) is recorded with status and
+reason and never fails the others.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import time
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-from flows.jobs import dask_pool, weather_maps
+from flows.jobs import dask_pool, run_pictures
 from flows.jobs.ingest import ingest_cycle
 from flows.jobs.refit import refit_job
-from flows.jobs.route_worker import failed_result, route_batch
+from flows.jobs.route_worker import copy_staged, failed_result, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline import enroute
@@ -34,7 +37,7 @@ from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
 from pipeline.routing.problem import MAX_VOYAGE_H
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
-from storage import cube, export_store, fleet_store, route_store
+from storage import cube, export_store, fleet_store, route_store, warehouse
 from storage.run_lock import job_lock
 
 LOG = logging.getLogger("jitroute.fleet")
@@ -130,11 +133,18 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
 
 
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
-                  dask_address: str | None, n_workers: int, per_batch: int | None) -> dict:
+                  dask_address: str | None, n_workers: int, per_batch: int | None, store_to: tuple[Path, Path],
+                  pictures_of: tuple[str, np.datetime64] | None = None, store_every_s: float = 0.0) -> dict:
     """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves and stage their
-    export files under `run_exports`). Returns rows, legs, export errors and the names of the staged files."""
-    rows, legs, export_errors, staged = [], [], [], set()
-    done = 0
+    export files under `run_exports`), storing the rows of the batches as they finish in the warehouse and the Parquet
+    exports `store_to` = (warehouse, exports folder) of the jobs' run (route_store.write_batch): those finished since
+    the last store, at most every `store_every_s` seconds, and the rest at the end. With `pictures_of`
+    = (run_id, cycle) and exports, workers also draw the run's weather maps (while the voyages route) and its fleet
+    map (after them) and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files
+    to the run's folder (`copied`: all copies done). Returns the export errors, the names of the staged files, the
+    number of voyages stored and `copied`."""
+    export_errors, staged, tracks, pending = [], set(), [], {"rows": [], "legs": []}
+    done, stored, copied = 0, 0, False
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
 
     def on_done(batch, results, error):
@@ -146,9 +156,11 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             for lvl, msg in res.get("log", []):
                 LOG.log(level.get(lvl, logging.INFO), "%s", printable(msg))
             r = res["route"]
-            rows.append(r)
+            pending["rows"].append(r)
+            pending["legs"].extend(res["legs"])
             staged.update(f["name"] for f in res.get("staged", []))
-            legs.extend(res["legs"])
+            if run_exports is not None and pictures_of is not None:
+                tracks.append((r["voyage_id"], r["status"], run_pictures.track(res["legs"])))
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
             for kind, data in res.get("exports", {}).items():  # only from a worker given no exports root
@@ -161,13 +173,44 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             LOG.info("routed %d/%d: %s %s%s", done, len(jobs), printable(r["voyage_id"]), r["status"],
                      f" ({printable(r['reason'])})" if r.get("reason") else "")
 
+    last_store = time.monotonic()
+
+    def store(final: bool = False) -> None:  # the batches finished since the last store, in one transaction
+        nonlocal stored, last_store
+        if pending["rows"] and (final or time.monotonic() - last_store >= store_every_s):
+            stored += len(route_store.write_batch(*store_to, jobs[0].run_id, pending["rows"], pending["legs"]))
+            pending["rows"], pending["legs"] = [], []
+            last_store = time.monotonic()
+
     if jobs:
         with dask_pool.dask_client(dask_address, n_workers) as client:
             per = dask_pool.voyages_per_batch(len(jobs), dask_pool.worker_slots(client), per_batch)
             exports_to = (run_exports.url, run_exports.storage_options) if run_exports is not None else None
+            pictures = []
+            if exports_to is not None and pictures_of is not None:
+                run_id, cycle = pictures_of
+                pictures.append(client.submit(run_pictures.stage_weather_maps, exports_to, run_id, cube_store.url,
+                                              cube_store.options, str(np.datetime64(cycle, "s")), cycle_label(cycle),
+                                              pure=False))
             dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_store.url,
-                                  cube_store.options, exports_to, on_done=on_done)
-    return {"rows": rows, "legs": legs, "export_errors": export_errors, "staged": staged}
+                                  cube_store.options, exports_to, on_done=on_done, on_group_done=store)
+            store(final=True)
+            if pictures:
+                pictures.append(client.submit(run_pictures.stage_fleet_map, exports_to, run_id,
+                                              f"run {run_id} · cycle {cycle_label(cycle)}", tracks, pure=False))
+            for future in pictures:
+                names, errors = dask_pool.result_or(
+                    future, lambda exc: ([], [f"fleet: pictures: {type(exc).__name__}: {exc}"]))
+                staged.update(names)
+                export_errors.extend(errors)
+            if exports_to is not None and staged and not run_exports.local:  # the copies of the publish, shared out
+                names, n = sorted(staged), dask_pool.worker_slots(client)
+                copies = [client.submit(copy_staged, exports_to, jobs[0].run_id, names[k::n], pure=False)
+                          for k in range(min(n, len(names)))]
+                copied = all([dask_pool.result_or(f, lambda exc: LOG.warning(
+                    "exports: a worker's share of the copies failed (%s: %s); this process copies them",
+                    type(exc).__name__, exc)) for f in copies])
+    return {"export_errors": export_errors, "staged": staged, "n_stored": stored, "copied": copied}
 
 
 def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, data_root: str | None = None,
@@ -209,12 +252,14 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                     "voyages at sea start from their position at the cycle's time", cycle_label(c), age_h,
                     str(nominal)[:16], s.routing.max_cycle_age_h)
     options = RoutingOptions.from_settings(s.routing)
-    jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports,
-                      cube.cycle_versions(layout.cube_store).get(c), ref_utc=c if stale else max(nominal, np.datetime64(c, "s")))
-    route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger, n_voyages=len(jobs),
-                          nominal_utc=nominal, cycle_age_h=age_h)
+    version = cube.cycle_versions(layout.cube_store).get(c)
+    with warehouse.one_reader(layout.warehouse):  # every read of the jobs on one connection
+        jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports, version,
+                          ref_utc=c if stale else max(nominal, np.datetime64(c, "s")))
+    running = route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger,
+                                    n_voyages=len(jobs), nominal_utc=nominal, cycle_age_h=age_h)
     run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
-    run_exports.discard_stale(route_store.running_run_ids(layout.warehouse))
+    run_exports.discard_stale(running)
     from flows.jobs.warm import cold_cache_warning
 
     cold = cold_cache_warning(options.solver) if jobs and not s.dask_address else None
@@ -226,32 +271,16 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
              f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
-                       s.dask_address, s.dask_workers,
-                       s.routing.voyages_per_task, name="route-voyages", timeout_s=s.routing.task_timeout_s)
-        if exports and out["rows"]:
-            from pipeline.export import plots
-
-            by_voyage: dict[str, list] = {}
-            for leg in out["legs"]:
-                by_voyage.setdefault(leg["voyage_id"], []).append(leg)
-            pairs = [(r, by_voyage.get(r["voyage_id"], [])) for r in out["rows"]]
-            fig = plots.fleet_map_figure(pairs, title=f"run {run_id} · cycle {cycle_label(c)}")
-            out["staged"].add(run_exports.stage(run_id, "fleet_map.png", plots.png_bytes(fig)))
-            try:  # the weather of the cycle at its start, for people to look at (its first step read once)
-                for var, png in weather_maps.run_maps_png(layout.cube_store, c, ("waves", "wind")).items():
-                    out["staged"].add(run_exports.stage(run_id, f"weather_{var}_{cycle_label(c)}.png", png))
-            except Exception as exc:  # a picture; the run's data does not depend on it
-                out["export_errors"].append(f"fleet: weather maps: {type(exc).__name__}: {exc}")
-        route_store.write_run_results(layout.warehouse, layout.exports, run_id, out["rows"], out["legs"],
-                                      out["export_errors"])
+                       s.dask_address, s.dask_workers, s.routing.voyages_per_task, (layout.warehouse, layout.exports),
+                       (run_id, c), s.routing.store_every_s, name="route-voyages", timeout_s=s.routing.task_timeout_s)
+        summary = route_store.finish_run(layout.warehouse, layout.exports, run_id, out["export_errors"])
     except BaseException as exc:
         run_exports.discard(run_id)
         route_store.fail_run(layout.warehouse, run_id, f"{type(exc).__name__}: {exc}")
         raise
-    manifest = run_exports.publish(run_id, only=out["staged"]) if exports else None
+    manifest = run_exports.publish(run_id, only=out["staged"], copied=out["copied"]) if exports else None
     files = [f["name"] for f in manifest["files"]] if manifest else []
     out_url = run_exports.run_url(run_id)
-    summary = route_store.run_summary(layout.warehouse, run_id)
     summary.update(run_id=run_id, exports_dir=out_url if manifest else None,
                    fleet_map=f"{out_url}/fleet_map.png" if "fleet_map.png" in files else None,
                    weather_maps=[f"{out_url}/{n}" for n in files if n.startswith("weather_") and n.endswith(".png")])

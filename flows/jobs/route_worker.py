@@ -111,6 +111,13 @@ def stage_exports(exports_to: tuple[str, dict], run_id: str, voyage_id: str, fil
     return staged, errors
 
 
+def copy_staged(exports_to: tuple[str, dict], run_id: str, names: list[str]) -> bool:
+    """Copy a share of the run's staged files to its run folder (storage/export_store.RunExports.copy_staged): the
+    publish's copies, done by the workers rather than the flow host. True when done."""
+    run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True)).copy_staged(run_id, names)
+    return True
+
+
 def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None = None,
               exports_to: tuple[str, dict] | None = None) -> dict:
     """Route one voyage end to end; a voyage that cannot be routed becomes a `failed` row with the reason. With

@@ -23,9 +23,9 @@ class WeatherMapError(ValueError):
     """A map that cannot be drawn as asked (unknown variable, step or cycle); the message says what exists."""
 
 
-def _published_cycle(cube_path, cycle) -> tuple[cube_window.Published, np.datetime64]:
+def _published_cycle(cube_path, cycle, cache_chunks: bool = True) -> tuple[cube_window.Published, np.datetime64]:
     loc = locate(cube_path)
-    pub = cube_window.open_published(loc)
+    pub = cube_window.open_published(loc, cache_chunks=cache_chunks)
     c = np.datetime64(cycle, "ns")
     if c not in pub.rows:
         have = ", ".join(cycle_label(x) for x in sorted(pub.rows)[-5:]) or "none"
@@ -37,10 +37,11 @@ def steps_h(cube_path, cycle) -> list[int]:
     return [int(s) for s in _published_cycle(cube_path, cycle)[0].step_h]
 
 
-def step_fields(cube_path, cycle, step_h: int, stride: int = 1) -> tuple[np.ndarray, np.ndarray, dict]:
+def step_fields(cube_path, cycle, step_h: int, stride: int = 1,
+                cache_chunks: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
     """(lat, lon, variable → (lat, lon) values) of lead `step_h` of the cycle over the whole grid, every
-    `stride`-th point; `cube_path` a path, URL or storage Location."""
-    pub, c = _published_cycle(cube_path, cycle)
+    `stride`-th point; `cube_path` a path, URL or storage Location (`cache_chunks`: see cube_window.open_published)."""
+    pub, c = _published_cycle(cube_path, cycle, cache_chunks)
     have = [int(s) for s in pub.step_h]
     if int(step_h) not in have:
         raise WeatherMapError(f"cycle {cycle_label(cycle)} has no step {step_h} h; it has {have[0]}..{have[-1]} h "
@@ -72,10 +73,11 @@ def step_png(cube_path, cycle, step_h: int, var: str) -> bytes:
 
 def run_maps_png(cube_path, cycle, variables=("waves", "wind"), step_h: int = 0,
                  stride: int = RUN_MAP_STRIDE) -> dict[str, bytes]:
-    """A run summary's maps: `variables` at lead `step_h`, the step read once and drawn every `stride` points."""
+    """A run summary's maps: `variables` at lead `step_h`, the step read once (past the chunk cache: it is drawn in a
+    routing worker) and drawn every `stride` points."""
     for var in variables:
         _check_var(var)
-    lat, lon, fields = step_fields(cube_path, cycle, step_h, stride)
+    lat, lon, fields = step_fields(cube_path, cycle, step_h, stride, cache_chunks=False)
     return {var: weather_map.weather_map_png(lat, lon, fields, var, _title(var, cycle, step_h)) for var in variables}
 
 

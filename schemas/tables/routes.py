@@ -134,13 +134,13 @@ LEG_HOURS_ADDED = ('hours_beyond_forecast', 'hours_before_cycle', 'hours_without
 
 # route_legs is kept in one Parquet file per run beside the warehouse (storage/route_history.py); this table lists
 # the files of committed runs, so a file is part of the warehouse only once its run's rows are committed
-ROUTE_LEG_PARTS = Table('route_leg_parts', 'the Parquet file holding the route_legs of each committed run', (
+ROUTE_LEG_PARTS = Table('route_leg_parts', 'the Parquet files holding the route_legs of each committed run, one per batch of voyages it stored', (
     Column('run_id', 'VARCHAR', None, 'routing run whose legs the file holds (route_runs.run_id)'),
     Column('file', 'VARCHAR', None, 'the file, relative to the route_legs folder beside the warehouse', not_null=True),
     Column('n_rows', 'BIGINT', None, 'legs in the file', not_null=True),
     Column('n_bytes', 'BIGINT', None, 'size of the file in bytes', not_null=True),
     Column('sha256', 'VARCHAR', None, 'SHA-256 of the file, hex, taken when it was written and read back', not_null=True),
     Column('written_at', 'TIMESTAMP', 'UTC', 'when the file was written (UTC)', not_null=True),
-), primary_key=('run_id',))
+), primary_key=('run_id', 'file'))
 
 TABLES = (ROUTE_RUNS, ROUTES, ROUTE_LEGS, ROUTE_LEG_PARTS)
