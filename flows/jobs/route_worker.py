@@ -92,6 +92,11 @@ def run_exports(url: str, options_json: str):
     return RunExports(url, json.loads(options_json))
 
 
+def exports_root(exports_to: tuple[str, dict]):
+    """The exports root `exports_to` = (URL or path, fsspec options) as a RunExports, opened once per process."""
+    return run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True))
+
+
 def stage_exports(exports_to: tuple[str, dict], run_id: str, voyage_id: str, files: dict) -> tuple[list[dict], dict]:
     """Write a voyage's export files (kind → bytes) to the run's staging area under the exports root
     `exports_to` = (URL or path, fsspec options). Returns (manifest entries {"name", "bytes"}, kind → error)."""
@@ -99,7 +104,7 @@ def stage_exports(exports_to: tuple[str, dict], run_id: str, voyage_id: str, fil
     from pipeline.export.paths import ExportPathError, voyage_export_key
     from storage.export_store import ExportPathError as StoreNameError
 
-    root = run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True))
+    root = exports_root(exports_to)
     staged, errors = [], {}
     for kind, data in files.items():
         try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
@@ -114,7 +119,7 @@ def stage_exports(exports_to: tuple[str, dict], run_id: str, voyage_id: str, fil
 def copy_staged(exports_to: tuple[str, dict], run_id: str, names: list[str]) -> bool:
     """Copy a share of the run's staged files to its run folder (storage/export_store.RunExports.copy_staged): the
     publish's copies, done by the workers rather than the flow host. True when done."""
-    run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True)).copy_staged(run_id, names)
+    exports_root(exports_to).copy_staged(run_id, names)
     return True
 
 

@@ -8,7 +8,7 @@ and one line per picture that could not be made (a picture; the run's data never
 
 from __future__ import annotations
 
-from flows.jobs.route_worker import run_exports
+from flows.jobs.route_worker import exports_root
 
 WEATHER_VARIABLES = ("waves", "wind")
 FLEET_MAP = "fleet_map.png"
@@ -28,15 +28,13 @@ def stage_fleet_map(exports_to: tuple[str, dict], run_id: str, title: str,
                     voyages: list[tuple[str, str, list[tuple]]]) -> tuple[list[str], list[str]]:
     """Draw the fleet map of `voyages` = (voyage_id, status, track) and stage it as the run's `fleet_map.png` under
     the exports root `exports_to` = (URL or path, fsspec options). Returns (names staged, errors)."""
-    import json
-
     from pipeline.export import plots
 
     pairs = [({"voyage_id": vid, "status": status}, [dict(zip(TRACK_KEYS, leg)) for leg in legs])
              for vid, status, legs in voyages]
     try:
         png = plots.png_bytes(plots.fleet_map_figure(pairs, title=title))
-        root = run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True))
+        root = exports_root(exports_to)
         return [root.stage(run_id, FLEET_MAP, png)], []
     except Exception as exc:  # a picture; the run's data does not depend on it
         return [], [f"fleet: fleet map: {type(exc).__name__}: {exc}"]
@@ -46,14 +44,12 @@ def stage_weather_maps(exports_to: tuple[str, dict], run_id: str, cube_url: str,
                        cycle: str, cycle_label: str) -> tuple[list[str], list[str]]:
     """Draw the weather of the cycle at its start (its first step read once) and stage one map per variable of
     WEATHER_VARIABLES. Returns (names staged, errors)."""
-    import json
-
     from flows.jobs import weather_maps
     from storage.cube_location import locate
 
     try:
         pngs = weather_maps.run_maps_png(locate(cube_url, storage_options), cycle, WEATHER_VARIABLES)
-        root = run_exports(exports_to[0], json.dumps(exports_to[1] or {}, sort_keys=True))
+        root = exports_root(exports_to)
         return [root.stage(run_id, weather_map_name(var, cycle_label), png) for var, png in pngs.items()], []
     except Exception as exc:  # a picture; the run's data does not depend on it
         return [], [f"fleet: weather maps: {type(exc).__name__}: {exc}"]
