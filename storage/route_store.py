@@ -141,7 +141,7 @@ def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n
                                                                        "n_export_failed", "export_errors"))
         con.execute(f"INSERT INTO route_runs ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})",
                     list(row.values()))
-        return {r[0] for r in con.execute("SELECT run_id FROM route_runs WHERE status = 'running'").fetchall()}
+        return _running_run_ids(con)
 
 
 def current_plan_legs(db_path: Path, voyage_ids: list[str]) -> dict[str, list[dict]]:
@@ -190,9 +190,8 @@ def reap_dead_runs(con) -> list[str]:
     return [rid for rid, _pid in dead]
 
 
-def running_run_ids(db_path: Path) -> set[str]:
-    with warehouse.connect(db_path, write=False) as con:
-        return {r[0] for r in con.execute("SELECT run_id FROM route_runs WHERE status = 'running'").fetchall()}
+def _running_run_ids(con) -> set[str]:
+    return {r[0] for r in con.execute("SELECT run_id FROM route_runs WHERE status = 'running'").fetchall()}
 
 
 def _store(con, db_path: Path, run_id: str, routes: pd.DataFrame, legs: pd.DataFrame, index: int) -> None:
