@@ -71,7 +71,7 @@ def main() -> None:
             vessels, contracts, dist = random_instance(n_v, n_c, seed=seed + 1)
             t0, c0 = time.perf_counter(), time.process_time()
             data = problem.build(vessels, contracts, dist, fuel_price=600.0)
-            plan = milp.solve(data, time_limit_s=a.time_limit)
+            plan = milp.solve(data, time_limit_s=a.time_limit, started_at=t0)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             ref_cost, ref_bound, ref_s = arc_flow(data, a.time_limit)
             own_bound = plan.cost * (1 - plan.gap) if np.isfinite(plan.gap) else -np.inf

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import secrets
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -128,8 +129,9 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     pairs |= {(a.discharge_port, b.load_port) for a in cons for b in cons}
     pairs |= {(c.discharge_port, v.end_port) for v in vessels for c in cons if v.end_port}
     dists = run.step(complete_distances, db, port_pos, pairs, name="sea-distances")
+    started = time.perf_counter()  # the time limit covers building the problem too
     data = problem.build(vessels, cons, distance_map(dists), fuel_price)
-    plan = run.step(milp.solve, data, time_limit_s=time_limit_s, name="plan")
+    plan = run.step(milp.solve, data, time_limit_s=time_limit_s, started_at=started, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"
     row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, vessel_drafts(fleet))
     stored = planning_store.save_plan(db, row, legs, left, voyages)

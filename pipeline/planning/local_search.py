@@ -90,6 +90,8 @@ def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit
     while improved and time.perf_counter() - t0 < time_limit_s:
         improved = False
         for j in range(n):  # relocate j
+            if time.perf_counter() - t0 > time_limit_s:
+                break
             a = owner.get(j)
             if a is None:
                 out_delta, rest = -pen[j], None  # taking it off the spot market saves its penalty
