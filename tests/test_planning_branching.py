@@ -163,3 +163,62 @@ def test_a_dive_past_its_deadline_still_returns_a_feasible_plan():
         assert len(master.columns) == n_columns  # past the deadline nothing priced is added
         assert not any(j in plan.get(k, ()) for k, j, _ in forbid)
         assemble(data, plan, solver="t", status="", gap=0.0, runtime_s=0.0)  # raises on an infeasible sequence
+
+
+def test_column_decisions_leave_the_vessel_only_its_column_and_the_others_none_of_its_contracts():
+    data = problem.build(*random_instance(5, 20, seed=1600, horizon_days=25, n_ports=8, window_days=6), fuel_price=600.0)
+    V, n = len(data.vessels), len(data.contracts)
+    master, _ = _root(data)
+    col = max(master.columns, key=lambda c: len(c.sequence))
+    blocked, compulsory = branch_price.node_constraints(branch_price.column_decisions(data, col.k, col.sequence), V, n)
+    assert set(np.flatnonzero(compulsory)) == set(col.sequence)
+    assert set(np.flatnonzero(~blocked[col.k])) & set(data.per_vessel[col.k].contracts) == set(col.sequence)
+    others = [k for k in range(V) if k != col.k]
+    assert blocked[np.ix_(others, list(col.sequence))].all()
+    allowed = master.allowed(blocked)
+    assert allowed[master.columns.index(col)]
+    assert all(set(c.sequence) <= set(col.sequence) for c, ok in zip(master.columns, allowed) if ok and c.k == col.k)
+
+
+def test_a_column_dive_ends_in_a_plan_of_priced_columns_costing_their_sum_between_the_lp_bound_and_the_optimum():
+    """From the root, the dive's plan is made of pool columns (a whole LP solution): its cost is the sum of those
+    columns' costs and the penalties of the contracts it leaves — the LP's own costing, no offset — and lies between
+    the root LP bound and the optimum (HiGHS's MILP over every enumerated column), on fleets of 6 × 24 where the root
+    LP is often fractional."""
+    from pipeline.planning import milp
+    from pipeline.planning.routes import vessel_columns
+
+    fractional = 0
+    for seed in range(8):
+        vessels, contracts, dist = random_instance(6, 24, seed=1700 + seed, horizon_days=20, n_ports=8, window_days=6)
+        data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+        every = [col for k in range(len(vessels)) for col in vessel_columns(data, k)[0]]
+        sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
+        assert finished
+        best = assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
+        master, bound = _root(data)
+        _, _, _, y = master.solve()
+        fractional += branch_price._whole_plan(master, y) is None
+        plan = branch_price.dive(data, master, (), time.perf_counter() + 60)
+        pool = {(c.k, c.sequence): c.cost for c in master.columns}
+        lifted = {j for seq in plan.values() for j in seq}
+        by_columns = (sum(pool[(k, seq)] for k, seq in plan.items())
+                      + sum(c.penalty for j, c in enumerate(data.contracts) if j not in lifted))
+        cost = assemble(data, plan, solver="t", status="", gap=0.0, runtime_s=0.0).cost
+        assert cost == pytest.approx(by_columns, rel=1e-12), f"seed {seed}"
+        assert bound - 1e-6 <= best + 1e-6 <= cost + 2e-6, f"seed {seed}"
+    assert fractional >= 3  # the dive fixed columns, not just read a whole root LP
+
+
+def test_a_plan_whose_time_is_already_up_is_feasible_and_claims_no_proof():
+    """The time limit counts from `started_at`: already spent, the planner (column generation forced by a cap of 3
+    labels per vessel) prices nothing more and returns at once a feasible plan, neither optimal nor with a gap."""
+    from pipeline.planning import milp
+
+    data = problem.build(*random_instance(5, 20, seed=1800, horizon_days=25, n_ports=8, window_days=6), fuel_price=600.0)
+    plan = milp.solve(data, time_limit_s=1.0, max_labels=3, started_at=time.perf_counter() - 100.0)
+    assert plan.status == "feasible" and not np.isfinite(plan.gap)
+    assert plan.runtime_s >= 100.0
+    assert len(plan.schedules) + len(plan.unassigned) >= 1
+    full = milp.solve(data, time_limit_s=60.0, max_labels=3)
+    assert full.status == "optimal" and full.cost <= plan.cost
