@@ -3,9 +3,9 @@
 Random instances (`pipeline/synthetic/contracts.py`: ports on a 3,000 NM square, load windows of 1–4 days over
 60 days, 2–4 of 4 cargo types per vessel, three deadweight classes). Per size and seed:
 - the planner (`pipeline.planning.milp.solve`: the set-partitioning LP bound, by column generation when enumerating
-  every sequence is too big, then HiGHS over the columns within the gap, then branch-and-price for the time left),
-  wall time including the enumeration,
-  cost, status and proven gap;
+  every sequence is too big, a dive fixing whole columns, HiGHS over the columns within the gap when few enough,
+  then branch-and-price for the time left), wall time from building the problem to the plan (the time limit counts
+  from there too), cost, status and proven gap;
 - the reference, in the same run: the textbook arc-flow MILP (per-vessel arcs, big-M time windows) on the same
   HiGHS with the same time limit — its best objective (ballast legs costed at their slowest speed, so at most its
   plan's cost) and its own dual bound — and the gap of the planner's plan to the best lower bound either proves;
