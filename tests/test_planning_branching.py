@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from pipeline.planning import branch_price, brute, colgen, local_search, problem
+from pipeline.planning import branch_price, brute, colgen, local_search, milp, problem
 from pipeline.planning.master_lp import MasterLP
 from pipeline.planning.problem import assemble
 from pipeline.synthetic.contracts import random_instance
@@ -24,6 +24,17 @@ def _instance(rng, seed):
 def _pairs(data):
     """Every vessel–contract pair a vessel could lift."""
     return [(k, j) for k in range(len(data.vessels)) for j in data.per_vessel[k].contracts]
+
+
+def _optimum_over_every_column(data) -> float:
+    """The optimum: HiGHS's MILP over every enumerated column (routes.vessel_columns, itself equal to brute
+    force's columns), solved to the end."""
+    from pipeline.planning.routes import vessel_columns
+
+    every = [col for k in range(len(data.vessels)) for col in vessel_columns(data, k)[0]]
+    sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
+    assert finished
+    return assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
 
 
 def _root(data):
@@ -119,9 +130,6 @@ def test_branching_reaches_the_exact_optimum_where_the_root_lp_is_fractional():
     the tree closes and its plan costs the optimum — brute force's on small instances, HiGHS's MILP over every
     enumerated column (routes.vessel_columns, itself equal to brute force's columns) on fleets of 5 × 20 with wide
     windows, where the root LP is often below the optimum."""
-    from pipeline.planning import milp
-    from pipeline.planning.routes import vessel_columns
-
     rng = np.random.default_rng(53)
     fractional = 0
     for seed in range(30):
@@ -132,10 +140,7 @@ def test_branching_reaches_the_exact_optimum_where_the_root_lp_is_fractional():
             vessels, contracts, dist = random_instance(5, 20, seed=700 + seed, horizon_days=25, n_ports=8,
                                                        window_days=6)
             data = problem.build(vessels, contracts, dist, fuel_price=600.0)
-            every = [col for k in range(len(vessels)) for col in vessel_columns(data, k)[0]]
-            sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
-            assert finished
-            best = assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
+            best = _optimum_over_every_column(data)
         master, bound = _root(data)
         _, _, _, y = master.solve()
         start = local_search.improve(data, colgen.round_lp(data, master.columns, y))
@@ -185,17 +190,11 @@ def test_a_column_dive_ends_in_a_plan_of_priced_columns_costing_their_sum_betwee
     columns' costs and the penalties of the contracts it leaves — the LP's own costing, no offset — and lies between
     the root LP bound and the optimum (HiGHS's MILP over every enumerated column), on fleets of 6 × 24 where the root
     LP is often fractional."""
-    from pipeline.planning import milp
-    from pipeline.planning.routes import vessel_columns
-
     fractional = 0
     for seed in range(8):
         vessels, contracts, dist = random_instance(6, 24, seed=1700 + seed, horizon_days=20, n_ports=8, window_days=6)
         data = problem.build(vessels, contracts, dist, fuel_price=600.0)
-        every = [col for k in range(len(vessels)) for col in vessel_columns(data, k)[0]]
-        sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
-        assert finished
-        best = assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
+        best = _optimum_over_every_column(data)
         master, bound = _root(data)
         _, _, _, y = master.solve()
         fractional += branch_price._whole_plan(master, y) is None
@@ -213,8 +212,6 @@ def test_a_column_dive_ends_in_a_plan_of_priced_columns_costing_their_sum_betwee
 def test_a_plan_whose_time_is_already_up_is_feasible_and_claims_no_proof():
     """The time limit counts from `started_at`: already spent, the planner (column generation forced by a cap of 3
     labels per vessel) prices nothing more and returns at once a feasible plan, neither optimal nor with a gap."""
-    from pipeline.planning import milp
-
     data = problem.build(*random_instance(5, 20, seed=1800, horizon_days=25, n_ports=8, window_days=6), fuel_price=600.0)
     plan = milp.solve(data, time_limit_s=1.0, max_labels=3, started_at=time.perf_counter() - 100.0)
     assert plan.status == "feasible" and not np.isfinite(plan.gap)
