@@ -121,6 +121,8 @@ def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit
                 continue
             rest_a = without(a, i)
             for j in range(n):
+                if time.perf_counter() - t0 > time_limit_s:
+                    break
                 b = owner.get(j)
                 if b == a or j == i or a not in lifters[j]:
                     continue

@@ -175,7 +175,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
 
     First a lower bound, the LP optimum of the set-partitioning master over every feasible sequence, and a plan:
     - small and medium fleets (every vessel's feasible sequences enumerated, routes.vessel_columns, at most
-      `max_labels` partial sequences per vessel): the LP over all of them, and the plan of its rounding improved by
+      `max_labels` partial sequences per vessel, within a tenth of the time limit): the LP over all of them, and the plan of its rounding improved by
       local search (local_search.py);
     - otherwise: column generation to the LP optimum (branch_price.solve_root, the LP kept warm in
       master_lp.MasterLP), and a dive on that LP fixing whole columns with pricing at each step
@@ -208,7 +208,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
 
     columns, complete = [], True
     for k in range(len(data.vessels)):
-        cols, done = vessel_columns(data, k, max_labels=max_labels)
+        cols, done = vessel_columns(data, k, max_labels=max_labels, deadline=t0 + 0.1 * float(time_limit_s))
         columns += cols
         complete &= done
         if not complete:

@@ -6,11 +6,14 @@ far): one no later and no dearer makes the other useless (every later cost item 
 leaving earlier can sail slower, never dearer), so it is dropped. What is left gives, for each set of contracts a vessel can lift, its least cost and the order achieving
 it — exactly what the brute force gets by trying every order. `max_labels` caps the work per vessel; when it
 binds, the most promising partial sequences (least cost so far less the penalties they save) are kept,
-the enumeration is `complete=False` and the plan is optimal only over the sequences found.
+the enumeration is `complete=False` and the plan is optimal only over the sequences found. A `deadline` stops it
+too (between sequence lengths), also `complete=False`.
 """
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
 
 from pipeline.planning.problem import HOURS_PER_DAY, PlanData
@@ -24,7 +27,8 @@ class Column:
 
 
 def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000,
-                   among: frozenset[int] | set[int] | None = None) -> tuple[list[Column], bool]:
+                   among: frozenset[int] | set[int] | None = None, deadline: float = math.inf
+                   ) -> tuple[list[Column], bool]:
     """(least-cost column per set of contracts vessel k can lift in a feasible order — of the contracts `among`
     only, when given —, enumeration complete)."""
     v, va = data.vessels[k], data.per_vessel[k]
@@ -43,6 +47,9 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000,
         level[(frozenset((j,)), j)] = [(t + va.dur_h[j], fuel, va.dur_h[j], (j,))]
     complete, n_labels = True, len(level)
     while level:
+        if time.perf_counter() > deadline:  # `deadline`: a time.perf_counter() reading
+            complete = False
+            break
         for (members, last), labels in level.items():
             for ready, fuel, busy, seq in labels:
                 end = ready + va.travel_h[(last, "e")]
