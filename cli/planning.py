@@ -66,7 +66,7 @@ def plan_fleet_cmd(contracts: Path = typer.Option(..., "--contracts", help="cont
                    fuel_price: float = typer.Option(600.0, "--fuel-price", help="Fuel price per tonne."),
                    penalty: float = typer.Option(500_000.0, "--penalty", help="Cost of leaving a contract unassigned "
                                                  "when its row gives none."),
-                   time_limit: float = typer.Option(60.0, "--time-limit", help="Planner time limit, seconds, from "
+                   time_limit: float = typer.Option(60.0, "--time-limit", min=0.1, help="Planner time limit, seconds, from "
                                                     "building the problem to the plan."),
                    as_json: bool = typer.Option(False, "--json", help="Print the plan as JSON."),
                    data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")):

@@ -417,7 +417,7 @@ def test_re_planning_replaces_unsailed_voyages_of_the_old_plan_and_keeps_those_a
     assert first_new is None or first_new >= end
 
 
-def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of(planned, monkeypatch):
+def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(planned, monkeypatch):
     from typer.testing import CliRunner
 
     from cli.main import app
@@ -431,6 +431,9 @@ def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of(planned, monkeyp
     bad = CliRunner().invoke(app, ["plan", "fleet", "--contracts", files["contracts"], "--as-of", "01/12/2020",
                                    "--data", str(root)])
     assert bad.exit_code == 2
+    no_time = CliRunner().invoke(app, ["plan", "fleet", "--contracts", files["contracts"], "--time-limit", "0",
+                                       "--data", str(root)])
+    assert no_time.exit_code == 2 and "--time-limit" in no_time.output
 
 
 def test_a_routing_run_says_which_voyages_came_from_a_plan(planned, tmp_path):
