@@ -289,6 +289,22 @@ def predict_ranges_nb(form, target_speed, coefs, starts, ends, rpm, draft_m, tri
             q += 1
 
 
+@numba.njit(cache=True)
+def predict_physical_ranges_nb(target_speed, coefs, starts, ends, rpm, draft_m, trim_m, months_dd, Xs, out):
+    """`predict_ranges_nb` of the physical form, its weather loads read from the speed design matrix Xs (columns 4 and
+    5 hold −Vw²·w(θw) and −Hs²·w(θs), `design_matrices`) instead of worked out again: the same values exactly."""
+    q = 0
+    for g in range(starts.size):
+        c = coefs[g]
+        for i in range(starts[g], ends[g]):
+            wind_term, wave_term = -Xs[i, 4], -Xs[i, 5]
+            if target_speed:
+                out[q] = stw_physical_terms_nb(c, rpm[i], draft_m[i], trim_m[i], months_dd[i], wind_term, wave_term)
+            else:
+                out[q] = fuel_physical_terms_nb(c, rpm[i], draft_m[i], months_dd[i], wind_term, wave_term)
+            q += 1
+
+
 def predict(form: int, target: str, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """What routing gets (`stw_kn_nb` / `fuel_tph_nb`), for broadcastable inputs; flat float64 array."""
     cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)

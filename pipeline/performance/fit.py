@@ -27,7 +27,7 @@ ROBUST_RTOL = 1e-5  # ... stopping once no coefficient moves by more than this (
 HUBER_K = 1.345
 
 
-@dataclass
+@dataclass(slots=True)
 class FitResult:
     form: str
     target: str  # speed | fuel

@@ -224,10 +224,18 @@ def _rmse_by_group(y, pred, which, G):
         return np.sqrt(np.bincount(which, weights=np.where(ok, sq, 0.0), minlength=G) / np.bincount(which, weights=ok, minlength=G))
 
 
-def _predict(form: str, target: str, coefs: np.ndarray, starts: np.ndarray, ends: np.ndarray, inp) -> np.ndarray:
-    """Predictions, as routing computes them, of group g's model (coefs[g]) at rows starts[g]:ends[g], concatenated."""
+def _predict(form: str, target: str, coefs: np.ndarray, starts: np.ndarray, ends: np.ndarray, inp,
+             X: dict | None = None) -> np.ndarray:
+    """Predictions, as routing computes them, of group g's model (coefs[g]) at rows starts[g]:ends[g], concatenated.
+    X: the form's design matrices of the same rows (`_designs`), if made: the physical form's weather loads are read
+    from them."""
     starts, ends = np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)
     out = np.empty(int((ends - starts).sum()))
+    if form == "physical" and X is not None:
+        features.predict_physical_ranges_nb(target == "speed", np.ascontiguousarray(coefs, dtype=np.float64), starts, ends,
+                                            *(np.ascontiguousarray(inp[c], dtype=np.float64)
+                                              for c in ("rpm", "draft_m", "trim_m", "months_dd")), X["speed"], out)
+        return out
     cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in features.MODEL_INPUTS]
     features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
                                starts, ends, *cols, out)
@@ -317,7 +325,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
                                                            k_folds=0, rtol=TRAIN_RTOL, skip=skipped), skipped=skipped)
         for t in TARGETS:
             coefs = fit.coef_matrix(c.train[t])
-            c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp)
+            c.hold_pred[t] = _predict(form, t, coefs, hold_from, bounds[1:], inp, X)
             if skipped:
                 c.hold_pred[t][np.isin(hold_which, list(skipped))] = np.nan
             c.hold_rmse[t] = _rmse_by_group(y[t][hold_rows], c.hold_pred[t], hold_which, G)
