@@ -18,7 +18,7 @@ from pipeline.routing import dp
 from pipeline.routing import geodesy as geo
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.problem import Instance
-from pipeline.routing.reachable_weather import _box_ranges, _cos_range, _course_range_nb
+from pipeline.routing.reachable_weather import _box_ranges, _cos_range, _course_range_nb, _edge_box
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, Grid, Weather, sample_nb
 
 DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm ≈ 57 h, 100 rpm ≈ 40 h in calm water
@@ -48,6 +48,28 @@ def test_course_range_holds_along_the_chord(lat0, lon0, lat1, lon1):
         assert any(lo - 1e-9 <= crs + k * 360.0 <= hi + 1e-9 for k in (-1, 0, 1)), (crs, lo, hi)
     if lat0 * lat1 > 0:
         assert hi - lo < 20.0  # a real range, not the whole compass
+
+
+@pytest.mark.parametrize("wraps", [True, False])
+def test_edge_box_holds_every_corner_the_leg_reads(wraps):
+    """Sampling anywhere on a leg reads only corners inside its box: Hs is 1 m in the box and 1,000 m outside."""
+    rng = np.random.default_rng(7)
+    grid = Grid(10.0, 1.0, 41, 0.0, 1.0, 360, True) if wraps else Grid(10.0, 0.5, 81, 150.0, 0.5, 141, False)
+    for _ in range(300):
+        lat0, lon0 = rng.uniform(12.0, 48.0), rng.uniform(153.0, 217.0)
+        lat1 = np.clip(lat0 + rng.uniform(-2.0, 2.0), 10.5, 49.5)
+        lon1 = lon0 + rng.uniform(-2.5, 2.5)
+        y0, y1, c0, nc = _edge_box(lat0, lon0, lat1, lon1, grid)
+        assert y1 - y0 <= 6 and nc <= 8  # a leg's own cells, not the grid
+        cells = np.zeros((grid.nlat, grid.nlon, 1, 7), np.float32)
+        cells[..., SWH] = 1000.0
+        cols = (c0 + np.arange(nc)) % grid.nlon
+        cells[y0:y1, cols, :, SWH] = 1.0
+        w, out = Weather(cells, np.zeros(1), grid), np.empty(7)
+        ch = geo.chord(lat0, lon0, lat1, lon1)
+        for f in np.linspace(0.0, 1.0, 101):
+            sample_nb(w, 0.0, *geo.chord_point(ch, f), out)
+            assert out[SWH] == pytest.approx(1.0), (lat0, lon0, lat1, lon1, f)
 
 
 def _random_cells(rng, nan_share, steady):

@@ -461,11 +461,10 @@ def reachable_weather_ranges(inst, windows) -> np.ndarray:
     where no plan within the windows sails the leg."""
     wf, sp = inst.weather, inst.space
     L2, P = sp.lat.shape
-    iy, ix = _cell_index(wf.grid, sp.lat, sp.lon)
     t_lo, t_hi = windows
     rng = np.zeros((L2, P, 2 * sp.max_shift + 1, 9))
-    reachable_ranges_nb(wf.cells, wf.times_h, wf.grid, np.ascontiguousarray(iy), np.ascontiguousarray(ix), 2,
-                        np.ascontiguousarray(t_lo, dtype=np.float64), np.ascontiguousarray(t_hi, dtype=np.float64),
+    reachable_ranges_nb(wf.cells, wf.times_h, wf.grid, np.ascontiguousarray(t_lo, dtype=np.float64),
+                        np.ascontiguousarray(t_hi, dtype=np.float64),
                         sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), rng)
     rng[..., [WIND_LO, WIND_HI, CUR_HI]] *= geo.KN_PER_MS
     return rng

@@ -38,6 +38,7 @@ from pipeline.routing.leg_kernel import N_LEG_OUT, sail_leg_nb
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y
 
 WINDOW_SLACK_H = 1.0  # widening of every window (h): covers rounding in the kernels' time sums
+BOX_MARGIN_CELLS = 0.02  # widening of a leg's box (in cells) beyond the chord points it was found from
 COURSE_SLACK_DEG = 0.5  # widening of every course range: the kernel's course at a step is computed, not exact
 
 
@@ -84,20 +85,36 @@ def _course_range_nb(la0, lo0, la1, lo1):
 
 
 @numba.njit(cache=True)
-def _edge_box(iy, ix, i, a, b, pad, nlat, nlon, wraps):
-    """(y0, y1, c0, nc): rows y0:y1 and columns c0 + 0..nc (mod nlon when wraps) of the cells `sample_nb` reads on the
-    leg (i, a) → (i + 1, b), from the cells' lower-left corners iy, ix at the nodes, padded by `pad` for the chord's
-    curvature."""
-    y0 = max(0, min(iy[i, a], iy[i + 1, b]) - pad)
-    y1 = min(nlat, max(iy[i, a], iy[i + 1, b]) + 2 + pad)
-    if wraps:  # the end's column as an offset from the start's, so a box across 0° stays one box
-        off = (ix[i + 1, b] - ix[i, a] + nlon // 2) % nlon - nlon // 2
-        c0 = (ix[i, a] + min(off, 0) - pad) % nlon
-        nc = min(abs(off) + 2 + 2 * pad, nlon)
-    else:
-        c0 = max(0, min(ix[i, a], ix[i + 1, b]) - pad)
-        nc = min(nlon, max(ix[i, a], ix[i + 1, b]) + 2 + pad) - c0
-    return y0, y1, c0, nc
+def _edge_box(lat0, lon0, lat1, lon1, grid):
+    """(y0, y1, c0, nc): rows y0:y1 and columns c0 + 0..nc (mod nlon when the grid wraps) holding every cell corner
+    `sample_nb` reads anywhere on the chord (lat0, lon0) → (lat1, lon1). The chord is followed in steps of at most a
+    quarter cell, along which its fractional grid coordinates move monotonically but for a bulge far below the
+    BOX_MARGIN_CELLS they are widened by."""
+    nlat, nlon = grid.nlat, grid.nlon
+    ch = geo.chord(lat0, lon0, lat1, lon1)
+    n = max(8, int(math.degrees(ch.d) / (0.25 * min(grid.dlat, grid.dlon))) + 1)
+    fy_lo, fy_hi = np.inf, -np.inf
+    fx_first, fx_lo, fx_hi = np.nan, np.inf, -np.inf
+    for k in range(n + 1):
+        la, lo = geo.chord_point(ch, k / n)
+        fy = (la - grid.lat0) / grid.dlat
+        fy_lo, fy_hi = min(fy_lo, fy), max(fy_hi, fy)
+        fx = ((lo - grid.lon0) % 360.0) / grid.dlon
+        if math.isnan(fx_first):
+            fx_first = fx
+        fx = fx_first + (fx - fx_first + 0.5 * (360.0 / grid.dlon)) % (360.0 / grid.dlon) - 0.5 * (360.0 / grid.dlon)
+        fx_lo, fx_hi = min(fx_lo, fx), max(fx_hi, fx)
+    # rows read at fy: min(int(clip(fy, 0, nlat − 1)), nlat − 2) and the one above, monotone in fy
+    y0 = min(int(min(max(fy_lo - BOX_MARGIN_CELLS, 0.0), nlat - 1.0)), nlat - 2)
+    y1 = min(int(min(max(fy_hi + BOX_MARGIN_CELLS, 0.0), nlat - 1.0)), nlat - 2) + 2
+    if grid.wraps:
+        c0 = int(math.floor(fx_lo - BOX_MARGIN_CELLS))
+        nc = min(int(math.floor(fx_hi + BOX_MARGIN_CELLS)) - c0 + 2, nlon)
+        return y0, y1, c0 % nlon, nc
+    if fx_lo - BOX_MARGIN_CELLS < 0.0 or fx_hi + BOX_MARGIN_CELLS > nlon - 1.0:
+        return y0, y1, 0, nlon  # off the grid's columns (clamped, or taken from the nearer edge): all of them
+    c0 = min(int(fx_lo - BOX_MARGIN_CELLS), nlon - 2)  # columns read: as the rows
+    return y0, y1, c0, min(int(fx_hi + BOX_MARGIN_CELLS), nlon - 2) + 2 - c0
 
 
 @numba.njit(cache=True)
@@ -208,14 +225,14 @@ def _cos_range(lo_deg, hi_deg):
 
 
 @numba.njit(cache=True)
-def reachable_ranges_nb(cells, times_h, grid, iy, ix, pad, t_lo, t_hi, lat, lon, edge_ok, max_shift, out):
+def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max_shift, out):
     """Per leg (i, a) → (i + 1, a + s − max_shift): out[i, a, s] = (wind lo, wind hi (m/s), wind relative direction
     lo, hi (folded deg 0..180), Hs lo, hi (m), wave relative direction lo, hi, current along course hi (m/s)) over
     the leg's cells (`_edge_box`) and the valid times a sample at t_lo[i, a]..t_hi[i + 1, b] (h) reads; NaN when
     that window is empty (no plan within the windows sails the leg); legs that are not edges are left as they are."""
     nt = times_h.shape[0]
     L2, P = lat.shape
-    nlat, nlon, wraps = grid.nlat, grid.nlon, grid.wraps
+    nlon, wraps = grid.nlon, grid.wraps
     box = np.empty(9)
     for i in range(L2 - 1):
         for a in range(P):
@@ -223,7 +240,7 @@ def reachable_ranges_nb(cells, times_h, grid, iy, ix, pad, t_lo, t_hi, lat, lon,
                 if not edge_ok[i, a, b]:
                     continue
                 s_ = b - a + max_shift
-                y0, y1, c0, nc = _edge_box(iy, ix, i, a, b, pad, nlat, nlon, wraps)
+                y0, y1, c0, nc = _edge_box(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], grid)
                 t0, t1 = t_lo[i, a], t_hi[i + 1, b]
                 if not t0 <= t1:  # no plan within the windows sails this leg
                     out[i, a, s_, :] = np.nan
