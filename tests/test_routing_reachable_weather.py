@@ -190,3 +190,42 @@ def test_windowed_bounds_hold_for_every_plan_within_the_windows(kind, rta_h, n):
         assert lb <= best + 1e-9  # jit: the cost of an on-time plan is at least its fuel
         assert lb >= dp.cost_lower_bound(inst, upper, *any_time[:3]) - 1e-9
     assert lb > dp.cost_lower_bound(inst, upper, *any_time[:3]) + 1e-3  # the weather met tightens it
+
+
+@pytest.mark.parametrize("kind, rta_h, n, budget_share", [("storm", 48.0, 1, 1.02), ("storm", 60.0, 2, 1.1),
+                                                          ("storm-limit", 60.0, 6, 1.05)])
+def test_fuel_windowed_leg_bounds_hold_for_every_plan_within_the_budget(kind, rta_h, n, budget_share):
+    """With a fuel budget the windows narrow to the times a plan within it can be at each node; every on-time plan
+    burning at most the budget still sails each leg in at least its leg's τ and φ (per leg, as dp_exact_nb takes
+    them) and finishes above the bound from every line."""
+    pr = problem(DEP, ARR, rta_h, rpm_options=(70, 85, 100), n_lines=3, n_points=5, max_shift=2, d_point_nm=25.0,
+                 max_hs_m=4.5 if kind == "storm-limit" else None)
+    inst = Instance.build(pr, pr.search_space(), _storm(kind, n))
+    o, sp = inst.objective, inst.space
+    on_time = [p for p in _plans(inst) if p[2][-1] <= o.t_dep_h + o.t_req_h]
+    budget = budget_share * min(cf[-1] for _, _, _, cf in on_time)
+    windows = dp.reachable_windows(inst, dp.latest_departures(inst), True)
+    lams, m_lam, t_min, tau, phi = dp.finish_bounds(inst, windows, budget, per_leg=True)
+    assert tau.shape == phi.shape == sp.lat.shape + (5, 3)
+    n_checked = 0
+    for nodes, rpm, ct, cf in on_time:
+        if cf[-1] > budget:
+            continue
+        for i in range(len(nodes) - 1):
+            a, b = nodes[i], nodes[i + 1]
+            d = geo.gc_distance_nm(sp.lat[i, a], sp.lon[i, a], sp.lat[i + 1, b], sp.lon[i + 1, b])
+            assert ct[i + 1] - ct[i] >= d * tau[i, a, b - a + 2, rpm[i]] * (1.0 - 1e-9)
+            assert cf[i + 1] - cf[i] >= d * phi[i, a, b - a + 2, rpm[i]] * (1.0 - 1e-9)
+            assert cf[-1] - cf[i] >= dp.fuel_to_finish_lb(m_lam[:, i, a], lams, t_min[i, a], ct[-1] - ct[i]) - 1e-9
+        n_checked += 1
+    assert n_checked >= 1
+    narrowed = dp.fuel_windows(inst, windows, budget, *_tables(inst, windows))
+    assert (narrowed[0] >= windows[0]).all() and (narrowed[1] <= windows[1]).all()
+    if rta_h >= 60.0:  # windows of a loose RTA are wide: a tight budget narrows some
+        assert (narrowed[1] - narrowed[0] < windows[1] - windows[0] - 1.0).any()
+
+
+def _tables(inst, windows):
+    """(lams, m_lam, t_min, tau_e, phi_e) of the windows alone, as fuel_windows takes them."""
+    lams, m_lam, t_min, tau_e, phi_e = dp.finish_bounds(inst, windows, per_leg=True)
+    return lams, m_lam, t_min, tau_e, phi_e

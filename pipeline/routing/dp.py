@@ -169,8 +169,8 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
-    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, R) its least hours and fuel per NM on
-    the legs leaving each node (a leg is priced at them before it is sailed, and not sailed when even that
+    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, 2·max_shift + 1, R) its least hours and
+    fuel per NM on each leg (i, a) → (i + 1, a + s − max_shift) (`per_leg=True`; a leg is priced at them before it is sailed, and not sailed when even that
     cannot beat `upper` or make the RTA); ld (L+2, P) the latest departures that can still make the
     RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
@@ -212,12 +212,13 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                 if not edge_ok[i, a, a2]:
                     continue
                 d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
+                s = a2 - a + max_shift
                 for r in range(R):
                     # the leg at its least hours and fuel first: no sailing when even that prices the label out
-                    t1 = t0 + d_nm * tau[i, a, r]
+                    t1 = t0 + d_nm * tau[i, a, s, r]
                     if on_time and t1 > ld[i + 1, a2]:
                         continue
-                    lb = f0 + d_nm * phi[i, a, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                    lb = f0 + d_nm * phi[i, a, s, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
                                                                       deadline - t1)
                     if _priced_out(o, lb, upper, tol, on_time):
                         continue
@@ -470,21 +471,48 @@ def reachable_weather_ranges(inst, windows) -> np.ndarray:
     return rng
 
 
-def finish_bounds(inst, windows=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P), tau, phi (L+2, P, R)): the fuel-to-finish bound tables of the
     exact DP and the least hours and fuel per NM they are built from (per node: on every leg leaving it). Without
     `windows` they hold for a ship at any node at any time, in any weather up to the strongest met near the node at
     any time; with windows (`reachable_windows`) only for ships within them, and the tables are built leg by leg
-    from the weather each leg can meet then (`reachable_weather_ranges`), which is tighter."""
+    from the weather each leg can meet then (`reachable_weather_ranges`), which is tighter. With a finite
+    `fuel_budget_t` too they hold for the plans within the windows that burn at most that much: the windows are
+    first narrowed to the times such a plan can be at each node (`fuel_windows`). With `per_leg`, tau and phi are
+    those of each leg (L+2, P, 2·max_shift + 1, R), as dp_exact_nb takes them."""
+    v, sp = inst.vessel, inst.space
+    L2, P = sp.lat.shape
+    R = len(v.rpm_options)
+    if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
+        # no corner bounds for this model form (e.g. the MLP): zero hours and fuel to finish are still lower
+        # bounds, so every search that uses these tables stays exact, it only prunes less
+        zeros, rates = np.zeros((L2, P)), np.zeros((L2, P) + ((2 * sp.max_shift + 1,) if per_leg else ()) + (R,))
+        return np.zeros(1), zeros[None].copy(), zeros, rates, rates.copy()
+    tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
+    # prices of time (t of fuel per hour) around the trade-offs between neighbouring engine settings
+    t_med, f_med = np.median(tau.reshape(-1, R), axis=0), np.median(phi.reshape(-1, R), axis=0)
+    slopes = [(f_med[r + 1] - f_med[r]) / (t_med[r] - t_med[r + 1]) for r in range(R - 1) if t_med[r] > t_med[r + 1]]
+    lams = np.unique(np.array([0.0] + [s * m for s in slopes if np.isfinite(s) and s > 0
+                                       for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
+    m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
+    _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+    if windows is not None and math.isfinite(fuel_budget_t):
+        windows = fuel_windows(inst, windows, fuel_budget_t, lams, m_lam, t_min, tau_e, phi_e)
+        tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
+        _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+    if per_leg:  # inf on the legs no plan within the windows sails
+        return lams, m_lam, t_min, tau_e, phi_e
+    return lams, m_lam, t_min, tau, phi
+
+
+def _leg_bounds(inst, windows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(tau_e, phi_e (L+2, P, 2·max_shift + 1, R), tau, phi (L+2, P, R)): least hours and fuel per NM per leg and
+    per node (its legs' least) in the weather of `finish_bounds`; inf on legs no plan within the windows sails."""
     v, sp = inst.vessel, inst.space
     L2, P = sp.lat.shape
     R = len(v.rpm_options)
     S = 2 * sp.max_shift + 1
-    if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
-        # no corner bounds for this model form (e.g. the MLP): zero hours and fuel to finish are still lower
-        # bounds, so every search that uses these tables stays exact, it only prunes less
-        zeros = np.zeros((L2, P))
-        return np.zeros(1), zeros[None].copy(), zeros, np.zeros((L2, P, R)), np.zeros((L2, P, R))
     if windows is None:
         wind, hs, cur = local_weather_max(inst)
         rng = np.zeros((L2 * P, 9))
@@ -493,26 +521,87 @@ def finish_bounds(inst, windows=None) -> tuple[np.ndarray, np.ndarray, np.ndarra
         tau, phi = np.empty((L2 * P, R)), np.empty((L2 * P, R))
         _corner_bounds(v, rng, tau, phi)
         tau, phi = tau.reshape(L2, P, R), phi.reshape(L2, P, R)
-        tau_e, phi_e = (np.repeat(x[:, :, None, :], S, axis=2) for x in (tau, phi))
-    else:
-        rng = reachable_weather_ranges(inst, windows)
-        closed = np.isnan(rng[..., WIND_LO])  # legs no plan within the windows sails
-        tau_e, phi_e = np.empty((L2 * P * S, R)), np.empty((L2 * P * S, R))
-        _corner_bounds(v, np.where(closed[..., None], 0.0, rng).reshape(-1, 9), tau_e, phi_e)
-        tau_e, phi_e = tau_e.reshape(L2, P, S, R), phi_e.reshape(L2, P, S, R)
-        tau_e[closed], phi_e[closed] = np.inf, np.inf
-        ok = (_edge_mask(sp.edge_ok, L2, P, int(sp.max_shift)) & ~closed)[..., None]
-        tau = np.where(ok, tau_e, np.inf).min(axis=2)  # a node's legs all take at least its least
-        phi = np.where(ok, phi_e, np.inf).min(axis=2)
-        tau[~np.isfinite(tau)], phi[~np.isfinite(phi)] = 0.0, 0.0  # no leg leaves: any bound holds
-    # prices of time (t of fuel per hour) around the trade-offs between neighbouring engine settings
-    t_med, f_med = np.median(tau.reshape(-1, R), axis=0), np.median(phi.reshape(-1, R), axis=0)
-    slopes = [(f_med[r + 1] - f_med[r]) / (t_med[r] - t_med[r + 1]) for r in range(R - 1) if t_med[r] > t_med[r + 1]]
-    lams = np.unique(np.array([0.0] + [s * m for s in slopes if np.isfinite(s) and s > 0
-                                       for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
-    m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
-    _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
-    return lams, m_lam, t_min, tau, phi
+        return np.repeat(tau[:, :, None, :], S, axis=2), np.repeat(phi[:, :, None, :], S, axis=2), tau, phi
+    rng = reachable_weather_ranges(inst, windows)
+    closed = np.isnan(rng[..., WIND_LO])  # legs no plan within the windows sails
+    tau_e, phi_e = np.empty((L2 * P * S, R)), np.empty((L2 * P * S, R))
+    _corner_bounds(v, np.where(closed[..., None], 0.0, rng).reshape(-1, 9), tau_e, phi_e)
+    tau_e, phi_e = tau_e.reshape(L2, P, S, R), phi_e.reshape(L2, P, S, R)
+    tau_e[closed], phi_e[closed] = np.inf, np.inf
+    ok = (_edge_mask(sp.edge_ok, L2, P, int(sp.max_shift)) & ~closed)[..., None]
+    tau = np.where(ok, tau_e, np.inf).min(axis=2)  # a node's legs all take at least its least
+    phi = np.where(ok, phi_e, np.inf).min(axis=2)
+    tau[~np.isfinite(tau)], phi[~np.isfinite(phi)] = 0.0, 0.0  # no leg leaves: any bound holds
+    return tau_e, phi_e, tau, phi
+
+
+def fuel_windows(inst, windows, fuel_budget_t: float, lams, m_lam, t_min, tau_e, phi_e, step_h: float = 0.25):
+    """`windows` narrowed to the times a plan burning at most `fuel_budget_t` and arriving by the RTA can be at each
+    node: its fuel so far is at least the least fuel to reach the node in the hours since departure (the bound of
+    `finish_bounds` run forwards, over the same legs' τ, φ) and the rest at least the fuel to finish in the hours
+    left (m_lam, t_min); both bounds are convex in the time at the node, so the times where they sum within the
+    budget are one interval, found on a grid of `step_h` and widened by a step and WINDOW_SLACK_H. A node whose
+    interval the grid misses keeps its window."""
+    o, sp = inst.objective, inst.space
+    L2, P = sp.lat.shape
+    m_f, t_f = np.empty_like(m_lam), np.empty_like(t_min)
+    _forward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_f, t_f)
+    t_lo, t_hi = (np.array(x, dtype=np.float64) for x in windows)
+    _fuel_windows_nb(lams, m_f, t_f, m_lam, t_min, o.t_dep_h, o.t_dep_h + o.t_req_h, fuel_budget_t, step_h,
+                     WINDOW_SLACK_H, t_lo, t_hi)
+    return t_lo, t_hi
+
+
+@numba.njit(cache=True)
+def _fuel_windows_nb(lams, m_f, t_f, m_b, t_b, t_dep, deadline, budget, step, slack, t_lo, t_hi):
+    """`fuel_windows` in place on t_lo, t_hi (L+2, P)."""
+    L2, P = t_lo.shape
+    for i in range(L2):
+        for a in range(P):
+            lo, hi = t_lo[i, a], t_hi[i, a]
+            if not lo <= hi:
+                continue
+            first, last = np.inf, -np.inf
+            n = int((hi - lo) / step) + 1
+            for q in range(n + 1):
+                t = min(lo + q * step, hi)
+                f = fuel_to_finish_lb(m_f[:, i, a], lams, t_f[i, a], t - t_dep)
+                f += fuel_to_finish_lb(m_b[:, i, a], lams, t_b[i, a], deadline - t)
+                if f <= budget:
+                    first, last = min(first, t), max(last, t)
+            if first <= last:
+                t_lo[i, a] = max(lo, first - step - slack)
+                t_hi[i, a] = min(hi, last + step + slack)
+
+
+@numba.njit(cache=True)
+def _forward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_f, t_f):
+    """`_backward_tables` from the departure: m_f[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_f[i, a] = least Σ d·min_r τ
+    from the departure to (i, a); inf where (i, a) cannot be reached."""
+    L2, P = lat.shape
+    R = tau_e.shape[3]
+    m_f[:] = np.inf
+    t_f[:] = np.inf
+    m_f[:, 0, P // 2] = 0.0
+    t_f[0, P // 2] = 0.0
+    for i in range(L2 - 1):
+        for a in range(P):
+            if t_f[i, a] == np.inf:
+                continue
+            for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                if not edge_ok[i, a, b]:
+                    continue
+                s = b - a + max_shift
+                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
+                fastest = np.inf
+                for r in range(R):
+                    fastest = min(fastest, tau_e[i, a, s, r])
+                t_f[i + 1, b] = min(t_f[i + 1, b], t_f[i, a] + d * fastest)
+                for k in range(lams.shape[0]):
+                    best = np.inf
+                    for r in range(R):
+                        best = min(best, phi_e[i, a, s, r] + lams[k] * tau_e[i, a, s, r])
+                    m_f[k, i + 1, b] = min(m_f[k, i + 1, b], m_f[k, i, a] + d * best)
 
 
 def _edge_mask(edge_ok, L2, P, max_shift) -> np.ndarray:
@@ -550,6 +639,13 @@ def latest_departures(inst) -> np.ndarray:
 def _on_time(o, upper: float) -> bool:
     """Whether a plan costing `upper` is on time under the objective `o` (then late plans cannot beat it)."""
     return upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
+
+
+def _fuel_budget_t(o, upper: float, gap: float) -> float:
+    """The most fuel (t) a plan can burn that the DP, pruning with the on-time incumbent cost `upper` and trimming
+    within `gap`, must keep: its cost is at most upper + gap·upper (the DP's tolerance is gap·LB ≤ gap·optimum)."""
+    cost = upper * (1.0 + gap) + 2e-9 * max(1.0, abs(upper))
+    return cost if o.kind == OBJ_JIT else (cost - 0.85) * o.f_target / 3.0  # thesis: 0.85 + 3·F/F_target on time
 
 
 def cost_lower_bound(inst, upper: float, lams, m_lam, t_min) -> float:
@@ -630,8 +726,12 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
         if baseline.ok:
             upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
         ld = latest_departures(inst)
-        # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA)
-        lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, _on_time(inst.objective, upper)))
+        # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
+        # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
+        on_time = _on_time(inst.objective, upper)
+        lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
+                                                     _fuel_budget_t(inst.objective, upper, options.gap) if on_time
+                                                     else math.inf, per_leg=True)
         eps = trim_eps(inst, options.gap, upper, lams, m_lam, t_min)
         nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
                                                       m_lam, t_min, tau, phi, ld, eps)
