@@ -335,12 +335,28 @@ def _corner_bounds(v, rng, tau, phi):
 
 
 @numba.njit(cache=True)
+def _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams, prices):
+    """The leg (i, a) → (i + 1, b) relaxed: prices[k] = d·min_r(φ + λ_k·τ); returns its least hours d·min_r τ."""
+    s = b - a + max_shift
+    d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
+    fastest = np.inf
+    for r in range(tau_e.shape[3]):
+        fastest = min(fastest, tau_e[i, a, s, r])
+    for k in range(lams.shape[0]):
+        best = np.inf
+        for r in range(tau_e.shape[3]):
+            best = min(best, phi_e[i, a, s, r] + lams[k] * tau_e[i, a, s, r])
+        prices[k] = d * best
+    return d * fastest
+
+
+@numba.njit(cache=True)
 def _backward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_lam, t_min):
     """m_lam[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_min[i, a] = least Σ d·min_r τ from (i, a) to the arrival
     through feasible edges, with τ, φ (L+2, P, 2·max_shift + 1, R) of each leg (i, a) → (i + 1, a + s − max_shift);
     inf where the arrival cannot be reached."""
     L2, P = lat.shape
-    R = tau_e.shape[3]
+    prices = np.empty(lams.shape[0])
     m_lam[:] = np.inf
     t_min[:] = np.inf
     m_lam[:, L2 - 1, P // 2] = 0.0
@@ -350,17 +366,10 @@ def _backward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_lam, t_
             for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, b] or t_min[i + 1, b] == np.inf:
                     continue
-                s = b - a + max_shift
-                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
-                fastest = np.inf
-                for r in range(R):
-                    fastest = min(fastest, tau_e[i, a, s, r])
-                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + d * fastest)
+                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e,
+                                                                            lams, prices))
                 for k in range(lams.shape[0]):
-                    best = np.inf
-                    for r in range(R):
-                        best = min(best, phi_e[i, a, s, r] + lams[k] * tau_e[i, a, s, r])
-                    m_lam[k, i, a] = min(m_lam[k, i, a], m_lam[k, i + 1, b] + d * best)
+                    m_lam[k, i, a] = min(m_lam[k, i, a], m_lam[k, i + 1, b] + prices[k])
 
 
 @numba.njit(cache=True)
@@ -587,7 +596,7 @@ def _forward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_f, t_f):
     """`_backward_tables` from the departure: m_f[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_f[i, a] = least Σ d·min_r τ
     from the departure to (i, a); inf where (i, a) cannot be reached."""
     L2, P = lat.shape
-    R = tau_e.shape[3]
+    prices = np.empty(lams.shape[0])
     m_f[:] = np.inf
     t_f[:] = np.inf
     m_f[:, 0, P // 2] = 0.0
@@ -599,17 +608,10 @@ def _forward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_f, t_f):
             for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, b]:
                     continue
-                s = b - a + max_shift
-                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
-                fastest = np.inf
-                for r in range(R):
-                    fastest = min(fastest, tau_e[i, a, s, r])
-                t_f[i + 1, b] = min(t_f[i + 1, b], t_f[i, a] + d * fastest)
+                t_f[i + 1, b] = min(t_f[i + 1, b], t_f[i, a] + _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams,
+                                                                          prices))
                 for k in range(lams.shape[0]):
-                    best = np.inf
-                    for r in range(R):
-                        best = min(best, phi_e[i, a, s, r] + lams[k] * tau_e[i, a, s, r])
-                    m_f[k, i + 1, b] = min(m_f[k, i + 1, b], m_f[k, i, a] + d * best)
+                    m_f[k, i + 1, b] = min(m_f[k, i + 1, b], m_f[k, i, a] + prices[k])
 
 
 def _edge_mask(edge_ok, L2, P, max_shift) -> np.ndarray:

@@ -122,7 +122,8 @@ def _box_ranges(cells, y0, y1, c0, nc, nlon, wraps, k0, k1, crs_lo, crs_hi, out)
     """Over rows y0:y1, columns c0 + 0..nc (mod nlon when wraps) and valid times k0..k1 of `cells`: out = (wind lo,
     hi (m/s), wind towards-direction lo, hi (deg; 0, 360 when free), Hs lo, hi (m), wave from-direction lo, hi,
     current along a course in crs_lo..crs_hi hi (m/s)), bounds on every sample that reads only these corners (see
-    the module docstring). Two passes: sums and extremes, then projections on the mean directions."""
+    the module docstring). Two passes: sums and extremes over the cells, then projections of the wind and wave
+    vectors kept from the first on their mean directions."""
     wsx, wsy, w_hi2, w_nan = 0.0, 0.0, 0.0, False
     ssx, ssy, s_nan = 0.0, 0.0, False
     h_lo, h_hi = np.inf, 0.0
@@ -133,12 +134,17 @@ def _box_ranges(cells, y0, y1, c0, nc, nlon, wraps, k0, k1, crs_lo, crs_hi, out)
     whole = crs_hi - crs_lo >= 180.0
     elx, ely = math.sin(math.radians(crs_lo)), math.cos(math.radians(crs_lo))
     ehx, ehy = math.sin(math.radians(crs_hi)), math.cos(math.radians(crs_hi))
+    seen = np.empty(((y1 - y0) * nc * (k1 - k0 + 1), 4))  # the corners' wind and wave vectors, for the second pass
+    n_seen = 0
     for y in range(y0, y1):
         for q in range(nc):
             x = (c0 + q) % nlon if wraps else c0 + q
             for k in range(k0, k1 + 1):
                 c = cells[y, x, k]
                 u, v = np.float64(c[U10]), np.float64(c[V10])
+                sx, sy = np.float64(c[WAVE_X]), np.float64(c[WAVE_Y])
+                seen[n_seen, 0], seen[n_seen, 1], seen[n_seen, 2], seen[n_seen, 3] = u, v, sx, sy
+                n_seen += 1
                 if math.isnan(u) or math.isnan(v):
                     w_nan = True
                     u = 0.0 if math.isnan(u) else u
@@ -147,7 +153,6 @@ def _box_ranges(cells, y0, y1, c0, nc, nlon, wraps, k0, k1, crs_lo, crs_hi, out)
                 wsy += v
                 w_hi2 = max(w_hi2, u * u + v * v)
                 wx_hi, wy_hi = max(wx_hi, abs(u)), max(wy_hi, abs(v))
-                sx, sy = np.float64(c[WAVE_X]), np.float64(c[WAVE_Y])
                 if math.isnan(sx) or math.isnan(sy):
                     s_nan = True
                 else:
@@ -184,23 +189,18 @@ def _box_ranges(cells, y0, y1, c0, nc, nlon, wraps, k0, k1, crs_lo, crs_hi, out)
     snx, sny = (ssx / sn, ssy / sn) if sn > 0.0 else (0.0, 1.0)
     w_lo, w_tlo, w_thi = np.inf, np.inf, -np.inf
     s_lo, s_tlo, s_thi = np.inf, np.inf, -np.inf
-    for y in range(y0, y1):
-        for q in range(nc):
-            x = (c0 + q) % nlon if wraps else c0 + q
-            for k in range(k0, k1 + 1):
-                c = cells[y, x, k]
-                u, v = np.float64(c[U10]), np.float64(c[V10])
-                dot = wnx * u + wny * v
-                w_lo = min(w_lo, dot)
-                if dot > 0.0:
-                    t = (u * wny - v * wnx) / dot
-                    w_tlo, w_thi = min(w_tlo, t), max(w_thi, t)
-                sx, sy = np.float64(c[WAVE_X]), np.float64(c[WAVE_Y])
-                dot = snx * sx + sny * sy
-                s_lo = min(s_lo, dot)
-                if dot > 0.0:
-                    t = (sx * sny - sy * snx) / dot
-                    s_tlo, s_thi = min(s_tlo, t), max(s_thi, t)
+    for n in range(n_seen):
+        u, v, sx, sy = seen[n, 0], seen[n, 1], seen[n, 2], seen[n, 3]
+        dot = wnx * u + wny * v
+        w_lo = min(w_lo, dot)
+        if dot > 0.0:
+            t = (u * wny - v * wnx) / dot
+            w_tlo, w_thi = min(w_tlo, t), max(w_thi, t)
+        dot = snx * sx + sny * sy
+        s_lo = min(s_lo, dot)
+        if dot > 0.0:
+            t = (sx * sny - sy * snx) / dot
+            s_tlo, s_thi = min(s_tlo, t), max(s_thi, t)
     if not w_nan and wn > 0.0 and w_lo > 0.0:
         base = math.degrees(math.atan2(wnx, wny))
         out[0] = w_lo
