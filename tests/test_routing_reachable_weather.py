@@ -229,3 +229,24 @@ def _tables(inst, windows):
     """(lams, m_lam, t_min, tau_e, phi_e) of the windows alone, as fuel_windows takes them."""
     lams, m_lam, t_min, tau_e, phi_e = dp.finish_bounds(inst, windows, per_leg=True)
     return lams, m_lam, t_min, tau_e, phi_e
+
+
+def test_corner_bounds_of_the_thesis_form_hold_just_above_a_calm():
+    """The thesis form drops its direction terms in a calm: with a following wind that adds speed (direction
+    coefficient > 0) a light breeze from astern is faster than both a calm and a strong wind, so the bound must
+    take the corner just above the calm."""
+    from pipeline.performance.features import FORM_THESIS, fuel_tph_nb, stw_kn_nb
+
+    speed = np.array([0.1, 0.0, 0.12, 0.005, -0.05, 0.0, -0.3])  # draft, trim, rpm, wind dir, wind, wave dir, Hs
+    fuel = np.array([0.0, 0.0, 0.02, -0.0005, 0.002, 0.0, 0.05])
+    v = lk.Vessel(FORM_THESIS, 10.0, 0.0, 0.0, np.inf, np.inf, 1.0, speed, fuel, np.array([100.0]))
+    rng = np.zeros((1, 9))
+    rng[0, dp.WIND_HI], rng[0, dp.WIND_REL_HI], rng[0, dp.WAVE_REL_HI] = 20.0, 180.0, 180.0
+    tau, phi = np.empty((1, 1)), np.empty((1, 1))
+    dp._corner_bounds(v, rng, tau, phi)
+    for wind_kn in (0.0, 1e-3, 0.5, 5.0, 20.0):
+        for rel in (0.0, 90.0, 180.0):
+            stw = stw_kn_nb(FORM_THESIS, speed, 100.0, 10.0, 0.0, wind_kn, rel, 0.0, 0.0, 0.0)
+            rate = fuel_tph_nb(FORM_THESIS, fuel, 100.0, 10.0, 0.0, wind_kn, rel, 0.0, 0.0, 0.0)
+            assert tau[0, 0] <= 1.0 / stw and phi[0, 0] <= rate / stw
+    assert 1.0 / tau[0, 0] > stw_kn_nb(FORM_THESIS, speed, 100.0, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0) + 0.8
