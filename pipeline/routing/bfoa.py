@@ -633,7 +633,7 @@ def polish(nodes, rpm_idx, cost: float, params: BfoaParams, g, v, w, o):
     latest = np.repeat((cum_t + params.polish_window_h)[:, None], P, axis=1)
     to_finish = np.maximum(cum_f[-1] - cum_f - slack_t, 0.0)
     m_lam = np.repeat(to_finish[None, :, None], P, axis=2)
-    no_rate = np.zeros((L2, P, v.rpm_options.shape[0]))
+    no_rate = np.zeros((L2, P, 2 * g.max_shift + 1, v.rpm_options.shape[0]))
     eps = params.polish_gap * cost / (L2 - 1) * (1.0 if o.kind == OBJ_JIT else o.f_target / 3.0)
     lam_t = (time_price_nb(np.asarray(rpm_idx, np.int64), cum_t, cum_f, v.rpm_options)
              if params.polish_buckets > 0 and o.kind == OBJ_JIT else 0.0)

@@ -26,16 +26,24 @@ Bounds (certified: they never drop a label of an optimal plan):
               BFOA plan's (`DpOptions.incumbent`); the answer does not depend on it, only the time taken.
   deadline    when U is on time (jit: below the 1000 t late step; thesis: below 9999.9), a plan arriving after
               the RTA cannot win, so a label must still be able to arrive by the RTA.
-  fuel        for the legs leaving each node and each engine setting r: the least hours per NM τ (best STW in
-              the weather met near those legs at any time, plus the strongest current there) and the least
-              fuel per NM φ. For any λ ≥ 0 a backward pass gives M_λ = the least Σ d·(φ + λ·τ) to the arrival,
-              and a completion sailed within H hours burns at least max_λ (M_λ − λ·H) (it cannot arrive at all
-              below the least Σ d·τ). A label whose fuel so far plus that bound prices it above U is dropped;
-              each leg is first priced at its own least hours and fuel (d·τ, d·φ) and sailed only when that
-              label could survive.
-The bounds on STW and fuel rate come from the performance model at the corners of the local weather's range
-(wind 0..max, Hs 0..max, every relative direction): both model forms are linear in regressors that take their
-extremes there (weather limits cap the range, since a leg beyond them is infeasible anyway).
+  fuel        for each leg and engine setting r: the least hours per NM τ (best STW in the weather the leg can
+              meet, plus the strongest current along its course there) and the least fuel per NM φ. For any λ ≥ 0
+              a backward pass gives M_λ = the least Σ d·(φ + λ·τ) to the arrival, and a completion sailed within
+              H hours burns at least max_λ (M_λ − λ·H) (it cannot arrive at all below the least Σ d·τ). A label
+              whose fuel so far plus that bound prices it above U is dropped; each leg is first priced at its
+              own least hours and fuel (d·τ, d·φ) and sailed only when that label could survive.
+The weather a leg can meet (`finish_bounds` with windows, reachable_weather.py): the grid cells its chord reads, at
+the valid times between the earliest arrival at its start and the latest departure from its end (the RTA's, when U
+is on time), narrowed to the times a plan burning no more than any plan the DP must keep can be there
+(`fuel_windows`). Over them wind and Hs have lower bounds, and the wind, wave and current directions relative to the
+leg's course ranges. The bounds on STW and fuel rate come from the performance model at the corners of those ranges
+(speeds lo..hi, relative directions lo..hi): the thesis form is linear in each of them (with the corner just above
+a calm, where it drops its direction terms), the physical form linear in Vw²·w(θw) and Hs²·w(θs) (w falling with
+θ), each then clipped monotonically; so the corners give its extremes whatever the coefficients' signs, fouling
+and the air-resistance allowance included (weather limits cap the range, since a leg beyond them is infeasible
+anyway). Without windows (the engine-limits DP, the grid DP) the range is the node's: wind and Hs 0..the strongest
+near it at any valid time, every direction, the strongest current. For the 5,000 NM bench voyages the windowed bound
+is 0.87 (east) and 0.95 (west) of the optimum, against 0.80 and 0.75 for the node's range.
 
 `dp_bucket_nb` keeps the older, faster approximation (labels merged per arrival-time bucket of
 `bucket_h` hours; optimal only up to that merging), selected by `DpOptions(bucket_h=...)`.
@@ -54,6 +62,7 @@ from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
+from pipeline.routing.reachable_weather import WINDOW_SLACK_H, earliest_arrival_nb, reachable_ranges_nb
 
 
 @numba.njit(cache=True)
@@ -168,8 +177,8 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
-    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, R) its least hours and fuel per NM on
-    the legs leaving each node (a leg is priced at them before it is sailed, and not sailed when even that
+    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, 2·max_shift + 1, R) its least hours and
+    fuel per NM on each leg (i, a) → (i + 1, a + s − max_shift) (`per_leg=True`; a leg is priced at them before it is sailed, and not sailed when even that
     cannot beat `upper` or make the RTA); ld (L+2, P) the latest departures that can still make the
     RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
@@ -211,12 +220,13 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                 if not edge_ok[i, a, a2]:
                     continue
                 d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
+                s = a2 - a + max_shift
                 for r in range(R):
                     # the leg at its least hours and fuel first: no sailing when even that prices the label out
-                    t1 = t0 + d_nm * tau[i, a, r]
+                    t1 = t0 + d_nm * tau[i, a, s, r]
                     if on_time and t1 > ld[i + 1, a2]:
                         continue
-                    lb = f0 + d_nm * phi[i, a, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                    lb = f0 + d_nm * phi[i, a, s, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
                                                                       deadline - t1)
                     if _priced_out(o, lb, upper, tol, on_time):
                         continue
@@ -290,36 +300,63 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
     return nodes, rpm_idx, best, n_legs, n_kept
 
 
+# columns of the per-node weather ranges `_corner_bounds` takes (speeds in kn, relative directions folded 0..180°)
+(WIND_LO, WIND_HI, WIND_REL_LO, WIND_REL_HI, HS_LO, HS_HI, WAVE_REL_LO, WAVE_REL_HI, CUR_HI) = range(9)
+
+
 @numba.njit(cache=True)
-def _corner_bounds(v, wind_kn, hs_m, cur_kn, tau, phi):
-    """Per node n and engine setting r: hours per NM ≥ tau[n, r] and fuel per NM ≥ phi[n, r] on legs that meet at
-    most wind_kn[n], hs_m[n] and a current of cur_kn[n] (the model at the corners of that range)."""
-    for n in range(wind_kn.shape[0]):
-        wk_hi = min(wind_kn[n], v.max_wind_kn)
-        h_hi = min(hs_m[n], v.max_hs_m)
+def _corner_bounds(v, rng, tau, phi):
+    """Per node n and engine setting r: hours per NM ≥ tau[n, r] and fuel per NM ≥ phi[n, r] on legs that meet
+    weather within the ranges rng[n] (columns WIND_LO …, CUR_HI): the model at the corners of those ranges, where
+    both forms take their extremes (linear in wind speed, Hs and the folded directions — thesis — or in
+    Vw²·w(θw) and Hs²·w(θs), w falling with θ — physical). The thesis form drops a direction term in a calm, so a
+    range down to a calm also gets the corner just above it (direction on, speed ~0)."""
+    for n in range(rng.shape[0]):
+        wk_hi = min(rng[n, WIND_HI], v.max_wind_kn)  # beyond a limit the leg is infeasible: no bound needed there
+        h_hi = min(rng[n, HS_HI], v.max_hs_m)
+        wk_lo, h_lo = min(rng[n, WIND_LO], wk_hi), min(rng[n, HS_LO], h_hi)
+        winds = (wk_lo, max(wk_lo, 1e-12), wk_hi)
+        waves = (h_lo, max(h_lo, 1e-12), h_hi)
         for r in range(v.rpm_options.shape[0]):
             rpm = v.rpm_options[r]
             stw, rate = 0.0, np.inf
-            for wk in (0.0, wk_hi):
-                for wr in (0.0, 180.0):
-                    for h in (0.0, h_hi):
-                        for hr in (0.0, 180.0):
+            for wk in winds:
+                for wr in (rng[n, WIND_REL_LO], rng[n, WIND_REL_HI]):
+                    for h in waves:
+                        for hr in (rng[n, WAVE_REL_LO], rng[n, WAVE_REL_HI]):
                             stw = max(stw, stw_kn_nb(v.form_id, v.speed_coef, rpm, v.draft_m, v.trim_m, wk, wr, h, hr,
                                                      v.months_dd))
                             rate = min(rate, fuel_tph_nb(v.form_id, v.fuel_coef, rpm, v.draft_m, v.trim_m, wk, wr, h,
                                                          hr, v.months_dd))
-            sog = stw + cur_kn[n]
+            sog = stw + rng[n, CUR_HI]
             # a little slack for rounding in the kernels' sums: the bounds must never cut an optimal plan
             tau[n, r] = (1.0 - 1e-9) / sog if sog > 0.0 else np.inf
             phi[n, r] = (1.0 - 1e-9) * rate / sog if sog > 0.0 else 0.0
 
 
 @numba.njit(cache=True)
-def _backward_tables(lat, lon, edge_ok, max_shift, tau, phi, lams, m_lam, t_min):
+def _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams, prices):
+    """The leg (i, a) → (i + 1, b) relaxed: prices[k] = d·min_r(φ + λ_k·τ); returns its least hours d·min_r τ."""
+    s = b - a + max_shift
+    d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
+    fastest = np.inf
+    for r in range(tau_e.shape[3]):
+        fastest = min(fastest, tau_e[i, a, s, r])
+    for k in range(lams.shape[0]):
+        best = np.inf
+        for r in range(tau_e.shape[3]):
+            best = min(best, phi_e[i, a, s, r] + lams[k] * tau_e[i, a, s, r])
+        prices[k] = d * best
+    return d * fastest
+
+
+@numba.njit(cache=True)
+def _backward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_lam, t_min):
     """m_lam[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_min[i, a] = least Σ d·min_r τ from (i, a) to the arrival
-    through feasible edges, with τ, φ of the node each leg leaves; inf where the arrival cannot be reached."""
+    through feasible edges, with τ, φ (L+2, P, 2·max_shift + 1, R) of each leg (i, a) → (i + 1, a + s − max_shift);
+    inf where the arrival cannot be reached."""
     L2, P = lat.shape
-    R = tau.shape[2]
+    prices = np.empty(lams.shape[0])
     m_lam[:] = np.inf
     t_min[:] = np.inf
     m_lam[:, L2 - 1, P // 2] = 0.0
@@ -329,16 +366,10 @@ def _backward_tables(lat, lon, edge_ok, max_shift, tau, phi, lams, m_lam, t_min)
             for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, b] or t_min[i + 1, b] == np.inf:
                     continue
-                d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
-                fastest = np.inf
-                for r in range(R):
-                    fastest = min(fastest, tau[i, a, r])
-                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + d * fastest)
+                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e,
+                                                                            lams, prices))
                 for k in range(lams.shape[0]):
-                    best = np.inf
-                    for r in range(R):
-                        best = min(best, phi[i, a, r] + lams[k] * tau[i, a, r])
-                    m_lam[k, i, a] = min(m_lam[k, i, a], m_lam[k, i + 1, b] + d * best)
+                    m_lam[k, i, a] = min(m_lam[k, i, a], m_lam[k, i + 1, b] + prices[k])
 
 
 @numba.njit(cache=True)
@@ -430,29 +461,176 @@ def local_weather_max(inst, pad_cells: int = 2) -> tuple[np.ndarray, np.ndarray,
     return out[0], out[1], out[2]
 
 
-def finish_bounds(inst) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def reachable_windows(inst, ld: np.ndarray, on_time: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(t_lo, t_hi) (L+2, P), hours after t_ref: a plan is at node (i, a) no earlier than t_lo and no later than
+    t_hi. t_lo is the earliest arrival (reachable_weather), t_hi the latest departure `ld` when the plan must make
+    the RTA (`on_time`), else the planning horizon; both widened by WINDOW_SLACK_H."""
+    v, o, sp = inst.vessel, inst.objective, inst.space
+    ea = np.empty(sp.lat.shape)
+    earliest_arrival_nb(inst.graph, v._replace(max_hs_m=np.inf, max_wind_kn=np.inf), inst.wx,
+                        np.ascontiguousarray(_fastest_settings(v)), o.t_dep_h, ea)
+    t_hi = np.minimum(ld, o.t_dep_h + o.max_hours) if on_time else np.full(sp.lat.shape, o.t_dep_h + o.max_hours)
+    return ea - WINDOW_SLACK_H, t_hi + WINDOW_SLACK_H
+
+
+def reachable_weather_ranges(inst, windows) -> np.ndarray:
+    """(L+2, P, 2·max_shift + 1, 9) `_corner_bounds` ranges (kn, deg, m) per leg (i, a) → (i + 1, a + s − max_shift):
+    the weather it can meet while the ship is within the windows (`reachable_windows`); zeros where no edge, NaN
+    where no plan within the windows sails the leg."""
+    wf, sp = inst.weather, inst.space
+    L2, P = sp.lat.shape
+    t_lo, t_hi = windows
+    rng = np.zeros((L2, P, 2 * sp.max_shift + 1, 9))
+    reachable_ranges_nb(wf.cells, wf.times_h, wf.grid, np.ascontiguousarray(t_lo, dtype=np.float64),
+                        np.ascontiguousarray(t_hi, dtype=np.float64),
+                        sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), rng)
+    rng[..., [WIND_LO, WIND_HI, CUR_HI]] *= geo.KN_PER_MS
+    return rng
+
+
+def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P), tau, phi (L+2, P, R)): the fuel-to-finish bound tables of the
-    exact DP and the least hours and fuel per NM they are built from."""
+    exact DP and the least hours and fuel per NM they are built from (per node: on every leg leaving it). Without
+    `windows` they hold for a ship at any node at any time, in any weather up to the strongest met near the node at
+    any time; with windows (`reachable_windows`) only for ships within them, and the tables are built leg by leg
+    from the weather each leg can meet then (`reachable_weather_ranges`), which is tighter. With a finite
+    `fuel_budget_t` too they hold for the plans within the windows that burn at most that much: the windows are
+    first narrowed to the times such a plan can be at each node (`fuel_windows`). With `per_leg`, tau and phi are
+    those of each leg (L+2, P, 2·max_shift + 1, R), as dp_exact_nb takes them."""
     v, sp = inst.vessel, inst.space
     L2, P = sp.lat.shape
     R = len(v.rpm_options)
     if v.form_id not in (FORM_THESIS, FORM_PHYSICAL):
         # no corner bounds for this model form (e.g. the MLP): zero hours and fuel to finish are still lower
         # bounds, so every search that uses these tables stays exact, it only prunes less
-        zeros = np.zeros((L2, P))
-        return np.zeros(1), zeros[None].copy(), zeros, np.zeros((L2, P, R)), np.zeros((L2, P, R))
-    wind, hs, cur = local_weather_max(inst)
-    tau, phi = np.empty((L2 * P, R)), np.empty((L2 * P, R))
-    _corner_bounds(v, wind.ravel(), hs.ravel(), cur.ravel(), tau, phi)
-    tau, phi = tau.reshape(L2, P, R), phi.reshape(L2, P, R)
+        zeros, rates = np.zeros((L2, P)), np.zeros((L2, P) + ((2 * sp.max_shift + 1,) if per_leg else ()) + (R,))
+        return np.zeros(1), zeros[None].copy(), zeros, rates, rates.copy()
+    tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
     # prices of time (t of fuel per hour) around the trade-offs between neighbouring engine settings
     t_med, f_med = np.median(tau.reshape(-1, R), axis=0), np.median(phi.reshape(-1, R), axis=0)
     slopes = [(f_med[r + 1] - f_med[r]) / (t_med[r] - t_med[r + 1]) for r in range(R - 1) if t_med[r] > t_med[r + 1]]
     lams = np.unique(np.array([0.0] + [s * m for s in slopes if np.isfinite(s) and s > 0
                                        for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
     m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
-    _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau, phi, lams, m_lam, t_min)
+    _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+    if windows is not None and math.isfinite(fuel_budget_t):
+        windows = fuel_windows(inst, windows, fuel_budget_t, lams, m_lam, t_min, tau_e, phi_e)
+        tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
+        _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+    if per_leg:  # inf on the legs no plan within the windows sails
+        return lams, m_lam, t_min, tau_e, phi_e
     return lams, m_lam, t_min, tau, phi
+
+
+def _leg_bounds(inst, windows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(tau_e, phi_e (L+2, P, 2·max_shift + 1, R), tau, phi (L+2, P, R)): least hours and fuel per NM per leg and
+    per node (its legs' least) in the weather of `finish_bounds`; inf on legs no plan within the windows sails."""
+    v, sp = inst.vessel, inst.space
+    L2, P = sp.lat.shape
+    R = len(v.rpm_options)
+    S = 2 * sp.max_shift + 1
+    if windows is None:
+        wind, hs, cur = local_weather_max(inst)
+        rng = np.zeros((L2 * P, 9))
+        rng[:, WIND_HI], rng[:, HS_HI], rng[:, CUR_HI] = wind.ravel(), hs.ravel(), cur.ravel()
+        rng[:, WIND_REL_HI] = rng[:, WAVE_REL_HI] = 180.0
+        tau, phi = np.empty((L2 * P, R)), np.empty((L2 * P, R))
+        _corner_bounds(v, rng, tau, phi)
+        tau, phi = tau.reshape(L2, P, R), phi.reshape(L2, P, R)
+        return np.repeat(tau[:, :, None, :], S, axis=2), np.repeat(phi[:, :, None, :], S, axis=2), tau, phi
+    rng = reachable_weather_ranges(inst, windows)
+    closed = np.isnan(rng[..., WIND_LO])  # legs no plan within the windows sails
+    tau_e, phi_e = np.empty((L2 * P * S, R)), np.empty((L2 * P * S, R))
+    _corner_bounds(v, np.where(closed[..., None], 0.0, rng).reshape(-1, 9), tau_e, phi_e)
+    tau_e, phi_e = tau_e.reshape(L2, P, S, R), phi_e.reshape(L2, P, S, R)
+    tau_e[closed], phi_e[closed] = np.inf, np.inf
+    ok = (_edge_mask(sp.edge_ok, L2, P, int(sp.max_shift)) & ~closed)[..., None]
+    tau = np.where(ok, tau_e, np.inf).min(axis=2)  # a node's legs all take at least its least
+    phi = np.where(ok, phi_e, np.inf).min(axis=2)
+    tau[~np.isfinite(tau)], phi[~np.isfinite(phi)] = 0.0, 0.0  # no leg leaves: any bound holds
+    return tau_e, phi_e, tau, phi
+
+
+def fuel_windows(inst, windows, fuel_budget_t: float, lams, m_lam, t_min, tau_e, phi_e, step_h: float = 0.25):
+    """`windows` narrowed to the times a plan burning at most `fuel_budget_t` and arriving by the RTA can be at each
+    node: its fuel so far is at least the least fuel to reach the node in the hours since departure (the bound of
+    `finish_bounds` run forwards, over the same legs' τ, φ) and the rest at least the fuel to finish in the hours
+    left (m_lam, t_min); both bounds are convex in the time at the node, so the times where they sum within the
+    budget are one interval, found on a grid of `step_h` and widened by a step and WINDOW_SLACK_H. A node whose
+    interval the grid misses keeps its window."""
+    o, sp = inst.objective, inst.space
+    L2, P = sp.lat.shape
+    m_f, t_f = np.empty_like(m_lam), np.empty_like(t_min)
+    _forward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_f, t_f)
+    t_lo, t_hi = (np.array(x, dtype=np.float64) for x in windows)
+    _fuel_windows_nb(lams, m_f, t_f, m_lam, t_min, o.t_dep_h, o.t_dep_h + o.t_req_h, fuel_budget_t, step_h,
+                     WINDOW_SLACK_H, t_lo, t_hi)
+    return t_lo, t_hi
+
+
+@numba.njit(cache=True)
+def _fuel_windows_nb(lams, m_f, t_f, m_b, t_b, t_dep, deadline, budget, step, slack, t_lo, t_hi):
+    """`fuel_windows` in place on t_lo, t_hi (L+2, P)."""
+    L2, P = t_lo.shape
+    for i in range(L2):
+        for a in range(P):
+            lo, hi = t_lo[i, a], t_hi[i, a]
+            if not lo <= hi:
+                continue
+            first, last = np.inf, -np.inf
+            n = int((hi - lo) / step) + 1
+            for q in range(n + 1):
+                t = min(lo + q * step, hi)
+                f = fuel_to_finish_lb(m_f[:, i, a], lams, t_f[i, a], t - t_dep)
+                f += fuel_to_finish_lb(m_b[:, i, a], lams, t_b[i, a], deadline - t)
+                if f <= budget:
+                    first, last = min(first, t), max(last, t)
+            if first <= last:
+                t_lo[i, a] = max(lo, first - step - slack)
+                t_hi[i, a] = min(hi, last + step + slack)
+
+
+@numba.njit(cache=True)
+def _forward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_f, t_f):
+    """`_backward_tables` from the departure: m_f[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_f[i, a] = least Σ d·min_r τ
+    from the departure to (i, a); inf where (i, a) cannot be reached."""
+    L2, P = lat.shape
+    prices = np.empty(lams.shape[0])
+    m_f[:] = np.inf
+    t_f[:] = np.inf
+    m_f[:, 0, P // 2] = 0.0
+    t_f[0, P // 2] = 0.0
+    for i in range(L2 - 1):
+        for a in range(P):
+            if t_f[i, a] == np.inf:
+                continue
+            for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                if not edge_ok[i, a, b]:
+                    continue
+                t_f[i + 1, b] = min(t_f[i + 1, b], t_f[i, a] + _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams,
+                                                                          prices))
+                for k in range(lams.shape[0]):
+                    m_f[k, i + 1, b] = min(m_f[k, i + 1, b], m_f[k, i, a] + prices[k])
+
+
+def _edge_mask(edge_ok, L2, P, max_shift) -> np.ndarray:
+    """(L+2, P, 2·max_shift + 1): whether the leg (i, a) → (i + 1, a + s − max_shift) is an edge (False on the
+    arrival line)."""
+    mask = np.zeros((L2, P, 2 * max_shift + 1), bool)
+    a = np.arange(P)
+    for s in range(2 * max_shift + 1):
+        b = a + s - max_shift
+        inside = (b >= 0) & (b < P)
+        mask[:-1, inside, s] = edge_ok[:, a[inside], b[inside]]
+    return mask
+
+
+def _fastest_settings(v) -> np.ndarray:
+    """The settings that include the fastest in every condition: the top one when STW cannot fall with rpm in this
+    model form (its rpm coefficient ≥ 0), else all of them."""
+    rpm_coef = v.speed_coef[1] if v.form_id == FORM_PHYSICAL else v.speed_coef[2]
+    return v.rpm_options[-1:] if rpm_coef >= 0.0 else v.rpm_options
 
 
 def latest_departures(inst) -> np.ndarray:
@@ -460,8 +638,7 @@ def latest_departures(inst) -> np.ndarray:
     latest_departure_nb). Weather limits are lifted (a relaxation: the bound can only get later); the fastest
     setting alone is sailed when STW cannot fall with rpm in this model form (its rpm coefficient ≥ 0)."""
     v, o = inst.vessel, inst.objective
-    rpm_coef = v.speed_coef[1] if v.form_id == FORM_PHYSICAL else v.speed_coef[2]
-    rpms = v.rpm_options[-1:] if rpm_coef >= 0.0 else v.rpm_options
+    rpms = _fastest_settings(v)
     free = v._replace(max_hs_m=np.inf, max_wind_kn=np.inf)
     ld = np.empty(inst.space.lat.shape)
     latest_departure_nb(inst.graph, free, inst.wx, np.ascontiguousarray(rpms), o.t_dep_h,
@@ -469,11 +646,23 @@ def latest_departures(inst) -> np.ndarray:
     return ld
 
 
+def _on_time(o, upper: float) -> bool:
+    """Whether a plan costing `upper` is on time under the objective `o` (then late plans cannot beat it)."""
+    return upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
+
+
+def _fuel_budget_t(o, upper: float, gap: float) -> float:
+    """The most fuel (t) a plan can burn that the DP, pruning with the on-time incumbent cost `upper` and trimming
+    within `gap`, must keep: its cost is at most upper + gap·upper (the DP's tolerance is gap·LB ≤ gap·optimum)."""
+    cost = upper * (1.0 + gap) + 2e-9 * max(1.0, abs(upper))
+    return cost if o.kind == OBJ_JIT else (cost - 0.85) * o.f_target / 3.0  # thesis: 0.85 + 3·F/F_target on time
+
+
 def cost_lower_bound(inst, upper: float, lams, m_lam, t_min) -> float:
     """A certified lower bound on the optimum's cost: the least fuel to sail the whole voyage within the hours it
     may take (the RTA when `upper` is on time, else the planning horizon), priced by the objective."""
     o, sp = inst.objective, inst.space
-    on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
+    on_time = _on_time(o, upper)
     hours = o.t_req_h if on_time else o.max_hours
     c = sp.lat.shape[1] // 2
     fuel_lb = float(fuel_to_finish_lb(m_lam[:, 0, c], lams, t_min[0, c], hours))
@@ -546,8 +735,13 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
             upper = min(upper, float(options.upper_bound))
         if baseline.ok:
             upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
-        lams, m_lam, t_min, tau, phi = finish_bounds(inst)
         ld = latest_departures(inst)
+        # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
+        # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
+        on_time = _on_time(inst.objective, upper)
+        lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
+                                                     _fuel_budget_t(inst.objective, upper, options.gap) if on_time
+                                                     else math.inf, per_leg=True)
         eps = trim_eps(inst, options.gap, upper, lams, m_lam, t_min)
         nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
                                                       m_lam, t_min, tau, phi, ld, eps)

@@ -384,7 +384,7 @@ def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: f
         upper = incumbent_cost(inst, nodes, EngineLimits(0.0, 0.0), one_change=buckets == 0)
         upper = upper * (1.0 + 1e-9) + 1e-12 if math.isfinite(upper) else math.inf  # that plan itself is kept
     sub = _route_instance(inst, nodes)
-    lams, m_lam, t_min, tau, phi = finish_bounds(sub)
+    lams, m_lam, t_min, tau, phi = finish_bounds(sub, per_leg=True)
     ld = latest_departures(sub)
     eps = trim_eps(sub, gap, upper, lams, m_lam, t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
     lam_t = time_price(inst, nodes) if buckets > 0 else 0.0
