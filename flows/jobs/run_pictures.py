@@ -2,12 +2,14 @@
 voyage's track, coloured by status) and the weather maps of the cycle's first step.
 
 Drawing them (matplotlib, and for the weather a step of the whole grid read from the cube) cost the flow host
-seconds a run; a worker that exports has matplotlib loaded already. Each function returns the staged files' names
-and one line per picture that could not be made (a picture; the run's data never depends on it).
+seconds a run. The worker reads what a picture shows and a child process draws it (flows/jobs/picture_process.py),
+so the worker never loads matplotlib. Each function returns the staged files' names and one line per picture that
+could not be made (a picture; the run's data never depends on it).
 """
 
 from __future__ import annotations
 
+from flows.jobs import picture_process
 from flows.jobs.route_worker import exports_root
 
 WEATHER_VARIABLES = ("waves", "wind")
@@ -28,12 +30,10 @@ def stage_fleet_map(exports_to: tuple[str, dict], run_id: str, title: str,
                     voyages: list[tuple[str, str, list[tuple]]]) -> tuple[list[str], list[str]]:
     """Draw the fleet map of `voyages` = (voyage_id, status, track) and stage it as the run's `fleet_map.png` under
     the exports root `exports_to` = (URL or path, fsspec options). Returns (names staged, errors)."""
-    from pipeline.export import plots
-
     pairs = [({"voyage_id": vid, "status": status}, [dict(zip(TRACK_KEYS, leg)) for leg in legs])
              for vid, status, legs in voyages]
     try:
-        png = plots.png_bytes(plots.fleet_map_figure(pairs, title=title))
+        png = picture_process.shared()("fleet_map", pairs, title)
         root = exports_root(exports_to)
         return [root.stage(run_id, FLEET_MAP, png)], []
     except Exception as exc:  # a picture; the run's data does not depend on it
@@ -48,7 +48,8 @@ def stage_weather_maps(exports_to: tuple[str, dict], run_id: str, cube_url: str,
     from storage.cube_location import locate
 
     try:
-        pngs = weather_maps.run_maps_png(locate(cube_url, storage_options), cycle, WEATHER_VARIABLES)
+        pngs = weather_maps.run_maps_png(locate(cube_url, storage_options), cycle, WEATHER_VARIABLES,
+                                         draw=picture_process.shared())
         root = exports_root(exports_to)
         return [root.stage(run_id, weather_map_name(var, cycle_label), png) for var, png in pngs.items()], []
     except Exception as exc:  # a picture; the run's data does not depend on it
