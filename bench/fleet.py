@@ -120,7 +120,23 @@ def worker_memory() -> dict:
         now[key] = int(value.split()[0]) / 1024.0
     return {"rss": now["Rss"], "pss": now["Pss"], "private": now["Private_Clean"] + now["Private_Dirty"],
             "anonymous": now["Anonymous"], "peak": peak_rss_mb(),
-            "imported": sorted({m.split(".")[0] for m in sys.modules} & set(BIG_LIBRARIES))}
+            "imported": sorted({m.split(".")[0] for m in sys.modules} & set(BIG_LIBRARIES)), "pictures": picture_memory()}
+
+
+def picture_memory() -> dict | None:
+    """In a worker: its picture process's memory (flows/jobs/picture_process.py: Rss, Pss, peak MB), None when it
+    has none running (or the code under test draws in the worker)."""
+    picture_process = sys.modules.get("flows.jobs.picture_process")
+    pid = picture_process.shared().pid if picture_process is not None and hasattr(picture_process, "shared") else None
+    if pid is None:
+        return None
+    rollup = {}
+    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()[1:]:
+        key, value = line.split(":", 1)
+        rollup[key] = int(value.split()[0]) / 1024.0
+    peak = next(int(line.split()[1]) / 1024.0 for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+                if line.startswith("VmHWM:"))
+    return {"rss": rollup["Rss"], "pss": rollup["Pss"], "peak": peak}
 
 
 def baseline_mb() -> tuple[float, float]:
@@ -256,12 +272,14 @@ def stored_cycle_mb(root: Path) -> float:
 
 
 def _host_profiler(path: Path | None):
-    """A started cProfile of the flow host (this process) when `--profile-host` asked for one, else None."""
+    """A started cProfile of the flow host (this process) when `--profile-host` asked for one, else None. It counts
+    the process's CPU time (all its threads: the dask client's and fsspec's event loops run beside the flow's), so
+    what the other threads spend shows under the flow's waits."""
     if path is None:
         return None
     import cProfile
 
-    profiler = cProfile.Profile()
+    profiler = cProfile.Profile(time.process_time)
     profiler.enable()
     return profiler
 
@@ -373,6 +391,9 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
                   f"{c['distinct_bytes'] / 1e6:.2f} MB, ratio {ratio:.2f}, cache bound {c['max_bytes'] / 2**20:.0f} MB; "
                   f"peak {m['peak']:.0f} MB; at the end Rss {m['rss']:.0f}, Pss {m['pss']:.0f}, private {m['private']:.0f}, "
                   f"anonymous {m['anonymous']:.0f} MB; imported {', '.join(m['imported'])}")
+            if m.get("pictures"):
+                p = m["pictures"]
+                print(f"    its picture process: peak {p['peak']:.0f} MB; at the end Rss {p['rss']:.0f}, Pss {p['pss']:.0f} MB")
     if 1 in rows and 2 in rows:
         print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
     print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))
