@@ -16,6 +16,7 @@ import functools
 import json
 import logging
 import traceback
+from pathlib import Path
 
 import numpy as np
 
@@ -164,6 +165,7 @@ def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: di
     are drawn in this process's child (flows/jobs/picture_process.py, started at the first picture), so this
     process never loads matplotlib."""
     stop_task_profiler()
+    release_free_memory()  # before the first voyage too: what the imports left resident
     out = []
     for job in jobs:
         out.append(route_one(job, cube_path, storage_options, exports_to, picture_process.shared()))
@@ -211,7 +213,48 @@ def _malloc_trim():
 def release_free_memory() -> None:
     """Give the memory freed by a voyage back to the system (glibc's malloc_trim, about a millisecond). Without it
     a worker's resident memory creeps up voyage after voyage (freed weather windows and plots stay in malloc's
-    arenas), unless the worker was started by a dask nanny, which sets MALLOC_TRIM_THRESHOLD_."""
+    arenas), unless the worker was started by a dask nanny, which sets MALLOC_TRIM_THRESHOLD_. Then drop the
+    resident code pages of LLVM (`drop_code_pages`)."""
     trim = _malloc_trim()
     if trim is not None:
         trim(0)
+    drop_code_pages()
+
+
+CODE_PAGES_OF = ("libllvmlite",)  # shared libraries whose code is mostly run once, when numba starts and loads kernels
+MADV_DONTNEED = 4
+
+
+@functools.cache
+def _madvise():
+    try:
+        madvise = ctypes.CDLL("libc.so.6", use_errno=True).madvise
+    except (OSError, AttributeError):  # not glibc/Linux: nothing to do
+        return None
+    madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+    return madvise
+
+
+def drop_code_pages(libraries: tuple[str, ...] = CODE_PAGES_OF) -> int:
+    """Unmap from this process the resident pages of the executable code of `libraries` (their read-only `r-xp`
+    mappings, madvise MADV_DONTNEED); returns the bytes of the mappings so advised.
+
+    LLVM's start-up (numba's import and its first kernel load) runs code spread over most of `libllvmlite.so`, and
+    those pages stay counted in the worker's resident memory (about 70 MB) although a worker routing with cached
+    kernels never runs them again. Code pages are never written, so a page that is needed again is read back from
+    the page cache (a minor fault); the file's pages stay in the page cache, shared by every process that maps it."""
+    madvise = _madvise()
+    if madvise is None:
+        return 0
+    try:
+        maps = Path("/proc/self/maps").read_text().splitlines()
+    except OSError:  # no /proc: nothing to do
+        return 0
+    dropped = 0
+    for line in maps:
+        fields = line.split(maxsplit=5)
+        if len(fields) == 6 and fields[1] == "r-xp" and any(name in fields[5] for name in libraries):
+            start, end = (int(x, 16) for x in fields[0].split("-"))
+            if madvise(start, end - start, MADV_DONTNEED) == 0:
+                dropped += end - start
+    return dropped

@@ -1,5 +1,6 @@
-"""A routing worker's pictures are drawn in a child process: the same PNGs, errors that name the picture, a child
-that died is started again, and the worker itself never imports matplotlib."""
+"""What keeps a routing worker small. Its pictures are drawn in a child process: the same PNGs, errors that name the
+picture, a child that died is started again, and the worker itself never imports matplotlib. LLVM's code pages,
+run once at start-up, are dropped from its resident memory and come back when needed."""
 
 from __future__ import annotations
 
@@ -74,3 +75,34 @@ def test_a_routing_batch_with_exports_stages_pngs_without_importing_matplotlib(t
     pngs = sorted((tmp_path / "exports").rglob("*.png"))
     assert [p.name for p in pngs] == ["VPIC.convergence.png", "VPIC.png"]
     assert all(p.read_bytes().startswith(b"\x89PNG") and p.stat().st_size > 10_000 for p in pngs)
+
+
+def test_dropping_llvms_code_pages_shrinks_a_worker_and_numba_still_compiles_and_runs():
+    """route_worker.drop_code_pages: the resident code of libllvmlite.so falls, and LLVM runs again when needed."""
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
+            "import numba\n"
+            "from flows.jobs.route_worker import drop_code_pages\n"
+            "def llvm_kb():\n"
+            "    kb, ours = 0, False\n"
+            "    for line in open('/proc/self/smaps'):\n"
+            "        head = line.split()\n"
+            "        if '-' in head[0] and len(head) >= 5:\n"
+            "            ours = len(head) == 6 and head[1] == 'r-xp' and 'libllvmlite' in head[5]\n"
+            "        elif ours and head[0] == 'Rss:':\n"
+            "            kb += int(head[1])\n"
+            "    return kb\n"
+            "@numba.njit\n"
+            "def f(x):\n"
+            "    return 3 * x + 1\n"
+            "assert f(2) == 7\n"
+            "before = llvm_kb()\n"
+            "advised = drop_code_pages()\n"
+            "after = llvm_kb()\n"
+            "@numba.njit\n"
+            "def g(x):\n"
+            "    return x * x - 1\n"
+            "print(before // 1024, after // 1024, advised > 0, f(5), g(4))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    before_mb, after_mb = int(out[0]), int(out[1])
+    assert before_mb >= 20 and after_mb <= before_mb // 4, out  # compiling touched tens of MB; few stay
+    assert out[2:] == ["True", "16", "15"], out  # a compiled kernel runs, and a new one compiles and runs
