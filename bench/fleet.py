@@ -205,6 +205,15 @@ def _host_cpu_s() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
+def _main_thread_cpu_s() -> float:
+    """CPU seconds (user + system) of this process's main thread, where the flow runs; the rest of the process's CPU
+    is its other threads' (the dask client's and fsspec's event loops)."""
+    import threading
+
+    fields = Path(f"/proc/self/task/{threading.main_thread().native_id}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (fields 14, 15)
+
+
 def _warm_numba(root: Path, cube_url: str, options: dict, ids: list[str], exports: bool) -> None:
     """Route one voyage in this process so the numba caches (in the code's __pycache__) exist before workers start."""
     import inspect
@@ -348,10 +357,10 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
                     client.run(worker_cube_reads)  # counts from here: the warm-up meets the cube first
                     run(root, address, ids[: 2 * workers], exports)  # warm-up: imports in the workers
                     _s3_counts(endpoint, reset=True)
-                    cpu0 = _host_cpu_s()
+                    cpu0, main0 = _host_cpu_s(), _main_thread_cpu_s()
                     profiler = _host_profiler(profile_host)
                     seconds = run(root, address, ids, exports)
-                    cpu = _host_cpu_s() - cpu0
+                    cpu, main_cpu = _host_cpu_s() - cpu0, _main_thread_cpu_s() - main0
                     if profiler is not None:
                         profiler.disable()
                         profiler.dump_stats(profile_host.with_suffix(f".{workers}w.prof"))
@@ -361,6 +370,8 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
                     memory = list(client.run(worker_memory).values())
                     peaks = [m["peak"] for m in memory]
                 rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches, memory)
+                print(f"{workers} worker(s): flow host CPU {cpu:.2f} s in all, {main_cpu:.2f} s of it in the flow's "
+                      f"thread, {cpu - main_cpu:.2f} s in its other threads (dask client, fsspec)")
             finally:
                 _stop(cluster[::-1])
     finally:
