@@ -106,3 +106,28 @@ def test_dropping_llvms_code_pages_shrinks_a_worker_and_numba_still_compiles_and
     before_mb, after_mb = int(out[0]), int(out[1])
     assert before_mb >= 20 and after_mb <= before_mb // 4, out  # compiling touched tens of MB; few stay
     assert out[2:] == ["True", "16", "15"], out  # a compiled kernel runs, and a new one compiles and runs
+
+
+def test_kernels_loaded_from_the_cache_leave_llvms_code_pages_dropped():
+    """route_worker.drop_code_pages_after_kernel_loads: a cached kernel loads, runs right, and LLVM's code it ran to
+    load does not stay resident."""
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
+            "from flows.jobs.route_worker import drop_code_pages_after_kernel_loads\n"
+            "from pipeline.routing.geodesy import gc_distance_nm\n"
+            "def llvm_kb():\n"
+            "    kb, ours = 0, False\n"
+            "    for line in open('/proc/self/smaps'):\n"
+            "        head = line.split()\n"
+            "        if '-' in head[0] and len(head) >= 5:\n"
+            "            ours = len(head) == 6 and head[1] == 'r-xp' and 'libllvmlite' in head[5]\n"
+            "        elif ours and head[0] == 'Rss:':\n"
+            "            kb += int(head[1])\n"
+            "    return kb\n"
+            "assert drop_code_pages_after_kernel_loads() and drop_code_pages_after_kernel_loads()  # once is enough\n"
+            "nm = gc_distance_nm(0.0, 0.0, 0.0, 1.0)\n"
+            "print(round(nm, 2), gc_distance_nm.stats.cache_hits.total() if hasattr(gc_distance_nm.stats.cache_hits, 'total') "
+            "else sum(gc_distance_nm.stats.cache_hits.values()), llvm_kb() // 1024)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert abs(float(out[0]) - 60.0) < 0.2, out  # 1° of the equator is 60 NM
+    assert int(out[1]) == 1, out  # loaded from the cache (the worker's case), not compiled
+    assert int(out[2]) <= 8, out  # MB of LLVM's code left resident after the load

@@ -165,6 +165,7 @@ def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: di
     are drawn in this process's child (flows/jobs/picture_process.py, started at the first picture), so this
     process never loads matplotlib."""
     stop_task_profiler()
+    drop_code_pages_after_kernel_loads()
     release_free_memory()  # before the first voyage too: what the imports left resident
     out = []
     for job in jobs:
@@ -233,6 +234,31 @@ def _madvise():
         return None
     madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
     return madvise
+
+
+def drop_code_pages_after_kernel_loads() -> bool:
+    """From now on, drop LLVM's code pages (`drop_code_pages`) after each numba kernel this process loads from the
+    cache. A worker loads about 27 kernels in its first voyage, each load running LLVM code that is not run again;
+    dropped as it goes, that code never piles up, which lowers the worker's peak by about 35 MB. Returns False where
+    numba's cache has no `load_overload` to follow (a numba that changed it: nothing is done)."""
+    from numba.core import caching
+
+    load = getattr(caching.Cache, "load_overload", None)
+    if load is None:
+        return False
+    if getattr(load, "drops_code_pages", False):
+        return True
+
+    @functools.wraps(load)
+    def load_overload(self, *args, **kwargs):
+        try:
+            return load(self, *args, **kwargs)
+        finally:
+            drop_code_pages()
+
+    load_overload.drops_code_pages = True
+    caching.Cache.load_overload = load_overload
+    return True
 
 
 def drop_code_pages(libraries: tuple[str, ...] = CODE_PAGES_OF) -> int:
