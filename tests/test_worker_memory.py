@@ -4,6 +4,7 @@ run once at start-up, are dropped from its resident memory and come back when ne
 
 from __future__ import annotations
 
+import inspect
 import os
 import signal
 import subprocess
@@ -15,6 +16,19 @@ import pytest
 from flows.jobs.picture_process import PictureError, PictureProcess
 from pipeline.export.drawing import UnknownPictureError, draw_here
 
+def llvm_code_kb(pid="self") -> int:
+    """The resident kB of libllvmlite.so's executable code in process `pid`."""
+    kb, ours = 0, False
+    for line in open(f"/proc/{pid}/smaps"):
+        head = line.split()
+        if "-" in head[0] and len(head) >= 5:
+            ours = len(head) == 6 and head[1] == "r-xp" and "libllvmlite" in head[5]
+        elif ours and head[0] == "Rss:":
+            kb += int(head[1])
+    return kb
+
+
+LLVM_CODE_KB = inspect.getsource(llvm_code_kb)  # the same, in a child's code
 HISTORY = {"bfoa": [5.0, 4.0, 4.2, 3.5], "dp_cost": 3.4}
 FLEET = [({"voyage_id": "V1", "status": "ok"}, [{"lat0": 30.0, "lon0": 140.0, "lat1": 32.0, "lon1": 145.0}]),
          ({"voyage_id": "V2", "status": "failed"}, [])]
@@ -38,6 +52,7 @@ def test_a_failed_drawing_says_why_and_the_child_goes_on():
         pid = draw.pid
         assert draw("fleet_map", FLEET, "two voyages").startswith(b"\x89PNG")
         assert draw.pid == pid  # the same child drew after the errors
+        assert llvm_code_kb(pid) <= 8 * 1024  # the land kernels it loaded to draw left no LLVM code resident
     with pytest.raises(UnknownPictureError):
         draw_here("nope")
 
@@ -78,26 +93,18 @@ def test_a_routing_batch_with_exports_stages_pngs_without_importing_matplotlib(t
 
 
 def test_dropping_llvms_code_pages_shrinks_a_worker_and_numba_still_compiles_and_runs():
-    """route_worker.drop_code_pages: the resident code of libllvmlite.so falls, and LLVM runs again when needed."""
+    """worker_memory.drop_code_pages: the resident code of libllvmlite.so falls, and LLVM runs again when needed."""
     code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
             "import numba\n"
-            "from flows.jobs.route_worker import drop_code_pages\n"
-            "def llvm_kb():\n"
-            "    kb, ours = 0, False\n"
-            "    for line in open('/proc/self/smaps'):\n"
-            "        head = line.split()\n"
-            "        if '-' in head[0] and len(head) >= 5:\n"
-            "            ours = len(head) == 6 and head[1] == 'r-xp' and 'libllvmlite' in head[5]\n"
-            "        elif ours and head[0] == 'Rss:':\n"
-            "            kb += int(head[1])\n"
-            "    return kb\n"
+            "from flows.jobs.worker_memory import drop_code_pages\n"
+            + LLVM_CODE_KB +
             "@numba.njit\n"
             "def f(x):\n"
             "    return 3 * x + 1\n"
             "assert f(2) == 7\n"
-            "before = llvm_kb()\n"
+            "before = llvm_code_kb()\n"
             "advised = drop_code_pages()\n"
-            "after = llvm_kb()\n"
+            "after = llvm_code_kb()\n"
             "@numba.njit\n"
             "def g(x):\n"
             "    return x * x - 1\n"
@@ -109,24 +116,16 @@ def test_dropping_llvms_code_pages_shrinks_a_worker_and_numba_still_compiles_and
 
 
 def test_kernels_loaded_from_the_cache_leave_llvms_code_pages_dropped():
-    """route_worker.drop_code_pages_after_kernel_loads: a cached kernel loads, runs right, and LLVM's code it ran to
+    """worker_memory.drop_code_pages_after_kernel_loads: a cached kernel loads, runs right, and LLVM's code it ran to
     load does not stay resident."""
     code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
-            "from flows.jobs.route_worker import drop_code_pages_after_kernel_loads\n"
+            "from flows.jobs.worker_memory import drop_code_pages_after_kernel_loads\n"
             "from pipeline.routing.geodesy import gc_distance_nm\n"
-            "def llvm_kb():\n"
-            "    kb, ours = 0, False\n"
-            "    for line in open('/proc/self/smaps'):\n"
-            "        head = line.split()\n"
-            "        if '-' in head[0] and len(head) >= 5:\n"
-            "            ours = len(head) == 6 and head[1] == 'r-xp' and 'libllvmlite' in head[5]\n"
-            "        elif ours and head[0] == 'Rss:':\n"
-            "            kb += int(head[1])\n"
-            "    return kb\n"
+            + LLVM_CODE_KB +
             "assert drop_code_pages_after_kernel_loads() and drop_code_pages_after_kernel_loads()  # once is enough\n"
             "nm = gc_distance_nm(0.0, 0.0, 0.0, 1.0)\n"
             "print(round(nm, 2), gc_distance_nm.stats.cache_hits.total() if hasattr(gc_distance_nm.stats.cache_hits, 'total') "
-            "else sum(gc_distance_nm.stats.cache_hits.values()), llvm_kb() // 1024)\n")
+            "else sum(gc_distance_nm.stats.cache_hits.values()), llvm_code_kb() // 1024)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert abs(float(out[0]) - 60.0) < 0.2, out  # 1° of the equator is 60 NM
     assert int(out[1]) == 1, out  # loaded from the cache (the worker's case), not compiled

@@ -20,6 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from flows.jobs.worker_memory import drop_code_pages_after_kernel_loads, release_free_memory
 from pipeline.export.drawing import draw_here
 
 CODE_ROOT = Path(__file__).resolve().parents[2]  # the checkout the child imports (the parent's own code)
@@ -111,7 +112,9 @@ def shared() -> PictureProcess:
 
 def serve(requests, replies) -> None:
     """The child's loop: each request (picture name, args) is answered (True, PNG bytes) or (False, its error),
-    until the parent closes `requests`."""
+    until the parent closes `requests`. After each picture it gives back what the drawing freed and LLVM's code pages
+    (flows/jobs/worker_memory.py: the maps' land mask is drawn with numba kernels)."""
+    drop_code_pages_after_kernel_loads()
     while True:
         try:
             name, args = _receive(requests)
@@ -122,6 +125,7 @@ def serve(requests, replies) -> None:
         except Exception as exc:  # the parent records it as that picture's error
             reply = (False, f"{type(exc).__name__}: {exc}")
         _send(replies, reply)
+        release_free_memory()
 
 
 if __name__ == "__main__":
