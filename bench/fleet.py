@@ -120,7 +120,23 @@ def worker_memory() -> dict:
         now[key] = int(value.split()[0]) / 1024.0
     return {"rss": now["Rss"], "pss": now["Pss"], "private": now["Private_Clean"] + now["Private_Dirty"],
             "anonymous": now["Anonymous"], "peak": peak_rss_mb(),
-            "imported": sorted({m.split(".")[0] for m in sys.modules} & set(BIG_LIBRARIES))}
+            "imported": sorted({m.split(".")[0] for m in sys.modules} & set(BIG_LIBRARIES)), "pictures": picture_memory()}
+
+
+def picture_memory() -> dict | None:
+    """In a worker: its picture process's memory (flows/jobs/picture_process.py: Rss, Pss, peak MB), None when it
+    has none running (or the code under test draws in the worker)."""
+    picture_process = sys.modules.get("flows.jobs.picture_process")
+    pid = picture_process.shared().pid if picture_process is not None and hasattr(picture_process, "shared") else None
+    if pid is None:
+        return None
+    rollup = {}
+    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()[1:]:
+        key, value = line.split(":", 1)
+        rollup[key] = int(value.split()[0]) / 1024.0
+    peak = next(int(line.split()[1]) / 1024.0 for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+                if line.startswith("VmHWM:"))
+    return {"rss": rollup["Rss"], "pss": rollup["Pss"], "peak": peak}
 
 
 def baseline_mb() -> tuple[float, float]:
@@ -187,6 +203,15 @@ def _host_cpu_s() -> float:
 
     ru = resource.getrusage(resource.RUSAGE_SELF)
     return ru.ru_utime + ru.ru_stime
+
+
+def _main_thread_cpu_s() -> float:
+    """CPU seconds (user + system) of this process's main thread, where the flow runs; the rest of the process's CPU
+    is its other threads' (the dask client's and fsspec's event loops)."""
+    import threading
+
+    fields = Path(f"/proc/self/task/{threading.main_thread().native_id}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime (fields 14, 15)
 
 
 def _warm_numba(root: Path, cube_url: str, options: dict, ids: list[str], exports: bool) -> None:
@@ -256,12 +281,14 @@ def stored_cycle_mb(root: Path) -> float:
 
 
 def _host_profiler(path: Path | None):
-    """A started cProfile of the flow host (this process) when `--profile-host` asked for one, else None."""
+    """A started cProfile of the flow host (this process) when `--profile-host` asked for one, else None. It counts
+    the process's CPU time (all its threads: the dask client's and fsspec's event loops run beside the flow's), so
+    what the other threads spend shows under the flow's waits."""
     if path is None:
         return None
     import cProfile
 
-    profiler = cProfile.Profile()
+    profiler = cProfile.Profile(time.process_time)
     profiler.enable()
     return profiler
 
@@ -330,10 +357,10 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
                     client.run(worker_cube_reads)  # counts from here: the warm-up meets the cube first
                     run(root, address, ids[: 2 * workers], exports)  # warm-up: imports in the workers
                     _s3_counts(endpoint, reset=True)
-                    cpu0 = _host_cpu_s()
+                    cpu0, main0 = _host_cpu_s(), _main_thread_cpu_s()
                     profiler = _host_profiler(profile_host)
                     seconds = run(root, address, ids, exports)
-                    cpu = _host_cpu_s() - cpu0
+                    cpu, main_cpu = _host_cpu_s() - cpu0, _main_thread_cpu_s() - main0
                     if profiler is not None:
                         profiler.disable()
                         profiler.dump_stats(profile_host.with_suffix(f".{workers}w.prof"))
@@ -343,6 +370,8 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
                     memory = list(client.run(worker_memory).values())
                     peaks = [m["peak"] for m in memory]
                 rows[workers] = (seconds, peaks, counts, cpu, where, reads, caches, memory)
+                print(f"{workers} worker(s): flow host CPU {cpu:.2f} s in all, {main_cpu:.2f} s of it in the flow's "
+                      f"thread, {cpu - main_cpu:.2f} s in its other threads (dask client, fsspec)")
             finally:
                 _stop(cluster[::-1])
     finally:
@@ -373,6 +402,9 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
                   f"{c['distinct_bytes'] / 1e6:.2f} MB, ratio {ratio:.2f}, cache bound {c['max_bytes'] / 2**20:.0f} MB; "
                   f"peak {m['peak']:.0f} MB; at the end Rss {m['rss']:.0f}, Pss {m['pss']:.0f}, private {m['private']:.0f}, "
                   f"anonymous {m['anonymous']:.0f} MB; imported {', '.join(m['imported'])}")
+            if m.get("pictures"):
+                p = m["pictures"]
+                print(f"    its picture process: peak {p['peak']:.0f} MB; at the end Rss {p['rss']:.0f}, Pss {p['pss']:.0f} MB")
     if 1 in rows and 2 in rows:
         print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
     print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))

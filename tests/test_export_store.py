@@ -93,6 +93,33 @@ def test_copies_shared_out_before_the_publish_and_a_failed_run_s_copies_removed(
     assert runs.manifest("r1") == manifest
 
 
+def test_a_publish_of_copied_files_with_their_sizes_lists_nothing_and_empties_the_staging(request):
+    """The run's host knows what its workers staged (name → bytes) and that they copied it: the manifest is made from
+    that, the staged files are deleted by name, and no prefix is listed (hundreds of keys cost the host CPU)."""
+    env = request.getfixturevalue("s3_endpoint")
+    runs = RunExports("s3://jitroute/sized/exports", {"endpoint_url": env["AWS_ENDPOINT_URL"],
+                                                      "key": env["AWS_ACCESS_KEY_ID"], "secret": env["AWS_SECRET_ACCESS_KEY"]})
+    sizes = {f"voyages/V{k}/V{k}.rtz": 10 + k for k in range(5)} | {"fleet_map.png": 3}
+    for n, b in sizes.items():
+        runs.stage("r1", n, b"x" * b)
+    runs.stage("r1", "LOST.rtz", b"staged by a worker whose voyages were given up")
+    runs.copy_staged("r1", sorted(sizes))
+    listed = []
+    find, ls = runs.fs.find, runs.fs.ls
+    runs.fs.find = lambda *a, **k: listed.append(a) or find(*a, **k)
+    runs.fs.ls = lambda *a, **k: listed.append(a) or ls(*a, **k)
+    manifest = runs.publish("r1", only=set(sizes) - {"fleet_map.png"}, copied=True, sizes=sizes)
+    runs.fs.find, runs.fs.ls = find, ls
+    assert listed == []
+    assert manifest == runs.manifest("r1") == {"run_id": "r1", "files": [
+        {"name": n, "bytes": sizes[n]} for n in sorted(sizes) if n != "fleet_map.png"]}
+    assert all(runs.fs.cat_file(f"{runs.run_url('r1')}/{n}") == b"x" * sizes[n] for n in sizes)
+    left = [p.rsplit(".staging-r1/", 1)[1] for p in runs.fs.find(runs._staging("r1"))]
+    assert left == ["LOST.rtz", "fleet_map.png"]  # only what the run did not vouch for stays in the staging …
+    assert runs.discard_stale(set()) == ["r1"] and not runs.fs.exists(runs._staging("r1"))  # … until the next run
+    assert runs.publish("r2", copied=True, sizes={}) is None  # nothing staged, nothing published
+
+
 def test_a_worker_stages_its_voyages_exports_and_returns_only_their_entries(tmp_path):
     import numpy as np
 

@@ -141,9 +141,9 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
     the last store, at most every `store_every_s` seconds, and the rest at the end. With `pictures_of`
     = (run_id, cycle) and exports, workers also draw the run's weather maps (while the voyages route) and its fleet
     map (after them) and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files
-    to the run's folder (`copied`: all copies done). Returns the export errors, the names of the staged files, the
+    to the run's folder (`copied`: all copies done). Returns the export errors, the staged files (name → bytes), the
     number of voyages stored and `copied`."""
-    export_errors, staged, tracks, pending = [], set(), [], {"rows": [], "legs": []}
+    export_errors, staged, tracks, pending = [], {}, [], {"rows": [], "legs": []}  # staged: name → bytes
     done, stored, copied = 0, 0, False
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
 
@@ -158,14 +158,14 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             r = res["route"]
             pending["rows"].append(r)
             pending["legs"].extend(res["legs"])
-            staged.update(f["name"] for f in res.get("staged", []))
+            staged.update((f["name"], f["bytes"]) for f in res.get("staged", []))
             if run_exports is not None and pictures_of is not None:
                 tracks.append((r["voyage_id"], r["status"], run_pictures.track(res["legs"])))
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
             for kind, data in res.get("exports", {}).items():  # only from a worker given no exports root
                 try:  # the voyage ID makes the file name, in the voyage's own folder, or is refused naming the voyage
-                    staged.add(run_exports.stage(r["run_id"], voyage_export_key(r["voyage_id"], SUFFIX[kind]), data))
+                    staged[run_exports.stage(r["run_id"], voyage_export_key(r["voyage_id"], SUFFIX[kind]), data)] = len(data)
                 except (OSError, ExportPathError) as exc:
                     export_errors.append(f"{r['voyage_id']}: {kind}: {exc}")
                     LOG.error("voyage %s: %s export not written: %s", r["voyage_id"], kind, exc)
@@ -199,9 +199,9 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
                 pictures.append(client.submit(run_pictures.stage_fleet_map, exports_to, run_id,
                                               f"run {run_id} · cycle {cycle_label(cycle)}", tracks, pure=False))
             for future in pictures:
-                names, errors = dask_pool.result_or(
+                entries, errors = dask_pool.result_or(
                     future, lambda exc: ([], [f"fleet: pictures: {type(exc).__name__}: {exc}"]))
-                staged.update(names)
+                staged.update((f["name"], f["bytes"]) for f in entries)
                 export_errors.extend(errors)
             if exports_to is not None and staged and not run_exports.local:  # the copies of the publish, shared out
                 names, n = sorted(staged), dask_pool.worker_slots(client)
@@ -278,7 +278,8 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
         run_exports.discard(run_id)
         route_store.fail_run(layout.warehouse, run_id, f"{type(exc).__name__}: {exc}")
         raise
-    manifest = run_exports.publish(run_id, only=out["staged"], copied=out["copied"]) if exports else None
+    manifest = (run_exports.publish(run_id, only=set(out["staged"]), copied=out["copied"], sizes=out["staged"])
+                if exports else None)
     files = [f["name"] for f in manifest["files"]] if manifest else []
     out_url = run_exports.run_url(run_id)
     summary.update(run_id=run_id, exports_dir=out_url if manifest else None,

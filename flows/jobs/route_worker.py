@@ -11,7 +11,6 @@ windows are cached per (store, cycle, content version, window), so a re-ingested
 
 from __future__ import annotations
 
-import ctypes
 import functools
 import json
 import logging
@@ -19,6 +18,8 @@ import traceback
 
 import numpy as np
 
+from flows.jobs import picture_process
+from flows.jobs.worker_memory import drop_code_pages_after_kernel_loads, release_free_memory
 from pipeline.routing import weather_field as wf
 from pipeline.routing.job import RouteJob, WeatherFor, plan_voyage
 from pipeline.routing.plan import Plan
@@ -124,9 +125,10 @@ def copy_staged(exports_to: tuple[str, dict], run_id: str, names: list[str]) -> 
 
 
 def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None = None,
-              exports_to: tuple[str, dict] | None = None) -> dict:
+              exports_to: tuple[str, dict] | None = None, draw=None) -> dict:
     """Route one voyage end to end; a voyage that cannot be routed becomes a `failed` row with the reason. With
-    `exports_to` (the run's exports root and its fsspec options) the export files are staged there, else returned."""
+    `exports_to` (the run's exports root and its fsspec options) the export files are staged there, else returned.
+    `draw` draws the PNGs (pipeline/export/drawing.py; default: in this process)."""
     from pipeline.routing.problem import RoutingInputError
     from pipeline.routing.search_space import VoyageGeometryError
 
@@ -140,9 +142,10 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
     out = {"route": {**plan.route_row(job.run_id), **start_columns(job)}, "legs": plan.leg_rows(job.run_id),
            "exports": {}, "export_errors": {}, "staged": [], "log": []}
     if job.exports and plan.legs:
-        from pipeline.export.bundle import export_plan  # matplotlib and pandas: only workers that export load them
+        from pipeline.export.bundle import export_plan  # lxml: only workers that export load it
+        from pipeline.export.drawing import draw_here
 
-        bundle = export_plan(plan, weather, job.vessel, job.voyage)
+        bundle = export_plan(plan, weather, job.vessel, job.voyage, draw=draw or draw_here)
         out["export_errors"] = dict(bundle.errors)
         if exports_to is None:
             out["exports"] = dict(bundle.files)  # kind → bytes; the caller names and writes them
@@ -157,11 +160,15 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
 def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: dict | None = None,
                 exports_to: tuple[str, dict] | None = None) -> list[dict]:
     """Route a few voyages one after the other; each is isolated (its own try/except and row). `cube_path` is a
-    local path or a URL (`s3://…`, with fsspec `storage_options`); `exports_to` as for route_one."""
+    local path or a URL (`s3://…`, with fsspec `storage_options`); `exports_to` as for route_one. The voyages' PNGs
+    are drawn in this process's child (flows/jobs/picture_process.py, started at the first picture), so this
+    process never loads matplotlib."""
     stop_task_profiler()
+    drop_code_pages_after_kernel_loads()
+    release_free_memory()  # before the first voyage too: what the imports left resident
     out = []
     for job in jobs:
-        out.append(route_one(job, cube_path, storage_options, exports_to))
+        out.append(route_one(job, cube_path, storage_options, exports_to, picture_process.shared()))
         release_free_memory()
     return out
 
@@ -193,20 +200,3 @@ def stop_task_profiler() -> bool:
     worker.loop.add_callback(stop)
     LOG.info("dask worker %s: its task profiler stopped (it held a profile per second of routing)", worker.address)
     return True
-
-
-@functools.cache
-def _malloc_trim():
-    try:
-        return ctypes.CDLL("libc.so.6").malloc_trim
-    except (OSError, AttributeError):  # not glibc: nothing to do
-        return None
-
-
-def release_free_memory() -> None:
-    """Give the memory freed by a voyage back to the system (glibc's malloc_trim, about a millisecond). Without it
-    a worker's resident memory creeps up voyage after voyage (freed weather windows and plots stay in malloc's
-    arenas), unless the worker was started by a dask nanny, which sets MALLOC_TRIM_THRESHOLD_."""
-    trim = _malloc_trim()
-    if trim is not None:
-        trim(0)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.export import weather_map
+from pipeline.export.drawing import Draw, draw_here
 from pipeline.sources.cycles import label as cycle_label
 from storage import cube_window
 from storage.cube_location import locate
@@ -72,13 +73,13 @@ def step_png(cube_path, cycle, step_h: int, var: str) -> bytes:
 
 
 def run_maps_png(cube_path, cycle, variables=("waves", "wind"), step_h: int = 0,
-                 stride: int = RUN_MAP_STRIDE) -> dict[str, bytes]:
-    """A run summary's maps: `variables` at lead `step_h`, the step read once (past the chunk cache: it is drawn in a
-    routing worker) and drawn every `stride` points."""
+                 stride: int = RUN_MAP_STRIDE, draw: Draw = draw_here) -> dict[str, bytes]:
+    """A run summary's maps: `variables` at lead `step_h`, the step read once (past the chunk cache: it is read in a
+    routing worker) and drawn every `stride` points by `draw` (pipeline/export/drawing.py)."""
     for var in variables:
         _check_var(var)
     lat, lon, fields = step_fields(cube_path, cycle, step_h, stride, cache_chunks=False)
-    return {var: weather_map.weather_map_png(lat, lon, fields, var, _title(var, cycle, step_h)) for var in variables}
+    return {var: draw("weather_map", lat, lon, fields, var, _title(var, cycle, step_h)) for var in variables}
 
 
 def animation(cube_path, cycle, var: str, progress=None) -> bytes:

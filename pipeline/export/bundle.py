@@ -2,7 +2,9 @@
 
 Each export stands alone: one that fails is reported by name and the others are still made. The
 caller decides where the bytes go (a run's staging folder, a `--rtz` path), so workers need no shared
-file system and nothing is written for a voyage whose rows never reached the warehouse.
+file system and nothing is written for a voyage whose rows never reached the warehouse. The PNGs are drawn by
+`draw` (pipeline/export/drawing.py: here by default, or by a child process, so a worker never loads matplotlib)
+from plain inputs made here.
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ import json
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from pipeline.export import geojson, plots, rtz
+from pipeline.export import geojson, rtz
+from pipeline.export.drawing import Draw, draw_here
 from pipeline.routing import weather_field as wf
 from pipeline.routing.plan import Plan
 
@@ -42,33 +45,34 @@ def geojson_bytes(plan: Plan, vessel: dict, voyage: dict) -> bytes:
     return json.dumps(geojson.route_to_geojson(named_route(plan, vessel, voyage), plan.legs), indent=1).encode()
 
 
-def route_map_bytes(plan: Plan, vessel: dict, voyage: dict, weather: wf.WeatherField) -> bytes:
-    """The route and its baseline over the wind/wave field met at mid-voyage."""
+def route_map_bytes(plan: Plan, vessel: dict, voyage: dict, weather: wf.WeatherField, draw: Draw = draw_here) -> bytes:
+    """The route and its baseline over the wind/wave field met at mid-voyage (the field's snapshot is cut here: only
+    it, not the voyage's weather, goes to `draw`)."""
     lats = [p[0] for p in plan.waypoints]
     lons = [p[1] for p in plan.waypoints]
     mid = plan.legs[len(plan.legs) // 2]["etd_utc"]
     snap = wf.snapshot(weather, mid, (min(lats), max(lats)), (min(lons), max(lons)))
     base_legs = plan.baseline.legs if plan.baseline is not None else None
-    fig = plots.route_map_figure(named_route(plan, vessel, voyage), plan.legs, base_legs,
-                                 snap if snap["hs_m"] is not None else None)
-    return plots.png_bytes(fig)
+    return draw("route_map", named_route(plan, vessel, voyage), plan.legs, base_legs,
+                snap if snap["hs_m"] is not None else None)
 
 
-def convergence_bytes(plan: Plan) -> bytes:
-    return plots.png_bytes(plots.convergence_figure(plan.history, title=f"{plan.voyage_id}: BFOA best cost per cycle"))
+def convergence_bytes(plan: Plan, draw: Draw = draw_here) -> bytes:
+    return draw("convergence", plan.history, f"{plan.voyage_id}: BFOA best cost per cycle")
 
 
 def export_plan(plan: Plan, weather: wf.WeatherField, vessel: dict, voyage: dict,
-                kinds: Iterable[str] = KINDS) -> ExportBundle:
-    """Every asked-for export of a plan with legs; a failing export is recorded in `errors`, never raised."""
+                kinds: Iterable[str] = KINDS, draw: Draw = draw_here) -> ExportBundle:
+    """Every asked-for export of a plan with legs; a failing export is recorded in `errors`, never raised. `draw`
+    draws the PNGs (pipeline/export/drawing.py)."""
     out = ExportBundle(str(plan.voyage_id))
     if not plan.legs:
         return out
     makers = {
         "rtz": lambda: rtz_bytes(plan, vessel, voyage),
         "geojson": lambda: geojson_bytes(plan, vessel, voyage),
-        "png": lambda: route_map_bytes(plan, vessel, voyage, weather),
-        "convergence": lambda: convergence_bytes(plan),
+        "png": lambda: route_map_bytes(plan, vessel, voyage, weather, draw),
+        "convergence": lambda: convergence_bytes(plan, draw),
     }
     for kind in kinds:
         if kind == "convergence" and plan.history is None:

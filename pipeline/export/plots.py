@@ -7,7 +7,7 @@ dateline is drawn as one piece. Legs are drawn as great circles (8 points per le
 
 Figures come from matplotlib's object API, not pyplot: rendering is Agg, headless and safe in
 worker threads. The `*_figure` functions return the Figure (for notebooks and tests), the
-`*_png` functions write it and return the Path; `png_bytes` renders one to bytes.
+`*_png` functions write it and return the Path, the `*_image` functions return its PNG bytes (`png_bytes`).
 """
 
 from __future__ import annotations
@@ -253,6 +253,12 @@ def route_map_png(path, route: dict, legs: list[dict], baseline_legs: list[dict]
     return _save(route_map_figure(route, legs, baseline_legs, field, title), path)
 
 
+def route_map_image(route: dict, legs: list[dict], baseline_legs: list[dict] | None = None,
+                    field: dict | None = None, title: str | None = None) -> bytes:
+    """`route_map_figure(...)` as PNG bytes."""
+    return png_bytes(route_map_figure(route, legs, baseline_legs, field, title))
+
+
 def convergence_figure(history, title: str | None = None) -> Figure:
     """Best cost per BFOA cycle (and the running best when it differs), with the DP optimum if given.
 
@@ -292,6 +298,10 @@ def convergence_png(path, history, title: str | None = None) -> Path:
     return _save(convergence_figure(history, title), path)
 
 
+def convergence_image(history, title: str | None = None) -> bytes:
+    return png_bytes(convergence_figure(history, title))
+
+
 def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Figure:
     """Every voyage of a run on one map, coloured by status and labelled with its voyage id;
     voyages without legs are listed in a box."""
@@ -329,6 +339,10 @@ def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str
 
 def fleet_map_png(path, routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Path:
     return _save(fleet_map_figure(routes_with_legs, title), path)
+
+
+def fleet_map_image(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> bytes:
+    return png_bytes(fleet_map_figure(routes_with_legs, title))
 
 
 def png_bytes(fig: Figure) -> bytes:

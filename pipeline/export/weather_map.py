@@ -3,19 +3,21 @@
 A map shows the variable's magnitude in colour (knots for wind and currents, metres for Hs) with
 thinned arrows pointing where the air, the waves or the water *go* (wind and waves are stored as
 coming-from directions, so their arrows are turned by 180°), over the land mask's coastlines.
-Input is a plain dict of 2-D arrays on a (lat, lon) grid, as read from one cube step.
+Input is a plain dict of 2-D arrays on a (lat, lon) grid, as read from one cube step. matplotlib is imported only
+when a map is drawn, so the variables' names and magnitudes cost a process nothing.
 """
 
 from __future__ import annotations
 
 import io
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 
-from pipeline.export.plots import _draw_land, _map_axes, png_bytes
 from pipeline.routing.geodesy import KN_PER_MS
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 VARIABLES = ("wind", "waves", "currents")
 ARROWS_X, ARROWS_Y = 36, 18  # arrows across and down the map at most
@@ -41,6 +43,10 @@ def magnitude_and_flow(step: dict, var: str) -> tuple[np.ndarray, np.ndarray, np
 
 def weather_map_figure(lat, lon, step: dict, var: str, title: str) -> Figure:
     """The variable of one step over its whole grid (longitudes drawn −180..180)."""
+    from matplotlib.ticker import MaxNLocator
+
+    from pipeline.export.plots import _draw_land, _map_axes
+
     lat = np.asarray(lat, dtype=np.float64)
     lon = (np.asarray(lon, dtype=np.float64) + 180.0) % 360.0 - 180.0
     bad = {k: np.shape(a) for k, a in step.items() if np.shape(a) != (lat.size, lon.size)}
@@ -75,6 +81,8 @@ def weather_map_figure(lat, lon, step: dict, var: str, title: str) -> Figure:
 
 
 def weather_map_png(lat, lon, step: dict, var: str, title: str) -> bytes:
+    from pipeline.export.plots import png_bytes
+
     return png_bytes(weather_map_figure(lat, lon, step, var, title))
 
 
