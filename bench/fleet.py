@@ -127,7 +127,7 @@ def picture_memory() -> dict | None:
     """In a worker: its picture process's memory (flows/jobs/picture_process.py: Rss, Pss, peak MB), None when it
     has none running (or the code under test draws in the worker)."""
     picture_process = sys.modules.get("flows.jobs.picture_process")
-    pid = picture_process.shared().pid if picture_process is not None and hasattr(picture_process, "shared") else None
+    pid = picture_process.of_this_process().pid if picture_process is not None and hasattr(picture_process, "of_this_process") else None
     if pid is None:
         return None
     rollup = {}

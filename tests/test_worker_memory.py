@@ -83,7 +83,7 @@ def test_a_routing_batch_with_exports_stages_pngs_without_importing_matplotlib(t
             "               run_id='r1', cycle=None, exports=True, options=RoutingOptions(n_lines=6, n_points=7))\n"
             f"out = route_batch([job], None, None, ({str(tmp_path / 'exports')!r}, {{}}))[0]\n"
             "print(out['route']['status'], sorted(f['name'] for f in out['staged']), out['export_errors'],\n"
-            "      'matplotlib' in sys.modules, picture_process.shared().pid is not None)\n")
+            "      'matplotlib' in sys.modules, picture_process.of_this_process().pid is not None)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == ("ok ['voyages/VPIC/VPIC.convergence.png', 'voyages/VPIC/VPIC.geojson', 'voyages/VPIC/VPIC.png', "
                    "'voyages/VPIC/VPIC.rtz'] {} False True"), out

@@ -4,7 +4,7 @@ matplotlib and drawing a map add about 80 MB to a process that holds them; a `da
 would carry that for its whole life. A `PictureProcess` instead starts one child interpreter (`python -m
 flows.jobs.picture_process`, the same code as its parent) at the first picture it is asked for, sends it each
 picture as its name (pipeline/export/drawing.py) and plain arguments, pickled over a pipe, and gets the PNG bytes
-back. A worker keeps one for its life (`shared`: starting one costs about 1.5 s CPU, numba's land kernels and
+back. A worker keeps one for its life (`of_this_process`: starting one costs about 1.5 s CPU, numba's land kernels and
 matplotlib); the child exits when it is closed or when its parent goes away (its input closes). A drawing that
 fails raises PictureError with the child's message; a child that died is started again at the next picture.
 """
@@ -102,7 +102,7 @@ class PictureProcess:
 
 
 @functools.cache
-def shared() -> PictureProcess:
+def of_this_process() -> PictureProcess:
     """This process's picture process, kept between batches and tasks (its child starts at the first picture and is
     closed at exit)."""
     pictures = PictureProcess()

@@ -168,7 +168,7 @@ def route_batch(jobs: list[RouteJob], cube_path: str | None, storage_options: di
     release_free_memory()  # before the first voyage too: what the imports left resident
     out = []
     for job in jobs:
-        out.append(route_one(job, cube_path, storage_options, exports_to, picture_process.shared()))
+        out.append(route_one(job, cube_path, storage_options, exports_to, picture_process.of_this_process()))
         release_free_memory()
     return out
 

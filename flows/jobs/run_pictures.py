@@ -37,7 +37,7 @@ def stage_fleet_map(exports_to: tuple[str, dict], run_id: str, title: str,
     pairs = [({"voyage_id": vid, "status": status}, [dict(zip(TRACK_KEYS, leg)) for leg in legs.tolist()])
              for vid, status, legs in voyages]
     try:
-        png = picture_process.shared()("fleet_map", pairs, title)
+        png = picture_process.of_this_process()("fleet_map", pairs, title)
         root = exports_root(exports_to)
         return [{"name": root.stage(run_id, FLEET_MAP, png), "bytes": len(png)}], []
     except Exception as exc:  # a picture; the run's data does not depend on it
@@ -53,7 +53,7 @@ def stage_weather_maps(exports_to: tuple[str, dict], run_id: str, cube_url: str,
 
     try:
         pngs = weather_maps.run_maps_png(locate(cube_url, storage_options), cycle, WEATHER_VARIABLES,
-                                         draw=picture_process.shared())
+                                         draw=picture_process.of_this_process())
         root = exports_root(exports_to)
         return [{"name": root.stage(run_id, weather_map_name(var, cycle_label), png), "bytes": len(png)}
                 for var, png in pngs.items()], []
