@@ -9,9 +9,10 @@ back. A worker keeps one for its life (`of_this_process`: starting one and drawi
 goes away (its input closes). A drawing that fails raises PictureError with the child's message; a child that died is
 started again at the next picture.
 
-The child stays lean (about 70 MB after its imports, peak about 115 MB): it draws with matplotlib's Figure and Agg
-(no pyplot), its coastlines and great circles come from numpy (pipeline/routing/land_mask.py, sphere.py), and it
-never imports numba, scipy, pandas, xarray, zarr, s3fs or dask (tests/test_worker_memory.py).
+The child stays lean (about 70 MB after its imports, peak 108 MB over bench/fleet.py's 200 voyages): it draws with
+matplotlib's Figure and Agg (no pyplot), its coastlines and great circles come from numpy
+(pipeline/routing/land_mask.py, sphere.py), and it never imports numba, scipy, pandas, xarray, zarr, s3fs or dask
+(tests/test_worker_memory.py).
 """
 
 from __future__ import annotations
