@@ -17,8 +17,9 @@ Targets: scaling 1 → 2 workers ≥ 1.7×; peak worker memory ≤ 300 MB.
 `--s3`: as in production instead: the cube and the exports on a local S3 server (moto, as the test suite's S3
 fixture; bench/s3_counting_server.py counts what it serves), a `dask scheduler` and `dask worker --nthreads 1
 --no-nanny` processes started in an empty folder with no data root. The numba caches are compiled in this process
-before the workers start. Prints besides voyages/min and peak worker MB: cube bytes and GETs per voyage (what
-the S3 server served under `cubes/`), export requests per voyage, and the flow host's CPU per voyage (this
+before the workers start. Prints besides voyages/min and peak worker MB: each worker's picture process (the child
+that draws its PNGs with `--exports`: peak, Rss and Pss at the end) and the two together, cube bytes and GETs per
+voyage (what the S3 server served under `cubes/`), export requests per voyage, and the flow host's CPU per voyage (this
 process: user + system time over the timed run). `--code DIR` runs another checkout's code (e.g. an export of
 the main branch) in this process and in the workers, so before/after figures come from one sitting.
 
@@ -381,13 +382,17 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
     print("worker cube: what the workers fetched from the cube (GET bytes and requests, HEADs) per voyage routed, over "
           "the warm-up and the timed run (every fetch of the cycle); all cube: what the S3 server served under cubes/ "
           "in the timed run to everyone (the flow host's weather maps and cycle checks too) per voyage")
-    print(f"{'workers':>7} {'seconds':>8} {'voy/min':>8} {'peak worker MB':>14} {'worker cube MB/voy':>18} {'GET/voy':>8} "
-          f"{'HEAD/voy':>8} {'all cube MB/voy':>15} {'export req/voy':>14} {'host CPU s/voy':>14}")
+    print("peak worker MB: its RSS high-water mark; +pictures: that plus its picture process's (what a machine must "
+          "hold for one worker, an upper bound: the two peaks need not coincide)")
+    print(f"{'workers':>7} {'seconds':>8} {'voy/min':>8} {'peak worker MB':>14} {'+pictures MB':>12} "
+          f"{'worker cube MB/voy':>18} {'GET/voy':>8} {'HEAD/voy':>8} {'all cube MB/voy':>15} {'export req/voy':>14} "
+          f"{'host CPU s/voy':>14}")
     for w, (seconds, peaks, counts, cpu, where, reads, caches, memory) in rows.items():
         routed, peak = n + 2 * w, max(peaks)
+        together = max(m["peak"] + (m["pictures"] or {}).get("peak", 0.0) for m in memory)
         cube_get = counts.get("GET cubes", {"requests": 0, "bytes": 0})
         export_req = sum(v["requests"] for k, v in counts.items() if k.endswith("exports"))
-        print(f"{w:>7} {seconds:>8.1f} {n / seconds * 60:>8.1f} {peak:>14.0f} "
+        print(f"{w:>7} {seconds:>8.1f} {n / seconds * 60:>8.1f} {peak:>14.0f} {together:>12.0f} "
               f"{sum(r['bytes'] for r in reads) / 1e6 / routed:>18.3f} {sum(r['get'] for r in reads) / routed:>8.1f} "
               f"{sum(r['head'] for r in reads) / routed:>8.1f} {cube_get['bytes'] / 1e6 / n:>15.3f} {export_req / n:>14.1f} "
               f"{cpu / n:>14.4f}")
@@ -405,6 +410,8 @@ def s3_processes(n_voyages: int, sizes: list[int], exports: bool, profile_host: 
             if m.get("pictures"):
                 p = m["pictures"]
                 print(f"    its picture process: peak {p['peak']:.0f} MB; at the end Rss {p['rss']:.0f}, Pss {p['pss']:.0f} MB")
+                print(f"    worker + picture process: peak {m['peak'] + p['peak']:.0f} MB (the sum of their peaks); at "
+                      f"the end Rss {m['rss'] + p['rss']:.0f}, Pss {m['pss'] + p['pss']:.0f} MB")
     if 1 in rows and 2 in rows:
         print(f"scaling 1 → 2 workers: {rows[1][0] / rows[2][0]:.2f}×")
     print("S3 requests by kind in the last run:", json.dumps(rows[sizes[-1]][2], sort_keys=True))

@@ -21,6 +21,7 @@ from pipeline.routing import weather_field as wf
 from pipeline.routing.objectives import LATE_STEP_T, objective, route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.search_space import build_search_space
+from pipeline.routing.sphere import gc_points
 from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solve, solver_instance
 from routing_cases import wavy
 
@@ -131,6 +132,25 @@ def test_a_chord_steps_through_the_same_points_and_courses_as_the_formulas():
             point = geo.chord_point(chord, f)
             assert point == geo.gc_interpolate(lat0, lon0, lat1, lon1, f)
             assert geo.chord_course_deg(chord, *point) == geo.gc_bearing_deg(*point, lat1, lon1)
+
+
+def test_numpys_great_circle_points_are_the_kernels_points():
+    # the maps draw legs with sphere.gc_points (numpy: the picture process never loads numba); the same points as
+    # gc_interpolate, across the dateline, for zero-length legs and at both ends
+    rng = np.random.default_rng(11)
+    lat0, lat1 = rng.uniform(-80.0, 80.0, (2, 3000))
+    lon0, lon1 = rng.uniform(-180.0, 360.0, (2, 3000))
+    lat1[:100], lon1[:100] = lat0[:100], lon0[:100]
+    frac = np.concatenate([[0.0, 1.0], rng.uniform(0.0, 1.0, 2998)])
+    got_lat, got_lon = gc_points(lat0, lon0, lat1, lon1, frac)
+    want = np.array([geo.gc_interpolate(*args) for args in zip(lat0, lon0, lat1, lon1, frac)])
+    np.testing.assert_allclose(got_lat, want[:, 0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose((got_lon - want[:, 1] + 180.0) % 360.0 - 180.0, 0.0, atol=1e-12)
+    assert np.all((got_lon >= -180.0) & (got_lon < 180.0))
+    # broadcast as the maps ask: a column of legs by a row of fractions
+    lat, lon = gc_points(lat0[:5, None], lon0[:5, None], lat1[:5, None], lon1[:5, None], np.linspace(0.0, 1.0, 9))
+    assert lat.shape == lon.shape == (5, 9)
+    np.testing.assert_allclose(lat[:, 0], lat0[:5], atol=1e-12)
 
 
 def test_yokohama_to_long_beach_stays_in_the_north_pacific():

@@ -1,6 +1,7 @@
 """What keeps a routing worker small. Its pictures are drawn in a child process: the same PNGs, errors that name the
-picture, a child that died is started again, and the worker itself never imports matplotlib. LLVM's code pages,
-run once at start-up, are dropped from its resident memory and come back when needed."""
+picture, a child that died is started again, the worker itself never imports matplotlib and the child never imports
+numba (nor scipy or the data libraries). LLVM's code pages, run once at start-up, are dropped from the worker's
+resident memory and come back when needed."""
 
 from __future__ import annotations
 
@@ -29,6 +30,16 @@ def llvm_code_kb(pid="self") -> int:
 
 
 LLVM_CODE_KB = inspect.getsource(llvm_code_kb)  # the same, in a child's code
+
+
+def native_libraries(pid) -> set[str]:
+    """The installed packages whose compiled libraries process `pid` has mapped (site-packages/<package>/…)."""
+    names = set()
+    for line in open(f"/proc/{pid}/maps"):
+        path = line.split(maxsplit=5)[-1]
+        if "site-packages/" in path:
+            names.add(path.split("site-packages/", 1)[1].split("/", 1)[0].split(".")[0])
+    return names
 HISTORY = {"bfoa": [5.0, 4.0, 4.2, 3.5], "dp_cost": 3.4}
 FLEET = [({"voyage_id": "V1", "status": "ok"}, [{"lat0": 30.0, "lon0": 140.0, "lat1": 32.0, "lon1": 145.0}]),
          ({"voyage_id": "V2", "status": "failed"}, [])]
@@ -52,9 +63,55 @@ def test_a_failed_drawing_says_why_and_the_child_goes_on():
         pid = draw.pid
         assert draw("fleet_map", FLEET, "two voyages").startswith(b"\x89PNG")
         assert draw.pid == pid  # the same child drew after the errors
-        assert llvm_code_kb(pid) <= 8 * 1024  # the land kernels it loaded to draw left no LLVM code resident
+        libraries = native_libraries(pid)
+        assert "matplotlib" in libraries and not libraries & {"numba", "llvmlite", "scipy"}, libraries
     with pytest.raises(UnknownPictureError):
         draw_here("nope")
+
+
+# what a worker's child draws: a route map over weather near a coast (land drawn), its convergence, the run's fleet
+# map and a weather map, with the arguments' kinds the worker sends (dicts, lists, numpy arrays)
+CHILD_PICTURES = """
+import numpy as np
+lat, lon = np.arange(30.0, 37.01, 0.5), np.arange(134.0, 142.01, 0.5)
+hs = 2.0 + np.outer(np.sin(np.radians(lat)), np.cos(np.radians(lon)))
+field = dict(lat=lat, lon=lon, hs_m=hs, u_ms=np.full_like(hs, 8.0), v_ms=np.full_like(hs, -3.0))
+legs = [dict(lat0=34.9, lon0=139.8, lat1=34.0, lon1=138.0), dict(lat0=34.0, lon0=138.0, lat1=33.3, lon1=135.5)]
+route = dict(voyage_id='V1', vessel_name='Pacific Trader', solver='bfoa', status='ok', fuel_t=12.5,
+             baseline_fuel_t=13.0, savings_pct=3.8, eta_utc=np.datetime64('2020-12-02T06'))
+step = dict(u10=np.full((15, 17), 6.0), v10=np.full((15, 17), -2.0), swh=hs, mwd=np.full((15, 17), 270.0),
+            uo=np.zeros((15, 17)), vo=np.zeros((15, 17)))
+pictures = [('route_map', (route, legs, legs[:1], field)), ('convergence', (HISTORY,)),
+            ('fleet_map', (FLEET + [(dict(voyage_id='V3', status='late'), legs)], 'run')),
+            ('weather_map', (lat, lon, step, 'waves', 'waves'))]
+"""
+
+
+def test_the_child_draws_every_picture_without_numba_scipy_or_the_data_libraries():
+    """The child's loop (`serve`) in a fresh interpreter, as `python -m flows.jobs.picture_process` runs it: every
+    kind of picture is drawn, and none of the libraries a routing worker holds for its voyages is imported (numba
+    alone cost the child about 70 MB; its coastlines and great circles are numpy's)."""
+    code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
+            "import io\n"
+            "from flows.jobs.picture_process import _receive, _send, serve\n"
+            f"HISTORY, FLEET = {HISTORY!r}, {FLEET!r}\n"
+            + CHILD_PICTURES +
+            "requests, replies = io.BytesIO(), io.BytesIO()\n"
+            "for name, args in pictures:\n"
+            "    _send(requests, (name, args))\n"
+            "requests.seek(0)\n"
+            "serve(requests, replies)\n"
+            "replies.seek(0)\n"
+            "for name, _args in pictures:\n"
+            "    ok, png = _receive(replies)\n"
+            "    print(name, ok, png[:8] == b'\\x89PNG\\r\\n\\x1a\\n' and len(png) > 10_000)\n"
+            "big = ('numba', 'llvmlite', 'scipy', 'pandas', 'pyarrow', 'xarray', 'zarr', 's3fs', 'dask', 'distributed',\n"
+            "       'duckdb', 'matplotlib')\n"
+            "print(*sorted({m.split('.')[0] for m in sys.modules} & set(big)))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
+    assert out[:4] == ["route_map True True", "convergence True True", "fleet_map True True",
+                       "weather_map True True"], out
+    assert out[4] == "matplotlib", out  # drawn with matplotlib, and nothing else of the big libraries
 
 
 def test_a_child_that_died_is_reported_and_started_again():

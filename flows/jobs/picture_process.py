@@ -4,15 +4,22 @@ matplotlib and drawing a map add about 80 MB to a process that holds them; a `da
 would carry that for its whole life. A `PictureProcess` instead starts one child interpreter (`python -m
 flows.jobs.picture_process`, the same code as its parent) at the first picture it is asked for, sends it each
 picture as its name (pipeline/export/drawing.py) and plain arguments, pickled over a pipe, and gets the PNG bytes
-back. A worker keeps one for its life (`of_this_process`: starting one costs about 1.5 s CPU, numba's land kernels and
-matplotlib); the child exits when it is closed or when its parent goes away (its input closes). A drawing that
-fails raises PictureError with the child's message; a child that died is started again at the next picture.
+back. A worker keeps one for its life (`of_this_process`: starting one and drawing its first picture costs about
+0.7 s CPU, matplotlib's import and the land structure's load); the child exits when it is closed or when its parent
+goes away (its input closes). A drawing that fails raises PictureError with the child's message; a child that died is
+started again at the next picture.
+
+The child stays lean (about 70 MB after its imports, peak 108 MB over bench/fleet.py's 200 voyages): it draws with
+matplotlib's Figure and Agg (no pyplot), its coastlines and great circles come from numpy
+(pipeline/routing/land_mask.py, sphere.py), and it never imports numba, scipy, pandas, xarray, zarr, s3fs or dask
+(tests/test_worker_memory.py).
 """
 
 from __future__ import annotations
 
 import atexit
 import functools
+import gc
 import os
 import pickle
 import struct
@@ -20,7 +27,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from flows.jobs.worker_memory import drop_code_pages_after_kernel_loads, release_free_memory
+from flows.jobs.worker_memory import release_free_memory
 from pipeline.export.drawing import draw_here
 
 CODE_ROOT = Path(__file__).resolve().parents[2]  # the checkout the child imports (the parent's own code)
@@ -112,9 +119,9 @@ def of_this_process() -> PictureProcess:
 
 def serve(requests, replies) -> None:
     """The child's loop: each request (picture name, args) is answered (True, PNG bytes) or (False, its error),
-    until the parent closes `requests`. After each picture it gives back what the drawing freed and LLVM's code pages
-    (flows/jobs/worker_memory.py: the maps' land mask is drawn with numba kernels)."""
-    drop_code_pages_after_kernel_loads()
+    until the parent closes `requests`. After each picture, once the reply is sent, it collects the drawing's
+    garbage and gives what it freed back to the system (flows/jobs/worker_memory.py)."""
+    frozen = False
     while True:
         try:
             name, args = _receive(requests)
@@ -125,6 +132,12 @@ def serve(requests, replies) -> None:
         except Exception as exc:  # the parent records it as that picture's error
             reply = (False, f"{type(exc).__name__}: {exc}")
         _send(replies, reply)
+        # a figure's artists, transforms and callbacks reference each other: about 5 MB a map that would otherwise
+        # pile up until the next full collection (a child drawing route maps grew by 40 MB between two)
+        gc.collect()
+        if not frozen:  # what the first picture imported and loaded stays for the child's life: later
+            gc.freeze()  # collections skip it (1 ms instead of 20-30 ms a picture)
+            frozen = True
         release_free_memory()
 
 

@@ -2,8 +2,8 @@
 
 glibc keeps memory a voyage freed in its arenas until `malloc_trim`; and numba's start and kernel loads run code
 spread over most of `libllvmlite.so` (about 70 MB resident) that a worker routing with cached kernels never runs
-again. Both are given back here, by the routing worker (flows/jobs/route_worker.py) and its picture process
-(flows/jobs/picture_process.py), which loads numba's land kernels too.
+again. Both are given back here, by the routing worker (flows/jobs/route_worker.py); its picture process
+(flows/jobs/picture_process.py), which never loads numba, gives back the memory its drawings freed.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 Maps use plain lon/lat axes with a 1/cos(latitude) aspect (locally true shape) and coastlines
 contoured from the `global-land-mask` grid sampled over the map extent. Everything is drawn in
 one longitude frame centred on the voyages (tick labels in °E/°W), so a route across the
-dateline is drawn as one piece. Legs are drawn as great circles (8 points per leg).
+dateline is drawn as one piece. Legs are drawn as great circles (8 points per leg). The land and the great circles
+are numpy's (pipeline/routing/land_mask.py, sphere.py): drawing never loads numba.
 
 Figures come from matplotlib's object API, not pyplot: rendering is Agg, headless and safe in
 worker threads. The `*_figure` functions return the Figure (for notebooks and tests), the
@@ -22,8 +23,8 @@ from matplotlib.transforms import ScaledTranslation
 
 from pipeline.export.voyage import (finite_or_none, iso_utc, unwrap_lon_deg, vessel_label, voyage_id,
                                     waypoint_names, waypoints_deg)
-from pipeline.routing.geodesy import KN_PER_MS, gc_interpolate
-from pipeline.routing.land import MASK_RES_DEG, is_sea
+from pipeline.routing.land_mask import MASK_RES_DEG, is_sea
+from pipeline.routing.sphere import KN_PER_MS, gc_points
 
 STATUS_COLOURS = {"ok": "#2ca02c", "late": "#ff7f0e"}
 FAILED_COLOUR = "#d62728"  # infeasible, failed, error and anything unknown
@@ -54,11 +55,11 @@ def _track(legs: list[dict], centre_deg: float) -> tuple[np.ndarray, np.ndarray]
     """Great-circle polyline through the legs, longitudes continuous and near the centre."""
     if not legs:
         return np.empty(0), np.empty(0)
-    fracs = np.linspace(0.0, 1.0, POINTS_PER_LEG + 1)
-    pts = [(legs[0]["lat0"], legs[0]["lon0"])]
-    for leg in legs:
-        pts += [gc_interpolate(leg["lat0"], leg["lon0"], leg["lat1"], leg["lon1"], f) for f in fracs[1:]]
-    lat, lon = np.array(pts, dtype=np.float64).T
+    fracs = np.linspace(0.0, 1.0, POINTS_PER_LEG + 1)[1:]
+    ends = np.array([[leg["lat0"], leg["lon0"], leg["lat1"], leg["lon1"]] for leg in legs], dtype=np.float64)
+    lat, lon = gc_points(*(ends[:, k, None] for k in range(4)), fracs[None, :])  # (legs, points of a leg)
+    lat = np.concatenate([ends[:1, 0], lat.ravel()])
+    lon = np.concatenate([ends[:1, 1], lon.ravel()])
     return lat, unwrap_lon_deg(lon, centre_deg)
 
 
@@ -145,10 +146,11 @@ def _draw_land(ax, extent) -> None:
     nx = int(min(MAX_LAND_SAMPLES, max(2, (x1 - x0) / MASK_RES_DEG)))
     ny = int(min(MAX_LAND_SAMPLES, max(2, (y1 - y0) / MASK_RES_DEG)))
     lon, lat = np.linspace(x0, x1, nx), np.linspace(y0, y1, ny)
-    land = (~is_sea(lat[:, None], lon[None, :])).astype(np.float32)
+    land = (~is_sea(lat[:, None], lon[None, :])).astype(np.float64)  # the contour generator works in float64: no copy
     if land.any():
-        ax.contourf(lon, lat, land, levels=[0.5, 1.5], colors=["#ddd5c4"], zorder=1)
-        ax.contour(lon, lat, land, levels=[0.5], colors="0.3", linewidths=0.5, zorder=1)
+        filled = ax.contourf(lon, lat, land, levels=[0.5, 1.5], colors=["#ddd5c4"], zorder=1)
+        # the coastline from the fill's contour generator: one copy of the sampled grid held with the figure, not two
+        ax.contour(filled, levels=[0.5], colors="0.3", linewidths=0.5, zorder=1)
 
 
 def _draw_field(fig, ax, cax, field: dict, centre_deg: float, extent) -> None:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.routing.geodesy import KN_PER_MS
+from pipeline.routing.sphere import KN_PER_MS
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

@@ -13,8 +13,7 @@ from typing import NamedTuple
 
 import numba
 
-EARTH_RADIUS_NM = 3440.065
-KN_PER_MS = 1.943844
+from pipeline.routing.sphere import EARTH_RADIUS_NM, KN_PER_MS  # defined without numba, for the picture process
 
 
 @numba.njit(cache=True)

@@ -1,15 +1,8 @@
-"""Land, sea and distance to land from the `global-land-mask` grid (GEBCO-derived, 1/120° ≈ 0.5 NM), usable in numba.
+"""Distance to land, and land or sea, from the `global-land-mask` grid (1/120° ≈ 0.5 NM), usable in numba.
 
-The package's grid (21600 × 43200 booleans, True = ocean, row 0 at 90° N, column 0 at 180° W) takes 933 MB
-decompressed and is never held whole: `build_land_grid()` streams its npz 120 rows at a time into a `LandGrid`
-of about 15 MB, which ships with the code (`land_grid_v1.npz`, 1 MB; `python -m pipeline.routing.land` writes it
-again after a change of the mask package) so processes load it instead of building it:
-
-- 1° × 1° tiles (120 × 120 cells), each all sea, all land or mixed; only mixed tiles keep their cells (packed
-  bits), so `is_sea` is exact at the grid's resolution;
-- for tiles with land in them or next to them, a lower bound of the distance to land per 1/12° block
-  (10 × 10 cells, ≈ 5 NM; 0.1 NM units); tiles farther out get the bound one tile of open water gives
-  (up to `BOUND_CAP_NM`).
+The land structure (`LandGrid`, its loading and `is_sea` in numpy) is pipeline/routing/land_mask.py's, so a process
+that only draws coastlines does not load numba; this module builds the structure from the package's mask
+(`build_land_grid`) and holds the kernels that read it.
 
 Distance to land (NM) is the distance from a point to the nearest land cell (cells as boxes, in the local flat
 metric at the point: a cell is 0.5 NM north–south and 0.5·cos(lat) NM east–west): 0 on land, exact up to the
@@ -20,47 +13,17 @@ over land: from a point at distance d, every point within d − c of it is at le
 
 from __future__ import annotations
 
-import importlib.metadata
-import importlib.util
 import math
-import threading
 import zipfile
 from pathlib import Path
-from typing import NamedTuple
 
 import numba
 import numpy as np
 
-MASK_RES_DEG = 1.0 / 120.0
-CELL_NM = 0.5  # north–south size of a cell (60 NM per degree / 120)
-TILE = 120  # cells per 1° tile side
-BLOCK = 10  # cells per bound block side (1/12°)
-N_ROWS, N_COLS = 180 * TILE, 360 * TILE
-SEA_TILE, LAND_TILE = -1, -2  # LandGrid.slot for tiles without cells kept
-BOUND_UNIT_NM = 0.1
-BOUND_CAP_NM = 25.0
-_MASK_FILE = "globe_combined_mask_compressed.npz"
-
-
-class LandGrid(NamedTuple):
-    """The land structure as kernels see it (see the module docstring)."""
-
-    slot: np.ndarray  # (180, 360) int32: SEA_TILE, LAND_TILE, or the tile's index into `bits`
-    bits: np.ndarray  # (n_mixed, 120, 15) uint8: the mixed tiles' cells, packed big-endian, 1 = sea
-    near: np.ndarray  # (180, 360) int32: the tile's index into `bound`, SEA_TILE (use `far_nm` of its row), LAND_TILE
-    bound: np.ndarray  # (n_near, 12, 12) uint8: lower bound of the distance to land per block, BOUND_UNIT_NM
-    far_nm: np.ndarray  # (180,) float64: lower bound of the distance to land in a tile with open water all round
-
-    @property
-    def nbytes(self) -> int:
-        return int(sum(a.nbytes for a in self))
-
-
-def _mask_path() -> Path:
-    spec = importlib.util.find_spec("global_land_mask")  # finds the package without importing it (its import loads 933 MB)
-    if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("the global-land-mask package is not installed; pip install global-land-mask")
-    return Path(list(spec.submodule_search_locations)[0]) / _MASK_FILE
+# is_sea, land_grid and the file helpers are land_mask's, here too for the routing code and the land tests
+from pipeline.routing.land_mask import (BLOCK, BOUND_CAP_NM, BOUND_UNIT_NM, CELL_NM, LAND_TILE, N_COLS, N_ROWS,
+                                        PACKAGED, SEA_TILE, TILE, LandGrid, _mask_key, _mask_path, _read_saved, is_sea,
+                                        land_grid, save_land_grid)
 
 
 def _tile_rows(path: Path):
@@ -142,44 +105,6 @@ def build_land_grid(path: Path | None = None) -> LandGrid:
     return LandGrid(slot=slot, bits=bits, near=near, bound=bound, far_nm=far_nm)
 
 
-_GRID: LandGrid | None = None
-_GRID_LOCK = threading.Lock()  # a worker's threads load it once between them
-_CACHE_NAME = "land_grid_v1.npz"
-PACKAGED = Path(__file__).with_name(_CACHE_NAME)  # shipped with the code: workers load 1 MB instead of building
-
-
-def _mask_key(mask_path: Path) -> str:
-    """What a saved LandGrid was built from: the package version and the mask file's size."""
-    return f"global-land-mask {importlib.metadata.version('global-land-mask')}, {mask_path.stat().st_size} bytes"
-
-
-def save_land_grid(grid: LandGrid, path: Path, key: str) -> None:
-    """Write `grid` to `path` (compressed npz, about 1 MB) with the key of the mask it was built from."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, key=key, **grid._asdict())
-    tmp.replace(path)
-
-
-def _read_saved(path: Path, key: str) -> LandGrid | None:
-    if not path.exists():
-        return None
-    with np.load(path) as z:
-        return LandGrid(**{k: z[k] for k in LandGrid._fields}) if str(z["key"]) == key else None
-
-
-def land_grid() -> LandGrid:
-    """The process's LandGrid: the one shipped with the code (`land_grid_v1.npz` beside this module) when it was
-    made from the installed mask, else built once (a few seconds, about 100 MB at the peak)."""
-    global _GRID
-    if _GRID is None:
-        with _GRID_LOCK:
-            if _GRID is None:
-                mask_path = _mask_path()
-                _GRID = _read_saved(PACKAGED, _mask_key(mask_path)) or build_land_grid(mask_path)
-    return _GRID
-
-
 @numba.njit(cache=True)
 def cell_of_nb(lat, lon):
     """(row, column) of the cell holding (lat, lon): row 0 at 90° N, column 0 at 180° W."""
@@ -199,12 +124,6 @@ def cell_is_sea_nb(grid, i, j):
         return False
     jj = j % TILE
     return (grid.bits[s, i % TILE, jj >> 3] >> (7 - (jj & 7))) & 1 == 1
-
-
-@numba.njit(cache=True)
-def is_sea_nb(grid, lat, lon):
-    i, j = cell_of_nb(lat, lon)
-    return cell_is_sea_nb(grid, i, j)
 
 
 @numba.njit(cache=True)
@@ -267,26 +186,12 @@ def _distances(grid, lat, lon, limit_nm, out):
         out[k] = distance_to_land_nb(grid, lat[k], lon[k], limit_nm)
 
 
-@numba.njit(cache=True)
-def _sea(grid, lat, lon, out):
-    for k in range(lat.size):
-        out[k] = is_sea_nb(grid, lat[k], lon[k])
-
-
 def distance_to_land_nm(lat, lon, limit_nm: float = BOUND_CAP_NM) -> np.ndarray:
     """Vectorised distance (NM) to the nearest land cell; values ≥ `limit_nm` mean "at least that far"."""
     lat, lon = np.broadcast_arrays(np.asarray(lat, np.float64), np.asarray(lon, np.float64))
     out = np.empty(lat.shape)
     _distances(land_grid(), np.ascontiguousarray(lat).ravel(), np.ascontiguousarray(lon).ravel(), float(limit_nm),
                out.reshape(-1))
-    return out
-
-
-def is_sea(lat, lon) -> np.ndarray:
-    """Vectorised: True where (lat, lon) is open water."""
-    lat, lon = np.broadcast_arrays(np.asarray(lat, np.float64), np.asarray(lon, np.float64))
-    out = np.empty(lat.shape, bool)
-    _sea(land_grid(), np.ascontiguousarray(lat).ravel(), np.ascontiguousarray(lon).ravel(), out.reshape(-1))
     return out
 
 
