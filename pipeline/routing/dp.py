@@ -64,7 +64,7 @@ from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_n
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 from pipeline.routing.reachable_weather import WINDOW_SLACK_H, earliest_arrival_nb, reachable_ranges_nb
 
-PRUNE_BINS = 4096  # time bins of dp_exact_nb's look-up of the candidates made (up to the deadline)
+PRUNE_BINS = 16384  # time bins of dp_exact_nb's look-up of the candidates made (up to the deadline)
 
 
 @numba.njit(cache=True)
