@@ -13,7 +13,8 @@ change with time; in time-varying weather it is the one assumption of this solve
 passing storm can be cheaper, and a weather limit can block a leg started at 116.7 h that is open at 118.7 h),
 so it is exact only over the wait-free plans of weather that holds still; tests/test_routing_exact.py checks it
 against exhaustive enumeration on small graphs with moving storms, where it happens to hold. There is no merging
-of labels into time buckets. `DpOptions(slot_h=...)` selects the DP that needs no such assumption
+of labels into time buckets. A leg is not sailed when a label already made at its end is sure to drop the one it
+would make (`dp_exact_nb`): that changes the legs sailed, never the labels kept. `DpOptions(slot_h=...)` selects the DP that needs no such assumption
 (dp_grid.py): departures from nodes on a time grid, with waiting; exact over that space, its plans wait.
 
 ε-trimming (`DpOptions.gap` > 0): sorted by time, a label is kept only when its f − e·t is more than ε below
