@@ -246,18 +246,31 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
     skip = skip_dropped and buckets == 0
     made = np.empty((P if skip else 0, PRUNE_BINS + 1))  # per node, the least g made so far per time bin
     bin_h = max(deadline - t_dep_h, 1e-6) / PRUNE_BINS
+    S = 2 * max_shift + 1
+    leg_nm, leg_tau, leg_phi = np.empty((P, S)), np.empty((P, S)), np.empty((P, S))
     for i in range(L2 - 1):
         n_c = 0
         made[:] = np.inf
         # the line's labels by time, all nodes together (see skip_dropped)
         by_time = np.argsort(kt[line_lo:line_hi], kind="mergesort") + line_lo
+        # the line's legs once: length, least hours and least fuel per NM over the settings
+        for a in range(P):
+            for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                s = a2 - a + max_shift
+                leg_nm[a, s] = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
+                leg_tau[a, s], leg_phi[a, s] = tau[i, a, s].min(), phi[i, a, s].min()
         for j in by_time:
             a, t0, f0 = knode[j], kt[j], kf[j]
             for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, a2]:
                     continue
-                d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
                 s = a2 - a + max_shift
+                d_nm = leg_nm[a, s]
+                # every setting at once first: at their least hours and fuel (the bound only grows as hours shrink)
+                lb = f0 + d_nm * leg_phi[a, s] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                                                                  deadline - (t0 + d_nm * leg_tau[a, s]))
+                if _priced_out(o, lb, upper, tol, on_time):
+                    continue
                 for r in range(R):
                     # the leg at its least hours and fuel first: no sailing when even that prices the label out
                     t1 = t0 + d_nm * tau[i, a, s, r]
