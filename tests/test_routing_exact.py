@@ -16,7 +16,8 @@ import pytest
 
 from routing_cases import MODEL, field, moving_storm, problem, wavy
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.dp import DpOptions, finish_bounds, fuel_to_finish_lb
+from pipeline.routing.dp import (DpOptions, _fuel_budget_t, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures,
+                                 reachable_windows, trim_eps)
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solve, solver_instance
@@ -85,6 +86,34 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
     assert best - 1e-9 <= trimmed.cost <= best * (1.0 + GAP) + 1e-9, (trimmed.cost, best)
     if rta == "impossible":
         assert plan.status == "late"
+
+
+@pytest.mark.parametrize("kind, obj, gap, n", [("storm", "jit", 0.0, 1), ("storm", "jit", 0.001, 2),
+                                                ("storm-limit", "thesis", 0.001, 4), ("current", "jit", 0.01, 5)])
+def test_skipping_legs_whose_label_would_be_dropped_keeps_the_same_labels(kind, obj, gap, n):
+    """dp_exact_nb does not sail a leg whose candidate a candidate made before it is sure to drop: the labels kept and
+    the plan are bit for bit those of sailing every leg, with fewer legs sailed."""
+    pr = problem(DEP, (34.0, -146.0), 70.0, rpm_options=(70, 80, 90, 100), objective=obj, n_lines=6, n_points=9,
+                 max_shift=2, d_point_nm=20.0, max_hs_m=4.5 if kind == "storm-limit" else None)
+    space = pr.search_space()
+    fld = _weather(kind, n)
+    inst, _ = solver_instance(pr, space, fld)
+    base = solve(pr, fld, solver="gc", space=space, continuous=False)
+    inst.f_target = max(base.fuel_t, 1e-6)  # as solve() sets it
+    upper = base.cost if base.status == "ok" else math.inf
+    ld = latest_departures(inst)
+    on_time = upper < math.inf
+    lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
+                                                 _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf,
+                                                 per_leg=True)
+    eps = trim_eps(inst, gap, upper, lams, m_lam, t_min)
+    args = (inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams, m_lam, t_min, tau, phi, ld, eps, 0, 0.0)
+    *skipping, legs_skipping, kept_skipping = dp_exact_nb(*args, True)
+    *every, legs_every, kept_every = dp_exact_nb(*args, False)
+    assert np.isfinite(every[2]) and kept_every > 20
+    assert kept_skipping == kept_every
+    assert (skipping[0] == every[0]).all() and (skipping[1] == every[1]).all() and skipping[2] == every[2]
+    assert legs_skipping < legs_every
 
 
 def _case(kind, rta, obj, rpms, n):

@@ -13,7 +13,8 @@ change with time; in time-varying weather it is the one assumption of this solve
 passing storm can be cheaper, and a weather limit can block a leg started at 116.7 h that is open at 118.7 h),
 so it is exact only over the wait-free plans of weather that holds still; tests/test_routing_exact.py checks it
 against exhaustive enumeration on small graphs with moving storms, where it happens to hold. There is no merging
-of labels into time buckets. `DpOptions(slot_h=...)` selects the DP that needs no such assumption
+of labels into time buckets. A leg is not sailed when a label already made at its end is sure to drop the one it
+would make (`dp_exact_nb`): that changes the legs sailed, never the labels kept. `DpOptions(slot_h=...)` selects the DP that needs no such assumption
 (dp_grid.py): departures from nodes on a time grid, with waiting; exact over that space, its plans wait.
 
 ε-trimming (`DpOptions.gap` > 0): sorted by time, a label is kept only when its f − e·t is more than ε below
@@ -63,6 +64,8 @@ from pipeline.routing.contract import Found
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 from pipeline.routing.reachable_weather import WINDOW_SLACK_H, earliest_arrival_nb, reachable_ranges_nb
+
+PRUNE_BINS = 16384  # time bins of dp_exact_nb's look-up of the candidates made (up to the deadline)
 
 
 @numba.njit(cache=True)
@@ -167,13 +170,31 @@ def _priced_out(o, fuel_lb, upper, tol, on_time):
 
 
 @numba.njit(cache=True)
+def _prefix_min(tree, row, n):
+    """The least value put at positions 1..n of the prefix-minimum (Fenwick) tree tree[row]."""
+    best = np.inf
+    while n > 0:
+        best = min(best, tree[row, n])
+        n -= n & -n
+    return best
+
+
+@numba.njit(cache=True)
+def _put_min(tree, row, n, val):
+    """Put val at position n (1-based) of the prefix-minimum tree tree[row]."""
+    while n < tree.shape[1]:
+        tree[row, n] = min(tree[row, n], val)
+        n += n & -n
+
+
+@numba.njit(cache=True)
 def time_span_nb(t, t_lo, t_span, buckets):
     """Which of `buckets` equal spans of [t_lo, t_lo + t_span] the time t falls in (the bucketed DPs' labels)."""
     return min(int((t - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
 
 
 @numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, buckets=0, lam_t=0.0):
+def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, buckets=0, lam_t=0.0, skip_dropped=True):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
@@ -186,7 +207,17 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
 
     With `buckets` > 0 (approximate, for local searches: bfoa's polish) a node keeps at most that many labels:
     the line's candidate times are cut into `buckets` equal spans and a span keeps its label of least
-    f − e·t + lam_t·t, lam_t (t/h) the price of time."""
+    f − e·t + lam_t·t, lam_t (t/h) the price of time.
+
+    Without buckets (and with `skip_dropped`) a leg is not sailed either when the candidate B it would make is sure
+    to be dropped: when a candidate A made before it at the same node arrives before B can (before t0 + d·τ) with
+    g_A = f − e·t no more than B can have, g0 + d·(φ − e·τ) (the fuel rate is at least φ/τ, so fuel − e·hours ≥
+    (φ/τ − e)·hours ≥ d·(φ − e·τ) when φ ≥ e·τ). B is then dropped by the keep rule below whether A is kept (g_B ≥
+    g_A ≥ the least kept g before B) or not (a label kept before A has g ≤ g_A + eps ≤ g_B + eps), and a dropped
+    candidate changes nothing else: the labels kept, so the plan, are the same, only fewer legs are sailed. The
+    candidates made so far are looked up per node in a prefix-minimum tree over time bins (`PRUNE_BINS` up to the
+    deadline), counting only bins wholly before t0 + d·τ; the line's labels are expanded in time order, so that the
+    earlier candidates, the ones that can drop others, are mostly made first."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
@@ -212,15 +243,34 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
     cpar, cnode, cr = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
     out = np.empty(N_LEG_OUT)
     n_legs = 0
+    skip = skip_dropped and buckets == 0
+    made = np.empty((P if skip else 0, PRUNE_BINS + 1))  # per node, the least g made so far per time bin
+    bin_h = max(deadline - t_dep_h, 1e-6) / PRUNE_BINS
+    S = 2 * max_shift + 1
+    leg_nm, leg_tau, leg_phi = np.empty((P, S)), np.empty((P, S)), np.empty((P, S))
     for i in range(L2 - 1):
         n_c = 0
-        for j in range(line_lo, line_hi):
+        made[:] = np.inf
+        # the line's labels by time, all nodes together (see skip_dropped)
+        by_time = np.argsort(kt[line_lo:line_hi], kind="mergesort") + line_lo
+        # the line's legs once: length, least hours and least fuel per NM over the settings
+        for a in range(P):
+            for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+                s = a2 - a + max_shift
+                leg_nm[a, s] = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
+                leg_tau[a, s], leg_phi[a, s] = tau[i, a, s].min(), phi[i, a, s].min()
+        for j in by_time:
             a, t0, f0 = knode[j], kt[j], kf[j]
             for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, a2]:
                     continue
-                d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
                 s = a2 - a + max_shift
+                d_nm = leg_nm[a, s]
+                # every setting at once first: at their least hours and fuel (the bound only grows as hours shrink)
+                lb = f0 + d_nm * leg_phi[a, s] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                                                                  deadline - (t0 + d_nm * leg_tau[a, s]))
+                if _priced_out(o, lb, upper, tol, on_time):
+                    continue
                 for r in range(R):
                     # the leg at its least hours and fuel first: no sailing when even that prices the label out
                     t1 = t0 + d_nm * tau[i, a, s, r]
@@ -230,6 +280,11 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                                                                       deadline - t1)
                     if _priced_out(o, lb, upper, tol, on_time):
                         continue
+                    if skip and tau[i, a, s, r] > 0.0 and phi[i, a, s, r] >= e * tau[i, a, s, r]:
+                        g_lb = f0 - e * t0 + d_nm * (phi[i, a, s, r] - e * tau[i, a, s, r])
+                        q = min(int((t1 - t_dep_h) / bin_h), PRUNE_BINS)  # bins 0..q − 1 end before t1
+                        if q > 0 and _prefix_min(made, a2, q) <= g_lb - 1e-12 * abs(g_lb):
+                            continue  # a candidate made already will drop the one this leg makes
                     sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
                     n_legs += 1
                     if out[CODE] != OK:
@@ -248,6 +303,9 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                         cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
                     ct[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = t1, f1, j, a2, r
                     n_c += 1
+                    q = int((t1 - t_dep_h) / bin_h)
+                    if skip and 0 <= q < PRUNE_BINS:
+                        _put_min(made, a2, q + 1, f1 - e * t1)
         # per node, by arrival time: keep a label only when it beats every earlier one on f − e·t
         order = np.argsort(ct[:n_c], kind="mergesort")
         by_node = np.argsort(cnode[:n_c][order], kind="mergesort")  # stable: time order kept inside each node
