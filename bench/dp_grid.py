@@ -2,12 +2,15 @@
 
 Per instance and grid step: the grid DP's CPU time (the thread's, one core, after compilation), the legs it
 sailed, the hours its plan waits, and its cost against the wait-free label DP's stored reference
-(bench/optima.json, certified within 0.1 % under the label DP's dominance rule). The two solve different
-decision spaces: the grid's plans leave every node on the grid (waiting at the heave-to rate from arrival to the
-next grid time), so a plan that was just on time can be late there; a cost below the reference means waiting
-won fuel. Always exits 0.
+(bench/optima.json, certified within 0.1 % under the label DP's dominance rule). A line's departure times are the
+grid and the times the known wait-free plans leave it (the baseline and the incumbent: BFOA's, seed 1, or with
+`--incumbent reference` the stored reference plan); a ship arriving between two waits for the next one (at the
+heave-to rate), so other plans pay rounding waits; a cost below the reference means waiting won fuel.
+`--wait-free-first` times what `jitroute route --solver dp` runs by default: the label DP first (pruned by the
+incumbent's cost), its plan's times joining the grid. Always exits 0.
 
     .venv/bin/python bench/dp_grid.py [--only NAME ...] [--slot-h 1.0 ...] [--max-wait-h 0] [--gap 0.001]
+                                      [--wait-free-first] [--incumbent bfoa|reference]
 """
 
 from __future__ import annotations
