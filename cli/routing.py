@@ -97,10 +97,12 @@ def register(app: typer.Typer) -> None:
         solver: str = typer.Option("bfoa", help="bfoa | dp | astar | gc | rhumb (gc/rhumb: the constant-speed voyage "
                                                 "along the great circle / rhumb line)."),
         solver_option: Optional[list[str]] = typer.Option(
-            None, "--solver-option", help="NAME=VALUE of the solver's own options, repeatable (e.g. gap=0 for an "
-                                          "exact dp; dp is certified within 0.1 % by default in weather that holds "
-                                          "still; slot_h=1 max_wait_h=12 makes it the DP that is exact when the "
-                                          "weather changes, its plan heaving to at nodes on a 1 h grid)."),
+            None, "--solver-option", help="NAME=VALUE of the solver's own options, repeatable. dp by default: "
+                                          "certified within 0.1 % over plans that may heave to at a node while the "
+                                          "weather changes (departures on a 1 h grid and at the wait-free DP's "
+                                          "times, waits up to 6 h more: slot_h=1 max_wait_h=6); gap=0 keeps every "
+                                          "label; slot_h=none is the wait-free DP alone (exact in weather that holds "
+                                          "still)."),
         seed: int = typer.Option(1, help="Random seed of the BFOA (same seed, same plan)."),
         objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),

@@ -1,7 +1,8 @@
 """The grid DP (dp_grid.py) against exhaustive enumeration of its own decision space on small graphs.
 
-The space: a node per line, an engine setting per leg, and at each node a departure on the grid
-t_dep + k·slot_h: the first slot after arriving, or up to `n_wait` slots later (waiting at `wait_tph`). The
+The space: a node per line, an engine setting per leg, and at each node a departure at one of its line's times
+(the grid t_dep + k·slot_h and the departures of the wait-free plans the DP was given): the first after arriving,
+or one up to `max_wait_h` later (waiting at `wait_tph`). The
 enumeration below walks every route × setting × wait depth first with the legs' kernel and the objective; it
 shares nothing with the DP but those. The DP keeping every state must equal it to rounding, and the DP with a
 gap must be within that gap. Weather: static, storms moving across the route (with and without Hs/wind limits),
@@ -23,6 +24,7 @@ from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
 from pipeline.export.rtz import route_to_rtz, validate_rtz
 from pipeline.routing.dp import DpOptions
+from pipeline.routing.dp_grid import line_times
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.objectives import LATE_STEP_T, route_cost_nb
 from pipeline.routing.savings import solver_instance
@@ -33,12 +35,14 @@ GAP = 0.02
 
 
 @numba.njit(cache=True)
-def _enumerate_nb(g, v, w, o, slot_h, n_wait, wait_tph):
-    """Least cost over every plan of the grid space (inf: none), depth first."""
+def _enumerate_nb(g, v, w, o, times, max_wait_h, wait_tph):
+    """Least cost over every plan of the grid space (inf: none), depth first: leave line i at a time of
+    times[i] from the first at or after arriving up to max_wait_h later."""
     L2, P = g.lat.shape
     R = v.rpm_options.shape[0]
     c = P // 2
-    n_choice = (n_wait + 1) * P * R
+    K = times.shape[1]
+    n_choice = K * P * R
     choice = np.full(L2, -1, np.int64)
     t = np.zeros(L2)
     f = np.zeros(L2)
@@ -55,9 +59,13 @@ def _enumerate_nb(g, v, w, o, slot_h, n_wait, wait_tph):
         q, b, r = choice[i] // (P * R), (choice[i] // R) % P, choice[i] % R
         if (i == L2 - 2 and b != c) or not g.edge_ok[i, node[i], b]:
             continue
-        k = max(0, int(math.ceil((t[i] - o.t_dep_h) / slot_h - 1e-9))) + q
-        td = o.t_dep_h + k * slot_h
-        if td - o.t_dep_h > o.max_hours:
+        k0 = 0
+        while k0 < K and times[i, k0] < t[i] - 1e-9:
+            k0 += 1
+        if k0 + q >= K:
+            continue
+        td = times[i, k0 + q]
+        if td > times[i, k0] + max_wait_h + 1e-9 or td - o.t_dep_h > o.max_hours:
             continue
         fw = f[i] + wait_tph * (td - t[i])
         lk.sail_leg_nb(g.lat[i, node[i]], g.lon[i, node[i]], g.lat[i + 1, b], g.lon[i + 1, b], td, v.rpm_options[r],
@@ -136,7 +144,8 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
     inst, base = _instance(kind, rta, obj, rpms, n, n_lines)
     wait_tph = 0.3
-    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, slot_h, int(max_wait_h / slot_h), wait_tph)
+    times = line_times(inst, [(base.nodes, base.rpm_idx)] if base.ok else [], slot_h)  # the grid + the baseline's
+    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, times, max_wait_h, wait_tph)
     dp = SOLVERS["dp"]
     exact = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
                                                             incumbent=None))
@@ -148,11 +157,39 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     assert got == pytest.approx(best, rel=1e-12, abs=1e-12), (got, best)
     assert all(w <= (slot_h + max_wait_h) + 1e-9 for w in exact.wait_h[1:])  # rounding + the extra waits allowed
     trimmed = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
-                                                              gap=GAP))
+                                                              gap=GAP, incumbent=None))
     cost = _sail_with_waits(inst, trimmed.nodes, trimmed.rpm_idx, trimmed.wait_h, wait_tph)
     assert best - 1e-9 <= cost <= best * (1.0 + GAP) + 1e-9, (cost, best)
     if rta == "impossible":  # least late: every plan is late, the DP compares late plans
         assert best >= (LATE_STEP_T if obj == "jit" else 9999.9)
+
+
+@pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASES,
+                         ids=[f"{c[0]}-{c[1]}-{c[2]}-{c[3]}-{len(c[4])}rpm" for c in CASES])
+def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optimum(kind, rta, obj, waits, rpms, n):
+    """What `--solver dp` runs by default: the label DP first, then the grid DP over the grid and the departure
+    times of the baseline and of the label DP's plan. Equal to enumeration of that space, never dearer than the
+    label DP's wait-free plan (which lies in it), and it finds the waiting plans no wait-free plan can match."""
+    slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)
+    n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
+    inst, base = _instance(kind, rta, obj, rpms, n, n_lines)
+    wait_tph = 0.3
+    dp = SOLVERS["dp"]
+    label = dp.search(inst, base, seed=1, options=DpOptions(incumbent=None))
+    plans = [(base.nodes, base.rpm_idx)] if base.ok else []
+    if label.nodes is not None:
+        plans.append((label.nodes, label.rpm_idx))
+    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, plans, slot_h),
+                         max_wait_h, wait_tph)
+    got = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
+                                                          wait_free_first=True, incumbent=None))
+    if not math.isfinite(best):
+        assert got.nodes is None and label.nodes is None
+        return
+    cost = _sail_with_waits(inst, got.nodes, got.rpm_idx, got.wait_h, wait_tph)
+    assert cost == pytest.approx(best, rel=1e-12, abs=1e-12), (cost, best)
+    if label.nodes is not None:
+        assert cost <= evaluate(inst, label.nodes, label.rpm_idx)[0] + 1e-9
 
 
 def test_the_window_cases_open_and_close():
@@ -201,8 +238,9 @@ def test_route_carries_the_grid_dps_waits(limits):
     assert plan.hours == pytest.approx(sum(g["hours"] + g["wait_h"] for g in plan.legs))
     assert plan.fuel_t == pytest.approx(sum(g["fuel_t"] + g["wait_fuel_t"] for g in plan.legs))
     assert abs(float((t - np.datetime64(pr.depart_utc, "s")) / np.timedelta64(1, "s")) / 3600 - plan.hours) < 1e-3
-    inst, _ = _instance("storm-window", "loose", "jit", (70, 85, 100), 0, 2)
-    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, 2.0, 6, 0.3)
+    inst, base = _instance("storm-window", "loose", "jit", (70, 85, 100), 0, 2)
+    assert not base.ok  # so the grid is the 2 h grid alone
+    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 2.0), 12.0, 0.3)
     changes = (limits.change_cost_t * plan.n_engine_changes) if limits is not None else 0.0
     assert plan.cost == pytest.approx(best + changes, rel=1e-9)
     if limits is not None:

@@ -74,7 +74,8 @@ def test_every_solver_is_never_worse_than_constant_speed(solver, case):
     weather, rpm_rta = CASES[case]
     pr = problem(DEP, ARR, _rta_h(rpm_rta), n_lines=6, n_points=7)
     rpm_b, hours_b, fuel_b = _constant_speed(pr, weather, SOLVERS[solver].base)
-    opts = FAST if solver == "bfoa" else None
+    # the product's options (what `jitroute route --solver NAME` runs); bfoa's cut short to keep the suite quick
+    opts = FAST if solver == "bfoa" else SOLVERS[solver].make_options(RoutingOptions(solver=solver).solver_overrides())
     plan = solve(pr, weather, solver=solver, seed=3, options=opts, limits=LIMITS, savings=True)
     assert plan.legs, plan.reason
     if hours_b <= pr.t_req_h + 1e-6:  # the constant speed is on time: so is the plan, on no more fuel
@@ -115,7 +116,9 @@ def test_unknown_solver_and_options_are_refused_before_routing():
         SOLVERS["dp"].make_options({"gapp": "0"})
     with pytest.raises(UnknownSolverError, match="expected a value like"):
         SOLVERS["dp"].make_options({"gap": "tight"})
-    assert SOLVERS["dp"].make_options(RoutingOptions(solver="dp").solver_overrides()).gap == 1e-3
+    product_dp = SOLVERS["dp"].make_options(RoutingOptions(solver="dp").solver_overrides())
+    assert (product_dp.gap, product_dp.slot_h, product_dp.wait_free_first) == (1e-3, 1.0, True)
+    assert SOLVERS["dp"].make_options({"slot_h": "none"}).slot_h is None  # the wait-free label DP alone
     assert SOLVERS["dp"].make_options({"gap": "0"}).gap == 0.0
     pr = problem(DEP, ARR, 60.0, n_lines=4, n_points=5)
     with pytest.raises(RoutingInputError, match="unknown solver"):

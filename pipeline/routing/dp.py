@@ -15,7 +15,9 @@ so it is exact only over the wait-free plans of weather that holds still; tests/
 against exhaustive enumeration on small graphs with moving storms, where it happens to hold. There is no merging
 of labels into time buckets. A leg is not sailed when a label already made at its end is sure to drop the one it
 would make (`dp_exact_nb`): that changes the legs sailed, never the labels kept. `DpOptions(slot_h=...)` selects the DP that needs no such assumption
-(dp_grid.py): departures from nodes on a time grid, with waiting; exact over that space, its plans wait.
+(dp_grid.py): departures from nodes on a time grid and at the times of known wait-free plans, with waiting; exact
+over that space, its plans wait. With `wait_free_first` (the product's default, options.DEFAULT_SOLVER_OPTIONS)
+this DP's plan comes first and its times join the grid, so the grid DP's plan is never dearer than it.
 
 ε-trimming (`DpOptions.gap` > 0): sorted by time, a label is kept only when its f − e·t is more than ε below
 every earlier kept one's at its node, with ε = gap·LB / (lines − 1) and LB a certified lower bound on the
@@ -546,7 +548,7 @@ def reachable_weather_ranges(inst, windows) -> np.ndarray:
     return rng
 
 
-def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: bool = False
+def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: bool = False, wide=None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(lams (K,), m_lam (K, L+2, P), t_min (L+2, P), tau, phi (L+2, P, R)): the fuel-to-finish bound tables of the
     exact DP and the least hours and fuel per NM they are built from (per node: on every leg leaving it). Without
@@ -555,7 +557,8 @@ def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: 
     from the weather each leg can meet then (`reachable_weather_ranges`), which is tighter. With a finite
     `fuel_budget_t` too they hold for the plans within the windows that burn at most that much: the windows are
     first narrowed to the times such a plan can be at each node (`fuel_windows`). With `per_leg`, tau and phi are
-    those of each leg (L+2, P, 2·max_shift + 1, R), as dp_exact_nb takes them."""
+    those of each leg (L+2, P, 2·max_shift + 1, R), as dp_exact_nb takes them. `wide` (a list) receives the node
+    tables of the windows before the fuel narrowing, which hold for plans that wait within the windows too."""
     v, sp = inst.vessel, inst.space
     L2, P = sp.lat.shape
     R = len(v.rpm_options)
@@ -572,6 +575,8 @@ def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: 
                                        for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
     m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
     _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+    if wide is not None:
+        wide[:] = [lams, m_lam.copy(), t_min.copy(), tau, phi]
     if windows is not None and math.isfinite(fuel_budget_t):
         windows = fuel_windows(inst, windows, fuel_budget_t, lams, m_lam, t_min, tau_e, phi_e)
         tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
@@ -759,50 +764,68 @@ class DpOptions:
     #                              (h) with waits; the plan's legs then carry their waits (wait_h, wait_fuel_t)
     max_wait_h: float = 0.0  # grid: a ship may wait this long beyond the first slot after arriving at a node
     wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
+    wait_free_first: bool = False  # grid: first the label DP (same gap); its plan's times join the grid
 
 
 def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None):
     """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with and
     `incumbent` that plan (nodes, rpm_idx) when known (the registry passes its incumbent solver's, solvers._dp).
-    The grid DP (options.slot_h) prunes only with plans it can sail in its own space: the baseline and
-    `incumbent`, each with the waits of the grid; its Found carries the waits (Found.wait_h, Found.wait_tph), which
-    solve() puts on the plan's legs."""
+    The grid DP (options.slot_h) searches the departure times of the grid and of the wait-free plans it knows:
+    the baseline, `incumbent` and, with `wait_free_first`, the label DP's plan, found first; its Found carries the
+    waits (Found.wait_h, Found.wait_tph), which solve() puts on the plan's legs."""
     from pipeline.routing.baseline import evaluate
 
+    if options.upper_bound is not None:
+        upper = min(upper, float(options.upper_bound))
+    if baseline.ok:
+        upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
     if options.slot_h is not None:
-        from pipeline.routing.dp_grid import search_grid, wait_hours, wait_rate_tph
-
-        if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0 or not (options.wait_tph or 0.0) >= 0.0:
-            raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0, got {options.slot_h}, "
-                             f"{options.max_wait_h} and {options.wait_tph}")
-        plans = [(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []
-        if incumbent is not None:
-            plans.append(incumbent)
-        nodes, rpm_idx, slots, cost, n_legs = search_grid(
-            inst, plans, slot_h=float(options.slot_h), max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
-            gap=float(options.gap), bounds=finish_bounds(inst), ld=latest_departures(inst))
-        if nodes is None:
-            return Found(None, None, n_legs)
-        return Found(nodes, rpm_idx, n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, float(options.slot_h)),
-                     wait_tph=wait_rate_tph(inst, options.wait_tph))
+        return _grid_search(inst, baseline, options, upper, incumbent)
     if options.bucket_h is not None:
         nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
                                                     inst.objective)
     else:
-        if options.upper_bound is not None:
-            upper = min(upper, float(options.upper_bound))
-        if baseline.ok:
-            upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
-        ld = latest_departures(inst)
-        # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
-        # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
-        on_time = _on_time(inst.objective, upper)
-        lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
-                                                     _fuel_budget_t(inst.objective, upper, options.gap) if on_time
-                                                     else math.inf, per_leg=True)
-        eps = trim_eps(inst, options.gap, upper, lams, m_lam, t_min)
-        nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
-                                                      m_lam, t_min, tau, phi, ld, eps)
+        nodes, rpm_idx, cost, n_legs = _label_search(inst, options.gap, upper, latest_departures(inst))
     if not math.isfinite(cost):
         return Found(None, None, n_legs)
     return Found(nodes, rpm_idx, n_legs)
+
+
+def _label_search(inst, gap: float, upper: float, ld: np.ndarray, wide=None):
+    """(nodes, rpm_idx, cost, legs sailed) of dp_exact_nb, pruned by `upper` and trimmed to `gap`; `wide` as in
+    finish_bounds."""
+    # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
+    # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
+    on_time = _on_time(inst.objective, upper)
+    lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
+                                                 _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf,
+                                                 per_leg=True, wide=wide)
+    eps = trim_eps(inst, gap, upper, lams, m_lam, t_min)
+    nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
+                                                  m_lam, t_min, tau, phi, ld, eps)
+    return nodes, rpm_idx, cost, n_legs
+
+
+def _grid_search(inst, baseline, options: DpOptions, upper: float, incumbent) -> Found:
+    """The grid DP (dp_grid.py) over the grid and the wait-free plans known (see `search`)."""
+    from pipeline.routing.dp_grid import search_grid, wait_hours, wait_rate_tph
+
+    if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0 or not (options.wait_tph or 0.0) >= 0.0:
+        raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0, got {options.slot_h}, "
+                         f"{options.max_wait_h} and {options.wait_tph}")
+    plans = [(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []
+    if incumbent is not None:
+        plans.append(incumbent)
+    ld = latest_departures(inst)
+    n_first, wide = 0, []
+    if options.wait_free_first:  # its windows hold for the grid's plans too: its incumbent is no dearer
+        nodes, rpm_idx, cost, n_first = _label_search(inst, options.gap, upper, ld, wide)
+        if math.isfinite(cost):
+            plans.append((nodes, rpm_idx))
+    nodes, rpm_idx, slots, cost, n_legs, times = search_grid(
+        inst, plans, slot_h=float(options.slot_h), max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
+        gap=float(options.gap), ld=ld, bounds=tuple(wide) or None)
+    if nodes is None:
+        return Found(None, None, n_first + n_legs)
+    return Found(nodes, rpm_idx, n_first + n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, times),
+                 wait_tph=wait_rate_tph(inst, options.wait_tph))

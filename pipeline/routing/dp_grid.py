@@ -6,16 +6,21 @@ rest of the voyage costs the same from either start time. Under a passing storm 
 start behind a storm can burn less. Here no such assumption is made.
 
 Decision space: a node per line and an engine setting per leg, as everywhere, plus **when the ship leaves each
-node**. Departures are on the grid t_dep + k·`slot_h`. A ship that reaches a node between two grid times waits
-(heaves to, drifting at `wait_tph` t/h) until the next one. It may also wait up to `n_wait` more slots there
-(waiting in front of a storm). Waiting at the departure node is allowed the same way. The arrival at the last
-line is not rounded: the voyage ends when the ship gets there.
+node**. A line's departure times are the grid t_dep + k·`slot_h` and the times the known wait-free plans leave it
+(`line_times`: the baseline, the incumbent solver's plan and, with `DpOptions.wait_free_first`, the label DP's
+plan; so each of those is a plan of the space as it is). A ship that reaches a node between two of its line's
+times waits (heaves to, drifting at `wait_tph` t/h) until the next one. It may also wait up to `max_wait_h` more
+there (waiting in front of a storm). Waiting at the departure node is allowed the same way. The arrival at the
+last line is not rounded: the voyage ends when the ship gets there.
 
-Exact: a state is (line, node, departure slot). Two partial plans in the same state have the same futures:
+Exact: a state is (line, node, departure time). Two partial plans in the same state have the same futures:
 same place, same departure time, and the fuel so far is all that differs. So the DP keeps one label per state
-(the least fuel) and drops nothing else. The optimum over this space is found; `tests/test_routing_exact.py`
-checks it against exhaustive enumeration of the same space (every route × setting × wait). The price is that
-no two departure times are merged: the work grows with the number of slots a node can be left in.
+(the least fuel) and drops nothing else. The optimum over this space is found; `tests/test_routing_grid_exact.py`
+checks it against exhaustive enumeration of the same space (every route × setting × wait), on the grid alone and
+on the grid with the label DP's plan. The price is that no two departure times are merged: the work grows with
+the number of times a node can be left at. What `jitroute route --solver dp` runs by default is the second: the
+label DP's wait-free plan first, then this DP, so its plan is never dearer than the wait-free one and it heaves to
+where waiting for the weather wins.
 
 Bounds (certified; they never drop a label of an optimal plan, as in dp.py):
   incumbent   `upper`: the cost of a known plan of this space (a wait-free plan sailed with the rounding waits,
@@ -25,7 +30,8 @@ Bounds (certified; they never drop a label of an optimal plan, as in dp.py):
   deadline    with an on-time incumbent, a label must be able to leave its node by the node's latest departure
               that still makes the RTA (dp.latest_departures; waiting only delays).
   fuel        dp.finish_bounds: fuel so far + the least fuel to finish in the hours left (the hours left start at
-              the departure slot; waiting burns ≥ 0).
+              the departure slot; waiting burns ≥ 0), priced in the weather of the times a plan can be at each
+              node (from the earliest arrival to the latest departure: waiting keeps a plan inside them).
 """
 
 from __future__ import annotations
@@ -36,35 +42,63 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.dp import _grow, _priced_out, fuel_to_finish_lb
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb
+from pipeline.routing.dp import _grow, _on_time, _priced_out, finish_bounds, fuel_to_finish_lb, reachable_windows
+from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb, sail_route_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 EARLY_SLOT = -1  # grid_sail_nb: a departure slot before the ship reaches the node
 
 
 @numba.njit(cache=True)
-def first_slot(t_h, t_dep_h, slot_h):
-    """The first grid slot k (departure t_dep_h + k·slot_h) at or after t_h; 1e-9 h of rounding is forgiven."""
-    return max(0, int(math.ceil((t_h - t_dep_h) / slot_h - 1e-9)))
+def first_slot(times_i, t_h):
+    """The first slot k of a line (departure times_i[k]) at or after t_h; 1e-9 h of rounding is forgiven.
+    times_i.shape[0] when the line has none left (its padding is inf)."""
+    return np.searchsorted(times_i, t_h - 1e-9)
+
+
+def line_times(inst, plans, slot_h: float) -> np.ndarray:
+    """(lines − 1, K) departure times (h, sorted, inf-padded) a ship may leave each line's nodes at: the grid
+    t_dep + k·slot_h up to the voyage's longest hours, and each wait-free plan's own departure time from that
+    line (`plans`: (nodes, rpm_idx); one that cannot be sailed adds nothing). So the plans given are plans of the
+    grid space as they are, without rounding waits, and the grid DP's optimum is never dearer than theirs."""
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    L2 = g.lat.shape[0]
+    grid = o.t_dep_h + slot_h * np.arange(int(math.floor(o.max_hours / slot_h + 1e-9)) + 1)
+    extra = [[] for _ in range(L2 - 1)]
+    ct, cf = np.empty(L2), np.empty(L2)
+    for nodes, rpm_idx in plans:
+        if nodes is None:
+            continue
+        code, _ = sail_route_nb(np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), 0, g, v, w, o, ct, cf)
+        if code != OK:
+            continue
+        for i in range(1, L2 - 1):
+            extra[i].append(float(ct[i]))
+    rows = [np.unique(np.concatenate([grid, np.asarray(e, float)])) for e in extra]
+    times = np.full((L2 - 1, max(len(r) for r in rows)), np.inf)
+    for i, r in enumerate(rows):
+        times[i, :len(r)] = r
+    return times
 
 
 @numba.njit(cache=True)
-def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, slot_h, wait_tph):
-    """(code, hours, fuel) of a plan of the grid space: leave line i's node at slot slots[i] and sail its leg at
-    rpm_idx[i]; code is a leg_kernel code, or EARLY_SLOT when a slot is before the ship is there. slots[i] < 0:
+def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, times, wait_tph):
+    """(code, hours, fuel) of a plan of the grid space: leave line i's node at times[i, slots[i]] and sail its leg
+    at rpm_idx[i]; code is a leg_kernel code, or EARLY_SLOT when a slot is before the ship is there. slots[i] < 0:
     the first slot after arriving (no extra wait). `slots` is filled with the slots used."""
     lat, lon = g.lat, g.lon
     out = np.empty(N_LEG_OUT)
     t, fuel = o.t_dep_h, 0.0
     L2 = nodes.shape[0]
     for i in range(L2 - 1):
-        k0 = first_slot(t, o.t_dep_h, slot_h)
+        k0 = first_slot(times[i], t)
         k = k0 if slots[i] < 0 else slots[i]
         if k < k0:
             return EARLY_SLOT, math.nan, math.nan
+        if k >= times.shape[1] or not times[i, k] < math.inf:
+            return TOO_LONG, math.nan, math.nan
         slots[i] = k
-        td = o.t_dep_h + k * slot_h
+        td = times[i, k]
         fuel += wait_tph * (td - t)
         a, b = nodes[i], nodes[i + 1]
         if not g.edge_ok[i, a, b]:
@@ -80,7 +114,7 @@ def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, slot_h, wait_tph):
 
 
 @numba.njit(cache=True)
-def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, slot_h, n_wait, wait_tph):
+def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, times, max_wait_h, wait_tph):
     """(nodes, rpm indexes, departure slots, cost, legs sailed, labels kept) of the best plan of the grid space
     costing less than `upper` (cost inf when there is none); labels whose lower bound is above `prune_at`
     (≤ upper; upper / (1 + gap) for a certified gap) are dropped. Bound tables as in dp.dp_exact_nb."""
@@ -97,11 +131,12 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, sl
     kk, kf = np.empty(cap, np.int64), np.empty(cap)
     kpar, knode, kr = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap, np.int64)
     n_kept = 0
-    for q in range(n_wait + 1):  # leave at once, or wait at the departure node
-        td = t_dep_h + q * slot_h
-        if on_time and td > ld[0, c]:
+    K = times.shape[1]
+    for q in range(K):  # leave at once, or wait at the departure node
+        td = times[0, q]
+        if td > t_dep_h + max_wait_h + 1e-9 or (on_time and td > ld[0, c]):
             break
-        kk[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = q, wait_tph * q * slot_h, -1, c, -1
+        kk[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = q, wait_tph * (td - t_dep_h), -1, c, -1
         n_kept += 1
     line_lo, line_hi = 0, n_kept
     ccap = 1024
@@ -115,7 +150,7 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, sl
         n_c = 0
         for j in range(line_lo, line_hi):
             a, f0 = knode[j], kf[j]
-            t0 = t_dep_h + kk[j] * slot_h
+            t0 = times[i, kk[j]]
             for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, a2]:
                     continue
@@ -141,10 +176,11 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, sl
                         if q < best:
                             best, best_par, best_r = q, j, r
                         continue
-                    k1 = first_slot(t1, t_dep_h, slot_h)
-                    for k in range(k1, k1 + n_wait + 1):
-                        td = t_dep_h + k * slot_h
-                        if td - t_dep_h > max_hours or (on_time and td > ld[i + 1, a2]):
+                    k1 = first_slot(times[i + 1], t1)
+                    for k in range(k1, K):
+                        td = times[i + 1, k]
+                        if td > times[i + 1, k1] + max_wait_h + 1e-9 or td - t_dep_h > max_hours or (
+                                on_time and td > ld[i + 1, a2]):
                             break
                         fw = f1 + wait_tph * (td - t1)
                         lb = fw + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - td)
@@ -201,26 +237,26 @@ def wait_rate_tph(inst, wait_tph: float | None) -> float:
     return float(p.model.fuel_tph(float(inst.rpm_options[0]), p.draft_m, p.trim_m))
 
 
-def grid_plan_cost(inst, nodes, rpm_idx, slot_h: float, wait_tph: float, slots=None) -> tuple[float, np.ndarray]:
+def grid_plan_cost(inst, nodes, rpm_idx, times, wait_tph: float, slots=None) -> tuple[float, np.ndarray]:
     """(cost, slots) of a plan in the grid space; `slots` None: each node left at the first slot after arriving
     (how a wait-free plan becomes a plan of this space). Cost inf when it cannot be sailed so."""
     L2 = len(nodes)
     s = np.full(L2 - 1, -1, np.int64) if slots is None else np.array(slots, np.int64)
     code, hours, fuel = grid_sail_nb(np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s, inst.graph,
-                                     inst.vessel, inst.wx, inst.objective, float(slot_h), float(wait_tph))
+                                     inst.vessel, inst.wx, inst.objective, times, float(wait_tph))
     if code != OK:
         return math.inf, s
     return float(route_cost_nb(inst.objective, hours, fuel)), s
 
 
-def wait_hours(inst, nodes, rpm_idx, slots, slot_h: float) -> np.ndarray:
+def wait_hours(inst, nodes, rpm_idx, slots, times) -> np.ndarray:
     """Hours waited at each line's node before its leg (line 0: at the departure), for the plan's slots."""
     g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
     out = np.empty(N_LEG_OUT)
     t = o.t_dep_h
     waits = np.zeros(len(nodes) - 1)
     for i in range(len(nodes) - 1):
-        td = o.t_dep_h + int(slots[i]) * slot_h
+        td = float(times[i, int(slots[i])])
         waits[i] = td - t
         a, b = int(nodes[i]), int(nodes[i + 1])
         sail_leg_nb(g.lat[i, a], g.lon[i, a], g.lat[i + 1, b], g.lon[i + 1, b], td,
@@ -261,26 +297,33 @@ def _incumbents(plans, n_settings: int):
             yield nodes, np.full(len(rpm_idx), r, np.int64)
 
 
-def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: float | None, gap: float,
-                bounds, ld) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None, float, int]:
-    """(nodes, rpm_idx, slots, cost, legs sailed) of the best plan of the grid space, within (1 + gap) of its
-    optimum; `plans` are known wait-free plans (nodes, rpm_idx), each sailed with the rounding waits as the
-    incumbent; `bounds` = dp.finish_bounds(inst), `ld` = dp.latest_departures(inst)."""
+def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: float | None, gap: float, ld,
+                bounds=None):
+    """(nodes, rpm_idx, slots, cost, legs sailed, times) of the best plan of the grid space, within (1 + gap) of
+    its optimum; `plans` are known wait-free plans (nodes, rpm_idx): their departure times join the grid
+    (`line_times`, returned as `times`; a plan's slots index its rows), so each is a plan of the space as it is,
+    and each, its settings one step faster and every setting held throughout are sailed with the rounding waits
+    as the incumbent; `ld` = dp.latest_departures(inst). The fuel-to-finish bound is dp.finish_bounds in the
+    weather of the times a plan can be at each node (reachable_windows): waits keep a plan within them; `bounds`,
+    when given, are such tables for windows at least as wide (the label DP's before its fuel narrowing)."""
     rate = wait_rate_tph(inst, wait_tph)
-    n_wait = int(math.floor(max_wait_h / slot_h + 1e-9))
+    times = line_times(inst, plans, slot_h)
     inc_cost, inc = math.inf, None
     for nodes, rpm_idx in _incumbents(plans, len(inst.rpm_options)):
-        q, s = grid_plan_cost(inst, nodes, rpm_idx, slot_h, rate)
+        q, s = grid_plan_cost(inst, nodes, rpm_idx, times, rate)
         if q < inc_cost:
             inc_cost, inc = q, (np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s)
+    on_time = math.isfinite(inc_cost) and _on_time(inst.objective, inc_cost)
+    if bounds is None:
+        bounds = finish_bounds(inst, reachable_windows(inst, ld, on_time))
     lams, m_lam, t_min, tau, phi = bounds
     upper = inc_cost * (1.0 + 1e-12) + 1e-12 if math.isfinite(inc_cost) else math.inf
     prune_at = upper / (1.0 + gap) if gap > 0.0 else upper
     nodes, rpm_idx, slots, cost, n_legs, _ = dp_grid_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper,
-                                                        prune_at, lams, m_lam, t_min, tau, phi, ld, float(slot_h),
-                                                        n_wait, rate)
+                                                        prune_at, lams, m_lam, t_min, tau, phi, ld, times,
+                                                        float(max_wait_h), rate)
     if math.isfinite(cost) and cost < inc_cost:
-        return nodes, rpm_idx, slots, float(cost), n_legs
+        return nodes, rpm_idx, slots, float(cost), n_legs, times
     if inc is None:
-        return None, None, None, math.inf, n_legs
-    return inc[0], inc[1], inc[2], inc_cost, n_legs
+        return None, None, None, math.inf, n_legs, times
+    return inc[0], inc[1], inc[2], inc_cost, n_legs, times
