@@ -227,3 +227,36 @@ def test_a_model_form_without_corner_bounds_gets_zero_bounds_that_prune_nothing(
     assert m_lam.shape == (len(lams), L2, P) and t_min.shape == (L2, P) and tau.shape == phi.shape == (L2, P, 3)
     assert not (m_lam.any() or t_min.any() or tau.any() or phi.any())
     assert fuel_to_finish_lb(m_lam[:, 0, 0], lams, t_min[0, 0], 10.0) == 0.0
+
+
+def test_a_head_current_that_passes_does_not_close_the_legs_behind_it():
+    """A current of 23 kn against the course east of 202° E for the first 12 h: the legs there have no headway
+    early and are open later, when every plan gets there. The latest departures used to skip a leg with no
+    headway at the voyage's departure time, so every node before it looked unable to make the RTA and the DP
+    answered `infeasible` (the label DP) where enumeration finds an on-time plan."""
+    from pipeline.routing.baseline import baseline as find_baseline, evaluate
+
+    def fn(LA, LO, h):
+        return dict(uo=np.where((LO > 202.0) & (h < 12.0), -12.0, 0.0), swh=np.full(LA.shape, 1.5),
+                    mwd_deg=np.full(LA.shape, 250.0))
+
+    fld = field(fn, step_h=3, hours=200)
+    pr = problem(DEP, ARR, 75.0, n_lines=3, n_points=5, max_shift=2, d_point_nm=25.0)
+    inst, base_nodes = solver_instance(pr, pr.search_space(), fld)
+    g = inst.graph
+    assert lk.sail_leg(g.lat[1, 2], g.lon[1, 2], g.lat[2, 2], g.lon[2, 2], 8.0, 100.0, inst.vessel,
+                       fld)[lk.CODE] == lk.NO_HEADWAY  # closed early ...
+    assert lk.sail_leg(g.lat[1, 2], g.lon[1, 2], g.lat[2, 2], g.lon[2, 2], 12.0, 100.0, inst.vessel,
+                       fld)[lk.CODE] == lk.OK  # ... open when a ship gets there
+    ld = latest_departures(inst)
+    assert np.isfinite(ld[0, 2]) and np.isfinite(ld[1:-1]).all()  # the departure and every node can make the RTA
+    base = find_baseline(inst, base_nodes)
+    best = _enumerate(inst)
+    assert math.isfinite(best)
+    from pipeline.routing.solvers import SOLVERS
+
+    for opts in (DpOptions(incumbent=None), DpOptions(gap=1e-3, slot_h=1.0, max_wait_h=6.0, wait_free_first=True,
+                                                      incumbent=None)):
+        found = SOLVERS["dp"].search(inst, base, seed=1, options=opts)
+        assert found.nodes is not None
+        assert evaluate(inst, found.nodes, found.rpm_idx)[0] <= best * (1 + opts.gap) + 1e-9

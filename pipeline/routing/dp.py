@@ -448,7 +448,10 @@ def latest_departure_nb(g, v, w, rpms, t_lo, deadline, ld):
     """ld[i, a] ≥ the latest time a ship can leave (i, a) and still reach the arrival by `deadline` (−inf: it
     cannot from t_lo on). Legs are sailed at the settings `rpms` (the fastest) with `v`'s weather limits lifted
     by the caller; first-in-first-out legs make the arrival time non-decreasing in the departure time, so the
-    latest departure over a leg is found by iterating t = target − hours(t) and then checked from above."""
+    latest departure over a leg is found by iterating t = target − hours(t) and then checked from above. A leg
+    with no headway at some departure time (a head current or gale that passes) says nothing about later ones:
+    where the leg cannot be sailed at t_lo or during the iteration, the bound is the target itself (a ship never
+    arrives before it leaves), which is safe."""
     lat, lon, edge_ok, max_shift = g.lat, g.lon, g.edge_ok, g.max_shift
     L2, P = lat.shape
     out = np.empty(N_LEG_OUT)
@@ -460,18 +463,26 @@ def latest_departure_nb(g, v, w, rpms, t_lo, deadline, ld):
                 target = ld[i + 1, b]
                 if not edge_ok[i, a, b] or target == -np.inf:
                     continue
-                if _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t_lo, v, w, rpms, out) > target:
-                    continue  # cannot make it even leaving at the earliest time
+                arr = _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t_lo, v, w, rpms, out)
+                if arr == np.inf:  # no headway leaving at t_lo: a later departure may have it
+                    ld[i, a] = max(ld[i, a], target)
+                    continue
+                if arr > target:
+                    continue  # cannot make it even leaving at the earliest time, nor later (FIFO)
                 t = target
                 for _it in range(6):  # fixed point of t = target − hours(t): hours change slowly with t
                     arr = _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, v, w, rpms, out)
                     if arr == np.inf:
+                        t = target  # no headway there: the departures between t_lo and target are not checked
                         break
                     t = t - (arr - target)
                 # move up until leaving then arrives after the target: by FIFO the latest departure is below
                 step = 1e-3
                 while True:
                     arr = _arrival(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, v, w, rpms, out)
+                    if arr == np.inf:
+                        t = target  # no headway there, and maybe again later: not checked
+                        break
                     if arr > target or t >= target:
                         break
                     t += step
