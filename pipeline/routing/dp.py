@@ -829,10 +829,15 @@ def _grid_search(inst, baseline, options: DpOptions, upper: float, incumbent) ->
         plans.append(incumbent)
     ld = latest_departures(inst)
     n_first, wide = 0, []
-    if options.wait_free_first:  # its windows hold for the grid's plans too: its incumbent is no dearer
+    if options.wait_free_first:
         nodes, rpm_idx, cost, n_first = _label_search(inst, options.gap, upper, ld, wide)
         if math.isfinite(cost):
             plans.append((nodes, rpm_idx))
+        # its windows (before the fuel narrowing) hold for the grid's plans when they reach to the horizon, or when
+        # its plan, a plan of the grid, is on time (then so is the grid's incumbent, and both end at the RTA); an
+        # `upper_bound` on time with no plan known on time is neither: the grid builds its own
+        if _on_time(inst.objective, upper) and not (math.isfinite(cost) and _on_time(inst.objective, cost)):
+            wide = []
     nodes, rpm_idx, slots, cost, n_legs, times = search_grid(
         inst, plans, slot_h=float(options.slot_h), max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
         gap=float(options.gap), ld=ld, bounds=tuple(wide) or None)
