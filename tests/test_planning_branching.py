@@ -209,6 +209,37 @@ def test_a_column_dive_ends_in_a_plan_of_priced_columns_costing_their_sum_betwee
     assert fractional >= 3  # the dive fixed columns, not just read a whole root LP
 
 
+def test_penalty_dives_return_plans_of_the_true_problem_and_leave_the_true_penalties_alone():
+    """Dives under dearer penalties (branch_price.penalty_dives) on fleets of 6 × 24: at factor 1 the dive is the
+    plain dive's, plan for plan; at dearer factors each plan is made of pool columns of the true problem (the
+    columns the dearer LPs priced join the pool), lifts each contract at most once, costs at least the optimum at the
+    true penalties; on some fleets (2 of these 6) such a plan lifts more contracts than the plain dive's and is
+    cheaper at the true penalties; the problem's penalties are unchanged."""
+    better = 0
+    for seed in range(6):
+        vessels, contracts, dist = random_instance(6, 24, seed=1700 + seed, horizon_days=20, n_ports=8, window_days=6)
+        data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+        penalties = [c.penalty for c in data.contracts]
+        best = _optimum_over_every_column(data)
+        master, _ = _root(data)
+        plain = branch_price.dive(data, master, (), time.perf_counter() + 60)
+        (same,) = branch_price.penalty_dives(data, _root(data)[0], time.perf_counter() + 60, factors=(1.0,))
+        assert same == plain, f"seed {seed}"
+        plans = branch_price.penalty_dives(data, master, time.perf_counter() + 60, factors=(2.0, 3.0))
+        assert len(plans) == 2
+        pool = {(c.k, c.sequence) for c in master.columns}
+        for plan in plans:
+            lifted = [j for seq in plan.values() for j in seq]
+            assert len(lifted) == len(set(lifted)), f"seed {seed}"
+            assert all((k, seq) in pool for k, seq in plan.items()), f"seed {seed}"
+            cost = assemble(data, plan, solver="t", status="", gap=0.0, runtime_s=0.0).cost
+            assert cost >= best - 1e-6, f"seed {seed}"
+            better += (len(lifted) > sum(map(len, plain.values()))
+                       and cost < assemble(data, plain, solver="t", status="", gap=0.0, runtime_s=0.0).cost)
+        assert [c.penalty for c in data.contracts] == penalties
+    assert better >= 2
+
+
 def test_a_plan_whose_time_is_already_up_is_feasible_and_claims_no_proof():
     """The time limit counts from `started_at`: already spent, the planner (column generation forced by a cap of 3
     labels per vessel) prices nothing more and returns at once a feasible plan, neither optimal nor with a gap."""
