@@ -82,6 +82,8 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
     while level:
         nxt: dict[tuple[int, int], list[tuple[float, float, tuple[int, ...]]]] = {}
         for (members, last), labels in level.items():
+            if time.perf_counter() > deadline:  # a level alone can take seconds on a large fleet
+                return [], False
             for ready, so_far, seq in labels:
                 end = ready + end_travel_h[last]
                 if end <= end_limit_h + 1e-9:
