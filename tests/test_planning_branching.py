@@ -209,6 +209,34 @@ def test_a_column_dive_ends_in_a_plan_of_priced_columns_costing_their_sum_betwee
     assert fractional >= 3  # the dive fixed columns, not just read a whole root LP
 
 
+def test_a_restored_basis_re_solves_its_node_without_an_iteration_after_other_nodes_and_new_columns():
+    """MasterLP.basis / restore: a node's final basis, restored after other nodes were solved and columns were added,
+    re-solves that node to the same LP value in no simplex iteration; without it the re-solve needs iterations."""
+    vessels, contracts, dist = random_instance(6, 24, seed=1702, horizon_days=20, n_ports=8, window_days=6)
+    data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+    master, _ = _root(data)
+    V, n = len(data.vessels), len(data.contracts)
+    _, _, _, y = master.solve()
+    k, j = branch_price.branching_pair(master, y)
+    assert 0.1 < master.lifted_by(y)[k, j] < 0.9  # a fractional root: the two children's LPs differ
+    first = branch_price.node_constraints(((k, j, True),), V, n)
+    value, _, converged = branch_price.solve_node(data, master, *first, np.inf, time.perf_counter() + 30)
+    assert converged
+    saved = master.basis()
+    other = branch_price.node_constraints(((k, j, False),), V, n)
+    branch_price.solve_node(data, master, *other, np.inf, time.perf_counter() + 30)
+    plan = branch_price.dive(data, master, (), time.perf_counter() + 30)  # more columns, the LP elsewhere
+    assert plan
+    for restore, moved in ((True, False), (False, True)):
+        branch_price.solve_node(data, master, *other, np.inf, time.perf_counter() + 30)
+        if restore:
+            assert master.restore(saved)
+        master.set_node(*first)
+        z, *_ = master.solve()
+        assert z == pytest.approx(value, rel=1e-9)
+        assert (master.h.getInfo().simplex_iteration_count > 0) == moved
+
+
 def test_penalty_dives_return_plans_of_the_true_problem_and_leave_the_true_penalties_alone():
     """Dives under dearer penalties (branch_price.penalty_dives) on fleets of 6 × 24: at factor 1 the dive is the
     plain dive's, plan for plan; at dearer factors each plan is made of pool columns of the true problem (the

@@ -16,7 +16,9 @@ Before that, Lasdon's bound (LP value + Σ per vessel least reduced cost, colgen
 node as soon as it reaches the incumbent.
 
 Search: best bound first (ties: deepest first, towards plans), so the proven bound — the least bound of the open
-nodes — rises as fast as the nodes are solved; the children of a node are opened with its bound. Branching pair:
+nodes — rises as fast as the nodes are solved; the children of a node are opened with its bound and its final LP
+basis, from which their LPs start (best first jumps across the tree, so the last solve's basis is far from a child's;
+from the parent's the dual simplex takes about half the iterations on 50 × 200). Branching pair:
 the most fractional x[k, j] (how much of j vessel k lifts in the LP). New plans: each node's LP rounded
 (colgen.round_lp) and whole node solutions; the caller may add plans from elsewhere through `improve`.
 """
@@ -45,6 +47,7 @@ class Node:
     neg_depth: int
     seq: int
     decisions: tuple[tuple[int, int, bool], ...] = field(compare=False)
+    basis: tuple | None = field(default=None, compare=False)  # its parent's final LP basis (MasterLP.basis)
 
 
 @dataclass
@@ -217,12 +220,14 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
             floor = min(floor, node.bound)
             continue
         blocked, compulsory = node_constraints(node.decisions, V, n)
+        if node.basis is not None:
+            master.restore(node.basis)
         bound, y, converged = solve_node(data, master, blocked, compulsory, cutoff(), deadline)
         bound = max(bound, node.bound)
         solved += 1
         if not converged:
             if bound < cutoff():  # cut short by the deadline: still open
-                heapq.heappush(open_nodes, Node(bound, node.neg_depth, node.seq, node.decisions))
+                heapq.heappush(open_nodes, Node(bound, node.neg_depth, node.seq, node.decisions, node.basis))
             else:
                 floor = min(floor, bound)
             continue
@@ -232,6 +237,7 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
             if plan.cost < best.cost:
                 best = plan
             continue
+        basis = master.basis()  # before the dive moves the LP elsewhere
         rounded = plan_of(colgen.round_lp(data, master.columns, y * master.allowed(blocked)))
         if rounded.cost < best.cost:
             best = rounded
@@ -249,6 +255,6 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
         k, j = branching_pair(master, y)
         depth = node.neg_depth - 1
         for lifts in (True, False):
-            heapq.heappush(open_nodes, Node(bound, depth, next(counter), node.decisions + ((k, j, lifts),)))
+            heapq.heappush(open_nodes, Node(bound, depth, next(counter), node.decisions + ((k, j, lifts),), basis))
     live = [o.bound for o in open_nodes]
     return Outcome(best, min(live + [floor, best.cost]), not live, solved)

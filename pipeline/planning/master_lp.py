@@ -1,5 +1,6 @@
 """The set-partitioning LP over a growing pool of columns, kept in one HiGHS instance so each solve starts from the
-last basis (a branch-and-price node re-solves in a few simplex iterations instead of from scratch).
+last basis (a branch-and-price node re-solves in a few simplex iterations instead of from scratch), or from a basis
+saved earlier (`basis` / `restore`: a node from its parent's).
 
 Rows and variables:
 - contract j: Σ y (columns lifting j) + s_j = 1, with s_j ≥ 0 costing j's penalty (left to the spot market);
@@ -110,6 +111,21 @@ class MasterLP:
         dual = np.asarray(sol.row_dual)
         x = np.asarray(sol.col_value)
         return float(h.getObjectiveValue()), dual[:self.n] - self.penalty, np.minimum(dual[self.n:], 0.0), x[self.n:]
+
+    def basis(self) -> tuple[list, list]:
+        """The last solve's basis (HiGHS's column and row statuses), to start a later solve from (`restore`)."""
+        b = self.h.getBasis()
+        return list(b.col_status), list(b.row_status)
+
+    def restore(self, saved: tuple[list, list]) -> bool:
+        """Start the next solve from a basis `basis` returned, the columns added since nonbasic at 0 (their lower
+        bound, so the basis stays valid whatever the node's bounds). Returns whether HiGHS took it; if not, the next
+        solve starts from the current basis, as without it."""
+        cols, rows = saved
+        b = highs.HighsBasis()
+        b.col_status = cols + [highs.HighsBasisStatus.kLower] * (self.n + len(self.columns) - len(cols))
+        b.row_status = rows
+        return self.h.setBasis(b) == highs.HighsStatus.kOk
 
     def slack(self) -> np.ndarray:
         """How much of each contract the last solve left (s_j)."""
