@@ -41,11 +41,8 @@ def lp_with_row(data, columns: list, kind: str, rhs: float, at_least: bool) -> t
     sign = -1.0 if at_least else 1.0
     while True:
         weight = np.array([1.0 if kind == "vessels" else len(c.sequence) for c in columns])
-        cost = np.array([c.cost - penalty[list(c.sequence)].sum() for c in columns])
-        rows = [j for c in columns for j in c.sequence] + [n + c.k for c in columns] + [n + V] * len(columns)
-        cols = [i for i, c in enumerate(columns) for _ in c.sequence] + list(range(len(columns))) * 2
-        vals = np.concatenate([np.ones(len(rows) - len(columns)), sign * weight])
-        A = sparse.csr_array((vals, (rows, cols)), shape=(n + V + 1, len(columns)))
+        cost, A = colgen._master(data, columns)  # contract rows, then vessel rows
+        A = sparse.vstack([A, sparse.csr_array(sign * weight[None, :])]).tocsr()
         b = np.concatenate([np.ones(n + V), [sign * rhs]])
         res = linprog(cost, A_ub=A, b_ub=b, bounds=(0, None), method="highs-ds")
         if res.status != 0:
@@ -77,11 +74,9 @@ def main() -> None:
 
     from pipeline.planning import branch_price, gap_columns, milp, problem
     from pipeline.planning.master_lp import MasterLP
-    from pipeline.synthetic.contracts import random_instance
+    from planning_instances import planning_data
 
-    n_v, n_c = (int(x) for x in a.size.split("x"))
-    vessels, contracts, dist = random_instance(n_v, n_c, seed=1)
-    data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+    data = planning_data(a.size)
     master = MasterLP(data)
     t0 = time.perf_counter()
     lp, converged = branch_price.solve_root(data, master, time.perf_counter() + 300)
@@ -107,7 +102,7 @@ def main() -> None:
     for share in a.shares:
         slack = share / 100 * lp
         t1, pool = time.perf_counter(), []
-        for k in range(n_v):
+        for k in range(len(data.vessels)):
             cols, complete = gap_columns.vessel_columns_within(data, k, pi, float(mu[k]), slack,
                                                                max_labels=a.max_labels)
             if not complete:

@@ -49,13 +49,12 @@ def main() -> None:
     ap.add_argument("--plan", type=float, help="a plan's cost, to measure the gap against when no optimum is known")
     a = ap.parse_args()
 
-    from pipeline.planning import branch_price, colgen, gap_columns, problem
+    from pipeline.planning import branch_price, colgen, gap_columns
     from pipeline.planning.master_lp import MasterLP
-    from pipeline.synthetic.contracts import random_instance
+    from planning_instances import planning_data
 
-    n_v, n_c = (int(x) for x in a.size.split("x"))
-    vessels, contracts, dist = random_instance(n_v, n_c, seed=1)
-    data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+    data = planning_data(a.size)
+    n_v, n_c = len(data.vessels), len(data.contracts)
     master = MasterLP(data)
     lp, converged = branch_price.solve_root(data, master, time.perf_counter() + 300)
     _, pi, mu, _ = master.solve()
@@ -68,7 +67,7 @@ def main() -> None:
                                                                max_labels=5_000_000)
             assert complete, "the columns within the gap are too many to enumerate"
             pool += [c for c in cols if (c.k, c.sequence) not in have]
-    const = sum(c.penalty for c in contracts)
+    const = sum(c.penalty for c in data.contracts)
     c, A = colgen._master(data, pool)
     members = A[:n_c].T.toarray() > 0
 

@@ -105,15 +105,13 @@ def main() -> None:
     ap.add_argument("--vessels", type=int, default=4, help="at most this many vessels freed a move (default 4)")
     a = ap.parse_args()
 
-    from pipeline.planning import branch_price, colgen, local_search, problem
+    from pipeline.planning import branch_price, colgen, local_search
     from pipeline.planning.master_lp import MasterLP
     from pipeline.planning.problem import assemble, schedule
     from pipeline.planning.routes import Column
-    from pipeline.synthetic.contracts import random_instance
+    from planning_instances import planning_data
 
-    n_v, n_c = (int(x) for x in a.size.split("x"))
-    vessels, contracts, dist = random_instance(n_v, n_c, seed=1)
-    data = problem.build(vessels, contracts, dist, fuel_price=600.0)
+    data = planning_data(a.size)
 
     def cost(sequences) -> float:
         return assemble(data, sequences, solver="t", status="", gap=np.nan, runtime_s=0.0).cost
