@@ -151,8 +151,10 @@ def attention_items(route: dict, run: dict | None) -> list[str]:
                      f"{_text(route.get('newer_attempt_reason')) or ''}".rstrip(": "))
     flag = _text(route.get("forecast_flag"))
     if flag:
-        hours = finite_or_none(route.get("hours_beyond_forecast"))
-        items.append(f"{flag}" + (f": {hours:.1f} h sailed past the forecast's last step" if hours else ""))
+        past = finite_or_none(route.get("hours_beyond_forecast"))
+        before = finite_or_none(route.get("hours_before_cycle"))
+        items.append(flag + (f": {past:.1f} h sailed past the forecast's last step" if past else "")
+                     + (f": {before:.1f} h sailed before the forecast cycle's init time" if before else ""))
     clearance = finite_or_none(route.get("min_land_clearance_nm"))
     if clearance is not None and clearance < 2.0:
         items.append(f"passes {clearance:.1f} NM from land")
@@ -219,19 +221,54 @@ def fleet_view(routes: pd.DataFrame, legs: pd.DataFrame, reports: pd.DataFrame, 
             item["behind"] = _pairs(behind_lat, behind_lon) if behind_lat.size > 1 else []
             all_lat += [lat, behind_lat]
             all_lon += [lon, behind_lon]
-        elif finite_or_none(r.get("dep_lat")) is not None:  # no plan: the voyage's ports only
-            plon = unwrap_lon_deg([r["dep_lon"]], centre)
-            item["position"] = {"lat": round(float(r["dep_lat"]), 3), "lon": round(float(plon[0]), 3),
-                                "phase": "no plan", "source": "departure port"}
-            all_lat.append(np.array([r["dep_lat"]]))
-            all_lon.append(plon)
+        else:  # no plan: where the ship last reported, else its departure port
+            rep = rep_by_voyage.get(vid)
+            if rep is not None and len(rep):
+                last = rep.iloc[-1]
+                plon = float(unwrap_lon_deg([last["lon"]], centre)[0])
+                item["report"] = {"lat": round(float(last["lat"]), 3), "lon": round(plon, 3), "utc": _iso(last["ts_utc"]),
+                                  "source": last["source"]}
+                item["position"] = {"lat": round(float(last["lat"]), 3), "lon": round(plon, 3), "phase": "no plan",
+                                    "source": last["source"]}
+            elif finite_or_none(r.get("dep_lat")) is not None:
+                plon = float(unwrap_lon_deg([r["dep_lon"]], centre)[0])
+                item["position"] = {"lat": round(float(r["dep_lat"]), 3), "lon": round(plon, 3), "phase": "no plan",
+                                    "source": "departure port"}
+            if item["position"]:
+                all_lat.append(np.array([item["position"]["lat"]]))
+                all_lon.append(np.array([item["position"]["lon"]]))
         voyages.append(item)
+    mark_current_voyages(voyages)
     lat = np.concatenate(all_lat) if all_lat else np.array([])
     lon = np.concatenate(all_lon) if all_lon else np.array([])
     counts = routes["status"].value_counts().to_dict() if not routes.empty else {}
     return {"as_of_utc": _iso(as_of), "as_of_note": as_of_note, "extent": extent_of(lat, lon),
             "run": _run_summary(run), "counts": {k: int(v) for k, v in counts.items()},
             "n_attention": sum(1 for v in voyages if v["attention"]), "voyages": voyages}
+
+
+_PHASE_RANK = {"at sea": 0, "not sailed": 1, "arrived": 2, "no plan": 3}
+
+
+def mark_current_voyages(voyages: list[dict]) -> None:
+    """Set `current` on each voyage: True for the one voyage per vessel whose position is the ship's now (the one at
+    sea; else the next to sail; else the last arrived; else one without a plan), False for the vessel's others
+    (a ship is in one place; its other voyages are drawn as plans only)."""
+    best: dict = {}
+    for i, v in enumerate(voyages):
+        if not v.get("position"):
+            v["current"] = False
+            continue
+        phase = v["position"]["phase"]
+        etd = utc_datetime(v["etd_utc"].rstrip("Z")) if v.get("etd_utc") else None
+        t = etd.timestamp() if etd else 0.0
+        key = (_PHASE_RANK.get(phase, 9), -t if phase == "arrived" else t)  # next to sail: earliest; arrived: latest
+        k = v.get("imo") if v.get("imo") is not None else v["voyage_id"]
+        if k not in best or key < best[k][0]:
+            best[k] = (key, i)
+    chosen = {i for _, i in best.values()}
+    for i, v in enumerate(voyages):
+        v["current"] = i in chosen
 
 
 def _run_summary(run: dict | None) -> dict | None:

@@ -213,7 +213,7 @@ async function fleetPage(main) {
   mapBox.before(controls);
   mapBox.after(legend);
   legend.after(el("div", { cls: "legend" },
-    "plan ahead (dashed, by status) · track behind (grey) · ● ship now (on its plan) · ◆ last reported position",
+    "plan ahead (dashed, by status) · track behind (grey) · ● ship now (on its plan) · ○ start of a ship's later voyage · ◆ last reported position",
     ...Object.entries(STATUS_COLOUR).slice(0, 3).map(([k, c]) => { const s = el("span", { cls: "dot" }); s.style.background = c; return el("span", {}, s, ` ${k}`); })));
   const placed = [];
   for (const v of d.voyages) {
@@ -228,6 +228,12 @@ async function fleetPage(main) {
     if (!v.position) continue;
     const x = map.x(v.position.lon), y = map.y(v.position.lat);
     const link = sv("a", { href: `/voyage/${encodeURIComponent(v.voyage_id)}` });
+    if (!v.current) {  // another voyage of a ship that is elsewhere now: where this one starts
+      link.append(sv("circle", { class: "voyage-start", "data-voyage": v.voyage_id, cx: x.toFixed(1), cy: y.toFixed(1), r: 3.5, fill: "#fff", stroke: colour, "stroke-width": 1.5 },
+        title(`${tip} · a later voyage of this ship (${v.position.phase})`)));
+      map.layers.marks.append(link);
+      continue;
+    }
     link.append(sv("circle", { class: "ship", "data-voyage": v.voyage_id, "data-phase": v.position.phase, cx: x.toFixed(1), cy: y.toFixed(1), r: v.attention.length ? 6 : 4.5,
                                fill: colour, stroke: v.attention.length ? "#000" : "#fff", "stroke-width": 1.5 }, title(`${tip} · ${v.position.phase}` + (v.attention.length ? ` · ${v.attention.join("; ")}` : ""))));
     map.layers.ships.append(link);
@@ -240,7 +246,7 @@ async function fleetPage(main) {
   }
   const rows = d.voyages.map(v => el("tr", { "data-voyage": v.voyage_id },
     td(v.vessel_name), el("td", {}, el("a", { href: `/voyage/${encodeURIComponent(v.voyage_id)}`, text: v.voyage_id })),
-    td(`${v.dep_name} → ${v.arr_name}`), statusCell(v.status), td(v.position ? v.position.phase : "–"),
+    td(`${v.dep_name} → ${v.arr_name}`), statusCell(v.status), td(v.position ? v.position.phase + (v.current ? "" : " (later voyage)") : "–"),
     td(utc(v.eta_utc)), td(utc(v.rta_utc)), td(v.eta_minus_rta_h === null ? "–" : (v.eta_minus_rta_h > 0 ? "+" : "") + num(v.eta_minus_rta_h, 1), "num"),
     td(num(v.fuel_t, 1), "num"), td(num(v.savings_pct, 1), "num"), el("td", { cls: "wrap attention", text: v.attention.join("; ") })));
   main.append(el("h2", { text: "Voyages" }),
