@@ -38,6 +38,13 @@ def warehouse_to_read(layout: DataLayout) -> Path:
                            "run `jitroute demo` or the nightly job first, or pass --data")
 
 
+def warehouse_version(layout: DataLayout) -> tuple:
+    """What changes when the warehouse to read is replaced or written: its path, modification time and size."""
+    path = warehouse_to_read(layout)
+    st = path.stat()
+    return str(path), st.st_mtime_ns, st.st_size
+
+
 @contextlib.contextmanager
 def reader(layout: DataLayout) -> Iterator[duckdb.DuckDBPyConnection]:
     """One short read-only connection to the warehouse to read (see warehouse_to_read)."""
@@ -54,11 +61,19 @@ def latest_run(con) -> dict | None:
     return None if df.empty else df.iloc[0].to_dict()
 
 
+# what the fleet page shows of each voyage's plan (latest_routes columns)
+FLEET_COLUMNS = ("voyage_id", "imo", "vessel_name", "dep_name", "arr_name", "status", "reason", "run_id", "depart_utc",
+                 "eta_utc", "rta_utc", "fuel_t", "savings_total_pct", "stale", "stale_reason", "newer_attempt_failed",
+                 "newer_attempt_status", "newer_attempt_reason", "forecast_flag", "hours_beyond_forecast",
+                 "hours_before_cycle", "min_land_clearance_nm")
+
+
 def latest_routes(con) -> pd.DataFrame:
-    """The plan to sail per voyage (the warehouse's latest_routes view) with its voyage's departure/arrival ports'
-    positions."""
-    return con.execute("""
-        SELECT r.*, v.dep_lat, v.dep_lon, v.arr_lat, v.arr_lon, v.depart_utc AS voyage_depart_utc
+    """The plan to sail per voyage (the warehouse's latest_routes view, FLEET_COLUMNS) with its voyage's departure
+    and arrival positions and departure time."""
+    return con.execute(f"""
+        SELECT {', '.join('r.' + c for c in FLEET_COLUMNS)}, v.dep_lat, v.dep_lon, v.arr_lat, v.arr_lon,
+               v.depart_utc AS voyage_depart_utc
         FROM latest_routes r LEFT JOIN voyages v USING (voyage_id)
         ORDER BY r.vessel_name, r.voyage_id""").fetchdf()
 

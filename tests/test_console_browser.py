@@ -182,6 +182,12 @@ def test_the_fleet_map_draws_every_demo_voyage_where_its_ship_is(visit, demo_roo
     late = [v for v, s in routes if s == "late"]
     for v in late:  # a late voyage says by how much
         assert "late: ETA" in visit.page.inner_text(f'#voyages tr[data-voyage="{v}"]')
+    # the table's filter keeps one vessel's voyages
+    vessel, n_voyages = _q(demo_root, "SELECT vessel_name, count(*) FROM latest_routes GROUP BY 1 ORDER BY 2 DESC, 1 LIMIT 1")[0]
+    visit.page.fill("#voyage-filter", vessel.lower())
+    shown = visit.page.eval_on_selector_all("#voyages tbody tr td:first-child", "els => els.map(e => e.innerText)")
+    assert shown == [vessel] * n_voyages
+    visit.page.fill("#voyage-filter", "")
     _weather_drawn(visit)
     _shot(visit, shots, "fleet")
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import hmac
 import json
+import threading
+from collections import OrderedDict
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -75,6 +77,30 @@ def _extent(request: Request) -> dict:
     return box
 
 
+class AnswerCache:
+    """The last few answers by key (the warehouse snapshot's version is part of a key, so a new snapshot is a new
+    answer); safe across the server's threads."""
+
+    def __init__(self, size: int = 8):
+        self.size = size
+        self._items: OrderedDict = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key):
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                return self._items[key]
+            return None
+
+    def put(self, key, value) -> None:
+        with self._lock:
+            self._items[key] = value
+            self._items.move_to_end(key)
+            while len(self._items) > self.size:
+                self._items.popitem(last=False)
+
+
 class TokenMiddleware(BaseHTTPMiddleware):
     def __init__(self, app, token: str):
         super().__init__(app)
@@ -119,17 +145,26 @@ def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starle
     def shell(request: Request):
         return Response((STATIC / "index.html").read_text(), media_type="text/html")
 
+    fleet_answers = AnswerCache()
+
     def fleet(request: Request):
         at = _parse_utc(request.query_params.get("at"), "at")
+        now = clock().replace(second=0, microsecond=0)  # positions to the minute: an answer serves a minute
+        key = (console_reads.warehouse_version(layout), at)
+        cached = fleet_answers.get(key)
+        if cached is not None and (cached[1] is None or cached[1] == now):  # shown at now: this minute's only
+            return Response(cached[0], media_type="application/json")
         with console_reads.reader(layout) as con:
             run = console_reads.latest_run(con)
             routes = console_reads.latest_routes(con)
-            as_of, note = console_data.as_of_time(clock(), run, at)
+            as_of, note = console_data.as_of_time(now, run, at)
             legs = console_reads.legs_of_latest(con)
             reports = console_reads.reports_sailed(con, as_of)
         view = console_data.fleet_view(routes, legs, reports, as_of, note, run)
         view["weather"] = _weather_times(run, as_of)
-        return _json(view)
+        response = _json(view)
+        fleet_answers.put(key, (response.body, now if note == "now" else None))
+        return response
 
     def _weather_times(run: dict | None, when) -> dict | None:
         cycle = (run or {}).get("cycle")
@@ -166,6 +201,8 @@ def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starle
 
         return _json(console_data.weather_layer(lat, lon, fields, var, cycle, step_h, box, is_sea=is_sea))
 
+    land_pictures = AnswerCache()
+
     def land(request: Request):
         from pipeline.routing.land_mask import is_sea
 
@@ -174,7 +211,10 @@ def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starle
             px = int(request.query_params.get("px", "800"))
         except ValueError:
             raise ApiError(400, "px must be a whole number of pixels") from None
-        png = console_data.land_png(box, px, is_sea)
+        png = land_pictures.get((tuple(box.values()), px))
+        if png is None:
+            png = console_data.land_png(box, px, is_sea)
+            land_pictures.put((tuple(box.values()), px), png)
         return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=86400"})
 
     def _voyage_parts(voyage_id: str):

@@ -105,10 +105,29 @@ def extent_of(lat_deg, lon_deg, pad_frac: float = 0.08, min_span_deg: float = 6.
 
 def _waypoints(legs: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(lat, lon, time as datetime64[s]) of a plan's n + 1 waypoints: each leg's start, then the last leg's end."""
-    lat = np.r_[legs["lat0"].to_numpy(float), legs["lat1"].to_numpy(float)[-1:]]
-    lon = np.r_[legs["lon0"].to_numpy(float), legs["lon1"].to_numpy(float)[-1:]]
-    t = np.r_[legs["etd_utc"].to_numpy("datetime64[s]"), legs["eta_utc"].to_numpy("datetime64[s]")[-1:]]
-    return lat, lon, t
+    return _waypoints_of(_leg_arrays(legs), slice(0, len(legs)))
+
+
+def _leg_arrays(legs: pd.DataFrame) -> dict[str, np.ndarray]:
+    """The legs' positions and times as numpy arrays (one conversion for a whole fleet's legs)."""
+    out = {c: legs[c].to_numpy(float) for c in ("lat0", "lon0", "lat1", "lon1")}
+    out.update({c: legs[c].to_numpy("datetime64[s]") for c in ("etd_utc", "eta_utc")})
+    return out
+
+
+def _waypoints_of(a: dict[str, np.ndarray], rows: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    last = slice(rows.stop - 1, rows.stop)
+    return (np.concatenate([a["lat0"][rows], a["lat1"][last]]), np.concatenate([a["lon0"][rows], a["lon1"][last]]),
+            np.concatenate([a["etd_utc"][rows], a["eta_utc"][last]]))
+
+
+def _runs_of(ids: np.ndarray) -> dict:
+    """id → slice of its rows, for rows sorted (grouped) by id."""
+    if ids.size == 0:
+        return {}
+    change = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+    starts, ends = np.r_[0, change], np.r_[change, ids.size]
+    return {ids[a]: slice(int(a), int(b)) for a, b in zip(starts, ends)}
 
 
 def position_on_plan(lat, lon, t, when) -> tuple[float, float, int]:
@@ -165,22 +184,30 @@ def attention_items(route: dict, run: dict | None) -> list[str]:
 
 
 def _pairs(lat, lon, decimals: int = 3) -> list[list[float]]:
-    return [[round(float(a), decimals), round(float(b), decimals)] for a, b in zip(lat, lon)]
+    return np.round(np.column_stack([np.asarray(lat, float), np.asarray(lon, float)]), decimals).tolist()
 
 
 def fleet_view(routes: pd.DataFrame, legs: pd.DataFrame, reports: pd.DataFrame, as_of: datetime, as_of_note: str,
                run: dict | None) -> dict:
     """The fleet page: each voyage's shown plan (latest_routes rows), where its ship is at `as_of` (on the plan, and
     its newest reported position), the track behind (reports, then the plan up to now) and the plan ahead."""
-    by_voyage = {vid: g for vid, g in legs.groupby("voyage_id", sort=False)} if not legs.empty else {}
-    rep_by_voyage = {vid: g for vid, g in reports.groupby("voyage_id", sort=False)} if not reports.empty else {}
+    # legs grouped by voyage (and reports by voyage, in time), as slices of arrays: a thousand voyages' legs are
+    # converted once, not per voyage
+    legs = legs.sort_values(["voyage_id", "leg"], kind="stable") if not legs.empty else legs
+    leg_arrays = _leg_arrays(legs) if not legs.empty else {}
+    by_voyage = _runs_of(legs["voyage_id"].to_numpy(object)) if not legs.empty else {}
+    if not reports.empty:
+        reports = reports.sort_values(["voyage_id", "ts_utc"], kind="stable")
+        rep_lat, rep_lon = reports["lat"].to_numpy(float), reports["lon"].to_numpy(float)
+        rep_t, rep_source = reports["ts_utc"].to_numpy("datetime64[s]"), reports["source"].to_numpy(object)
+    rep_by_voyage = _runs_of(reports["voyage_id"].to_numpy(object)) if not reports.empty else {}
     centre = centre_lon_deg(np.r_[legs["lon0"].to_numpy(float)] if not legs.empty else
                             routes[["dep_lon", "arr_lon"]].to_numpy(float).ravel())
     all_lat, all_lon, voyages = [], [], []
     when = np.datetime64(as_of, "s")
     for r in routes.to_dict("records"):
         vid = r["voyage_id"]
-        g = by_voyage.get(vid)
+        rows = by_voyage.get(vid)
         item = {"voyage_id": vid, "vessel_name": plain(r.get("vessel_name")), "imo": plain(r.get("imo")),
                 "dep_name": plain(r.get("dep_name")), "arr_name": plain(r.get("arr_name")), "status": plain(r.get("status")),
                 "reason": plain(r.get("reason")), "run_id": plain(r.get("run_id")), "etd_utc": _iso(r.get("depart_utc")),
@@ -189,8 +216,8 @@ def fleet_view(routes: pd.DataFrame, legs: pd.DataFrame, reports: pd.DataFrame, 
                 "attention": attention_items(r, run), "ahead": [], "behind": [], "position": None, "report": None}
         eta, rta = utc_datetime(r.get("eta_utc")), utc_datetime(r.get("rta_utc"))
         item["eta_minus_rta_h"] = None if not (eta and rta) else round((eta - rta).total_seconds() / 3600.0, 2)
-        if g is not None and len(g):
-            lat, lon, t = _waypoints(g)
+        if rows is not None:
+            lat, lon, t = _waypoints_of(leg_arrays, rows)
             lon = unwrap_lon_deg(lon, centre)
             plat, plon, k = position_on_plan(lat, lon, t, when)
             departed = utc_datetime(r.get("voyage_depart_utc")) or utc_datetime(r.get("depart_utc"))
@@ -204,14 +231,13 @@ def fleet_view(routes: pd.DataFrame, legs: pd.DataFrame, reports: pd.DataFrame, 
             # starts from one), then the plan's waypoints passed, then where the plan puts the ship now
             behind_lat, behind_lon = lat[:k], lon[:k]
             rep = rep_by_voyage.get(vid)
-            if rep is not None and len(rep):
-                rlon = unwrap_lon_deg(rep["lon"].to_numpy(float), centre)
-                rlat = rep["lat"].to_numpy(float)
-                before = rep["ts_utc"].to_numpy("datetime64[s]") < t[0]
+            if rep is not None:
+                rlon = unwrap_lon_deg(rep_lon[rep], centre)
+                rlat = rep_lat[rep]
+                before = rep_t[rep] < t[0]
                 behind_lat, behind_lon = np.r_[rlat[before], behind_lat], np.r_[rlon[before], behind_lon]
-                last = rep.iloc[-1]
                 item["report"] = {"lat": round(float(rlat[-1]), 3), "lon": round(float(rlon[-1]), 3),
-                                  "utc": _iso(last["ts_utc"]), "source": last["source"]}
+                                  "utc": _iso(rep_t[rep][-1]), "source": rep_source[rep][-1]}
             if phase != "not sailed" and t[0] > np.datetime64(departed, "s") and finite_or_none(r.get("dep_lat")) is not None:
                 dlon = float(unwrap_lon_deg([r["dep_lon"]], centre)[0])
                 dlon = dlon - 360.0 * round((dlon - (behind_lon[0] if behind_lon.size else plon)) / 360.0)
@@ -223,13 +249,13 @@ def fleet_view(routes: pd.DataFrame, legs: pd.DataFrame, reports: pd.DataFrame, 
             all_lon += [lon, behind_lon]
         else:  # no plan: where the ship last reported, else its departure port
             rep = rep_by_voyage.get(vid)
-            if rep is not None and len(rep):
-                last = rep.iloc[-1]
-                plon = float(unwrap_lon_deg([last["lon"]], centre)[0])
-                item["report"] = {"lat": round(float(last["lat"]), 3), "lon": round(plon, 3), "utc": _iso(last["ts_utc"]),
-                                  "source": last["source"]}
-                item["position"] = {"lat": round(float(last["lat"]), 3), "lon": round(plon, 3), "phase": "no plan",
-                                    "source": last["source"]}
+            if rep is not None:
+                k = rep.stop - 1
+                plon = float(unwrap_lon_deg([rep_lon[k]], centre)[0])
+                item["report"] = {"lat": round(float(rep_lat[k]), 3), "lon": round(plon, 3), "utc": _iso(rep_t[k]),
+                                  "source": rep_source[k]}
+                item["position"] = {"lat": round(float(rep_lat[k]), 3), "lon": round(plon, 3), "phase": "no plan",
+                                    "source": rep_source[k]}
             elif finite_or_none(r.get("dep_lat")) is not None:
                 plon = float(unwrap_lon_deg([r["dep_lon"]], centre)[0])
                 item["position"] = {"lat": round(float(r["dep_lat"]), 3), "lon": round(plon, 3), "phase": "no plan",

@@ -28,6 +28,8 @@ function sv(tag, attrs, ...kids) {
   return e;
 }
 function title(text) { return sv("title", {}, text); }
+const ESC = { "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" };
+function esc(x) { return String(x).replace(/[&<>"']/g, c => ESC[c]); }
 async function getJSON(url) {
   const r = await fetch(url, { credentials: "same-origin" });
   const body = await r.json().catch(() => ({ error: `${url}: HTTP ${r.status}` }));
@@ -215,42 +217,72 @@ async function fleetPage(main) {
   legend.after(el("div", { cls: "legend" },
     "plan ahead (dashed, by status) · track behind (grey) · ● ship now (on its plan) · ○ start of a ship's later voyage · ◆ last reported position",
     ...Object.entries(STATUS_COLOUR).slice(0, 3).map(([k, c]) => { const s = el("span", { cls: "dot" }); s.style.background = c; return el("span", {}, s, ` ${k}`); })));
-  const placed = [];
+  // a thousand voyages: each layer is written as one string (far cheaper than an element at a time)
+  const tracks = [], marks = [], ships = [], labels = [], placed = [];
+  const tag = (name, attrs, inner) => `<${name} ${Object.entries(attrs).map(([k, v]) => `${k}="${esc(v)}"`).join(" ")}>${inner || ""}</${name}>`;
+  const tip = text => `<title>${esc(text)}</title>`;
   for (const v of d.voyages) {
     const colour = STATUS_COLOUR[v.status] || "#555";
-    const tip = `${v.vessel_name} · ${v.voyage_id} · ${v.dep_name} → ${v.arr_name} · ${v.status} · ETA ${utc(v.eta_utc)} · RTA ${utc(v.rta_utc)}`;
-    if (v.behind.length) map.layers.tracks.append(sv("path", { class: "track-behind", "data-voyage": v.voyage_id, d: map.path(v.behind), stroke: "#56606b", "stroke-width": 1.6, fill: "none" }));
-    if (v.ahead.length) map.layers.tracks.append(sv("path", { class: "track-ahead", "data-voyage": v.voyage_id, d: map.path(v.ahead), stroke: colour, "stroke-width": 1.8, "stroke-dasharray": "6 3", fill: "none" }, title(tip)));
+    const about = `${v.vessel_name} · ${v.voyage_id} · ${v.dep_name} → ${v.arr_name} · ${v.status} · ETA ${utc(v.eta_utc)} · RTA ${utc(v.rta_utc)}`;
+    if (v.behind.length) tracks.push(tag("path", { class: "track-behind", "data-voyage": v.voyage_id, d: map.path(v.behind), stroke: "#56606b", "stroke-width": 1.6, fill: "none" }));
+    if (v.ahead.length) tracks.push(tag("path", { class: "track-ahead", "data-voyage": v.voyage_id, d: map.path(v.ahead), stroke: colour, "stroke-width": 1.8, "stroke-dasharray": "6 3", fill: "none" }, tip(about)));
     if (v.report) {
-      const x = map.x(v.report.lon), y = map.y(v.report.lat);
-      map.layers.marks.append(sv("path", { class: "report", "data-voyage": v.voyage_id, d: `M${x},${y - 8}L${x + 8},${y}L${x},${y + 8}L${x - 8},${y}Z`, fill: "#fff", stroke: "#333" }, title(`${v.vessel_name}: ${v.report.source} ${utc(v.report.utc)}`)));
+      const x = map.x(v.report.lon).toFixed(1), y = map.y(v.report.lat);
+      marks.push(tag("path", { class: "report", "data-voyage": v.voyage_id, d: `M${x},${(y - 8).toFixed(1)}l8,8l-8,8l-8,-8Z`, fill: "#fff", stroke: "#333" }, tip(`${v.vessel_name}: ${v.report.source} ${utc(v.report.utc)}`)));
     }
     if (!v.position) continue;
-    const x = map.x(v.position.lon), y = map.y(v.position.lat);
-    const link = sv("a", { href: `/voyage/${encodeURIComponent(v.voyage_id)}` });
+    const x = map.x(v.position.lon), y = map.y(v.position.lat), href = `/voyage/${encodeURIComponent(v.voyage_id)}`;
     if (!v.current) {  // another voyage of a ship that is elsewhere now: where this one starts
-      link.append(sv("circle", { class: "voyage-start", "data-voyage": v.voyage_id, cx: x.toFixed(1), cy: y.toFixed(1), r: 3.5, fill: "#fff", stroke: colour, "stroke-width": 1.5 },
-        title(`${tip} · a later voyage of this ship (${v.position.phase})`)));
-      map.layers.marks.append(link);
+      marks.push(tag("a", { href }, tag("circle", { class: "voyage-start", "data-voyage": v.voyage_id, cx: x.toFixed(1), cy: y.toFixed(1), r: 3.5, fill: "#fff", stroke: colour, "stroke-width": 1.5 },
+        tip(`${about} · a later voyage of this ship (${v.position.phase})`))));
       continue;
     }
-    link.append(sv("circle", { class: "ship", "data-voyage": v.voyage_id, "data-phase": v.position.phase, cx: x.toFixed(1), cy: y.toFixed(1), r: v.attention.length ? 6 : 4.5,
-                               fill: colour, stroke: v.attention.length ? "#000" : "#fff", "stroke-width": 1.5 }, title(`${tip} · ${v.position.phase}` + (v.attention.length ? ` · ${v.attention.join("; ")}` : ""))));
-    map.layers.ships.append(link);
+    ships.push(tag("a", { href }, tag("circle", { class: "ship", "data-voyage": v.voyage_id, "data-phase": v.position.phase, cx: x.toFixed(1), cy: y.toFixed(1), r: v.attention.length ? 6 : 4.5,
+      fill: colour, stroke: v.attention.length ? "#000" : "#fff", "stroke-width": 1.5 }, tip(`${about} · ${v.position.phase}` + (v.attention.length ? ` · ${v.attention.join("; ")}` : "")))));
     // a label where it overlaps no other (the table lists every voyage)
-    const w = 7 * (v.vessel_name || v.voyage_id).length, lx = x + 7, ly = y - 6;
+    const name = v.vessel_name || v.voyage_id, w = 7 * name.length, lx = x + 7, ly = y - 6;
     if (lx + w < map.W && !placed.some(p => Math.abs(p[0] - lx) < (p[2] + w) / 2 + 4 && Math.abs(p[1] - ly) < 13)) {
       placed.push([lx, ly, w]);
-      map.layers.labels.append(sv("text", { x: lx, y: ly, "font-size": 11, fill: "#10202e", stroke: "#fff", "stroke-width": 3, "paint-order": "stroke" }, v.vessel_name || v.voyage_id));
+      labels.push(tag("text", { x: lx.toFixed(1), y: ly.toFixed(1), "font-size": 11, fill: "#10202e", stroke: "#fff", "stroke-width": 3, "paint-order": "stroke" }, esc(name)));
     }
   }
-  const rows = d.voyages.map(v => el("tr", { "data-voyage": v.voyage_id },
-    td(v.vessel_name), el("td", {}, el("a", { href: `/voyage/${encodeURIComponent(v.voyage_id)}`, text: v.voyage_id })),
-    td(`${v.dep_name} → ${v.arr_name}`), statusCell(v.status), td(v.position ? v.position.phase + (v.current ? "" : " (later voyage)") : "–"),
-    td(utc(v.eta_utc)), td(utc(v.rta_utc)), td(v.eta_minus_rta_h === null ? "–" : (v.eta_minus_rta_h > 0 ? "+" : "") + num(v.eta_minus_rta_h, 1), "num"),
-    td(num(v.fuel_t, 1), "num"), td(num(v.savings_pct, 1), "num"), el("td", { cls: "wrap attention", text: v.attention.join("; ") })));
-  main.append(el("h2", { text: "Voyages" }),
-    table(["Vessel", "Voyage", "Route", "Status", "Now", "ETA (UTC)", "RTA (UTC)", "ETA−RTA h ", "Fuel t ", "Saving % ", "Attention"], rows, "voyages"));
+  map.layers.tracks.innerHTML = tracks.join("");
+  map.layers.marks.innerHTML = marks.join("");
+  map.layers.ships.innerHTML = ships.join("");
+  map.layers.labels.innerHTML = labels.join("");
+  voyageTable(main, d.voyages);
+}
+
+/* the fleet's voyages as a table: those needing attention first; at most ROWS_SHOWN rows until asked for all, with a
+   filter on vessel, voyage, ports and status (a thousand rows are slow to lay out and nobody reads them at once) */
+const ROWS_SHOWN = 200;
+function voyageTable(main, voyages) {
+  const cell = (text, cls) => `<td${cls ? ` class="${cls}"` : ""}>${esc(text === null || text === undefined ? "–" : text)}</td>`;
+  const row = v => `<tr data-voyage="${esc(v.voyage_id)}">` + cell(v.vessel_name)
+    + `<td><a href="/voyage/${encodeURIComponent(v.voyage_id)}">${esc(v.voyage_id)}</a></td>` + cell(`${v.dep_name} → ${v.arr_name}`)
+    + cell(v.status, `status-${v.status}`) + cell(v.position ? v.position.phase + (v.current ? "" : " (later voyage)") : "–")
+    + cell(utc(v.eta_utc)) + cell(utc(v.rta_utc)) + cell(v.eta_minus_rta_h === null ? "–" : (v.eta_minus_rta_h > 0 ? "+" : "") + num(v.eta_minus_rta_h, 1), "num")
+    + cell(num(v.fuel_t, 1), "num") + cell(num(v.savings_pct, 1), "num") + cell(v.attention.join("; "), "wrap attention") + "</tr>";
+  const ordered = [...voyages.filter(v => v.attention.length), ...voyages.filter(v => !v.attention.length)];
+  const text = v => `${v.vessel_name} ${v.voyage_id} ${v.dep_name} ${v.arr_name} ${v.status}`.toLowerCase();
+  const box = table(["Vessel", "Voyage", "Route", "Status", "Now", "ETA (UTC)", "RTA (UTC)", "ETA−RTA h ", "Fuel t ", "Saving % ", "Attention"], [], "voyages");
+  const filter = el("input", { id: "voyage-filter", type: "search", placeholder: "filter: vessel, voyage, port, status", size: 36 });
+  const count = el("span", { cls: "note", id: "voyage-count" });
+  const all = el("button", { id: "show-all", type: "button" });
+  let showAll = false;
+  function draw() {
+    const q = filter.value.trim().toLowerCase();
+    const hits = q ? ordered.filter(v => text(v).includes(q)) : ordered;
+    const shown = showAll ? hits : hits.slice(0, ROWS_SHOWN);
+    box.querySelector("tbody").innerHTML = shown.map(row).join("");
+    count.textContent = `${shown.length} of ${hits.length} voyages shown` + (q ? ` matching "${q}"` : "") + " · those needing attention first";
+    all.textContent = `show all ${hits.length}`;
+    all.hidden = shown.length === hits.length;
+  }
+  filter.addEventListener("input", draw);
+  all.addEventListener("click", () => { showAll = true; draw(); });
+  main.append(el("h2", { text: "Voyages" }), el("div", { cls: "controls" }, filter, count, all), box);
+  draw();
 }
 
 /* ---- Voyage ---- */
