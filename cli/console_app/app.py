@@ -8,13 +8,16 @@ a cookie); without one the command binds only the loopback interface.
 
 from __future__ import annotations
 
+import contextlib
 import hmac
 import json
+import logging
 import threading
 from collections import OrderedDict
 from datetime import UTC, datetime
 from pathlib import Path
 
+import duckdb
 import pandas as pd
 from starlette.applications import Starlette
 from starlette.middleware import Middleware
@@ -32,7 +35,9 @@ from pipeline.export import console_data
 from storage import console_reads
 from storage.layout import DataLayout
 
+log = logging.getLogger("jitroute.console")
 STATIC = Path(__file__).resolve().parent / "static"
+KEEP_READY_S = 5.0  # how often the fleet answer is checked against the snapshot and the minute
 TOKEN_COOKIE = "jitroute_console_token"
 PAGES = ("fleet", "voyage", "plan", "runs")
 # the browser may load nothing from elsewhere: every script, style, picture and request comes from this server
@@ -127,8 +132,9 @@ class SecurityHeaders(BaseHTTPMiddleware):
         return response
 
 
-def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starlette:
-    """The console over `layout`'s data root. `now()` gives the current UTC time (naive), default the clock."""
+def create_app(layout: DataLayout, token: str | None = None, now=None, prepare: bool = True) -> Starlette:
+    """The console over `layout`'s data root. `now()` gives the current UTC time (naive), default the clock.
+    `prepare`: while the server runs, a thread keeps the fleet page's answer made (see keep_ready)."""
     clock = now or (lambda: datetime.now(UTC).replace(tzinfo=None))
 
     def api(fn):
@@ -147,13 +153,14 @@ def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starle
 
     fleet_answers = AnswerCache()
 
-    def fleet(request: Request):
-        at = _parse_utc(request.query_params.get("at"), "at")
+    def fleet_answer(at: datetime | None) -> bytes:
+        """The fleet's JSON, from the cache while the warehouse snapshot (and, for positions shown now, the minute)
+        is the same."""
         now = clock().replace(second=0, microsecond=0)  # positions to the minute: an answer serves a minute
         key = (console_reads.warehouse_version(layout), at)
         cached = fleet_answers.get(key)
         if cached is not None and (cached[1] is None or cached[1] == now):  # shown at now: this minute's only
-            return Response(cached[0], media_type="application/json")
+            return cached[0]
         with console_reads.reader(layout) as con:
             run = console_reads.latest_run(con)
             routes = console_reads.latest_routes(con)
@@ -162,9 +169,25 @@ def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starle
             reports = console_reads.reports_sailed(con, as_of)
         view = console_data.fleet_view(routes, legs, reports, as_of, note, run)
         view["weather"] = _weather_times(run, as_of)
-        response = _json(view)
-        fleet_answers.put(key, (response.body, now if note == "now" else None))
-        return response
+        body = _json(view).body
+        fleet_answers.put(key, (body, now if note == "now" else None))
+        return body
+
+    def fleet(request: Request):
+        return Response(fleet_answer(_parse_utc(request.query_params.get("at"), "at")), media_type="application/json")
+
+    def keep_ready(stop: threading.Event) -> None:
+        """Keep the fleet page's answer made (at start, when the snapshot is replaced, each minute for positions shown
+        now) and the land mask loaded, so an operator opening the console does not wait for them."""
+        from pipeline.routing.land_mask import is_sea
+
+        is_sea(0.0, 0.0)
+        while not stop.is_set():
+            try:
+                fleet_answer(None)
+            except (console_reads.NoWarehouseError, OSError, duckdb.Error) as exc:
+                log.debug("console: fleet answer not prepared (%s)", exc)
+            stop.wait(KEEP_READY_S)
 
     def _weather_times(run: dict | None, when) -> dict | None:
         cycle = (run or {}).get("cycle")
@@ -293,4 +316,14 @@ def create_app(layout: DataLayout, token: str | None = None, now=None) -> Starle
     middleware = [Middleware(SecurityHeaders)]
     if token:
         middleware.insert(0, Middleware(TokenMiddleware, token=token))
-    return Starlette(routes=routes, middleware=middleware)
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        stop = threading.Event()
+        if prepare:
+            threading.Thread(target=keep_ready, args=(stop,), name="console-keep-ready", daemon=True).start()
+        try:
+            yield
+        finally:
+            stop.set()
+
+    return Starlette(routes=routes, middleware=middleware, lifespan=lifespan)
