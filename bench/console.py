@@ -225,7 +225,8 @@ def main() -> None:
     load = os.getloadavg()
     print(f"\nfleet page, {os.cpu_count()} CPUs, load average {load[0]:.1f} / {load[1]:.1f} (1 / 5 min); "
           f"warm = median of {args.repeat}, each page in a fresh browser context")
-    print(f"{'voyages':>8} {'shown':>6} {'api cold s':>11} {'api warm s':>11} {'api KB':>8} {'page cold s':>12} {'page warm s':>12}")
+    print(f"{'voyages':>8} {'shown':>6} {'api cold s':>11} {'api warm s':>11} {'api KB':>8} "
+          f"{'page cold s':>12} {'page warm s':>12}")
     for n, r in results.items():
         page = (f"{r['page_cold_s']:>12.2f} {r['page_warm_s']:>12.2f}" if "page_cold_s" in r
                 else f"{'no chromium':>12} {'':>12}")

@@ -254,8 +254,8 @@ def test_the_fleet_plan_page_shows_every_vessel_and_the_contracts_left(visit, de
     names = visit.page.eval_on_selector_all("#gantt > text", "els => els.map(e => e.textContent)")
     assert sum(1 for n in names if n.startswith("JIT ")) == n_vessels  # idle vessels too
     if left:
-        assert sorted(visit.page.eval_on_selector_all("#unassigned tbody tr td:first-child", "els => els.map(e => e.innerText)")) \
-            == sorted(c for c, in left)
+        codes = visit.page.eval_on_selector_all("#unassigned tbody tr td:first-child", "els => els.map(e => e.innerText)")
+        assert sorted(codes) == sorted(c for c, in left)
     _shot(visit, shots, "plan")
 
 

@@ -152,6 +152,7 @@ def create_app(layout: DataLayout, token: str | None = None, now=None, prepare: 
         return Response((STATIC / "index.html").read_text(), media_type="text/html")
 
     fleet_answers = AnswerCache()
+    fleet_making = threading.Lock()
 
     def fleet_answer(at: datetime | None) -> bytes:
         """The fleet's JSON, from the cache while the warehouse snapshot (and, for positions shown now, the minute)
@@ -161,6 +162,13 @@ def create_app(layout: DataLayout, token: str | None = None, now=None, prepare: 
         cached = fleet_answers.get(key)
         if cached is not None and (cached[1] is None or cached[1] == now):  # shown at now: this minute's only
             return cached[0]
+        with fleet_making:  # one making at a time: a request arriving meanwhile takes that answer
+            cached = fleet_answers.get(key)
+            if cached is not None and (cached[1] is None or cached[1] == now):
+                return cached[0]
+            return make_fleet_answer(key, at, now)
+
+    def make_fleet_answer(key, at: datetime | None, now: datetime) -> bytes:
         with console_reads.reader(layout) as con:
             run = console_reads.latest_run(con)
             routes = console_reads.latest_routes(con)
@@ -181,12 +189,15 @@ def create_app(layout: DataLayout, token: str | None = None, now=None, prepare: 
         now) and the land mask loaded, so an operator opening the console does not wait for them."""
         from pipeline.routing.land_mask import is_sea
 
-        is_sea(0.0, 0.0)
+        land_loaded = False
         while not stop.is_set():
             try:
                 fleet_answer(None)
             except (console_reads.NoWarehouseError, OSError, duckdb.Error) as exc:
                 log.debug("console: fleet answer not prepared (%s)", exc)
+            if not land_loaded:  # after the fleet answer: a page asks for the land once it has the fleet
+                is_sea(0.0, 0.0)
+                land_loaded = True
             stop.wait(KEEP_READY_S)
 
     def _weather_times(run: dict | None, when) -> dict | None:
