@@ -311,9 +311,8 @@ function profileChart(legs, baseline) {
     svg.append(sv("text", { x: L - 4, y: Yv(vmax * k / 4) + 4, "font-size": 10, "text-anchor": "end" }, num(vmax * k / 4, 0)));
     svg.append(sv("text", { x: W - R + 4, y: Yf(fmax * k / 4) + 4, "font-size": 10, fill: "#b04a00" }, num(fmax * k / 4, 0)));
   }
-  const dayMs = 864e5, first = Math.ceil(t0 / (dayMs / 4)) * (dayMs / 4);
-  const every = (tEnd - t0) > 4 * dayMs ? dayMs : dayMs / 4;
-  for (let t = first; t <= tEnd; t += every) {
+  const hourMs = 3.6e6, every = [6, 12, 24, 48, 96].map(h => h * hourMs).find(e => (tEnd - t0) / e <= 8) || 192 * hourMs;
+  for (let t = Math.ceil(t0 / every) * every; t <= tEnd; t += every) {
     svg.append(sv("line", { x1: X(t), x2: X(t), y1: H - B, y2: H - B + 4, stroke: "#445" }));
     svg.append(sv("text", { x: X(t), y: H - B + 15, "font-size": 10, "text-anchor": "middle" }, new Date(t).toISOString().slice(5, 13).replace("T", " ") + "Z"));
   }
