@@ -259,13 +259,14 @@ const ROWS_SHOWN = 200;
 function voyageTable(main, voyages) {
   const cell = (text, cls) => `<td${cls ? ` class="${cls}"` : ""}>${esc(text === null || text === undefined ? "–" : text)}</td>`;
   const row = v => `<tr data-voyage="${esc(v.voyage_id)}">` + cell(v.vessel_name)
-    + `<td><a href="/voyage/${encodeURIComponent(v.voyage_id)}">${esc(v.voyage_id)}</a></td>` + cell(`${v.dep_name} → ${v.arr_name}`)
-    + cell(v.status, `status-${v.status}`) + cell(v.position ? v.position.phase + (v.current ? "" : " (later voyage)") : "–")
+    + `<td class="id" title="${esc(v.voyage_id)}"><a href="/voyage/${encodeURIComponent(v.voyage_id)}">${esc(v.voyage_id)}</a></td>`
+    + cell(v.status, `status-${v.status}`) + cell(v.attention.join("; "), "wrap attention") + cell(`${v.dep_name} → ${v.arr_name}`)
+    + cell(v.position ? v.position.phase + (v.current ? "" : " (later voyage)") : "–")
     + cell(utc(v.eta_utc)) + cell(utc(v.rta_utc)) + cell(v.eta_minus_rta_h === null ? "–" : (v.eta_minus_rta_h > 0 ? "+" : "") + num(v.eta_minus_rta_h, 1), "num")
-    + cell(num(v.fuel_t, 1), "num") + cell(num(v.savings_pct, 1), "num") + cell(v.attention.join("; "), "wrap attention") + "</tr>";
+    + cell(num(v.fuel_t, 1), "num") + cell(num(v.savings_pct, 1), "num") + "</tr>";
   const ordered = [...voyages.filter(v => v.attention.length), ...voyages.filter(v => !v.attention.length)];
   const text = v => `${v.vessel_name} ${v.voyage_id} ${v.dep_name} ${v.arr_name} ${v.status}`.toLowerCase();
-  const box = table(["Vessel", "Voyage", "Route", "Status", "Now", "ETA (UTC)", "RTA (UTC)", "ETA−RTA h ", "Fuel t ", "Saving % ", "Attention"], [], "voyages");
+  const box = table(["Vessel", "Voyage", "Status", "Attention", "Route", "Now", "ETA (UTC)", "RTA (UTC)", "ETA−RTA h ", "Fuel t ", "Saving % "], [], "voyages");
   const filter = el("input", { id: "voyage-filter", type: "search", placeholder: "filter: vessel, voyage, port, status", size: 36 });
   const count = el("span", { cls: "note", id: "voyage-count" });
   const all = el("button", { id: "show-all", type: "button" });
