@@ -185,6 +185,70 @@ def _join(rule, layer: _Layer, lat: float, lon: float, with_extra: bool) -> tupl
         radius *= 2.0
 
 
+ESCAPE_BOX_DEG = 1.0
+ESCAPE_STEP_DEG = RES_DEG / 20.0  # 0.0125° (0.75 NM): the graph's cell centres lie on this fine grid
+ESCAPE_MARGIN_NM = 0.55  # fine nodes keep this much more than the rule, so the diagonals between them keep the rule
+
+
+def _escape(rule, layer: _Layer, lat: float, lon: float) -> tuple[np.ndarray, np.ndarray, dict[int, list]]:
+    """When no graph node is one clear leg from a port (a bay whose mouth is narrower than the graph's cells, e.g.
+    Manila Bay): the shortest paths on a fine grid (ESCAPE_STEP_DEG, ± ESCAPE_BOX_DEG round the port) from the
+    port to the graph's cells in the box, through fine nodes that keep the rule (plus ESCAPE_MARGIN_NM). Returns the
+    cells reached, their path lengths (NM) and each one's path (fine points from the port's side, the cell excluded)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    step, half = ESCAPE_STEP_DEG, 0.5 * RES_DEG
+    top = LAT_LIMITS_DEG[1] - half
+    lat0 = top - RES_DEG * math.ceil((top - (lat - ESCAPE_BOX_DEG)) / RES_DEG)
+    lon0 = -180.0 + half + RES_DEG * math.floor((lon - ESCAPE_BOX_DEG + 180.0 - half) / RES_DEG)
+    n = int(round(2 * ESCAPE_BOX_DEG / step)) + 41
+    la = lat0 + step * np.arange(n)
+    lo = lon0 + step * np.arange(n)
+    LA, LO = np.meshgrid(la, lo, indexing="ij")
+    d = distance_to_land_nm(LA, LO, limit_nm=rule.clearance_nm + 2.0)
+    near = np.minimum(_haversine_nm(LA, LO, rule.dep_lat, rule.dep_lon), _haversine_nm(LA, LO, rule.arr_lat, rule.arr_lon))
+    ok = d >= np.where(near <= rule.approach_nm, 0.0, rule.clearance_nm) + ESCAPE_MARGIN_NM
+    ok &= (LA >= LAT_LIMITS_DEG[0]) & (LA <= LAT_LIMITS_DEG[1])
+    idx = np.arange(n * n).reshape(n, n)
+    rows, cols, w = [], [], []
+    for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        i0, i1, j0, j1 = max(0, -di), n - max(0, di), max(0, -dj), n - max(0, dj)
+        good = ok[i0:i1, j0:j1] & ok[i0 + di:i1 + di, j0 + dj:j1 + dj]
+        cost = 60.0 * step * np.hypot(di, dj * np.cos(np.radians(LA[i0:i1, j0:j1])))
+        rows.append(idx[i0:i1, j0:j1][good])
+        cols.append(idx[i0 + di:i1 + di, j0 + dj:j1 + dj][good])
+        w.append(cost[good])
+    graph = coo_matrix((np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n * n, n * n)).tocsr()
+    grid = land_grid()
+    order = np.argsort(_haversine_nm(LA, LO, lat, lon), axis=None)
+    source, first_nm = -1, 0.0
+    for k in order[:400]:
+        if ok.flat[k] and leg_is_clear_nb(grid, rule, lat, lon, LA.flat[k], LO.flat[k], -90.0, 90.0):
+            source, first_nm = int(k), float(geo.gc_distance_nm(lat, lon, LA.flat[k], LO.flat[k]))
+            break
+    if source < 0:
+        return np.zeros(0, np.int64), np.zeros(0), {}
+    dist, pred = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
+    nodes, costs, paths = [], [], {}
+    for a in range(0, n, 20):  # the cell centres: every 20th fine node
+        for b in range(0, n, 20):
+            k = idx[a, b]
+            i = int(round((LAT_LIMITS_DEG[1] - half - la[a]) / RES_DEG))
+            j = int(round((geo.wrap180(lo[b]) + 180.0 - half) / RES_DEG)) % N_COLS
+            if not np.isfinite(dist[k]) or not (0 <= i < N_ROWS) or layer.edges[i, j] == 0:
+                continue
+            path, m = [], int(pred[k])
+            while m >= 0:
+                path.append((float(LA.flat[m]), float(geo.wrap180(LO.flat[m]))))
+                m = int(pred[m])
+            node = i * N_COLS + j
+            nodes.append(node)
+            costs.append(first_nm + float(dist[k]))
+            paths[node] = path[::-1]
+    return np.array(nodes, np.int64), np.array(costs), paths
+
+
 def _build_layer(clearance_nm: float) -> _Layer:
     base = sea_graph(clearance_nm)
     edges = base.edges.copy()
@@ -441,6 +505,12 @@ def passage_names() -> tuple[str, ...]:
     return tuple(p.name for p in PASSAGES)
 
 
+def _position(p) -> tuple[float, float]:
+    """(lat, lon) as floats, the longitude in -180..180 (left as given when it already is)."""
+    lat, lon = float(p[0]), float(p[1])
+    return lat, (lon if -180.0 <= lon <= 180.0 else float(geo.wrap180(lon)))
+
+
 def _fmt(p: tuple[float, float]) -> str:
     return f"{p[0]:.4f},{p[1]:.4f}"
 
@@ -462,8 +532,7 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
                              f"{LAT_LIMITS_DEG[0]:g}..{LAT_LIMITS_DEG[1]:g})")
         if not bool(is_sea(la, lo)):
             raise NoSeaRoute(f"{name} {_fmt((la, lo))} is on land (global land mask, which holds lakes and the Caspian Sea as land); give a position at sea, e.g. the pilot station")
-    dep = (float(dep[0]), float(geo.wrap180(dep[1])))
-    arr = (float(arr[0]), float(geo.wrap180(arr[1])))
+    dep, arr = (_position(p) for p in (dep, arr))
     rule = clearance(dep, arr, clearance_nm, approach_nm)
     layer = _layer(rule.clearance_nm)
     grid = land_grid()
@@ -473,12 +542,19 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
                                             and not _crosses_gate(layer.gates, *dep, *arr)) else math.inf
     src_node, src_cost = _join(rule, layer, *dep, with_extra=True)
     dst_node, dst_cost = _join(rule, layer, *arr, with_extra=True)
+    src_paths: dict[int, list] = {}
+    dst_paths: dict[int, list] = {}
+    if not src_node.size:
+        src_node, src_cost, src_paths = _escape(rule, layer, *dep)
+    if not dst_node.size:
+        dst_node, dst_cost, dst_paths = _escape(rule, layer, *arr)
     if direct == math.inf:
         for name, pos, nodes in ((dep_name, dep, src_node), (arr_name, arr, dst_node)):
             if not nodes.size:
-                raise NoSeaRoute(f"{name} {_fmt(pos)} has no water {rule.clearance_nm:g} NM clear of land within "
-                                 f"{JOIN_MAX_NM:g} NM (an enclosed harbour, lake or the mask's coast): give a position at "
-                                 f"sea, e.g. the pilot station")
+                raise NoSeaRoute(f"{name} {_fmt(pos)} is enclosed at this clearance: no way from it to open water keeps "
+                                 f"{rule.clearance_nm:g} NM from land outside its {rule.approach_nm:g} NM approach (a "
+                                 f"harbour or bay whose way out is narrower than twice that); give a position outside it, "
+                                 f"e.g. the pilot station, or a wider port approach")
     avoided = np.array([p.name in avoid for p in PASSAGES], np.bool_)
     parent = np.full(layer.xoff.size - 1, -1, np.int64)
     best, last = _astar(layer.edges, _move_cost(), MOVES, layer.xlat, layer.xlon, layer.xoff, layer.xdst, layer.xcost,
@@ -490,7 +566,11 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
         nodes.append(int(last))
         last = int(parent[last])
     nodes.reverse()
-    pts = [dep] + [tuple(float(v) for v in _node_pos(layer.xlat, layer.xlon, n)) for n in nodes] + [arr]
+    prefix = src_paths.get(nodes[0], []) if nodes else []
+    suffix = dst_paths.get(nodes[-1], [])[::-1] if nodes else []
+    at = 1 + len(prefix)  # path index of nodes[0]
+    pts = ([dep] + prefix + [tuple(float(v) for v in _node_pos(layer.xlat, layer.xlon, n)) for n in nodes] + suffix
+           + [arr])
     lat = np.array([p[0] for p in pts])
     lon = np.array([p[1] for p in pts])
     # fairway vertices on the path (a passage used over at least one of its edges) are fixed
@@ -502,11 +582,11 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
             prev_same = k > 0 and nodes[k - 1] >= N_GRID and int(layer.vpass[nodes[k - 1] - N_GRID]) == pid
             nxt_same = k + 1 < len(nodes) and nodes[k + 1] >= N_GRID and int(layer.vpass[nodes[k + 1] - N_GRID]) == pid
             if prev_same or nxt_same:
-                fixed[k + 1] = True
-                if prev_same and used and used[-1][0] == pid and used[-1][2] == k:
-                    used[-1] = (pid, used[-1][1], k + 1)
+                fixed[k + at] = True
+                if prev_same and used and used[-1][0] == pid and used[-1][2] == k + at - 1:
+                    used[-1] = (pid, used[-1][1], k + at)
                 else:
-                    used.append((pid, k + 1, k + 1))
+                    used.append((pid, k + at, k + at))
     keep = np.zeros(len(pts), np.bool_)
     _pull(grid, rule, layer.gates, lat, lon, fixed, keep)
     new_index = np.cumsum(keep) - 1
@@ -542,4 +622,37 @@ def _why_none(layer, avoid, avoided, src_node, dst_node, dep, arr, dep_name, arr
     return f"{base}: the two lie in separate waters"
 
 
-__all__ = ["NoSeaRoute", "SeaRoute", "passage_names", "sea_route"]
+def least_clearance_outside_passages_nm(route: SeaRoute, approach_nm: float = DEFAULT_APPROACH_NM,
+                                        step_nm: float = 0.1) -> float:
+    """Least distance to land (NM, capped at 25) along `route`, sampled every `step_nm`, outside its passages'
+    fairways, the port approaches (`approach_nm` of the first and last waypoint) and the fairways' end approaches
+    (FAIRWAY_END_APPROACH_NM): what the route promises to keep (its clearance). 0 means a sample on land."""
+    from pipeline.routing.sphere import gc_points
+
+    inside = np.zeros(route.lat.size - 1, bool)
+    spots = [(route.lat[0], route.lon[0], approach_nm), (route.lat[-1], route.lon[-1], approach_nm)]
+    for p in route.passages:
+        inside[p.start_index:p.end_index] = True
+        for k in (p.start_index, p.end_index):
+            spots.append((route.lat[k], route.lon[k], FAIRWAY_END_APPROACH_NM))
+    best = 25.0
+    for k in np.flatnonzero(~inside):
+        la0, lo0, la1, lo1 = route.lat[k], route.lon[k], route.lat[k + 1], route.lon[k + 1]
+        n = int(geo.gc_distance_nm(la0, lo0, la1, lo1) / step_nm) + 2
+        lat, lon = gc_points(la0, lo0, la1, lo1, np.linspace(0.0, 1.0, n))
+        free = np.ones(n, bool)
+        for sla, slo, r in spots:
+            free &= _haversine_nm(lat, lon, sla, slo) > r
+        if free.any():
+            best = min(best, float(distance_to_land_nm(lat[free], lon[free], limit_nm=best).min()))
+    return best
+
+
+def _haversine_nm(lat, lon, lat0, lon0):
+    p1, p2 = np.radians(lat0), np.radians(lat)
+    dl = np.radians((lon - lon0 + 180.0) % 360.0 - 180.0)
+    a = np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(dl / 2) ** 2
+    return 2.0 * EARTH_RADIUS_NM * np.arcsin(np.minimum(1.0, np.sqrt(a)))
+
+
+__all__ = ["NoSeaRoute", "SeaRoute", "least_clearance_outside_passages_nm", "passage_names", "sea_route"]

@@ -70,8 +70,14 @@ PASSAGES: tuple[Passage, ...] = (
             title="Bab-el-Mandeb (the channel east of Perim)"),
     Passage("great_belt", "strait", ((57.31, 10.9), (57.25, 10.84), (56.42, 10.98), (56.29, 10.91), (55.72, 10.87), (55.12, 10.98), (54.8, 10.93), (54.6, 11.0)), 0.5,
             title="Kattegat and the Great Belt (route T)"),
+    Passage("san_bernardino", "strait", ((12.45, 123.95), (12.51, 124.11), (12.75, 124.385), (12.75, 124.55)), 0.4,
+            title="San Bernardino Strait (Sibuyan and Samar Seas to the Pacific)"),
+    Passage("verde_island", "strait", ((13.65, 120.6), (13.615, 120.895), (13.605, 121.16), (13.58, 121.27), (13.45, 121.5)),
+            0.5, title="Verde Island Passage (Manila to the Sibuyan Sea)"),
+    Passage("surigao", "strait", ((9.85, 125.35), (10.6, 125.45)), 1.0,
+            title="Surigao Strait (Mindanao Sea to Leyte Gulf)"),
     Passage("torres", "strait", ((-9.20, 144.00), (-10.49, 142.68), (-10.50, 141.20)), 0.5,
-            title="Torres Strait (Great North East and Prince of Wales channels)"),
+            gates=(((-10.68, 142.55), (-9.15, 142.55)),), title="Torres Strait (Great North East and Prince of Wales channels)"),
 )
 
 
