@@ -90,8 +90,12 @@ def test_singapore_shanghai_and_rotterdam_piraeus_through_gibraltar():
     assert_clear_outside_fairways(r, SINGAPORE, SHANGHAI)
     r = sea_route(ROTTERDAM, PIRAEUS)
     check(r)
-    assert names(r) == ["dover", "gibraltar"]
-    assert r.dist_nm == pytest.approx(2814, rel=0.03)  # searoute 2,814 NM
+    assert names(r) == ["dover", "gibraltar", "rion", "corinth"]  # the small ship's way, through the Corinth Canal
+    assert r.dist_nm == pytest.approx(2814, rel=0.03)  # searoute 2,814 NM (its network has the Corinth Canal too)
+    assert_clear_outside_fairways(r, ROTTERDAM, PIRAEUS)
+    r = sea_route(ROTTERDAM, PIRAEUS, avoid={"corinth"})  # round the Peloponnese
+    check(r)
+    assert names(r) == ["dover", "gibraltar"] and 2814 < r.dist_nm < 2814 * 1.08
     assert_clear_outside_fairways(r, ROTTERDAM, PIRAEUS)
 
 
@@ -102,8 +106,12 @@ def test_elbe_to_the_baltic_through_kiel_and_round_skagen_without_it():
     # the canal's 53 NM plus the Elbe approach and the Baltic: well under the 715 NM round Skagen (searoute)
     assert 400 < r.dist_nm < 480
     round_skagen = sea_route(ELBE, GDANSK, avoid={"kiel"})
-    # round Skagen and through the Great Belt (route T, the deep-water way in): searoute, whose network has no Kiel
-    # Canal, takes the shallower Øresund at 715 NM; the Great Belt is about 10 % longer
+    # round Skagen and through the Øresund, as searoute (whose network has no Kiel Canal): 715 NM
+    assert names(round_skagen) == ["oresund"]
+    assert round_skagen.dist_nm == pytest.approx(715, rel=0.05)
+    assert_clear_outside_fairways(round_skagen, ELBE, GDANSK)
+    # a deep-draught ship avoids the Sound as well: the Great Belt (route T), about 8 % longer
+    round_skagen = sea_route(ELBE, GDANSK, avoid={"kiel", "oresund"})
     assert names(round_skagen) == ["great_belt"]
     assert 715 < round_skagen.dist_nm < 715 * 1.12
     assert_clear_outside_fairways(round_skagen, ELBE, GDANSK)

@@ -5,7 +5,7 @@ and clearance rule, clearance.py: at sea only within `approach_nm` of either por
 straits and canals of passages.py, or raises `NoSeaRoute` naming what blocks it.
 
 How:
-1. A coarse graph over the whole ocean (sea_graph.py): 0.25° cells that keep the clearance, 16 moves each, every
+1. A coarse graph over the whole ocean (sea_graph.py): 0.125° cells that keep the clearance, 16 moves each, every
    edge a great-circle leg checked at ≤ 0.1 NM. The passages' fairways are chains of extra nodes whose two ends join
    the cells within `JOIN_NM` by clear legs (at sea only within FAIRWAY_END_APPROACH_NM of the end, as for a port); grid edges across a passage's gate are removed, so a strait with a gate
    is sailed on its fairway only.
@@ -16,8 +16,8 @@ How:
 4. String-pulling: between fixed points (the ports and the fairway vertices used) a waypoint is dropped while the
    great-circle leg that replaces it stays clear (and crosses no gate), so the route is near-geodesic: its legs
    touch the coast's clearance line rather than following cell centres.
-A pair takes tens of milliseconds warm; the first call in a process loads (or, once per machine and clearance,
-builds: a few seconds) the graph.
+A pair takes 0.03–0.3 s warm (up to about 1.3 s for an ocean-wide search such as Santos–Shanghai); the first call
+in a process loads the graph (or, once per machine and clearance, builds it: about 25 s).
 """
 
 from __future__ import annotations
@@ -186,7 +186,8 @@ def _join(rule, layer: _Layer, lat: float, lon: float, with_extra: bool) -> tupl
 
 
 ESCAPE_BOX_DEG = 1.0
-ESCAPE_STEP_DEG = RES_DEG / 20.0  # 0.0125° (0.75 NM): the graph's cell centres lie on this fine grid
+ESCAPE_STEP_DEG = 0.0125  # 0.75 NM: the graph's cell centres lie on this fine grid, every ESCAPE_EVERY nodes
+ESCAPE_EVERY = int(round(RES_DEG / ESCAPE_STEP_DEG))
 ESCAPE_MARGIN_NM = 0.55  # fine nodes keep this much more than the rule, so the diagonals between them keep the rule
 
 
@@ -202,7 +203,7 @@ def _escape(rule, layer: _Layer, lat: float, lon: float) -> tuple[np.ndarray, np
     top = LAT_LIMITS_DEG[1] - half
     lat0 = top - RES_DEG * math.ceil((top - (lat - ESCAPE_BOX_DEG)) / RES_DEG)
     lon0 = -180.0 + half + RES_DEG * math.floor((lon - ESCAPE_BOX_DEG + 180.0 - half) / RES_DEG)
-    n = int(round(2 * ESCAPE_BOX_DEG / step)) + 41
+    n = int(round(2 * ESCAPE_BOX_DEG / step)) + 2 * ESCAPE_EVERY + 1
     la = lat0 + step * np.arange(n)
     lo = lon0 + step * np.arange(n)
     LA, LO = np.meshgrid(la, lo, indexing="ij")
@@ -231,8 +232,8 @@ def _escape(rule, layer: _Layer, lat: float, lon: float) -> tuple[np.ndarray, np
         return np.zeros(0, np.int64), np.zeros(0), {}
     dist, pred = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
     nodes, costs, paths = [], [], {}
-    for a in range(0, n, 20):  # the cell centres: every 20th fine node
-        for b in range(0, n, 20):
+    for a in range(0, n, ESCAPE_EVERY):  # the cell centres
+        for b in range(0, n, ESCAPE_EVERY):
             k = idx[a, b]
             i = int(round((LAT_LIMITS_DEG[1] - half - la[a]) / RES_DEG))
             j = int(round((geo.wrap180(lo[b]) + 180.0 - half) / RES_DEG)) % N_COLS
@@ -326,8 +327,26 @@ def _row_tables(moves):
 @numba.njit(cache=True)
 def _h(lat, lon, tx, ty, tz):
     x, y, z = _unit(lat, lon)
+    return _h_xyz(x, y, z, tx, ty, tz)
+
+
+@numba.njit(cache=True)
+def _h_xyz(x, y, z, tx, ty, tz):
+    """Great-circle NM between unit vectors (the chord's angle): the A* heuristic, admissible."""
     ch = math.sqrt((x - tx) ** 2 + (y - ty) ** 2 + (z - tz) ** 2)
     return 2.0 * EARTH_RADIUS_NM * math.asin(min(1.0, 0.5 * ch))
+
+
+@numba.njit(cache=True)
+def _trig_tables():
+    """cos and sin of every row's latitude and every column's longitude."""
+    rc, rs = np.empty(N_ROWS), np.empty(N_ROWS)
+    cc, cs = np.empty(N_COLS), np.empty(N_COLS)
+    for i in range(N_ROWS):
+        rc[i], rs[i] = math.cos(math.radians(cell_lat(i))), math.sin(math.radians(cell_lat(i)))
+    for j in range(N_COLS):
+        cc[j], cs[j] = math.cos(math.radians(cell_lon(j))), math.sin(math.radians(cell_lon(j)))
+    return rc, rs, cc, cs
 
 
 @numba.njit(cache=True)
@@ -382,6 +401,7 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
     for k in range(dst_node.size):
         to_dst[dst_node[k]] = min(to_dst[dst_node[k]], dst_cost[k])
     tx, ty, tz = _unit(tlat, tlon)
+    rc, rs, cc, cs = _trig_tables()
     hf = np.empty(1 << 16)
     hn = np.empty(1 << 16, np.int64)
     size = 0
@@ -410,12 +430,14 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
             for k in range(moves.shape[0]):
                 if not (e >> k) & 1:
                     continue
-                m = (i + moves[k, 0]) * nc + (j + moves[k, 1]) % nc
+                ii, jj = i + moves[k, 0], (j + moves[k, 1]) % nc
+                m = ii * nc + jj
                 gm = gn + move_cost[i, k]
                 if gm < g[m]:
                     g[m] = gm
                     parent[m] = n
-                    hf, hn, size = _heap_push(hf, hn, size, gm + _h(cell_lat(m // nc), cell_lon(m % nc), tx, ty, tz), m)
+                    hm = _h_xyz(rc[ii] * cc[jj], rc[ii] * cs[jj], rs[ii], tx, ty, tz)
+                    hf, hn, size = _heap_push(hf, hn, size, gm + hm, m)
         for q in range(xoff[n], xoff[n + 1]):
             if xpass[q] >= 0 and avoided[xpass[q]]:
                 continue

@@ -16,6 +16,7 @@ plan's own speed). Sources of the canal figures:
   rules" and transit statistics); 14 h taken, plus 12 h waiting for the daily convoy on average.
 - Panama: 80 km (44 NM) from Cristóbal to Balboa, 8–10 h through the locks (Panama Canal Authority); 10 h taken,
   plus 24 h waiting without a booked slot (ACP "Canal Waters Time" runs about one day for unbooked ships).
+- Corinth: 6.4 km, about 1 h through with a tug, one way at a time (Corinth Canal S.A.); 2 h waiting taken.
 - Kiel: 98 km (53 NM) from Brunsbüttel to Kiel-Holtenau, about 7–9 h including the locks (WSA Nord-Ostsee-Kanal);
   8 h taken, plus 2 h at the locks.
 Fairway coordinates: canals and the Bosporus drawn from the charts' channel axis; the straits' fairways are the
@@ -53,6 +54,12 @@ PASSAGES: tuple[Passage, ...] = (
         (54.02, 8.20), (53.93, 8.55), (53.89, 8.75), (53.88, 9.00), (53.89, 9.14), (54.00, 9.30), (54.10, 9.45),
         (54.30, 9.67), (54.33, 9.85), (54.36, 10.05), (54.37, 10.15), (54.43, 10.19), (54.52, 10.28)),
         None, transit_h=8.0, wait_h=2.0, title="Kiel Canal (Nord-Ostsee-Kanal), with the Elbe approach"),
+    Passage("corinth", "canal", ((38.02, 22.86), (37.97, 22.92), (37.94, 22.955), (37.915, 23.01), (37.905, 23.03),
+                                 (37.87, 23.06), (37.85, 23.25)),
+            None, transit_h=1.0, wait_h=2.0, title="Corinth Canal (beam under about 17 m)"),
+    Passage("rion", "strait", ((38.22, 20.95), (38.25, 21.45), (38.295, 21.525), (38.305, 21.545), (38.32, 21.575), (38.33, 21.78),
+                               (38.345, 21.845), (38.345, 22.155), (38.2, 22.3)), 0.2,
+            title="Rion–Antirrion Strait (Gulf of Patras to the Gulf of Corinth)"),
     Passage("gibraltar", "strait", ((35.93, -6.1), (35.98, -5.56), (36.04, -5.41), (36.05, -5.15)), 1.0,
             gates=(((36.20, -5.60), (35.70, -5.60)),), title="Strait of Gibraltar"),
     Passage("dover", "strait", ((50.75, 1.15), (51.25, 1.85)), 1.0,
@@ -76,6 +83,9 @@ PASSAGES: tuple[Passage, ...] = (
             0.5, title="Verde Island Passage (Manila to the Sibuyan Sea)"),
     Passage("surigao", "strait", ((9.85, 125.35), (10.6, 125.45)), 1.0,
             title="Surigao Strait (Mindanao Sea to Leyte Gulf)"),
+    Passage("oresund", "strait", ((56.15, 12.35), (56.055, 12.625), (55.84, 12.805), (55.385, 12.805), (55.38, 12.81),
+                                  (55.25, 12.85)), 0.2,
+            title="Øresund (The Sound; Drogden's 8 m limits the draught)"),
     Passage("torres", "strait", ((-9.20, 144.00), (-10.49, 142.68), (-10.50, 141.20)), 0.5,
             gates=(((-10.68, 142.55), (-9.15, 142.55)),), title="Torres Strait (Great North East and Prince of Wales channels)"),
 )

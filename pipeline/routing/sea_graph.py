@@ -1,12 +1,12 @@
-"""The coarse global sea graph the global sea-route layer searches (global_routes.py): a 0.25° grid of sea cells.
+"""The coarse global sea graph the global sea-route layer searches (global_routes.py): a 0.125° grid of sea cells.
 
-A node is the centre of a 0.25° cell between the ice limits (`LAT_LIMITS_DEG`) that keeps the clearance from land
+A node is the centre of a 0.125° cell between the ice limits (`LAT_LIMITS_DEG`) that keeps the clearance from land
 (land.py's distance field, the product's own mask). An edge joins a node to one of its 16 neighbours (the 8 around
 it and the 8 a knight's move away, so paths need not zig-zag at 45°) when the great-circle leg between the centres
 keeps the clearance at every point, checked at ≤ 0.1 NM (clearance.leg_is_clear_nb, the rule every plan is held
-to). Columns wrap round the antimeridian. Edges are one bit each (a uint16 per node), about 1.5 MB in memory.
+to). Columns wrap round the antimeridian. Edges are one bit each (a uint16 per node), about 6 MB in memory (2.1 million cells).
 
-Building the edges for a clearance takes about a minute on one core; the result is kept per process and on disk
+Building the edges for a clearance takes about 25 s on one core; the result is kept per process and on disk
 (a temporary directory, keyed by the mask, the clearance and this module's `GRAPH_VERSION`), so a process pays
 it at most once per machine and clearance.
 """
@@ -29,7 +29,7 @@ from pipeline.routing.land import distance_to_land_nb, land_grid
 from pipeline.routing.land_mask import _mask_key, _mask_path
 
 GRAPH_VERSION = 1
-RES_DEG = 0.25
+RES_DEG = 0.125
 LAT_LIMITS_DEG = (-62.0, 72.0)  # ice limits: no route into the Antarctic pack or through the Arctic passages
 N_COLS = int(round(360.0 / RES_DEG))
 N_ROWS = int(round((LAT_LIMITS_DEG[1] - LAT_LIMITS_DEG[0]) / RES_DEG))
@@ -89,7 +89,7 @@ def _build_edges(grid, rule, moves, opposite, edges):
 
 
 def build_sea_graph(clearance_nm: float) -> SeaGraph:
-    """The graph's edges for `clearance_nm`, built from the land grid (about a minute)."""
+    """The graph's edges for `clearance_nm`, built from the land grid (about 25 s)."""
     edges = np.zeros((N_ROWS, N_COLS), np.uint16)
     _build_edges(land_grid(), open_sea_rule(clearance_nm), MOVES, OPPOSITE, edges)
     return SeaGraph(edges=edges, clearance_nm=float(clearance_nm))
