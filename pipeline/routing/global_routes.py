@@ -7,7 +7,8 @@ straits and canals of passages.py, or raises `NoSeaRoute` naming what blocks it.
 How:
 1. A coarse graph over the whole ocean (sea_graph.py): 0.125° cells that keep the clearance, 16 moves each, every
    edge a great-circle leg checked at ≤ 0.1 NM. The passages' fairways are chains of extra nodes whose two ends join
-   the cells within `JOIN_NM` by clear legs (at sea only within FAIRWAY_END_APPROACH_NM of the end, as for a port); grid edges across a passage's gate are removed, so a strait with a gate
+   the cells and the other passages' vertices within `JOIN_NM` by clear legs (at sea only within
+   FAIRWAY_END_APPROACH_NM of the end, as for a port); grid edges across a passage's gate are removed, so a strait with a gate
    is sailed on its fairway only.
 2. The ports join the graph (cells and fairway vertices within `JOIN_NM`, widening to `JOIN_MAX_NM`) by legs clear
    under the voyage's rule; a direct leg between them counts too.
@@ -273,13 +274,19 @@ def _build_layer(clearance_nm: float) -> _Layer:
             (la0, lo0), (la1, lo1) = p.fairway[k], p.fairway[k + 1]
             add(first + k, first + k + 1, float(geo.gc_distance_nm(la0, lo0, la1, lo1)), pid)
         ends += [first, first + len(p.fairway) - 1]
+    joined: set[tuple[int, int]] = set()
     layer = _Layer(edges, np.array(xlat), np.array(xlon), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
                    np.zeros(0, np.int64), gates, np.array(vpass, np.int64))
     for e in ends:
         end = (xlat[e - N_GRID], xlon[e - N_GRID])
-        nodes, costs = _join(clearance(end, end, clearance_nm, FAIRWAY_END_APPROACH_NM), layer, *end, with_extra=False)
+        # the cells near the end, and the other passages' vertices (a fairway may lead into another, e.g. Durian
+        # Strait into the Singapore Strait)
+        nodes, costs = _join(clearance(end, end, clearance_nm, FAIRWAY_END_APPROACH_NM), layer, *end, with_extra=True)
+        own = vpass[e - N_GRID]
         for nd, c in zip(nodes, costs):
-            add(e, int(nd), float(c), -1)
+            if nd < N_GRID or (vpass[nd - N_GRID] != own and (int(nd), e) not in joined):
+                add(e, int(nd), float(c), -1)
+                joined.add((e, int(nd)))
     n_all = N_GRID + len(xlat)
     counts = np.zeros(n_all + 1, np.int64)
     for a, lst in adj.items():

@@ -86,6 +86,13 @@ PASSAGES: tuple[Passage, ...] = (
     Passage("oresund", "strait", ((56.15, 12.35), (56.055, 12.625), (55.84, 12.805), (55.385, 12.805), (55.38, 12.81),
                                   (55.25, 12.85)), 0.2,
             title="Øresund (The Sound; Drogden's 8 m limits the draught)"),
+    Passage("bangka", "strait", ((-3.05, 106.2), (-2.825, 105.93), (-2.82, 105.925), (-2.39, 105.62), (-2.38, 105.61),
+                                 (-2.095, 105.105), (-2.05, 105.08), (-2.02, 105.08), (-1.955, 105.1), (-1.95, 105.105),
+                                 (-1.55, 105.2)), 0.4,
+            title="Bangka Strait (Java Sea to Singapore along Sumatra)"),
+    Passage("durian", "strait", ((-0.9, 104.75), (-0.7, 104.34), (-0.48, 104.125), (0.655, 104.115), (0.92, 103.85),
+                                 (0.915, 103.755), (0.925, 103.75), (1.045, 103.73), (1.12, 103.79), (1.12, 103.8)), 0.4,
+            title="Durian Strait (the Riau archipelago to the Singapore Strait)"),
     Passage("torres", "strait", ((-9.20, 144.00), (-10.49, 142.68), (-10.50, 141.20)), 0.5,
             gates=(((-10.68, 142.55), (-9.15, 142.55)),), title="Torres Strait (Great North East and Prince of Wales channels)"),
 )
