@@ -19,7 +19,9 @@ plan's own speed). Sources of the canal figures:
 - Corinth: 6.4 km, about 1 h through with a tug, one way at a time (Corinth Canal S.A.); 2 h waiting taken.
 - Kiel: 98 km (53 NM) from Brunsbüttel to Kiel-Holtenau, about 7–9 h including the locks (WSA Nord-Ostsee-Kanal);
   8 h taken, plus 2 h at the locks.
-Fairway coordinates: canals and the Bosporus drawn from the charts' channel axis; the straits' fairways are the
+Fairway coordinates: canals and the Bosporus drawn from the charts' channel axis, the Kanmon Strait (closed on the
+mask) from Eurostat's marine network (as the `searoute` package ships it), the Inland Sea beyond it at 0.2 NM on the
+mask; the straits' fairways are the
 shortest path at their clearance on the product's land mask (fine-grid search, then string-pulled), which lies along
 the traffic separation schemes within a mile or two.
 """
@@ -81,6 +83,11 @@ PASSAGES: tuple[Passage, ...] = (
             title="San Bernardino Strait (Sibuyan and Samar Seas to the Pacific)"),
     Passage("verde_island", "strait", ((13.65, 120.6), (13.615, 120.895), (13.605, 121.16), (13.58, 121.27), (13.45, 121.5)),
             0.5, title="Verde Island Passage (Manila to the Sibuyan Sea)"),
+    Passage("visayan", "strait", ((13.45, 121.5), (13.265, 121.875), (13.255, 121.895), (12.035, 123.12), (11.935, 123.125),
+                                  (11.91, 123.14), (11.89, 123.155), (11.295, 124.07), (11.24, 124.1), (10.45, 124.1),
+                                  (10.26, 124.085), (10.225, 124.065), (10.22, 124.05), (10.225, 124.045),
+                                  (10.225, 123.875)), 0.4,
+            title="Sibuyan and Visayan Seas, the Camotes Sea round Mactan (the Verde Island Passage to Cebu)"),
     Passage("surigao", "strait", ((9.85, 125.35), (10.6, 125.45)), 1.0,
             title="Surigao Strait (Mindanao Sea to Leyte Gulf)"),
     Passage("oresund", "strait", ((56.15, 12.35), (56.055, 12.625), (55.84, 12.805), (55.385, 12.805), (55.38, 12.81),
@@ -93,6 +100,19 @@ PASSAGES: tuple[Passage, ...] = (
     Passage("durian", "strait", ((-0.9, 104.75), (-0.7, 104.34), (-0.48, 104.125), (0.655, 104.115), (0.92, 103.85),
                                  (0.915, 103.755), (0.925, 103.75), (1.045, 103.73), (1.12, 103.79), (1.12, 103.8)), 0.4,
             title="Durian Strait (the Riau archipelago to the Singapore Strait)"),
+    Passage("inland_sea", "strait", (
+        (33.991, 130.691), (33.958, 130.837), (33.93, 130.9), (33.957, 130.957), (33.96, 131.0), (33.92, 131.05),
+        (33.91, 131.25), (33.795, 132.01), (33.76, 132.045), (33.76, 132.06), (33.825, 132.16), (33.835, 132.38),
+        (33.905, 132.48), (33.91, 132.545), (33.92, 132.56), (33.925, 132.565), (33.935, 132.67), (33.955, 132.705),
+        (34.15, 132.93), (34.145, 132.98), (34.115, 133.01), (34.1, 133.01), (34.095, 133.015), (34.09, 133.04),
+        (34.14, 133.1), (34.16, 133.13), (34.24, 133.235), (34.315, 133.535), (34.32, 133.655), (34.325, 133.66),
+        (34.33, 133.665), (34.335, 133.71), (34.345, 133.795), (34.375, 133.835), (34.43, 134.025),
+        (34.485, 134.035), (34.58, 134.155), (34.58, 134.9), (34.615, 134.99), (34.615, 135.035), (34.5, 135.15),
+        (34.25, 134.96), (33.85, 134.95),), None,
+            title="Kanmon Strait and the Seto Inland Sea, out by the Akashi and Kitan Straits"),
+    Passage("naruto", "strait", ((34.41, 134.0), (34.41, 134.08), (34.425, 134.135), (34.4, 134.245), (34.245, 134.65),
+                                 (33.85, 134.95)), 0.2,
+            title="Naruto Strait (the Inland Sea's short way out to the Kii Channel; strong tidal streams)"),
     Passage("torres", "strait", ((-9.20, 144.00), (-10.49, 142.68), (-10.50, 141.20)), 0.5,
             gates=(((-10.68, 142.55), (-9.15, 142.55)),), title="Torres Strait (Great North East and Prince of Wales channels)"),
 )
