@@ -142,6 +142,11 @@ def main() -> int:
                          clearance_nm=clear, passages=[p.name for p in r.passages], own_nm=own.dist_nm))
     n = len(PAIRS)
     within3 = sum(abs(x["diff"]) <= 0.03 for x in rows)
+    # shorter than searoute by more than 3 % yet within 1 % of the great circle: no sea route can be much shorter,
+    # searoute's lanes are the longer ones there
+    at_gc = [x["pair"] for x in rows if x["diff"] < -0.03 and x["product_nm"] <= 1.01 * x["gc_nm"]]
+    longer = [f"{x['pair']} {100 * x['diff']:+.1f} %" for x in rows if x["diff"] > 0.03]
+    shorter = [f"{x['pair']} {100 * x['diff']:+.1f} %" for x in rows if x["diff"] < -0.03 and x["pair"] not in at_gc]
     within8 = sum(abs(x["diff"]) <= 0.08 for x in rows)
     unclear = [x["pair"] for x in rows if x["clearance_nm"] < CLEARANCE_NM - SAMPLING_SLACK_NM]
     cpus = sorted(x["cpu_s"] for x in rows)
@@ -149,6 +154,11 @@ def main() -> int:
     print(f"\npairs {n}; refused {len(refused)} (target 0)")
     print(f"within ±3 % of searoute: {within3}/{n} = {100 * within3 / n:.0f} % (target ≥ 90 %); within ±8 %: "
           f"{within8}/{n} (target all)")
+    print(f"  off by more than 3 %: shorter, within 1 % of the great circle ({len(at_gc)}): {', '.join(at_gc)}")
+    print(f"  shorter, off the great circle ({len(shorter)}): {'; '.join(shorter)}")
+    print(f"  longer ({len(longer)}): {'; '.join(longer)}")
+    print(f"within ±3 % of searoute or at the great circle: {within3 + len(at_gc)}/{n} = "
+          f"{100 * (within3 + len(at_gc)) / n:.0f} %")
     print(f"routes closer than {CLEARANCE_NM:g} NM to land (less {SAMPLING_SLACK_NM} NM, the 0.1 NM sampling) outside "
           f"fairways and approaches: {len(unclear)} {unclear}")
     print(f"CPU per pair, warm: median {cpus[len(cpus) // 2]:.3f} s, max {cpus[-1]:.3f} s; first call (graph load/build and "

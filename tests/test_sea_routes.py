@@ -90,7 +90,7 @@ def test_singapore_shanghai_and_rotterdam_piraeus_through_gibraltar():
     assert_clear_outside_fairways(r, SINGAPORE, SHANGHAI)
     r = sea_route(ROTTERDAM, PIRAEUS)
     check(r)
-    assert names(r) == ["dover", "gibraltar", "rion", "corinth"]  # the small ship's way, through the Corinth Canal
+    assert names(r) == ["dover", "gibraltar", "messina", "rion", "corinth"]  # the small ship's way, by Corinth
     assert r.dist_nm == pytest.approx(2814, rel=0.03)  # searoute 2,814 NM (its network has the Corinth Canal too)
     assert_clear_outside_fairways(r, ROTTERDAM, PIRAEUS)
     r = sea_route(ROTTERDAM, PIRAEUS, avoid={"corinth"})  # round the Peloponnese
