@@ -157,3 +157,25 @@ def test_short_voyage_is_the_direct_leg_when_it_is_clear():
 def test_strait_fairways_keep_their_own_clearance(p):
     rule = open_sea_rule(p.clearance_nm)
     assert least_clearance_nm(list(p.fairway), rule) >= p.clearance_nm
+
+
+def test_the_sea_route_command_prints_the_route_and_refuses_with_the_reason(tmp_path, monkeypatch):
+    import json
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "400")
+    out = tmp_path / "route.geojson"
+    res = CliRunner().invoke(app, ["sea-route", "40.45,-73.8", "33.65,-118.3", "--geojson", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "canal panama" in res.output and "transit 10 h + waiting 24 h" in res.output
+    feature = json.loads(out.read_text())
+    lon, lat = zip(*feature["geometry"]["coordinates"])
+    assert (lat[0], lon[0]) == NEW_YORK and (lat[-1], lon[-1]) == LOS_ANGELES
+    assert feature["properties"]["passages"] == ["panama"]
+    res = CliRunner().invoke(app, ["sea-route", "40.45,-73.8", "33.65,-118.3", "--avoid", "panama"])
+    assert res.exit_code == 0 and "panama" not in res.output
+    res = CliRunner().invoke(app, ["sea-route", "42.0,51.0", "40.0,-40.0"])
+    assert res.exit_code == 2 and "on land" in res.output
