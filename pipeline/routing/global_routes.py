@@ -12,12 +12,12 @@ How:
    is sailed on its fairway only.
 2. The ports join the graph (cells and fairway vertices within `JOIN_NM`, widening to `JOIN_MAX_NM`) by legs clear
    under the voyage's rule; a direct leg between them counts too.
-3. A* from departure to arrival (numba; the great circle to the arrival as heuristic, so the path is the
-   graph's shortest). Avoided passages' fairway edges are skipped.
+3. A* from departure to arrival (numba, an indexed binary heap; the great circle to the arrival as heuristic, so the
+   path is the graph's shortest). Avoided passages' fairway edges are skipped.
 4. String-pulling: between fixed points (the ports and the fairway vertices used) a waypoint is dropped while the
    great-circle leg that replaces it stays clear (and crosses no gate), so the route is near-geodesic: its legs
    touch the coast's clearance line rather than following cell centres.
-A pair takes 0.03–0.3 s warm (up to about 1.3 s for an ocean-wide search such as Santos–Shanghai); the first call
+A pair takes 0.03–0.3 s warm (up to about 0.9 s for an ocean-wide search such as Santos–Shanghai); the first call
 in a process loads the graph (or, once per machine and clearance, builds it: about 25 s).
 """
 
@@ -357,30 +357,46 @@ def _trig_tables():
 
 
 @numba.njit(cache=True)
-def _heap_push(hf, hn, size, f, n):
-    if size >= hf.size:
-        nf = np.empty(hf.size * 2)
-        nn = np.empty(hf.size * 2, np.int64)
-        nf[:size] = hf[:size]
-        nn[:size] = hn[:size]
-        hf, hn = nf, nn
-    k = size
-    hf[k], hn[k] = f, n
+def _sift_up(hf, hn, pos, k):
     while k > 0:
         p = (k - 1) // 2
         if hf[p] <= hf[k]:
             break
         hf[p], hf[k] = hf[k], hf[p]
         hn[p], hn[k] = hn[k], hn[p]
+        pos[hn[p]], pos[hn[k]] = p, k
         k = p
+
+
+@numba.njit(cache=True)
+def _heap_set(hf, hn, pos, size, f, n):
+    """Put node n in the heap with key f, or lower its key to f (keys only fall: the heuristic is consistent)."""
+    k = pos[n]
+    if k >= 0:
+        hf[k] = f
+        _sift_up(hf, hn, pos, k)
+        return hf, hn, size
+    if size >= hf.size:
+        nf = np.empty(hf.size * 2)
+        nn = np.empty(hf.size * 2, np.int64)
+        nf[:size] = hf[:size]
+        nn[:size] = hn[:size]
+        hf, hn = nf, nn
+    hf[size], hn[size] = f, n
+    pos[n] = size
+    _sift_up(hf, hn, pos, size)
     return hf, hn, size + 1
 
 
 @numba.njit(cache=True)
-def _heap_pop(hf, hn, size):
+def _heap_pop(hf, hn, pos, size):
     f, n = hf[0], hn[0]
+    pos[n] = -1
     size -= 1
+    if size == 0:
+        return f, n, size
     hf[0], hn[0] = hf[size], hn[size]
+    pos[hn[0]] = 0
     k = 0
     while True:
         a, b, m = 2 * k + 1, 2 * k + 2, k
@@ -392,6 +408,7 @@ def _heap_pop(hf, hn, size):
             break
         hf[m], hf[k] = hf[k], hf[m]
         hn[m], hn[k] = hn[k], hn[m]
+        pos[hn[m]], pos[hn[k]] = m, k
         k = m
     return f, n, size
 
@@ -403,7 +420,6 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
     leg, -2 for none). `parent` (N_GRID + E) is filled (−1: from the source)."""
     n_all = xoff.size - 1
     g = np.full(n_all, np.inf)
-    closed = np.zeros(n_all, np.bool_)
     to_dst = np.full(n_all, np.inf)
     for k in range(dst_node.size):
         to_dst[dst_node[k]] = min(to_dst[dst_node[k]], dst_cost[k])
@@ -411,6 +427,7 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
     rc, rs, cc, cs = _trig_tables()
     hf = np.empty(1 << 16)
     hn = np.empty(1 << 16, np.int64)
+    pos = np.full(n_all, -1, np.int32)  # each node's place in the heap (-1: not in it)
     size = 0
     for k in range(src_node.size):
         n = src_node[k]
@@ -418,16 +435,13 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
             g[n] = src_cost[k]
             parent[n] = -1
             la, lo = _node_pos(xlat, xlon, n)
-            hf, hn, size = _heap_push(hf, hn, size, g[n] + _h(la, lo, tx, ty, tz), n)
+            hf, hn, size = _heap_set(hf, hn, pos, size, g[n] + _h(la, lo, tx, ty, tz), n)
     best, last = direct_nm, (-1 if direct_nm < np.inf else -2)
     nc = edges.shape[1]
     while size > 0:
-        f, n, size = _heap_pop(hf, hn, size)
-        if closed[n]:
-            continue
+        f, n, size = _heap_pop(hf, hn, pos, size)
         if f >= best:
             break
-        closed[n] = True
         gn = g[n]
         if gn + to_dst[n] < best:
             best, last = gn + to_dst[n], n
@@ -444,7 +458,7 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
                     g[m] = gm
                     parent[m] = n
                     hm = _h_xyz(rc[ii] * cc[jj], rc[ii] * cs[jj], rs[ii], tx, ty, tz)
-                    hf, hn, size = _heap_push(hf, hn, size, gm + hm, m)
+                    hf, hn, size = _heap_set(hf, hn, pos, size, gm + hm, m)
         for q in range(xoff[n], xoff[n + 1]):
             if xpass[q] >= 0 and avoided[xpass[q]]:
                 continue
@@ -454,7 +468,7 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
                 g[m] = gm
                 parent[m] = n
                 la, lo = _node_pos(xlat, xlon, m)
-                hf, hn, size = _heap_push(hf, hn, size, gm + _h(la, lo, tx, ty, tz), m)
+                hf, hn, size = _heap_set(hf, hn, pos, size, gm + _h(la, lo, tx, ty, tz), m)
     return best, last
 
 
