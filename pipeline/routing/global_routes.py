@@ -51,7 +51,7 @@ class _Layer(NamedTuple):
     edges: np.ndarray  # (N_ROWS, N_COLS) uint16, see sea_graph
     xlat: np.ndarray  # (E,) extra nodes (fairway vertices), ids N_GRID + k
     xlon: np.ndarray
-    xoff: np.ndarray  # (N_GRID + E + 1,) int64 CSR offsets of extra edges per node
+    xoff: np.ndarray  # (N_GRID + E + 1,) int32 CSR offsets of extra edges per node
     xdst: np.ndarray  # extra edges: destination node id,
     xcost: np.ndarray  # length NM,
     xpass: np.ndarray  # passage index (fairway edge) or -1 (a join to the grid)
@@ -275,7 +275,7 @@ def _build_layer(clearance_nm: float) -> _Layer:
             add(first + k, first + k + 1, float(geo.gc_distance_nm(la0, lo0, la1, lo1)), pid)
         ends += [first, first + len(p.fairway) - 1]
     joined: set[tuple[int, int]] = set()
-    layer = _Layer(edges, np.array(xlat), np.array(xlon), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
+    layer = _Layer(edges, np.array(xlat), np.array(xlon), np.zeros(1, np.int32), np.zeros(0, np.int64), np.zeros(0),
                    np.zeros(0, np.int64), gates, np.array(vpass, np.int64))
     for e in ends:
         end = (xlat[e - N_GRID], xlon[e - N_GRID])
@@ -288,10 +288,10 @@ def _build_layer(clearance_nm: float) -> _Layer:
                 add(e, int(nd), float(c), -1)
                 joined.add((e, int(nd)))
     n_all = N_GRID + len(xlat)
-    counts = np.zeros(n_all + 1, np.int64)
+    counts = np.zeros(n_all + 1, np.int32)
     for a, lst in adj.items():
         counts[a + 1] = len(lst)
-    xoff = np.cumsum(counts)
+    xoff = np.cumsum(counts).astype(np.int32)
     xdst = np.empty(xoff[-1], np.int64)
     xcost = np.empty(xoff[-1])
     xpass = np.empty(xoff[-1], np.int64)
@@ -420,9 +420,8 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
     leg, -2 for none). `parent` (N_GRID + E) is filled (−1: from the source)."""
     n_all = xoff.size - 1
     g = np.full(n_all, np.inf)
-    to_dst = np.full(n_all, np.inf)
-    for k in range(dst_node.size):
-        to_dst[dst_node[k]] = min(to_dst[dst_node[k]], dst_cost[k])
+    order = np.argsort(dst_node)  # the arrival's joins, by node, for a binary search per node taken from the heap
+    dst_sorted, dst_sorted_cost = dst_node[order], dst_cost[order]
     tx, ty, tz = _unit(tlat, tlon)
     rc, rs, cc, cs = _trig_tables()
     hf = np.empty(1 << 16)
@@ -443,8 +442,11 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
         if f >= best:
             break
         gn = g[n]
-        if gn + to_dst[n] < best:
-            best, last = gn + to_dst[n], n
+        q = np.searchsorted(dst_sorted, n)
+        while q < dst_sorted.size and dst_sorted[q] == n:
+            if gn + dst_sorted_cost[q] < best:
+                best, last = gn + dst_sorted_cost[q], n
+            q += 1
         if n < N_GRID:
             i, j = n // nc, n % nc
             e = edges[i, j]
@@ -599,7 +601,7 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
                                  f"harbour or bay whose way out is narrower than twice that); give a position outside it, "
                                  f"e.g. the pilot station, or a wider port approach")
     avoided = np.array([p.name in avoid for p in PASSAGES], np.bool_)
-    parent = np.full(layer.xoff.size - 1, -1, np.int64)
+    parent = np.full(layer.xoff.size - 1, -1, np.int32)
     best, last = _astar(layer.edges, _move_cost(), MOVES, layer.xlat, layer.xlon, layer.xoff, layer.xdst, layer.xcost,
                         layer.xpass, avoided, src_node, src_cost, dst_node, dst_cost, direct, arr[0], arr[1], parent)
     if last == -2:
@@ -648,7 +650,7 @@ def _why_none(layer, avoid, avoided, src_node, dst_node, dep, arr, dep_name, arr
     base = f"no sea route from {dep_name} {_fmt(dep)} to {arr_name} {_fmt(arr)} at {clearance_nm:g} NM from land"
     if avoid:
         none = np.zeros_like(avoided)
-        parent = np.full(layer.xoff.size - 1, -1, np.int64)
+        parent = np.full(layer.xoff.size - 1, -1, np.int32)
         _, last = _astar(layer.edges, _move_cost(), MOVES, layer.xlat, layer.xlon, layer.xoff, layer.xdst, layer.xcost,
                          layer.xpass, none, src_node, np.zeros(src_node.size), dst_node, np.zeros(dst_node.size),
                          math.inf, arr[0], arr[1], parent)
