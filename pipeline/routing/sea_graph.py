@@ -14,7 +14,6 @@ it at most once per machine and clearance.
 from __future__ import annotations
 
 import hashlib
-import math
 import tempfile
 import threading
 from pathlib import Path
@@ -23,7 +22,6 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from pipeline.routing import geodesy as geo
 from pipeline.routing.clearance import Clearance, leg_is_clear_nb
 from pipeline.routing.land import distance_to_land_nb, land_grid
 from pipeline.routing.land_mask import _mask_key, _mask_path
