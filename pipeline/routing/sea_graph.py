@@ -14,6 +14,7 @@ it at most once per machine and clearance.
 from __future__ import annotations
 
 import hashlib
+import os
 import tempfile
 import threading
 from pathlib import Path
@@ -119,7 +120,7 @@ def sea_graph(clearance_nm: float) -> SeaGraph:
             else:
                 g = build_sea_graph(key)
                 path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_name(f"{path.stem}.{threading.get_ident()}.tmp.npz")
+                tmp = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp.npz")
                 np.savez_compressed(tmp, edges=g.edges)
                 tmp.replace(path)
             _GRAPHS[key] = g
