@@ -17,7 +17,8 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test]'
 	rm -f $(VENV)/.installed-* && touch $@
 
-# then compile the routing kernels into numba's cache (pipeline/**/__pycache__), so the first run does not pay it
+# then compile the routing kernels into numba's cache (pipeline/__pycache__/numba/jitroute-<digest of the sources>,
+# see pipeline/compile_cache.py), so the first run does not pay it
 install: $(STAMP)
 	$(BIN)/jitroute warm
 
