@@ -132,7 +132,8 @@ def solve_optimum(spec: SuiteInstance, problem, space, weather, gap: float = DP_
     from pipeline.routing.dp import DpOptions
 
     t0 = time.thread_time()
-    plan = solve(problem, weather, solver="dp", space=space, options=DpOptions(gap=gap), continuous=False)
+    plan = solve(problem, weather, solver="dp", space=space, options=DpOptions(gap=gap), continuous=False, limits=None,
+                 savings=False)
     cpu_s = time.thread_time() - t0
     rec = {"hash": instance_hash(spec, problem, space, weather), "status": plan.status, "cost": plan.cost,
            "fuel_t": plan.fuel_t, "hours": plan.hours, "gap": gap, "dp_cpu_s": cpu_s, "legs_sailed": plan.n_evals,

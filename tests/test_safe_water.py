@@ -18,10 +18,9 @@ from global_land_mask import globe
 from pipeline.routing import land
 from pipeline.routing.search_space import build_search_space, reachable
 from pipeline.routing import weather_field as wf
-from pipeline.routing.solve import solve
 from pipeline.routing.voyage import problem_from_voyage
 from pipeline.synthetic.fleet import PORTS, ROUTES
-from routing_cases import FAST, MODEL, problem
+from routing_cases import FAST, MODEL, problem, solve
 
 R_NM = 3440.065
 MARCUS = (24.286, 153.979)  # Minami-Tori-shima, ~1 NM across, 500 NM from other land

@@ -18,9 +18,8 @@ from pipeline.routing.baseline import shortest_route
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.options import SOLVER_NAMES, RoutingOptions, UnknownSolverError
 from pipeline.routing.problem import Instance, RoutingInputError
-from pipeline.routing.solve import solve
 from pipeline.routing.solvers import SOLVERS
-from routing_cases import FAST, field, moving_storm, problem, wavy
+from routing_cases import FAST, field, moving_storm, problem, solve, wavy
 
 DEP, ARR = (30.0, -160.0), (33.0, -146.0)
 WAVY = field(wavy(7))
