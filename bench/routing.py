@@ -53,9 +53,8 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from pipeline.performance.model import reference_model  # noqa: E402
-from pipeline.routing import weather_field as wf  # noqa: E402
 from pipeline.routing.solve import BfoaParams, DpOptions, EngineLimits, RoutingProblem, solve  # noqa: E402
-from pipeline.synthetic import weather as synth  # noqa: E402
+from pipeline.synthetic.routing_suite import route_nodes, voyage_weather  # noqa: E402
 
 TARGET_GAP_PCT = 1.0
 TARGET_SOLVE_S = 2.0
@@ -89,22 +88,6 @@ def pin_one_core() -> str:
         os.sched_setaffinity(0, {core})
         return f"pinned to core {core}"
     return "not pinned (no sched_setaffinity here)"
-
-
-def voyage_weather(space, depart_utc, hours: float, seed: int = 3) -> wf.WeatherField:
-    """Hourly analytic weather on a 1° grid covering every usable node, from 1 h before departure."""
-    ok = space.node_ok
-    lat = np.arange(np.floor(space.lat[ok].min()) - 2.0, np.ceil(space.lat[ok].max()) + 2.5, 1.0)
-    lon360 = space.lon[ok] % 360.0  # the voyage crosses the dateline: 0..360 east keeps the box in one piece
-    lon = np.arange(np.floor(lon360.min()) - 2.0, np.ceil(lon360.max()) + 2.5, 1.0)
-    times = depart_utc - np.timedelta64(1, "h") + np.arange(int(np.ceil(hours)) + 2).astype("timedelta64[h]")
-    t_h = synth.hours_since_epoch(times)[:, None, None]
-    la, lo = np.meshgrid(lat, lon, indexing="ij")
-    u10, v10 = synth.wind_uv(t_h, la[None], lo[None], seed)
-    swh, mwd, _ = synth.waves(t_h, la[None], lo[None], seed)
-    uo, vo = synth.currents_uv(t_h, la[None], lo[None])
-    return wf.from_arrays(lat, lon, times, u10=u10, v10=v10, swh=swh, mwd_deg=mwd,
-                          uo=np.broadcast_to(uo, u10.shape), vo=np.broadcast_to(vo, u10.shape))
 
 
 def build_instance(n_lines: int, n_points: int, d_point_nm: float | None):
@@ -156,16 +139,6 @@ def bfoa_runs(problem, weather, space, seeds, params: BfoaParams, dp_cost: float
         runs.append({"seed": seed, "status": p.status, "cost": p.cost, "fuel_t": p.fuel_t, "hours": p.hours,
                      "runtime_s": p.runtime_s, "n_evals": p.n_evals, "gap_pct": 100.0 * (p.cost / dp_cost - 1.0)})
     return runs
-
-
-def route_nodes(space, plan) -> list[int]:
-    """Node index per line of a plan's route (nearest node on each line to the waypoint)."""
-    lat = np.array([plan.legs[0]["lat0"]] + [leg["lat1"] for leg in plan.legs])
-    lon = np.array([plan.legs[0]["lon0"]] + [leg["lon1"] for leg in plan.legs])
-    d = (space.lat - lat[:, None]) ** 2 + (((space.lon - lon[:, None]) + 180.0) % 360.0 - 180.0) ** 2
-    nodes = np.argmin(d, axis=1)
-    nodes[0] = nodes[-1] = space.centre  # the ports: only the centre node of the end lines is used
-    return [int(n) for n in nodes]
 
 
 def stored_dp(path: Path, instance: dict, bucket_h: float | None) -> dict | None:
