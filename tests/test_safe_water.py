@@ -100,6 +100,7 @@ def test_distance_to_a_small_island_equals_the_raw_mask(island):
     assert np.all(far <= np.maximum(got, 0.5) + 1e-9) and np.all(far[want >= 0.5] >= 0.5)
 
 
+@pytest.mark.slow  # a child process
 def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
     code = ("import re, sys\n"
             "from pipeline.routing import land\n"
@@ -116,6 +117,7 @@ def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
                              "run `python -m pipeline.routing.land` and commit it")
 
 
+@pytest.mark.slow  # child processes
 def test_processes_load_the_shipped_land_structure_without_building_it():
     code = ("import re, sys\n"
             "from pipeline.routing import land\n"

@@ -135,6 +135,7 @@ def test_rhumb_routes_along_the_rhumb_line_not_the_great_circle():
         solve(pr, field(wavy(1)), solver="rhumb", space=pr.search_space())
 
 
+@pytest.mark.slow  # jitroute child processes
 def test_the_cli_refuses_an_unknown_solver_or_option_before_opening_anything(tmp_path):
     import os
 
