@@ -9,7 +9,7 @@ export PREFECT_HOME ?= $(CURDIR)/.prefect
 export PREFECT_LOGGING_LEVEL ?= WARNING
 export PREFECT_SERVER_ANALYTICS_ENABLED ?= false
 
-.PHONY: install demo test bench clean
+.PHONY: install demo test test-fast lint bench clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -17,7 +17,8 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test]'
 	rm -f $(VENV)/.installed-* && touch $@
 
-# then compile the routing kernels into numba's cache (pipeline/**/__pycache__), so the first run does not pay it
+# then compile the routing kernels into numba's cache (pipeline/__pycache__/numba/jitroute-<digest of the sources>,
+# see pipeline/compile_cache.py), so the first run does not pay it
 install: $(STAMP)
 	$(BIN)/jitroute warm
 
@@ -26,6 +27,13 @@ demo: install
 
 test: install
 	$(BIN)/python -m pytest -n auto
+
+# before every commit: every test not marked slow (unit tests of every package on tiny cases), one process
+test-fast: install
+	$(BIN)/python -m pytest -m "not slow"
+
+lint: install
+	$(BIN)/ruff check .
 
 bench: install
 	$(BIN)/python bench/ingest.py

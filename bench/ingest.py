@@ -34,7 +34,6 @@ os.environ["PREFECT_LOGGING_LEVEL"] = "ERROR"  # the mirror has no OSCAR before 
 
 import eccodes  # noqa: E402
 import netCDF4  # noqa: E402
-import numpy as np  # noqa: E402
 
 from flows.ingest import ingest_weather  # noqa: E402
 from pipeline.synthetic.mirror import write_mirror  # noqa: E402

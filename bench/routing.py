@@ -53,9 +53,8 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from pipeline.performance.model import reference_model  # noqa: E402
-from pipeline.routing import weather_field as wf  # noqa: E402
 from pipeline.routing.solve import BfoaParams, DpOptions, EngineLimits, RoutingProblem, solve  # noqa: E402
-from pipeline.synthetic import weather as synth  # noqa: E402
+from pipeline.synthetic.routing_suite import route_nodes, voyage_weather  # noqa: E402
 
 TARGET_GAP_PCT = 1.0
 TARGET_SOLVE_S = 2.0
@@ -91,22 +90,6 @@ def pin_one_core() -> str:
     return "not pinned (no sched_setaffinity here)"
 
 
-def voyage_weather(space, depart_utc, hours: float, seed: int = 3) -> wf.WeatherField:
-    """Hourly analytic weather on a 1° grid covering every usable node, from 1 h before departure."""
-    ok = space.node_ok
-    lat = np.arange(np.floor(space.lat[ok].min()) - 2.0, np.ceil(space.lat[ok].max()) + 2.5, 1.0)
-    lon360 = space.lon[ok] % 360.0  # the voyage crosses the dateline: 0..360 east keeps the box in one piece
-    lon = np.arange(np.floor(lon360.min()) - 2.0, np.ceil(lon360.max()) + 2.5, 1.0)
-    times = depart_utc - np.timedelta64(1, "h") + np.arange(int(np.ceil(hours)) + 2).astype("timedelta64[h]")
-    t_h = synth.hours_since_epoch(times)[:, None, None]
-    la, lo = np.meshgrid(lat, lon, indexing="ij")
-    u10, v10 = synth.wind_uv(t_h, la[None], lo[None], seed)
-    swh, mwd, _ = synth.waves(t_h, la[None], lo[None], seed)
-    uo, vo = synth.currents_uv(t_h, la[None], lo[None])
-    return wf.from_arrays(lat, lon, times, u10=u10, v10=v10, swh=swh, mwd_deg=mwd,
-                          uo=np.broadcast_to(uo, u10.shape), vo=np.broadcast_to(vo, u10.shape))
-
-
 def build_instance(n_lines: int, n_points: int, d_point_nm: float | None):
     """(problem with its RTA, search space, weather, slowest-rpm great-circle hours)."""
     model = reference_model(14.0, 100.0, 1.5)
@@ -117,7 +100,7 @@ def build_instance(n_lines: int, n_points: int, d_point_nm: float | None):
     slow_kn = float(model.stw_kn(RPM[0], loose.draft_m, loose.trim_m))
     horizon_h = 1.6 * space.base_distance_nm / slow_kn + 24.0  # the solvers' planning horizon, and a day
     weather = voyage_weather(space, DEPART_UTC, horizon_h)
-    gc = solve(loose, weather, solver="gc", space=space)  # constant slowest rpm: arrives long before a 60-day RTA
+    gc = solve(loose, weather, solver="gc", space=space, limits=None, savings=False)  # constant slowest rpm: arrives long before a 60-day RTA
     rta = DEPART_UTC + np.timedelta64(int(round(RTA_FACTOR * gc.hours * 60)), "m")
     return replace(loose, rta_utc=rta), space, weather, gc.hours
 
@@ -127,17 +110,22 @@ def warm_up(problem: RoutingProblem, weather) -> float:
     t0 = time.perf_counter()
     tiny = replace(problem, n_lines=4, n_points=5)
     space = tiny.search_space()
-    solve(tiny, weather, solver="bfoa", seed=1, params=BfoaParams(n_bacteria=4, n_chemo=2, n_cycles=2), space=space)
-    solve(tiny, weather, solver="dp", space=space)
-    solve(tiny, weather, solver="dp", space=space, bucket_h=0.5)
-    solve(tiny, weather, solver="astar", space=space)
+    bare = dict(limits=None, savings=False)  # the searches alone, as the solvers are measured here (timed_solve)
+    solve(tiny, weather, solver="bfoa", seed=1, params=BfoaParams(n_bacteria=4, n_chemo=2, n_cycles=2), space=space,
+          **bare)
+    solve(tiny, weather, solver="dp", space=space, options=DpOptions(), **bare)
+    solve(tiny, weather, solver="dp", space=space, bucket_h=0.5, **bare)
+    solve(tiny, weather, solver="astar", space=space, **bare)
     solve(tiny, weather, solver="bfoa", seed=1, params=BfoaParams(n_bacteria=4, n_chemo=2, n_cycles=2), space=space,
           limits=EngineLimits(), savings=True)
     return time.perf_counter() - t0
 
 
 def timed_solve(*args, **kw):
-    """solve(...) with runtime_s set to the solve's CPU time (this thread's)."""
+    """solve(...) with runtime_s set to the solve's CPU time (this thread's); the search alone (no engine-change
+    limits, no savings split) unless `limits` / `savings` are given."""
+    kw.setdefault("limits", None)
+    kw.setdefault("savings", False)
     t0 = time.thread_time()
     plan = solve(*args, **kw)
     plan.runtime_s = time.thread_time() - t0
@@ -151,16 +139,6 @@ def bfoa_runs(problem, weather, space, seeds, params: BfoaParams, dp_cost: float
         runs.append({"seed": seed, "status": p.status, "cost": p.cost, "fuel_t": p.fuel_t, "hours": p.hours,
                      "runtime_s": p.runtime_s, "n_evals": p.n_evals, "gap_pct": 100.0 * (p.cost / dp_cost - 1.0)})
     return runs
-
-
-def route_nodes(space, plan) -> list[int]:
-    """Node index per line of a plan's route (nearest node on each line to the waypoint)."""
-    lat = np.array([plan.legs[0]["lat0"]] + [leg["lat1"] for leg in plan.legs])
-    lon = np.array([plan.legs[0]["lon0"]] + [leg["lon1"] for leg in plan.legs])
-    d = (space.lat - lat[:, None]) ** 2 + (((space.lon - lon[:, None]) + 180.0) % 360.0 - 180.0) ** 2
-    nodes = np.argmin(d, axis=1)
-    nodes[0] = nodes[-1] = space.centre  # the ports: only the centre node of the end lines is used
-    return [int(n) for n in nodes]
 
 
 def stored_dp(path: Path, instance: dict, bucket_h: float | None) -> dict | None:

@@ -165,8 +165,9 @@ def register(app: typer.Typer) -> None:
     def warm(solver: Optional[list[str]] = typer.Option(None, "--solver",
                                                        help="Solvers to compile (default bfoa, the fleet's; repeat "
                                                             "for more: dp, astar, gc, rhumb).")):
-        """Compile the refit, fleet-planning and routing kernels into numba's cache (in the checkout's __pycache__)
-        before the first fleet run; `make install` runs it. Quick when the cache is already warm."""
+        """Compile the refit, fleet-planning and routing kernels into numba's cache (one folder per digest of the
+        pipeline's sources, see docs/development.md) before the first fleet run; `make install` runs it. Quick when
+        the cache is already warm."""
         from flows.jobs.warm import warm_job
         from pipeline.routing.solvers import SOLVERS
 

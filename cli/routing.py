@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from cli.console import console, err_console, fail
+from pipeline.routing.options import RoutingOptions
 
 
 def _latlon(text: str, what: str) -> tuple[float, float]:
@@ -94,7 +95,7 @@ def register(app: typer.Typer) -> None:
         rta: Optional[str] = typer.Option(None, help="Required time of arrival UTC."),
         imo: Optional[int] = typer.Option(None, help="Vessel (its active performance model is used)."),
         voyage: Optional[str] = typer.Option(None, "--voyage", help="Take the voyage from the warehouse instead."),
-        solver: str = typer.Option("bfoa", help="bfoa | dp | astar | gc | rhumb (gc/rhumb: the constant-speed voyage "
+        solver: str = typer.Option(RoutingOptions.solver, help="bfoa | dp | astar | gc | rhumb (gc/rhumb: the constant-speed voyage "
                                                 "along the great circle / rhumb line)."),
         solver_option: Optional[list[str]] = typer.Option(
             None, "--solver-option", help="NAME=VALUE of the solver's own options, repeatable. dp by default: "
@@ -103,8 +104,8 @@ def register(app: typer.Typer) -> None:
                                           "times, waits up to 6 h more: slot_h=1 max_wait_h=6); gap=0 keeps every "
                                           "label; slot_h=none is the wait-free DP alone (exact in weather that holds "
                                           "still)."),
-        seed: int = typer.Option(1, help="Random seed of the BFOA (same seed, same plan)."),
-        objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
+        seed: int = typer.Option(RoutingOptions.seed, help="Random seed of the BFOA (same seed, same plan)."),
+        objective: str = typer.Option(RoutingOptions.objective, help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
         calm: bool = typer.Option(False, "--calm", help="Ignore the cube: calm water, no current."),
         rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel); the search uses them, then each run's rpm is refined anywhere between the lowest and the highest (routing.continuous_speed)."),

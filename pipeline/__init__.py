@@ -6,3 +6,7 @@ Conventions (everywhere in jitroute):
 - SI in the weather cube (m/s, m, s); knots and nautical miles in routing; tonnes for fuel;
 - UTC everywhere; longitudes 0..360 east in the cube, -180..180 accepted at the edges.
 """
+
+from pipeline import compile_cache as _compile_cache
+
+_compile_cache.configure()  # before any kernel is defined: numba's cache keyed on these sources (see compile_cache)

@@ -161,7 +161,7 @@ def migrate(con: duckdb.DuckDBPyConnection) -> list[str]:
 
 
 # warehouse file → the read-only connection `one_reader` holds open for this thread's reads of it
-_READERS: contextvars.ContextVar[dict] = contextvars.ContextVar("warehouse_readers", default={})
+_READERS: contextvars.ContextVar[dict] = contextvars.ContextVar("warehouse_readers", default={})  # noqa: B039 (replaced, never changed)
 
 
 @contextlib.contextmanager

@@ -14,6 +14,26 @@ if os.environ.get("CI"):
     hypothesis_settings.load_profile("ci")
 
 JMA_FIXTURES = Path(__file__).resolve().parent / "fixtures" / "jma"
+TESTS = Path(__file__).resolve().parent
+
+# Whole files marked `slow` (`make test-fast`, `pytest -m "not slow"`, leaves them out; `make test` runs them): they
+# start servers, clusters or flows, run the nightly or the fleet end to end, or route bench-sized voyages. Single
+# slow tests in other files carry @pytest.mark.slow themselves. Paths relative to tests/.
+SLOW_FILES = (
+    "reliability/",  # crashes, kills, hostile servers, damaged stores: child processes and real servers
+    "test_cluster.py", "test_schedule_e2e.py", "test_object_root.py", "test_worker_memory.py",  # clusters, servers
+    "test_operable.py", "test_fleet.py", "test_enroute.py", "test_warehouse_recovery.py",  # nightly or fleet runs
+    "test_ingest.py", "test_served_parameters.py", "test_export_store.py",  # Prefect API, served flows, S3 server
+    "test_readme_examples.py", "test_routing_suite.py",  # the README's commands; the bench suite's voyages
+    "test_routing_twin.py",  # every search again with the JIT off, in a child process
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        rel = item.path.resolve().relative_to(TESTS).as_posix()
+        if any(rel == f or (f.endswith("/") and rel.startswith(f)) for f in SLOW_FILES):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="session")

@@ -17,8 +17,8 @@ from pipeline.routing.continuous_speed import refine_rpm, runs_of, split_runs
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import RoutingInputError
-from pipeline.routing.solve import solve, solver_instance
-from routing_cases import FAST, field, moving_storm, problem, wavy
+from pipeline.routing.solve import solver_instance
+from routing_cases import FAST, field, moving_storm, problem, solve, wavy
 
 STORM = field(moving_storm(5, 33.0, 225.0, drift_kn=(-10.0, 0.0), hs_peak=6.0), step_h=6, hours=240)
 DEP, ARR = (30.0, -160.0), (35.0, -130.0)

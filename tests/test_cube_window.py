@@ -134,6 +134,7 @@ def test_a_worker_routes_on_the_new_values_after_a_re_ingest(store):
     assert windy_legs[0]["wind_kn"] > calm_legs[0]["wind_kn"] + 10  # the run that read v2 meets the new wind
 
 
+@pytest.mark.slow  # a child process that routes
 def test_a_worker_routes_from_the_cube_without_pandas_xarray_or_duckdb(store):
     """What keeps a dask worker small: routing a voyage (exports off) imports none of the big table libraries."""
     code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
@@ -163,6 +164,7 @@ def s3_options(s3_endpoint):
             "secret": s3_endpoint["AWS_SECRET_ACCESS_KEY"]}
 
 
+@pytest.mark.slow  # an S3 server
 def test_the_cube_on_s3_is_written_read_by_window_and_published_for_plain_readers(s3_options, store, tmp_path):
     url, locks = "s3://jitroute/root/cubes/weather.zarr", tmp_path / "locks"
     with pytest.raises(cube.CubeError, match="lock_dir"):

@@ -22,8 +22,8 @@ from pipeline.routing.objectives import LATE_STEP_T, objective, route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.search_space import build_search_space
 from pipeline.routing.sphere import gc_points
-from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solve, solver_instance
-from routing_cases import wavy
+from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solver_instance
+from routing_cases import solve, wavy
 
 MODEL = reference_model(14.0, 100.0, 1.5)  # STW = 0.14·rpm kn, fuel = 1.5·(rpm/100)³ t/h in calm water
 FAST = BfoaParams(n_bacteria=8, n_chemo=6, n_cycles=8)

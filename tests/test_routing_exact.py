@@ -14,13 +14,13 @@ import math
 import numpy as np
 import pytest
 
-from routing_cases import MODEL, field, moving_storm, problem, wavy
+from routing_cases import MODEL, field, moving_storm, problem, solve, wavy
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.dp import (DpOptions, _fuel_budget_t, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures,
                                  reachable_windows, trim_eps)
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
-from pipeline.routing.solve import solve, solver_instance
+from pipeline.routing.solve import solver_instance
 
 GAP = 0.02  # ε-trimming coarse enough to trim labels on graphs this small
 DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm (9.8 kn) ≈ 57 h, 100 rpm (14 kn) ≈ 40 h in calm water

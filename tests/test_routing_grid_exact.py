@@ -221,7 +221,7 @@ def test_route_carries_the_grid_dps_waits(limits):
     (etd after it, hours and fuel of the route include it), its cost is the enumerated optimum of the grid space,
     and its rows fit the route_legs definition. Holding a setting 200 h (longer than the voyage) is met by one
     setting throughout, so the waits are kept then too."""
-    from pipeline.routing.solve import solve
+    from routing_cases import solve
     from schemas.tables.routes import ROUTE_LEGS
 
     pr, fld = _window_problem(), _weather("storm-window", 0)
@@ -265,7 +265,7 @@ def test_a_waiting_plan_that_breaks_the_holds(kind, calm_h, rpms, slot_h, max_wa
     """Held 12 h, a grid-DP plan that changes setting after a leg of about 10 h is re-planned wait-free on its route
     holding each setting; where the storm at the departure blocks every such plan, the waiting plan is kept, without
     the limits, and says which hold it breaks."""
-    from pipeline.routing.solve import solve
+    from routing_cases import solve
 
     pr = problem(DEP, ARR, calm_h, rpm_options=rpms, n_lines=4, n_points=5, max_shift=2, d_point_nm=25.0,
                  max_hs_m=4.5 if kind in LIMITED else None, max_wind_kn=45.0 if kind == "storm-window" else None)
@@ -288,7 +288,7 @@ def test_a_waiting_plan_that_breaks_the_holds(kind, calm_h, rpms, slot_h, max_wa
 def test_position_on_a_waiting_plan_is_its_wait_node():
     """A ship on a plan that waits is at the waiting node during the wait, not at the end of the voyage."""
     from pipeline.enroute import position_on_plan
-    from pipeline.routing.solve import solve
+    from routing_cases import solve
 
     opts = DpOptions(slot_h=2.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None)
     plan = solve(_window_problem(), _weather("storm-window", 0), solver="dp", options=opts)

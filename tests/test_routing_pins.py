@@ -40,8 +40,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from routing_cases import FAST, field, moving_storm, problem, wavy
-from pipeline.routing.solve import solve
+from routing_cases import FAST, field, moving_storm, problem, solve, wavy
 
 # name → (status, cost as float.hex, n_evals, node offset per inner line (None: not on this graph), rpm per leg to 3 decimals)
 PINS = {

@@ -19,8 +19,8 @@ TESTS = Path(__file__).resolve().parent
 CASES = r'''
 import json, sys
 sys.path.insert(0, sys.argv[1])
-from routing_cases import field, problem, wavy, moving_storm
-from pipeline.routing.solve import BfoaParams, DpOptions, solve
+from routing_cases import field, problem, solve, wavy, moving_storm
+from pipeline.routing.solve import BfoaParams, DpOptions
 
 tiny = BfoaParams(n_bacteria=5, n_chemo=3, n_cycles=4, ed_every=2, steps_to_die=6)
 out = {}

@@ -18,10 +18,9 @@ from global_land_mask import globe
 from pipeline.routing import land
 from pipeline.routing.search_space import build_search_space, reachable
 from pipeline.routing import weather_field as wf
-from pipeline.routing.solve import solve
 from pipeline.routing.voyage import problem_from_voyage
 from pipeline.synthetic.fleet import PORTS, ROUTES
-from routing_cases import FAST, MODEL, problem
+from routing_cases import FAST, MODEL, problem, solve
 
 R_NM = 3440.065
 MARCUS = (24.286, 153.979)  # Minami-Tori-shima, ~1 NM across, 500 NM from other land
@@ -101,6 +100,7 @@ def test_distance_to_a_small_island_equals_the_raw_mask(island):
     assert np.all(far <= np.maximum(got, 0.5) + 1e-9) and np.all(far[want >= 0.5] >= 0.5)
 
 
+@pytest.mark.slow  # a child process
 def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
     code = ("import re, sys\n"
             "from pipeline.routing import land\n"
@@ -117,6 +117,7 @@ def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
                              "run `python -m pipeline.routing.land` and commit it")
 
 
+@pytest.mark.slow  # child processes
 def test_processes_load_the_shipped_land_structure_without_building_it():
     code = ("import re, sys\n"
             "from pipeline.routing import land\n"

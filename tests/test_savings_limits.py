@@ -17,8 +17,8 @@ from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BU
                                             incumbent_cost, limited_plan, settings_held_h)
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
-from pipeline.routing.solve import solve, solver_instance
-from routing_cases import field, moving_storm, problem, wavy
+from pipeline.routing.solve import solver_instance
+from routing_cases import field, moving_storm, problem, solve, wavy
 
 DEP, ARR = (30.0, -160.0), (33.0, -146.0)
 WEATHER = field(wavy(7))  # steady in time: the limited plan's dominance rule is exact here

@@ -13,7 +13,6 @@ import json
 import signal
 from datetime import datetime, timezone
 import subprocess
-from pathlib import Path
 
 import duckdb
 import httpx

@@ -18,9 +18,8 @@ from pipeline.routing.baseline import shortest_route
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.options import SOLVER_NAMES, RoutingOptions, UnknownSolverError
 from pipeline.routing.problem import Instance, RoutingInputError
-from pipeline.routing.solve import solve
 from pipeline.routing.solvers import SOLVERS
-from routing_cases import FAST, field, moving_storm, problem, wavy
+from routing_cases import FAST, field, moving_storm, problem, solve, wavy
 
 DEP, ARR = (30.0, -160.0), (33.0, -146.0)
 WAVY = field(wavy(7))
@@ -136,6 +135,7 @@ def test_rhumb_routes_along_the_rhumb_line_not_the_great_circle():
         solve(pr, field(wavy(1)), solver="rhumb", space=pr.search_space())
 
 
+@pytest.mark.slow  # jitroute child processes
 def test_the_cli_refuses_an_unknown_solver_or_option_before_opening_anything(tmp_path):
     import os
 

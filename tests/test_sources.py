@@ -1,7 +1,6 @@
 """RISH/OSCAR listing and the fetcher, over a real HTTP server on 127.0.0.1."""
 
 import numpy as np
-import pytest
 
 from pipeline.sources import oscar, rish
 from pipeline.sources.fetch import FetchOptions, fetch, sha256_of

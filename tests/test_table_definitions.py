@@ -96,6 +96,7 @@ def test_a_row_with_a_key_the_table_lacks_or_without_a_column_is_refused(tmp_pat
     assert not (tmp_path / "exports").exists()
 
 
+@pytest.mark.slow  # ingest, refit and a fleet run
 def test_a_real_run_writes_parquet_with_exactly_the_defined_schemas(tmp_path, demo_mirror):
     from flows.jobs.fleet import route_fleet_job
 

@@ -7,7 +7,8 @@ import numpy as np
 
 from pipeline.performance.model import reference_model
 from pipeline.routing import weather_field as wf
-from pipeline.routing.solve import RoutingProblem, solve
+from pipeline.routing.solve import RoutingProblem
+from routing_cases import solve
 
 MODEL = reference_model(14.0, 100.0, 1.5)
 

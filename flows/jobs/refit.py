@@ -15,7 +15,7 @@ from pipeline.fleet_validate import validate_vessels, validate_voyages
 from pipeline.performance.bunker import validate_bunker
 from pipeline.performance.refit import (DEFAULT_FORM, REPORT_COLUMNS, Gate, check_form, fitted_from_rows, gate_with,
                                         refit_fleet, storage_actions)
-from pipeline.performance.validate import reason_counts, validate_noon
+from pipeline.performance.validate import reason_counts
 from storage import fleet_store
 
 LOG = logging.getLogger("jitroute.refit")

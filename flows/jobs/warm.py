@@ -1,7 +1,8 @@
 """`jitroute warm`: compile the refit, fleet-planning and routing kernels into numba's cache ahead of the first nightly.
 
-numba compiles each kernel on its first call and keeps the machine code in the `__pycache__` folders beside the
-sources (inside the checkout), so later processes load it in milliseconds. Without this step the first voyage on
+numba compiles each kernel on its first call and keeps the machine code in its cache folder, one per digest of the
+pipeline's sources (pipeline.compile_cache: by default pipeline/__pycache__/numba/jitroute-<digest>), so later
+processes of the same code load it in milliseconds. Without this step the first voyage on
 every dask worker pays the compilation (minutes on 2 cores) in silence. `make install` runs it; it refits a small
 generated fleet in a throw-away data root, plans a small generated fleet by column generation and routes one short demo voyage in calm water with each solver asked for, through the same code as a fleet run's worker (exports
 too), then records a stamp of the sources it compiled, so a fleet run can tell (and say) when the cache is cold.
@@ -9,10 +10,8 @@ too), then records a stamp of the sources it compiled, so a fleet run can tell (
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
-import os
 import time
 from pathlib import Path
 
@@ -20,21 +19,23 @@ import numpy as np
 
 LOG = logging.getLogger("jitroute.warm")
 
-PIPELINE = Path(__file__).resolve().parents[2] / "pipeline"
+from pipeline.compile_cache import PIPELINE, cache_dir, sources_digest
 
 
 def stamp_path() -> Path:
-    """Where the stamp lives: beside numba's cache (NUMBA_CACHE_DIR when set, else pipeline/__pycache__)."""
-    return Path(os.environ.get("NUMBA_CACHE_DIR") or PIPELINE / "__pycache__") / "jitroute-warm.json"
+    """Where the stamp lives: in numba's cache folder for the sources as they are now."""
+    return cache_dir() / "jitroute-warm.json"
 
 
-def sources_digest() -> str:
-    """Digest of every pipeline source file's path, size and modification time (what numba's cache is keyed on)."""
-    h = hashlib.sha256()
-    for p in sorted(PIPELINE.rglob("*.py")):
-        st = p.stat()
-        h.update(f"{p.relative_to(PIPELINE)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
-    return h.hexdigest()[:16]
+def remove_in_tree_cache() -> int:
+    """Remove the kernels numba cached beside the sources (pipeline/**/__pycache__/*.nbi, *.nbc) before the cache
+    was keyed on the sources' digest: nothing loads them any more. Returns how many files were removed."""
+    n = 0
+    for pattern in ("*.nbi", "*.nbc"):
+        for p in PIPELINE.glob(f"**/__pycache__/{pattern}"):
+            p.unlink(missing_ok=True)
+            n += 1
+    return n
 
 
 def is_warm(solver: str = "bfoa") -> bool:
@@ -102,10 +103,11 @@ def warm_job(solvers: list[str] | None = None) -> dict:
     from flows.jobs.route_worker import route_one
 
     solvers = list(solvers or ["bfoa"])
+    remove_in_tree_cache()
     cold = [s for s in solvers if not is_warm(s)]
     if cold:
         LOG.info("compiling the routing kernels (%s) into numba's cache under %s unless they are there already: "
-                 "a few minutes on 2 cores the first time", ", ".join(cold), os.environ.get("NUMBA_CACHE_DIR") or PIPELINE)
+                 "a few minutes on 2 cores the first time", ", ".join(cold), cache_dir())
     seconds = {}
     t0 = time.monotonic()
     _warm_refit()

@@ -306,7 +306,7 @@ def _refit(imos, bounds, inp, ts, active, versions, forms, robust, gate: Gate, f
     n = np.diff(bounds)
     hold_from = _split(imos, bounds, ts, active, gate)
     hold_rows = _ranges(hold_from, bounds[1:])
-    n_train, n_hold = hold_from - bounds[:-1], bounds[1:] - hold_from
+    n_hold = bounds[1:] - hold_from
     hold_which = np.repeat(np.arange(G), n_hold)
     y = {"speed": inp["stw_kn"], "fuel": inp["fuel_tph"]}
     hold_mean = {t: _group_mean(y[t][hold_rows], hold_which, G) for t in TARGETS}
@@ -581,7 +581,6 @@ def _judge_active(imos, bounds, hold_from, inp, ts, y, active, gate: Gate) -> tu
     for form, groups in by_form.items():
         gi = np.array(groups)
         rows = _ranges(bounds[gi], bounds[gi + 1])
-        which = np.repeat(np.arange(gi.size), bounds[gi + 1] - bounds[gi])
         pred = {t: _predict(form, t, np.array([list(active[int(imos[g])][t].values()) for g in groups], dtype=np.float64),
                             bounds[gi], bounds[gi + 1], inp) for t in TARGETS}
         starts = np.r_[0, np.cumsum(bounds[gi + 1] - bounds[gi])]

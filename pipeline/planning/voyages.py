@@ -145,6 +145,6 @@ def apply_commitments(fleet: pd.DataFrame, busy: dict[int, tuple[pd.Timestamp, s
     fleet = fleet.copy()
     for imo, (free_from, port) in busy.items():
         at = fleet["imo"] == imo
-        fleet.loc[at, "from_utc"] = fleet.loc[at, "from_utc"].map(lambda t: max(pd.Timestamp(t), free_from))
+        fleet.loc[at, "from_utc"] = fleet.loc[at, "from_utc"].map(lambda t: max(pd.Timestamp(t), free_from))  # noqa: B023 (called here)
         fleet.loc[at, "from_port"] = port
     return fleet

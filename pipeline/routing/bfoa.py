@@ -88,7 +88,7 @@ import numba
 import numpy as np
 
 from pipeline.routing.dp import dp_exact_nb
-from pipeline.routing.engine_timing import (Scratch, aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb,
+from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb,
                                             sail_span_nb, scratch, time_price_nb)
 from pipeline.routing.leg_kernel import sail_route_nb
 from pipeline.routing.objectives import OBJ_JIT

@@ -34,7 +34,6 @@ import numba
 import numpy as np
 
 from pipeline.routing import leg_kernel as lk
-from pipeline.routing.baseline import evaluate
 from pipeline.routing.dp import (_grow, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures,
                                  time_span_nb, trim_eps)
 from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb

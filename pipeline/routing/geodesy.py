@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numba
 
-from pipeline.routing.sphere import EARTH_RADIUS_NM, KN_PER_MS  # defined without numba, for the picture process
+from pipeline.routing.sphere import EARTH_RADIUS_NM, KN_PER_MS  # noqa: F401 (re-exported) defined without numba, for the picture process
 
 
 @numba.njit(cache=True)

@@ -22,7 +22,7 @@ import numpy as np
 
 # is_sea, land_grid and the file helpers are land_mask's, here too for the routing code and the land tests
 from pipeline.routing.land_mask import (BLOCK, BOUND_CAP_NM, BOUND_UNIT_NM, CELL_NM, LAND_TILE, N_COLS, N_ROWS,
-                                        PACKAGED, SEA_TILE, TILE, LandGrid, _mask_key, _mask_path, _read_saved, is_sea,
+                                        PACKAGED, SEA_TILE, TILE, LandGrid, _mask_key, _mask_path, _read_saved, is_sea,  # noqa: F401
                                         land_grid, save_land_grid)
 
 

@@ -24,9 +24,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-# numba caches this module by its own source only: a change to the performance functions it compiles
-# in (features.stw_kn_nb, fuel_tph_nb and the physical form's term functions) needs a change here, or
-# cleared __pycache__, to be seen.
+# The performance functions compiled in here live in another file; numba's cache folder is keyed on the
+# digest of every pipeline source (pipeline.compile_cache), so their edits are seen.
 from pipeline.performance.features import (FORM_PHYSICAL, fuel_physical_terms_nb, fuel_tph_nb, stw_kn_nb,
                                            stw_physical_terms_nb, weather_terms_nb)
 from pipeline.routing import geodesy as geo

@@ -11,7 +11,6 @@ crosses no limit line. Nodes are held to the same clearance.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import NamedTuple
 

@@ -36,6 +36,7 @@ from pipeline.routing.continuous_speed import as_settings, refine_rpm
 from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
                                             limited_plan, settings_held_h)
 from pipeline.routing.objectives import route_cost_nb
+from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import profile_plan, solver_instance, split_of
@@ -44,6 +45,9 @@ from pipeline.routing.solvers import SOLVERS as REGISTRY
 from pipeline.routing.weather_field import WeatherField
 
 SOLVERS = tuple(REGISTRY)
+# the product's defaults (options.RoutingOptions and options.DEFAULT_SOLVER_OPTIONS): what `jitroute route`,
+# route-fleet and the dask workers plan with (job.plan_voyage), and what solve() plans with when not told otherwise
+PRODUCT = RoutingOptions()
 _evaluate = evaluate  # the name tests and scripts have used
 
 
@@ -127,16 +131,22 @@ def _check_forecast(problem: RoutingProblem, weather: WeatherField) -> None:
             f"{weather.horizon_utc} of the forecast cycle {cycle}; route it with a later cycle")
 
 
+def product_options(solver: str):
+    """The solver's own options as the product runs them: its options class's defaults with the product's
+    (options.DEFAULT_SOLVER_OPTIONS) over them, e.g. `dp` certified within 0.1 % over plans that may wait."""
+    return solver_spec(solver).make_options(RoutingOptions(solver=solver).solver_overrides())
+
+
 def _options(spec, options, params: BfoaParams | None, bucket_h: float | None):
     """The solver's options: `options` as given, else the shorthands (`params` are BfoaParams, `bucket_h` a
-    DpOptions field) when they are of this solver's kind, else its defaults."""
+    DpOptions field) when they are of this solver's kind, else the product's (product_options)."""
     if options is None:
         if params is not None and isinstance(params, spec.options):
             options = params
         elif bucket_h is not None and "bucket_h" in getattr(spec.options, "__dataclass_fields__", {}):
             options = spec.make_options({"bucket_h": float(bucket_h)})
         else:
-            options = spec.options()
+            options = product_options(spec.name)
     if not isinstance(options, spec.options):
         raise RoutingInputError(f"solver {spec.name!r} takes {spec.options.__name__} options, not {type(options).__name__}")
     return options
@@ -269,18 +279,23 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
     return kept
 
 
-def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa", seed: int = 1, options=None,
-          params: BfoaParams | None = None, space: SearchSpace | None = None, bucket_h: float | None = None,
-          limits: EngineLimits | None = None, savings: bool = False, continuous: bool = True) -> Plan:
+def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODUCT.solver, seed: int = PRODUCT.seed,
+          options=None, params: BfoaParams | None = None, space: SearchSpace | None = None,
+          bucket_h: float | None = None, limits: EngineLimits | None = PRODUCT.limits, savings: bool = True,
+          continuous: bool = PRODUCT.continuous_speed) -> Plan:
     """Route one voyage. Never raises for a voyage that simply cannot be sailed: the plan says why.
 
-    `options` are the solver's own (solvers.SOLVERS[solver].options); `params` (BfoaParams, for bfoa) and
-    `bucket_h` (for dp) are shorthands for them. With `limits` (engine_limits.EngineLimits) the solver's route
-    gets the best engine plan holding each setting; `savings` adds the split against the constant-speed voyage
-    (savings.py) to the plan (fleet and CLI plans always have both, see job.plan_voyage). A `space` laid along
-    another base route than the solver's (`rhumb`) is refused. With `continuous` (the product's way) the speeds of
-    the solver's plan and of the best engine plan on the base route are refined continuously between the lowest and
-    the highest allowed rpm (continuous_speed.py); without it plans use only the settings.
+    Every default is the product's (`PRODUCT`, options.RoutingOptions): `solve(problem, weather, solver="dp")` gives
+    the plan `jitroute route --solver dp`, route-fleet and the workers give (job.plan_voyage calls this with the
+    run's options). `options` are the solver's own (solvers.SOLVERS[solver].options; default product_options);
+    `params` (BfoaParams, for bfoa) and `bucket_h` (for dp) are shorthands for them. With `limits`
+    (engine_limits.EngineLimits; None: none) the solver's route gets the best engine plan holding each setting;
+    `savings` adds the split against the constant-speed voyage (savings.py) to the plan and lets the best engine
+    plan on the base route compete in never-worse. A `space` laid along another base route than the solver's
+    (`rhumb`) is refused. With `continuous` the speeds of the solver's plan and of the best engine plan on the base
+    route are refined continuously between the lowest and the highest allowed rpm (continuous_speed.py); without it
+    plans use only the settings. The bare search (the solver's options class's defaults, no limits, no savings) is
+    `solve(..., options=SOLVERS[solver].options(), limits=None, savings=False)`.
     """
     spec = solver_spec(solver)
     opts = _options(spec, options, params, bucket_h)
@@ -326,5 +341,5 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = "bfoa
     return plan
 
 
-__all__ = ["solve", "SOLVERS", "RoutingProblem", "RoutingInputError", "VoyageGeometryError", "BfoaParams", "DpOptions",
+__all__ = ["solve", "product_options", "PRODUCT", "SOLVERS", "RoutingProblem", "RoutingInputError", "VoyageGeometryError", "BfoaParams", "DpOptions",
            "Plan", "shortest_route", "constant_rpm_route", "EngineLimits"]

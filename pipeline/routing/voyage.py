@@ -8,6 +8,7 @@ import numpy as np
 
 from pipeline.engine_ranges import parse_barred_rpm
 from pipeline.performance.model import PerformanceModel
+from pipeline.routing.options import RoutingOptions
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 
 
@@ -28,10 +29,13 @@ def rpm_options_of(voyage: dict, rpm_max: float | None) -> tuple[float, ...]:
     return tuple(float(r) for r in opts)
 
 
-def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float | None = None, objective: str = "jit",
-                        window_h: float = 6.0, n_lines: int | None = None, n_points: int = 21,
-                        d_point_nm: float | None = None, land_clearance_nm: float = 2.0,
-                        port_approach_nm: float = 10.0, base: str = "gc", barred_rpm=None) -> RoutingProblem:
+def problem_from_voyage(voyage: dict, model: PerformanceModel, *, rpm_max: float | None = None,
+                        objective: str = RoutingOptions.objective, window_h: float = RoutingOptions.arrival_window_h,
+                        n_lines: int | None = RoutingOptions.n_lines, n_points: int = RoutingOptions.n_points,
+                        d_point_nm: float | None = RoutingOptions.d_point_nm,
+                        land_clearance_nm: float = RoutingOptions.land_clearance_nm,
+                        port_approach_nm: float = RoutingOptions.port_approach_nm, base: str = "gc",
+                        barred_rpm=None) -> RoutingProblem:
     """The voyage as a routing problem; `barred_rpm` is its vessel's barred speed ranges (the vessels column as
     text, or (low, high) pairs): a listed setting inside one is moved to the range's nearer edge, said on the plan."""
     vid = str(voyage.get("voyage_id"))

@@ -116,7 +116,6 @@ def test_every_rejection_reason_through_the_cli(root, fresh, tmp_path):
 
 def _mixed(fresh: pd.DataFrame, n_good: int, seed: int) -> tuple[pd.DataFrame, int]:
     """n_good fresh good rows and a bad variant of every other fresh row, shuffled; returns (rows, n_bad)."""
-    rng = np.random.default_rng(seed)
     good = fresh.iloc[:n_good]
     bad = []
     for k, (_, r) in enumerate(fresh.iloc[n_good:].iterrows()):

@@ -11,7 +11,8 @@ from pipeline.performance.model import reference_model
 from pipeline.routing import weather_field as wf
 from pipeline.routing.problem import RoutingInputError
 from pipeline.routing.search_space import VoyageGeometryError
-from pipeline.routing.solve import BfoaParams, RoutingProblem, solve
+from pipeline.routing.solve import BfoaParams, RoutingProblem
+from tests.routing_cases import solve
 
 MODEL = reference_model(14.0, 100.0, 1.5)
 FAST = BfoaParams(n_bacteria=8, n_chemo=6, n_cycles=8)

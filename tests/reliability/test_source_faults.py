@@ -11,7 +11,6 @@ import duckdb
 import eccodes
 import netCDF4
 import numpy as np
-import pytest
 
 import flows.ingest
 import flows.jobs.ingest
