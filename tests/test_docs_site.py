@@ -25,7 +25,8 @@ def test_the_readme_is_the_short_layer_and_points_to_every_page_of_the_manual():
 def test_mkdocs_builds_the_manual_strictly_into_pages_that_load_nothing_from_elsewhere(tmp_path):
     site = tmp_path / "site"
     r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(ROOT / "mkdocs.yml"),
-                        "--site-dir", str(site)], cwd=ROOT, capture_output=True, text=True, timeout=120)
+                        "--site-dir", str(site)], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                       check=False)
     assert r.returncode == 0, r.stderr[-3000:]
     pages = sorted(p.stem for p in (ROOT / "docs").glob("*.md"))
     for stem in pages:
