@@ -370,10 +370,7 @@ def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | 
         ax.plot(lon, lat, "-", color="#c2185b", lw=2.0, zorder=4, label="plan")
         wlat, wlon = _waypoints(legs, centre)
         ax.plot(wlon, wlat, "o", ms=3.5, mfc="white", mec="#c2185b", zorder=5, label="waypoints")
-        names = waypoint_names(route, wlat.size)
-        etd0 = utc_datetime(legs[0].get("etd_utc"))
-        if route.get("start_kind") not in (None, "port") and etd0 is not None:  # re-planned at sea
-            names[0] = f"{route['start_kind']} {dtg(etd0)} (from {route.get('dep_name') or 'departure'})"
+        names = waypoint_names(route, wlat.size)  # a plan re-made at sea starts at its report (pipeline/enroute.py)
         for k in (0, wlat.size - 1):
             ax.annotate(names[k], (wlon[k], wlat[k]), xytext=(4, 4), textcoords="offset points", fontsize=8,
                         zorder=6)
