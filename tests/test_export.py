@@ -298,7 +298,7 @@ def test_fleet_map_colours_voyages_by_status(voyage, tmp_path):
     ax = fig.axes[0]
     colours = {ln.get_color() for ln in ax.get_lines() if len(ln.get_xdata()) > 2}
     assert colours == {plots.STATUS_COLOURS["ok"], plots.STATUS_COLOURS["late"]}
-    assert {t.get_text() for t in ax.texts} >= {"V0007", "V0008", "no route: V0009 (infeasible)"}
+    assert {t.get_text().split(" ETA ")[0] for t in ax.texts} >= {"V0007", "V0008", "no route: V0009 (infeasible)"}
     x0, x1 = ax.get_xlim()
     assert x0 < 141.0 and x1 > 183.0  # both voyages in one frame, the dateline one not wrapped to −180
     assert _is_png(plots.fleet_map_png(tmp_path / "fleet.png", fleet, title="run 2021-01-10"))
@@ -380,8 +380,10 @@ def test_fleet_map_marks_each_ship_now_shortens_plan_ids_and_keeps_labels_apart(
              (dict(route, voyage_id="V0010"), make_legs(depart=DEPART + timedelta(days=1)))]
     fig = plots.fleet_map_figure(fleet, "run r1", now_utc=now)
     ax = fig.axes[0]
-    texts = [t for t in ax.texts if t.get_text() in ("V0007", "V0008", "9140956/1", "V0010")]
-    assert sorted(t.get_text() for t in texts) == ["9140956/1", "V0007", "V0008", "V0010"]
+    texts = [t for t in ax.texts if t.get_text().split(" ETA ")[0] in ("V0007", "V0008", "9140956/1", "V0010")]
+    assert sorted(t.get_text() for t in texts) == sorted(
+        f"{name} ETA {plots.dtg(lg[-1]['eta_utc'].to_pydatetime())}"
+        for name, (_r, lg) in zip(("V0007", "V0008", "9140956/1", "V0010"), fleet))
     assert "fleet plan plan-20201201T0000-446a6a" in ax.get_title() and "2021-01-10T12:00:00Z" in ax.get_title()
     renderer = FigureCanvasAgg(fig).get_renderer()
     boxes = [t.get_window_extent(renderer) for t in texts]
@@ -407,3 +409,13 @@ def test_the_convergence_plot_is_left_out_of_a_run_unless_debug_plots_is_set(mon
     monkeypatch.setenv("JITROUTE_DEBUG_PLOTS", "maybe")
     with pytest.raises(SettingsError, match="JITROUTE_DEBUG_PLOTS='maybe' is not 1 or 0"):
         load_settings()
+
+
+def test_a_large_fleet_s_map_labels_only_the_voyages_not_ok():
+    n = plots.MAX_FLEET_LABELS + 1
+    fleet = [(dict(voyage_id=f"V{k:04d}", status="late" if k in (3, 40) else "ok"),
+              make_legs(points=[(20.0 + 0.2 * k, 130.0), (20.0 + 0.2 * k, 131.0)], sog_kn=(12.0,), rpm=(70.0,)))
+             for k in range(n)]
+    ax = plots.fleet_map_figure(fleet, "run r2").axes[0]
+    assert sorted(t.get_text().split(" ETA ")[0] for t in ax.texts) == ["V0003", "V0040"]
+    assert f"labels on 2 voyages not ok only, of {n}" in ax.get_title()

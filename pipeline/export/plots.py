@@ -268,6 +268,7 @@ def dtg(t: datetime) -> str:
     return f"{t:%d/%H%M}Z"
 
 
+MAX_FLEET_LABELS = 60  # beyond this many voyages a fleet map labels only those not ok (placing a label costs a drawing)
 PLAN_VOYAGE_ID = re.compile(r"^plan-\d{8}T\d{4}-[0-9a-f]+-(\d+)-(\d+)$")  # pipeline/planning/voyages.py
 MAX_LABEL_CHARS = 14
 
@@ -455,8 +456,8 @@ def convergence_image(history, title: str | None = None) -> bytes:
 
 def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None,
                      now_utc=None) -> Figure:
-    """Every voyage of a run on one map, coloured by status, labelled with a short voyage id (labels kept clear of
-    each other), each ship's position at `now_utc` (the run's time) along its plan marked; voyages without legs are
+    """Every voyage of a run on one map, coloured by status, labelled with a short voyage id and its ETA (day/hhmmZ;
+    labels kept clear of each other), each ship's position at `now_utc` (the run's time) along its plan marked; voyages without legs are
     listed in a box. A route dict needs voyage_id and status (and start_kind: a plan re-made at sea starts at sea);
     legs need lat0/lon0/lat1/lon1 and, for the positions, etd_utc/eta_utc."""
     all_lon = np.concatenate([waypoints_deg(legs)[1] for _r, legs in routes_with_legs] or [np.empty(0)])
@@ -474,6 +475,12 @@ def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str
     plans = sorted({m.group(0).rsplit("-", 2)[0] for r, _l in routes_with_legs
                     if (m := PLAN_VOYAGE_ID.match(voyage_id(r)))})
     lines = [head, sub] + ([f"labels IMO/leg: voyages of fleet plan {', '.join(plans)}"] if plans else [])
+    routed = [r for r, lg in routes_with_legs if lg]
+    to_label = routed
+    if len(routed) > MAX_FLEET_LABELS:
+        to_label = [r for r in routed if str(r.get("status")) != "ok"][:MAX_FLEET_LABELS]
+        lines.append(f"labels on {len(to_label)} voyages not ok only, of {len(routed)}")
+    labelled = {id(r) for r in to_label}
     extent = _extent(lat_all, lon_all)
     fig, ax, _ = _map_axes(lines, extent)
     _draw_land(ax, extent)
@@ -487,7 +494,10 @@ def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str
         ax.plot(lon[[0, -1]], lat[[0, -1]], "o", ms=3, color=colour, zorder=4)
         n = lat.size
         spots = [(lon[k], lat[k]) for k in (n // 2, n // 3, 2 * n // 3, n // 5, 4 * n // 5, 0, n - 1)]
-        labels.append((short_voyage_label(voyage_id(route)), spots, colour))
+        eta = utc_datetime(legs[-1].get("eta_utc")) if legs else None
+        if id(route) in labelled:
+            labels.append((short_voyage_label(voyage_id(route)) + (f" ETA {dtg(eta)}" if eta is not None else ""),
+                           spots, colour))
         at_sea = route.get("start_kind") not in (None, "port")  # re-planned at sea (pipeline/enroute.py)
         pos = position_at(legs, now, at_sea) if now is not None else None
         if pos is not None:
@@ -501,7 +511,12 @@ def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str
             xs, ys = zip(*pts)
             ax.plot(xs, ys, ls="none", zorder=7, **marker[where])
             handles.append(Line2D([], [], ls="none", label=f"ship {where} now", **marker[where]))
-    _place_labels(fig, ax, labels)
+    from matplotlib.transforms import Bbox
+
+    pad_px = 5.0 * fig.dpi / 72.0  # half a marker: labels keep off the ships too
+    avoid = [Bbox.from_extents(px - pad_px, py - pad_px, px + pad_px, py + pad_px)
+             for pts in ships.values() for px, py in ax.transData.transform(np.asarray(pts).reshape(-1, 2))]
+    _place_labels(fig, ax, labels, avoid)
     if handles:
         ax.legend(handles=handles, loc="best", fontsize=8, title="status / ship now", title_fontsize=8)
     if missing:
