@@ -14,7 +14,7 @@ import logging
 USER_ERRORS = {"CycleError", "UnknownVesselError", "FleetRunError", "NoonFileError", "FileNotFoundError",
                "WarehouseBusyError", "WarehouseCorruptError", "WarehouseWriteError", "RoutingInputError",
                "VoyageGeometryError", "ServeError", "TimeoutError", "CubeError", "ExportPathError", "WeatherMapError",
-               "FleetFileError", "SettingsError", "UnknownSolverError", "PlanningInputError"}
+               "FleetFileError", "SettingsError", "UnknownSolverError", "PlanningInputError", "NoSeaRoute"}
 
 
 # Errors that are not the user's input but the state of the data, one line each with their own exit code:

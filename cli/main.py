@@ -5,7 +5,8 @@ from __future__ import annotations
 import typer
 from typer.core import TyperGroup
 
-from cli import cube, errors, fleet, ingest, performance, planning, routing, signals, warehouse, weather
+from cli import (cube, errors, fleet, ingest, performance, planning, routing, sea_routes, signals, warehouse, weather,
+                 web_console)
 
 
 class Commands(TyperGroup):
@@ -34,7 +35,7 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-for module in (ingest, performance, routing, fleet, weather, cube, warehouse, planning):
+for module in (ingest, performance, routing, fleet, weather, cube, warehouse, planning, sea_routes, web_console):
     module.register(app)
 
 

@@ -109,4 +109,13 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE voyages ADD COLUMN plan_id VARCHAR;
         """,
     ),
+    Migration(
+        "planning_002_distances_along_sea_routes",
+        """
+        DELETE FROM port_distances;  -- the node-line graph's distances: computed again along the global sea routes
+        ALTER TABLE port_distances ADD COLUMN passages VARCHAR;
+        ALTER TABLE port_distances ADD COLUMN canal_nm DOUBLE;
+        ALTER TABLE port_distances ADD COLUMN canal_h DOUBLE;
+        """,
+    ),
 ]

@@ -24,10 +24,18 @@ speeds are refined between the lowest and the highest rpm after the search (cont
 or cheaper: the storm plans 1.0 % cheaper, the wavy plans 0.24 %). The exact DP's work counts fell again when its
 bound began to be priced leg by leg in the weather each leg can meet while a plan can sail it (same plans). A refactor that changes any of them
 changed an algorithm: change a pin only in a commit that changes the algorithm (or its random stream) on
-purpose and says so.
+purpose and says so. The costs were re-recorded once more when the continuous-speed refinement stopped taking its
+dot products through BLAS (math.fsum instead of `g @ h`), whose summation order follows the CPU's kernel: since
+then every field here, the cost's last bit included, is the same under every OpenBLAS core type, and
+`test_pins_hold_under_other_blas_kernels` proves it on this machine.
 """
 
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -37,19 +45,19 @@ from pipeline.routing.solve import solve
 
 # name → (status, cost as float.hex, n_evals, node offset per inner line (None: not on this graph), rpm per leg to 3 decimals)
 PINS = {
-    "wavy-bfoa-1": ('ok', '0x1.fb3adc92200e2p+5', 398, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
-    "wavy-bfoa-2": ('ok', '0x1.fb3adc92200e2p+5', 396, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
-    "wavy-dp": ('ok', '0x1.fb3adc92200e2p+5', 7884, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
-    "wavy-astar": ('ok', '0x1.fb3adc92200e2p+5', 2355, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
+    "wavy-bfoa-1": ('ok', '0x1.fb3adc92200e8p+5', 398, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
+    "wavy-bfoa-2": ('ok', '0x1.fb3adc92200e8p+5', 396, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
+    "wavy-dp": ('ok', '0x1.fb3adc92200e8p+5', 7884, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
+    "wavy-astar": ('ok', '0x1.fb3adc92200e8p+5', 2355, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
     "wavy-gc": ('ok', '0x1.fc77d7d0372bcp+5', 0, [0, 0, 0, 0, 0, 0, 0, 0], [81.92, 81.92, 81.92, 81.92, 81.92, 81.92, 81.92, 81.92, 81.92]),
-    "wavy-dp-bucket": ('ok', '0x1.fb3adc92200e2p+5', 20848, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
+    "wavy-dp-bucket": ('ok', '0x1.fb3adc92200e8p+5', 20848, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
     "wavy-rhumb": ('ok', '0x1.f81b1b05b7d7dp+5', 0, None, [81.613, 81.613, 81.613, 81.613, 81.613, 81.613, 81.613, 81.613, 81.613]),
     "thesis-bfoa-3": ('ok', '0x1.ff5c6329c7382p+1', 307, [0, 0, 0, 0, 0, 0], [84.784, 84.784, 89.143, 89.143, 90.2, 90.2, 88.783]),
     "storm-gc": ('ok', '0x1.100fd89f06a5bp+7', 0, [0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168]),
-    "storm-bfoa-4": ('ok', '0x1.cc493afcf2cbbp+6', 833, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.748, 81.436, 77.604, 75.522, 73.629, 73.253, 74.388, 77.889, 77.889, 80.013, 82.229]),
-    "storm-dp": ('ok', '0x1.cc39f73066772p+6', 22853, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.771, 81.405, 77.663, 75.594, 73.636, 73.257, 74.394, 76.616, 78.935, 80.031, 82.109]),
-    "storm-dp-bucket": ('ok', '0x1.cc493afcf2cbbp+6', 70252, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.748, 81.436, 77.604, 75.522, 73.629, 73.253, 74.388, 77.889, 77.889, 80.013, 82.229]),
-    "storm-astar": ('ok', '0x1.cc39f73066772p+6', 7015, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.771, 81.405, 77.663, 75.594, 73.636, 73.257, 74.394, 76.616, 78.935, 80.031, 82.109]),
+    "storm-bfoa-4": ('ok', '0x1.cc493afcf2c94p+6', 833, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.748, 81.436, 77.604, 75.522, 73.629, 73.253, 74.388, 77.889, 77.889, 80.013, 82.229]),
+    "storm-dp": ('ok', '0x1.cc39f7306677ap+6', 22853, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.771, 81.405, 77.663, 75.594, 73.636, 73.257, 74.394, 76.616, 78.935, 80.031, 82.109]),
+    "storm-dp-bucket": ('ok', '0x1.cc493afcf2c94p+6', 70252, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.748, 81.436, 77.604, 75.522, 73.629, 73.253, 74.388, 77.889, 77.889, 80.013, 82.229]),
+    "storm-astar": ('ok', '0x1.cc39f7306677ap+6', 7015, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.771, 81.405, 77.663, 75.594, 73.636, 73.257, 74.394, 76.616, 78.935, 80.031, 82.109]),
 }
 
 
@@ -98,3 +106,36 @@ def test_plan_is_pinned(plans, name):
     got = (plan.status, float(plan.cost).hex(), plan.n_evals, _offsets(plan, space) if space is not None else None,
            [round(g["rpm"], 3) for g in plan.legs])
     assert got == (status, cost_hex, n_evals, offsets, rpm)
+
+
+def _cpu_flags() -> set[str]:
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return set()
+    line = next((ln for ln in text.splitlines() if ln.startswith("flags")), "")
+    return set(line.split(":", 1)[-1].split())
+
+
+# Prescott (SSE3) runs on any x86-64; Haswell (AVX2) where the CPU has it. Each sums a dot product in its own order,
+# so a plan that took its arithmetic through BLAS would differ in its last bits under one of them.
+CORE_TYPES = ["Prescott"] + (["Haswell"] if "avx2" in _cpu_flags() else [])
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _cpu_flags(), reason="OpenBLAS core types are an x86-64 matter")
+@pytest.mark.parametrize("core", CORE_TYPES)
+def test_pins_hold_under_other_blas_kernels(core):
+    """The pinned plans, recomputed in a process whose OpenBLAS uses `core`'s kernels, match the pins bit for bit."""
+    script = ("from test_routing_pins import PINS, _plans, _offsets\n"
+              "for name, plan, space in _plans():\n"
+              "    got = (plan.status, float(plan.cost).hex(), plan.n_evals,\n"
+              "           _offsets(plan, space) if space is not None else None, [round(g['rpm'], 3) for g in plan.legs])\n"
+              "    if got != PINS[name]:\n"
+              "        print(name, got)\n")
+    env = dict(os.environ, OPENBLAS_CORETYPE=core)
+    env.pop("OPENBLAS_L2_SIZE", None)
+    out = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).parent, env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout == "", f"plans that differ from their pins under OPENBLAS_CORETYPE={core}:\n{out.stdout}"

@@ -16,7 +16,7 @@ from flows.settings import load_settings
 from pipeline.export.plan_gantt import plan_gantt_png
 from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
-from pipeline.planning.sea_distances import PortDistance, distance_map, needed_pairs, sea_distance
+from pipeline.planning.sea_distances import PortDistance, canal_map, distance_map, needed_pairs, sea_distance
 from pipeline.planning.voyages import (DEFAULT_PENALTY,
                                        apply_commitments, committed, plan_contracts, plan_rows, plan_vessels,
                                        vessel_drafts)
@@ -92,11 +92,14 @@ def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: s
     stored = planning_store.load_port_distances(db)
     known = {(r["port_a"], r["port_b"]): PortDistance(r["port_a"], r["port_b"], r["lat_a"], r["lon_a"], r["lat_b"],
                                                       r["lon_b"], float("nan") if pd.isna(r["dist_nm"]) else r["dist_nm"],
-                                                      r["gc_nm"], r["reason"] if isinstance(r["reason"], str) else None)
+                                                      r["gc_nm"], r["reason"] if isinstance(r["reason"], str) else None,
+                                                      r["passages"] if isinstance(r["passages"], str) else None,
+                                                      0.0 if pd.isna(r["canal_nm"]) else float(r["canal_nm"]),
+                                                      0.0 if pd.isna(r["canal_h"]) else float(r["canal_h"]))
              for r in stored.to_dict("records")}
     todo = needed_pairs(ports, known, pairs)
     if todo:
-        LOG.info("computing %d sea distances (shortest sea route through the routing graph)", len(todo))
+        LOG.info("computing %d sea distances (shortest sea route over the whole ocean)", len(todo))
         new = [sea_distance(a, ports[a], b, ports[b]) for a, b in todo]
         planning_store.save_port_distances(db, pd.DataFrame([r.__dict__ for r in new]))
         for r in new:
@@ -130,7 +133,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     pairs |= {(c.discharge_port, v.end_port) for v in vessels for c in cons if v.end_port}
     dists = run.step(complete_distances, db, port_pos, pairs, name="sea-distances")
     started = time.perf_counter()  # the time limit covers building the problem too
-    data = problem.build(vessels, cons, distance_map(dists), fuel_price)
+    data = problem.build(vessels, cons, distance_map(dists), fuel_price, canals=canal_map(dists))
     plan = run.step(milp.solve, data, time_limit_s=time_limit_s, started_at=started, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"
     row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, vessel_drafts(fleet))

@@ -7,6 +7,10 @@ Conventions (all solvers share them, so their costs compare exactly):
   window); the vessel then spends `port_h` loading, sails laden to the discharge port and spends `port_h`
   discharging. A vessel arriving before `early` waits.
 - Lifted weight = min(max weight, deadweight); it must reach the contract's minimum weight.
+- Distances are the global sea routes' (sea_distances.py); a route through a canal sails the canal's fairway in
+  the canal's transit and waiting hours instead of at the vessel's speed (`build`'s `canals`), its fuel still
+  counted per NM. A pair without a distance only removes the arcs that need it: a vessel whose start port has
+  no sea route to a load port may still lift that cargo after another one.
 - Legs are sailed at the vessel's ballast / laden planning speed; fuel per NM at that speed and draft
   (`fuel.py`). A ballast leg to a load port where the vessel would wait for the window leaves later and sails
   slower, down to `SLOWEST_BALLAST_SHARE` of its ballast speed, so that it arrives when loading starts; its fuel is
@@ -149,6 +153,8 @@ def _distance(dist_nm: dict, a: str, b: str) -> float | None:
 
 
 def _why_not(v: PlanVessel, c: Contract, dist_nm: dict) -> str | None:
+    """Why vessel `v` can never lift contract `c` (None: it may). A missing distance from the vessel's start port
+    to the load port is no reason: the vessel may still lift `c` after another cargo (its start arc is left out)."""
     if v.cargo_types is not None and c.cargo_type not in v.cargo_types:
         return f"cannot carry {c.cargo_type}"
     for p in (c.load_port, c.discharge_port):
@@ -158,17 +164,24 @@ def _why_not(v: PlanVessel, c: Contract, dist_nm: dict) -> str | None:
         return f"deadweight {v.dwt_t:.0f} t below the minimum {c.min_t:.0f} t"
     if _distance(dist_nm, c.load_port, c.discharge_port) is None:
         return f"no sea route {c.load_port} → {c.discharge_port}"
-    if _distance(dist_nm, v.start_port, c.load_port) is None:
-        return f"no sea route from its start port {v.start_port} to {c.load_port}"
     if v.end_port is not None and _distance(dist_nm, c.discharge_port, v.end_port) is None:
         return f"no sea route from {c.discharge_port} to its end port {v.end_port}"
     return None
 
 
+def _hours(canals: dict, a: str, b: str, nm: float, speed_kn: float) -> float:
+    """Hours from a to b (`nm` NM) at `speed_kn`, a canal's share of the route at the canal's own pace
+    (sea_distances.hours)."""
+    canal_nm, canal_h = canals.get((a, b)) or canals.get((b, a)) or (0.0, 0.0)
+    return (nm - canal_nm) / speed_kn + canal_h
+
+
 def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tuple[str, str], float],
-          fuel_price: float) -> PlanData:
+          fuel_price: float, canals: dict[tuple[str, str], tuple[float, float]] | None = None) -> PlanData:
     """Every feasible arc per vessel, with its distance and time; `dist_nm` maps (port, port) → NM (either order;
-    a pair absent or NaN has no sea route)."""
+    a pair absent or NaN has no sea route); `canals` (port, port) → (NM, hours) of the route through canals, sailed
+    in those hours instead of at the vessel's speed (sea_distances.canal_map)."""
+    canals = canals or {}
     per_vessel: list[VesselArcs] = []
     why: dict[int, list[str]] = {j: [] for j in range(len(contracts))}
     for k, v in enumerate(vessels):
@@ -179,20 +192,23 @@ def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tu
                 laden = _distance(dist_nm, c.load_port, c.discharge_port)
                 lift = min(c.max_t, v.dwt_t)
                 speed_kn, fuel_t_per_nm = v.laden_at(lift)
-                dur = 2 * v.port_h + laden / speed_kn
+                dur = 2 * v.port_h + _hours(canals, c.load_port, c.discharge_port, laden, speed_kn)
+                end_nm = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port)
+                to_end = 0.0 if v.end_port is None else _hours(canals, c.discharge_port, v.end_port, end_nm,
+                                                               v.ballast_speed_kn)
                 bal0 = _distance(dist_nm, v.start_port, c.load_port)
-                arrive = v.start_h + bal0 / v.ballast_speed_kn
-                to_end = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port) / v.ballast_speed_kn
-                if arrive > c.late_h + 1e-9:
+                arrive = None if bal0 is None else v.start_h + _hours(canals, v.start_port, c.load_port, bal0,
+                                                                       v.ballast_speed_kn)
+                if arrive is not None and arrive > c.late_h + 1e-9:
                     reason = f"cannot reach {c.load_port} before the window closes"
-                elif max(arrive, c.early_h) + dur + to_end > v.end_h + 1e-9:
+                elif max(arrive if arrive is not None else -math.inf, c.early_h, v.start_h) + dur + to_end > v.end_h + 1e-9:
                     reason = "cannot finish it before its availability ends"
                 else:
                     va.contracts.append(j)
                     va.dur_h[j], va.laden_nm[j], va.lift_t[j] = dur, laden, lift
                     va.laden_fuel_t[j] = laden * fuel_t_per_nm
-                    va.arcs[("s", j)], va.travel_h[("s", j)] = bal0, arrive
-                    end_nm = 0.0 if v.end_port is None else _distance(dist_nm, c.discharge_port, v.end_port)
+                    if arrive is not None:  # else lifted only after another cargo
+                        va.arcs[("s", j)], va.travel_h[("s", j)] = bal0, arrive
                     va.arcs[(j, "e")], va.travel_h[(j, "e")] = end_nm, to_end
             if reason is not None:
                 why[j].append(f"{v.name or v.imo}: {reason}")
@@ -205,13 +221,18 @@ def build(vessels: list[PlanVessel], contracts: list[Contract], dist_nm: dict[tu
                 d = _distance(dist_nm, ci.discharge_port, cj.load_port)
                 if d is None:
                     continue
-                h = d / v.ballast_speed_kn
+                h = _hours(canals, ci.discharge_port, cj.load_port, d, v.ballast_speed_kn)
                 ready = ci.early_h + va.dur_h[i] + h
                 if ready > cj.late_h + 1e-9 or max(ready, cj.early_h) + va.dur_h[j] + va.travel_h[(j, "e")] > v.end_h + 1e-9:
                     continue
                 va.arcs[(i, j)], va.travel_h[(i, j)] = d, h
         per_vessel.append(va)
     reasons = {j: _summary(contracts[j], r) for j, r in why.items() if len(r) == len(vessels)}
+    reached = {a[1] for va in per_vessel for a in va.arcs}
+    for j in range(len(contracts)):  # kept by some vessel, yet no start arc or earlier cargo of any leads to it
+        if j not in reasons and j not in reached:
+            reasons[j] = ("no vessel can reach it: no sea route from any start port to "
+                          f"{contracts[j].load_port} in time, nor from another cargo's discharge port")
     return PlanData(vessels, contracts, float(fuel_price), per_vessel, reasons)
 
 

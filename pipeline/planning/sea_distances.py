@@ -1,11 +1,12 @@
-"""Port-to-port sea distances: the length of the routing graph's shortest sea route (the baseline's route).
+"""Port-to-port sea distances: the length of the shortest sea route of the global sea-route layer.
 
-The graph is the one routing lays out for a voyage between the two ports (`search_space.build_search_space`:
-the same lines, land clearance and port approaches), and the route is `baseline.shortest_route`, so a planned leg
-is as long as the baseline routing later compares its plan with. A pair without a sea route through that graph
-(or a port routing refuses, e.g. on land) gets NaN and the reason. Distances are symmetric: each unordered pair is
-computed once. Computed pairs are kept in the `port_distances` table (storage.planning_store) and reused while
-both ports keep their positions.
+The route is `global_routes.sea_route`'s (the product's land mask and clearance, round capes and through the
+straits and canals of routing/passages.py), so a planned leg is as long as the base route routing later lays its
+corridor along. A pair without a sea route (a port on land or enclosed, an unconnected sea) gets NaN and the reason.
+A route through a canal carries the canal's time: `canal_nm` of its length is the canals' fairways, sailed in
+`canal_h` hours (transit and waiting allowance, passages.py) instead of at the vessel's speed
+(`hours`). Distances are symmetric: each unordered pair is computed once. Computed pairs are kept in the
+`port_distances` table (storage.planning_store) and reused while both ports keep their positions.
 """
 
 from __future__ import annotations
@@ -14,11 +15,8 @@ import itertools
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
-from pipeline.routing.baseline import shortest_route
 from pipeline.routing.geodesy import gc_distance_nm
-from pipeline.routing.search_space import VoyageGeometryError, build_search_space
+from pipeline.routing.global_routes import NoSeaRoute, sea_route
 
 
 @dataclass(frozen=True)
@@ -32,23 +30,34 @@ class PortDistance:
     dist_nm: float  # NaN: no sea route
     gc_nm: float  # great-circle distance, for comparison
     reason: str | None = None
+    passages: str | None = None  # the passages sailed, in order from port_a, ';'-separated
+    canal_nm: float = 0.0  # length of the canals' fairways in dist_nm
+    canal_h: float = 0.0  # hours through those canals, waiting included
 
 
-def sea_distance(a: str, pos_a: tuple[float, float], b: str, pos_b: tuple[float, float]) -> PortDistance:
-    """The shortest sea route's length between two ports ((lat, lon) degrees, at sea)."""
+def sea_distance(a: str, pos_a: tuple[float, float], b: str, pos_b: tuple[float, float], *,
+                 avoid=frozenset()) -> PortDistance:
+    """The shortest sea route's length between two ports ((lat, lon) degrees, at sea), avoiding the passages named
+    in `avoid`."""
     gc = float(gc_distance_nm(pos_a[0], pos_a[1], pos_b[0], pos_b[1]))
     try:
-        space = build_search_space(pos_a, pos_b, dep_name=f"port {a}", arr_name=f"port {b}")
-    except VoyageGeometryError as exc:
+        route = sea_route(pos_a, pos_b, avoid=avoid, dep_name=f"port {a}", arr_name=f"port {b}")
+    except NoSeaRoute as exc:
         return PortDistance(a, b, *pos_a, *pos_b, math.nan, gc, str(exc))
-    nodes = shortest_route(space)
-    if nodes is None:
-        return PortDistance(a, b, *pos_a, *pos_b, math.nan, gc,
-                            f"no sea route from {a} to {b} through the routing graph (land or limits in the way)")
-    lat = space.lat[np.arange(len(nodes)), nodes]
-    lon = space.lon[np.arange(len(nodes)), nodes]
-    dist = float(sum(gc_distance_nm(lat[i], lon[i], lat[i + 1], lon[i + 1]) for i in range(len(nodes) - 1)))
-    return PortDistance(a, b, *pos_a, *pos_b, dist, gc)
+    canal_nm = canal_h = 0.0
+    for p in route.passages:
+        if p.transit_h is not None:
+            canal_nm += float(sum(gc_distance_nm(route.lat[k], route.lon[k], route.lat[k + 1], route.lon[k + 1])
+                                  for k in range(p.start_index, p.end_index)))
+            canal_h += p.transit_h + p.wait_h
+    return PortDistance(a, b, *pos_a, *pos_b, route.dist_nm, gc, None,
+                        ";".join(p.name for p in route.passages) or None, canal_nm, canal_h)
+
+
+def hours(dist_nm: float, speed_kn: float, canal: tuple[float, float] = (0.0, 0.0)) -> float:
+    """Hours to sail `dist_nm` at `speed_kn` when `canal` = (NM, hours) of it goes through canals at their own pace."""
+    canal_nm, canal_h = canal
+    return (dist_nm - canal_nm) / speed_kn + canal_h
 
 
 def needed_pairs(ports: dict[str, tuple[float, float]], known: dict[tuple[str, str], PortDistance],
@@ -69,4 +78,13 @@ def distance_map(rows: list[PortDistance]) -> dict[tuple[str, str], float]:
     out: dict[tuple[str, str], float] = {}
     for r in rows:
         out[(r.port_a, r.port_b)] = out[(r.port_b, r.port_a)] = r.dist_nm
+    return out
+
+
+def canal_map(rows: list[PortDistance]) -> dict[tuple[str, str], tuple[float, float]]:
+    """(a, b) → (canal NM, canal hours) both ways, for the pairs whose route goes through a canal."""
+    out: dict[tuple[str, str], tuple[float, float]] = {}
+    for r in rows:
+        if r.canal_h and math.isfinite(r.dist_nm):
+            out[(r.port_a, r.port_b)] = out[(r.port_b, r.port_a)] = (float(r.canal_nm), float(r.canal_h))
     return out

@@ -243,7 +243,10 @@ def _descent(d_fuel, d_hours, run_rpm, lo, hi, pinned) -> np.ndarray | None:
         if not np.any(movable):
             return None
         g, h = d_fuel[movable], d_hours[movable]
-        mu = float(g @ h) / float(h @ h) if float(h @ h) > 0.0 else 0.0
+        # math.fsum, not `g @ h`: BLAS's ddot sums in an order that follows the CPU's kernel (AVX-512, AVX2, SSE3),
+        # so a plan's last bits would depend on the machine; a correctly rounded sum does not
+        gh, hh = math.fsum(g * h), math.fsum(h * h)
+        mu = gh / hh if hh > 0.0 else 0.0
         d = np.zeros(len(run_rpm))
         d[movable] = -(g - mu * h)
         blocked = ((d < 0.0) & (run_rpm <= lo)) | ((d > 0.0) & ((run_rpm >= hi) | pinned))

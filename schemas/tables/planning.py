@@ -71,7 +71,8 @@ CONTRACTS_REJECTED = Table('contracts_rejected', 'rows of contracts files refuse
 
 PORT_DISTANCES = Table(
     'port_distances',
-    "sea distance between two ports: length of the routing graph's shortest sea route, reused by later plans", (
+    "sea distance between two ports: length of the shortest sea route over the whole ocean (global sea-route "
+    "layer), reused by later plans", (
     Column('port_a', 'VARCHAR', None, 'first port (names in sorted order; the distance holds both ways)'),
     Column('port_b', 'VARCHAR', None, 'second port'),
     Column('lat_a', 'DOUBLE', 'degree_north', 'latitude of port_a used, degrees north'),
@@ -83,6 +84,9 @@ PORT_DISTANCES = Table(
     Column('gc_nm', 'DOUBLE', 'NM', 'great-circle distance, nautical miles'),
     Column('reason', 'VARCHAR', None, 'why there is no sea route'),
     Column('computed_at', 'TIMESTAMP', 'UTC', 'when the distance was computed (UTC)'),
+    Column('passages', 'VARCHAR', None, "canals and straits the route sails through, in order from port_a, ';'-separated"),
+    Column('canal_nm', 'DOUBLE', 'NM', 'length of the route inside canals, nautical miles (sailed in canal_h)'),
+    Column('canal_h', 'DOUBLE', 'h', 'hours through the canals on the route, transit and waiting allowance'),
 ), primary_key=('port_a', 'port_b'))
 
 FLEET_PLANS = Table(

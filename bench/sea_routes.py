@@ -1,0 +1,174 @@
+"""Sea routes over the whole ocean: the global sea-route layer (pipeline/routing/global_routes.py) on real trades.
+
+For each port pair below (ports given by a position at sea near the pilot station or the anchorage): the product's
+distance (`sea_route`, default 2 NM land clearance and 10 NM port approach), `searoute`'s (Eurostat's marine
+network; installed for the bench only, never a product dependency: `pip install searoute`; without it the figures
+recorded in bench/sea_routes_searoute.json are used), the great circle, the passages sailed, the CPU time of the
+pair (warm: the graph loaded and the kernels compiled before the clock starts; the first call's cost is printed
+apart), and the route's least distance to land outside its passages' fairways and approaches, sampled every 0.1 NM.
+
+searoute's network has no Kiel Canal and sends the Baltic through the shallow Øresund: pairs marked `searoute
+avoids` are compared with the product's route avoiding the same passages (the product's own route is printed too).
+
+Targets (#39): 0 pairs refused; within ±3 % of searoute on ≥ 90 % of pairs and within ±8 % on all; every route at
+least the 2 NM clearance from land outside its fairways. Prints a table and the summary; writes
+bench/out/sea_routes.json; always exits 0.
+
+    .venv/bin/python bench/sea_routes.py [--record]    # --record: write searoute's figures to the JSON beside
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ["NUMBA_NUM_THREADS"] = "1"  # before numba is imported anywhere
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.routing import geodesy as geo  # noqa: E402
+from pipeline.routing.global_routes import least_clearance_outside_passages_nm, sea_route  # noqa: E402
+from pipeline.routing.sea_route import NoSeaRoute  # noqa: E402
+
+RECORDED = Path(__file__).with_name("sea_routes_searoute.json")
+CLEARANCE_NM = 2.0
+# the product checks legs at ≤ 0.1 NM steps; between two samples 0.1 NM apart a point may lie up to 0.05 NM nearer
+SAMPLING_SLACK_NM = 0.05
+
+# (lat, lon) at sea, at or just off the pilot station / outer anchorage
+PORTS = {
+    "Shanghai": (31.0, 122.7), "Ningbo": (29.95, 122.55), "Qingdao": (35.95, 120.45), "Busan": (35.0, 129.1),
+    "Tokyo Bay": (35.2, 139.8), "Nagoya": (34.55, 136.85), "Hong Kong": (22.1, 114.25), "Kaohsiung": (22.55, 120.2),
+    "Manila": (14.33, 120.55), "Singapore": (1.15, 103.75), "Port Klang": (2.95, 101.2), "Jakarta": (-6.0, 106.85),
+    "Colombo": (6.95, 79.8), "Mumbai": (18.85, 72.75), "Jebel Ali": (25.1, 54.9), "Jeddah": (21.45, 39.05),
+    "Port Said": (31.4, 32.35), "Piraeus": (37.9, 23.55), "Istanbul": (40.96, 28.9), "Constanta": (44.1, 28.8),
+    "Genoa": (44.35, 8.9), "Algeciras": (36.1, -5.35), "Valencia": (39.4, -0.25), "Marseille": (43.25, 5.25),
+    "Naples": (40.75, 14.25), "Rotterdam": (52.0, 3.7), "Antwerp": (51.4, 3.05), "Hamburg": (54.0, 8.1),
+    "Gdansk": (54.5, 18.8), "Gothenburg": (57.6, 11.6), "Le Havre": (49.55, 0.0), "Lisbon": (38.6, -9.3),
+    "Dakar": (14.65, -17.45), "Lagos": (6.35, 3.35), "Cape Town": (-33.9, 18.35), "Durban": (-29.9, 31.1),
+    "Mombasa": (-4.1, 39.75), "Santos": (-24.05, -46.3), "Rio de Janeiro": (-23.05, -43.15),
+    "Buenos Aires": (-35.15, -56.25), "Valparaiso": (-33.0, -71.7), "Callao": (-12.05, -77.25),
+    "Balboa": (8.85, -79.5), "Colon": (9.42, -79.93), "Kingston": (17.9, -76.8), "Houston": (29.3, -94.65),
+    "New Orleans": (28.9, -89.45), "Miami": (25.75, -80.05), "New York": (40.45, -73.8), "Halifax": (44.5, -63.5),
+    "Los Angeles": (33.65, -118.3), "Vancouver": (48.45, -124.8), "Honolulu": (21.25, -157.9), "Guam": (13.45, 144.6),
+    "Sydney": (-33.85, 151.35), "Melbourne": (-38.4, 144.6), "Brisbane": (-27.2, 153.3),
+    "Port Hedland": (-20.0, 118.55), "Auckland": (-36.6, 174.9), "Davao": (6.8, 125.75), "Cebu": (10.2, 123.85),
+}
+
+# (from, to, passages searoute cannot take: the product is compared avoiding them too)
+PAIRS = [
+    ("Shanghai", "Rotterdam", ()), ("Singapore", "Rotterdam", ()), ("Singapore", "Piraeus", ()),
+    ("Mumbai", "Genoa", ()), ("Jeddah", "Rotterdam", ()), ("Jebel Ali", "Rotterdam", ()), ("Colombo", "Marseille", ()),
+    ("Hong Kong", "Algeciras", ()), ("Port Said", "Singapore", ()),
+    ("New York", "Los Angeles", ()), ("Houston", "Tokyo Bay", ()), ("Rotterdam", "Callao", ()),
+    ("New Orleans", "Valparaiso", ()), ("Colon", "Balboa", ()), ("Miami", "Vancouver", ()), ("Kingston", "Honolulu", ()),
+    ("Hamburg", "Gdansk", ("kiel",)), ("Rotterdam", "Gdansk", ("kiel",)), ("Antwerp", "Gothenburg", ()),
+    ("Singapore", "Shanghai", ()), ("Port Klang", "Hong Kong", ()), ("Singapore", "Los Angeles", ()),
+    ("Colombo", "Singapore", ()), ("Jakarta", "Singapore", ()), ("Port Klang", "Jebel Ali", ()),
+    ("Piraeus", "Constanta", ()), ("Istanbul", "Genoa", ()), ("Rotterdam", "Piraeus", ()), ("Rotterdam", "Algeciras", ()),
+    ("Algeciras", "Piraeus", ()), ("Genoa", "Piraeus", ()), ("Le Havre", "Valencia", ()), ("Naples", "Piraeus", ()),
+    ("Marseille", "Port Said", ()), ("Lisbon", "Rotterdam", ()),
+    ("Brisbane", "Singapore", ()), ("Sydney", "Port Hedland", ()), ("Port Hedland", "Qingdao", ()),
+    ("Melbourne", "Auckland", ()),
+    ("Manila", "Guam", ()), ("Hong Kong", "Manila", ()), ("Singapore", "Manila", ()), ("Manila", "Cebu", ()),
+    ("Davao", "Hong Kong", ()), ("Busan", "Tokyo Bay", ()), ("Busan", "Nagoya", ()), ("Qingdao", "Tokyo Bay", ()),
+    ("Hong Kong", "Qingdao", ()), ("Kaohsiung", "Ningbo", ()), ("Guam", "Manila", ()),
+    ("Tokyo Bay", "Los Angeles", ()), ("Shanghai", "Vancouver", ()), ("Busan", "Vancouver", ()),
+    ("Sydney", "Los Angeles", ()), ("Auckland", "Honolulu", ()), ("Valparaiso", "Sydney", ()),
+    ("Cape Town", "Rotterdam", ()), ("Durban", "Singapore", ()), ("Mombasa", "Mumbai", ()), ("Santos", "Rotterdam", ()),
+    ("Rio de Janeiro", "Lagos", ()), ("Buenos Aires", "Cape Town", ()), ("Dakar", "New York", ()),
+    ("Halifax", "Rotterdam", ()), ("New York", "Rotterdam", ()), ("Santos", "Shanghai", ()),
+    ("Shanghai", "Rotterdam", ("suez",)), ("Singapore", "Rotterdam", ("suez", "panama")),
+]
+
+
+def searoute_nm(pairs) -> dict[str, float]:
+    """searoute's length (NM) per pair key, computed when the package is installed, else the recorded figures."""
+    try:
+        import searoute as sr
+    except ImportError:
+        return json.loads(RECORDED.read_text())["nm"]
+    out = {}
+    for a, b, avoid in pairs:
+        (la, lo), (lb, lob) = PORTS[a], PORTS[b]
+        restrictions = ["northwest"] + [x for x in avoid if x in ("suez", "panama")]
+        f = sr.searoute([lo, la], [lob, lb], units="naut", restrictions=restrictions)
+        out[key(a, b, avoid)] = round(float(f["properties"]["length"]), 1)
+    return out
+
+
+def key(a, b, avoid) -> str:
+    return f"{a} - {b}" + (f" (avoid {'+'.join(avoid)})" if avoid else "")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--record", action="store_true", help="write searoute's figures to bench/sea_routes_searoute.json")
+    args = ap.parse_args()
+    t0 = time.process_time()
+    sea_route(PORTS["Rotterdam"], PORTS["Piraeus"])  # loads (or builds) the graph and compiles the kernels
+    first_s = time.process_time() - t0
+    ref = searoute_nm(PAIRS)
+    if args.record:
+        import importlib.metadata
+
+        RECORDED.write_text(json.dumps({"searoute": importlib.metadata.version("searoute"), "nm": ref}, indent=1) + "\n")
+    rows, refused = [], []
+    print(f"{'pair':44s} {'product':>8s} {'searoute':>8s} {'diff':>7s} {'gc':>7s} {'cpu s':>6s} {'clear':>6s}  passages")
+    for a, b, avoid in PAIRS:
+        k = key(a, b, avoid)
+        t = time.process_time()
+        try:
+            r = sea_route(PORTS[a], PORTS[b], avoid=set(avoid), clearance_nm=CLEARANCE_NM)
+        except NoSeaRoute as exc:
+            refused.append((k, str(exc)))
+            print(f"{k:44s} REFUSED: {exc}")
+            continue
+        cpu = time.process_time() - t
+        own = r if not avoid or avoid in (("suez",), ("suez", "panama")) else sea_route(PORTS[a], PORTS[b])
+        clear = least_clearance_outside_passages_nm(r)
+        gc = float(geo.gc_distance_nm(*PORTS[a], *PORTS[b]))
+        diff = r.dist_nm / ref[k] - 1.0
+        names = "+".join(p.name for p in r.passages) or "-"
+        note = f" (own route {own.dist_nm:,.0f} via {'+'.join(p.name for p in own.passages)})" if own is not r else ""
+        print(f"{k:44s} {r.dist_nm:8,.0f} {ref[k]:8,.0f} {100 * diff:+6.1f}% {gc:7,.0f} {cpu:6.3f} {clear:6.2f}  {names}{note}")
+        rows.append(dict(pair=k, product_nm=r.dist_nm, searoute_nm=ref[k], gc_nm=gc, diff=diff, cpu_s=cpu,
+                         clearance_nm=clear, passages=[p.name for p in r.passages], own_nm=own.dist_nm))
+    n = len(PAIRS)
+    within3 = sum(abs(x["diff"]) <= 0.03 for x in rows)
+    # shorter than searoute by more than 3 % yet within 1 % of the great circle: no sea route can be much shorter,
+    # searoute's lanes are the longer ones there
+    at_gc = [x["pair"] for x in rows if x["diff"] < -0.03 and x["product_nm"] <= 1.01 * x["gc_nm"]]
+    longer = [f"{x['pair']} {100 * x['diff']:+.1f} %" for x in rows if x["diff"] > 0.03]
+    shorter = [f"{x['pair']} {100 * x['diff']:+.1f} %" for x in rows if x["diff"] < -0.03 and x["pair"] not in at_gc]
+    within8 = sum(abs(x["diff"]) <= 0.08 for x in rows)
+    unclear = [x["pair"] for x in rows if x["clearance_nm"] < CLEARANCE_NM - SAMPLING_SLACK_NM]
+    cpus = sorted(x["cpu_s"] for x in rows)
+    used = sorted({p for x in rows for p in x["passages"]})
+    print(f"\npairs {n}; refused {len(refused)} (target 0)")
+    print(f"within ±3 % of searoute: {within3}/{n} = {100 * within3 / n:.0f} % (target ≥ 90 %); within ±8 %: "
+          f"{within8}/{n} (target all)")
+    print(f"  off by more than 3 %: shorter, within 1 % of the great circle ({len(at_gc)}): {', '.join(at_gc)}")
+    print(f"  shorter, off the great circle ({len(shorter)}): {'; '.join(shorter)}")
+    print(f"  longer ({len(longer)}): {'; '.join(longer)}")
+    print(f"within ±3 % of searoute or at the great circle: {within3 + len(at_gc)}/{n} = "
+          f"{100 * (within3 + len(at_gc)) / n:.0f} %")
+    print(f"routes closer than {CLEARANCE_NM:g} NM to land (less {SAMPLING_SLACK_NM} NM, the 0.1 NM sampling) outside "
+          f"fairways and approaches: {len(unclear)} {unclear}")
+    print(f"CPU per pair, warm: median {cpus[len(cpus) // 2]:.3f} s, max {cpus[-1]:.3f} s; first call (graph load/build and "
+          f"compilation) {first_s:.2f} s")
+    print(f"passages sailed: {', '.join(used)}")
+    out = ROOT / "bench" / "out"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sea_routes.json").write_text(json.dumps(dict(rows=rows, refused=refused, first_s=first_s), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
