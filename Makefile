@@ -1,6 +1,7 @@
 # Two commands do all set-up on a fresh machine:
 #   make demo   - install into .venv and run the nightly job on generated demo data
 #   make test   - install into .venv (with test extras) and run the test suite
+#   make docs   - build the manual (docs/, mkdocs.yml) into site/
 PY ?= python3.11
 VENV ?= .venv
 BIN := $(VENV)/bin
@@ -9,7 +10,7 @@ export PREFECT_HOME ?= $(CURDIR)/.prefect
 export PREFECT_LOGGING_LEVEL ?= WARNING
 export PREFECT_SERVER_ANALYTICS_ENABLED ?= false
 
-.PHONY: install demo test test-fast lint bench clean
+.PHONY: install demo test test-fast lint docs bench clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -35,6 +36,10 @@ test-fast: install
 lint: install
 	$(BIN)/ruff check .
 
+# the manual's second layer; --strict: a broken link or a missing page fails the build. The test extras hold mkdocs.
+docs: $(STAMP)
+	$(BIN)/python -m mkdocs build --strict --site-dir site
+
 bench: install
 	$(BIN)/python bench/ingest.py
 	$(BIN)/python bench/refit.py
@@ -45,4 +50,4 @@ bench: install
 	$(BIN)/python bench/planning.py
 
 clean:
-	rm -rf data .prefect
+	rm -rf data .prefect site

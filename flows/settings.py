@@ -107,6 +107,9 @@ class Settings:
     # Retention of the weather cube: after each ingest, cycles initialised more than this many days before the
     # newest one are retired (storage.cube.retire_cycles: hidden, their chunks deleted). None keeps every cycle.
     cube_retention_days: float | None = None
+    # A fleet run's exports are the operator's set (RTZ, GeoJSON, route map, fleet and weather maps); with
+    # debug_plots (JITROUTE_DEBUG_PLOTS=1) each voyage's BFOA convergence plot is written beside them.
+    debug_plots: bool = False
 
     @property
     def performance(self) -> "Gate":
@@ -155,6 +158,18 @@ def storage_options_from_env(text: str | None) -> dict | None:
         raise SettingsError("JITROUTE_STORAGE_OPTIONS is not a JSON object of fsspec storage options, "
                             'e.g. {"endpoint_url": "http://127.0.0.1:9000"}')
     return value
+
+
+def _flag(env, name: str) -> bool | None:
+    """A yes/no from the environment: 1/true/yes or 0/false/no (unset or empty: None)."""
+    text = env.get(name, "").strip().lower()
+    if not text:
+        return None
+    if text in ("1", "true", "yes", "on"):
+        return True
+    if text in ("0", "false", "no", "off"):
+        return False
+    raise SettingsError(f"{name}={text!r} is not 1 or 0 (true or false)")
 
 
 def _days(env, name: str) -> float | None:
@@ -215,6 +230,7 @@ def load_settings(**overrides) -> Settings:
         dask_address=env.get("JITROUTE_DASK_ADDRESS") or None,
         dask_workers=int(env["JITROUTE_DASK_WORKERS"]) if env.get("JITROUTE_DASK_WORKERS") else None,
         cube_retention_days=_days(env, "JITROUTE_CUBE_RETENTION_DAYS"),
+        debug_plots=_flag(env, "JITROUTE_DEBUG_PLOTS"),
         **{
             "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
             "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,

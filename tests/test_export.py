@@ -298,7 +298,124 @@ def test_fleet_map_colours_voyages_by_status(voyage, tmp_path):
     ax = fig.axes[0]
     colours = {ln.get_color() for ln in ax.get_lines() if len(ln.get_xdata()) > 2}
     assert colours == {plots.STATUS_COLOURS["ok"], plots.STATUS_COLOURS["late"]}
-    assert {t.get_text() for t in ax.texts} >= {"V0007", "V0008", "no route: V0009 (infeasible)"}
+    assert {t.get_text().split(" ETA ")[0] for t in ax.texts} >= {"V0007", "V0008", "no route: V0009 (infeasible)"}
     x0, x1 = ax.get_xlim()
     assert x0 < 141.0 and x1 > 183.0  # both voyages in one frame, the dateline one not wrapped to −180
     assert _is_png(plots.fleet_map_png(tmp_path / "fleet.png", fleet, title="run 2021-01-10"))
+
+
+# --- what an operator reads on the pictures ----------------------------------------------------------------------
+
+def test_route_map_names_the_weather_s_valid_time_and_the_units_of_colour_and_barbs(voyage):
+    route, legs = voyage
+    field = dict(_field(), valid_utc="2021-01-10T18:00:00Z", valid_note="the forecast step nearest mid-voyage")
+    title = plots.route_map_figure(route, legs, None, field=field).axes[0].get_title()
+    assert "weather valid 2021-01-10T18:00:00Z (the forecast step nearest mid-voyage)" in title
+    assert "Hs [m]" in title and "wind barbs [kn]" in title and "comes FROM" in title
+    assert "ETD 2021-01-10T06:00:00Z" in title and "LATE" not in title  # on time
+
+
+def test_a_late_plan_s_map_says_by_how_many_hours(voyage):
+    route, legs = voyage
+    eta = legs[-1]["eta_utc"]
+    late = dict(route, status="late", rta_utc=eta - pd.Timedelta(hours=7, minutes=30))
+    fig = plots.route_map_figure(late, legs)
+    assert "LATE by 7.5 h" in fig.axes[0].get_title()
+    assert any("7.5 h after the RTA" in t.get_text() for t in fig.axes[0].texts)
+    assert plots.late_hours(route) is None  # arrives before its RTA
+
+
+def test_time_marks_sit_on_whole_utc_hours_where_the_plan_puts_the_ship(voyage):
+    route, legs = voyage
+    marks = plots.time_marks(legs)
+    t0, t1 = legs[0]["etd_utc"], legs[-1]["eta_utc"].to_pydatetime()
+    step = plots.time_mark_step_h((t1 - t0).total_seconds() / 3600.0)
+    assert 3 <= len(marks) <= 10 and all(t.minute == 0 and t.hour % step == 0 and t0 < t < t1 for t, _la, _lo in marks)
+    # the ship at a mark is on the leg sailed then, in proportion to the leg's time
+    t, lat, lon = marks[0]
+    leg = next(x for x in legs if x["etd_utc"] <= t <= x["eta_utc"])
+    frac = (t - leg["etd_utc"]) / (leg["eta_utc"].to_pydatetime() - leg["etd_utc"])
+    from pipeline.routing.sphere import gc_points
+    want = gc_points(leg["lat0"], leg["lon0"], leg["lat1"], leg["lon1"], frac)
+    assert (lat, lon) == pytest.approx((float(want[0]), float(want[1])))
+    ax = plots.route_map_figure(route, legs).axes[0]
+    assert sorted(t.get_text() for t in ax.texts if t.get_text().endswith("Z")) == sorted(plots.dtg(m[0]) for m in marks)
+
+
+def test_position_at_is_in_port_before_departure_on_the_track_at_sea_and_at_the_arrival_after():
+    legs = make_legs(points=[(30.0, 140.0), (30.0, 142.0), (30.0, 144.0)], sog_kn=(10.0, 10.0), rpm=(70.0, 70.0))
+    mid = legs[0]["etd_utc"] + (legs[0]["eta_utc"].to_pydatetime() - legs[0]["etd_utc"]) / 2
+    assert plots.position_at(legs, DEPART - timedelta(hours=1)) == (30.0, 140.0, "in port")
+    assert plots.position_at(legs, DEPART, starts_at_sea=True)[2] == "at sea"
+    lat, lon, where = plots.position_at(legs, mid)
+    assert where == "at sea" and lon == pytest.approx(141.0, abs=1e-6) and lat > 30.0  # a great circle bows poleward
+    assert plots.position_at(legs, legs[-1]["eta_utc"] + pd.Timedelta(hours=1)) == (30.0, 144.0, "arrived")
+
+
+def test_route_map_draws_no_wind_barb_on_land(voyage):
+    from pipeline.routing.land_mask import is_sea
+
+    route, _ = voyage
+    legs = make_legs(points=[(33.0, 136.0), (34.0, 141.0)], sog_kn=(12.0,), rpm=(70.0,))  # along Japan's south coast
+    lat, lon = np.arange(45.0, 25.0, -0.5), np.arange(125.0, 150.0, 0.5)
+    u = np.full((lat.size, lon.size), 10.0)
+    field = dict(lat=lat, lon=lon, hs_m=np.full_like(u, 2.0), u_ms=u, v_ms=u)
+    (barbs,) = [c for c in plots.route_map_figure(route, legs, None, field).axes[0].collections
+                if type(c).__name__ == "Barbs"]
+    xy = barbs.get_offsets()
+    assert len(xy) > 20 and is_sea(xy[:, 1], xy[:, 0]).all()
+    assert not is_sea(np.array([35.0, 36.0]), np.array([138.0, 139.0])).any()  # Honshu is on this map, without barbs
+
+
+def test_fleet_map_marks_each_ship_now_shortens_plan_ids_and_keeps_labels_apart(voyage):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    route, legs = voyage
+    plan_vid = "plan-20201201T0000-446a6a-9140956-1"
+    west = make_legs(points=[(35.0, 141.0), (38.0, 150.0), (42.0, 160.0)], sog_kn=(12.0, 12.0), rpm=(70.0, 70.0))
+    near = make_legs(points=[(35.2, 141.1), (38.1, 150.2), (42.1, 160.1)], sog_kn=(12.0, 12.0), rpm=(70.0, 70.0))
+    now = DEPART + timedelta(hours=6)
+    fleet = [(dict(route, start_kind="noon report"), legs), (dict(route, voyage_id="V0008", status="late"), west),
+             (dict(route, voyage_id=plan_vid, start_kind="port"), near),
+             (dict(route, voyage_id="V0010"), make_legs(depart=DEPART + timedelta(days=1)))]
+    fig = plots.fleet_map_figure(fleet, "run r1", now_utc=now)
+    ax = fig.axes[0]
+    texts = [t for t in ax.texts if t.get_text().split(" ETA ")[0] in ("V0007", "V0008", "9140956/1", "V0010")]
+    assert sorted(t.get_text() for t in texts) == sorted(
+        f"{name} ETA {plots.dtg(lg[-1]['eta_utc'].to_pydatetime())}"
+        for name, (_r, lg) in zip(("V0007", "V0008", "9140956/1", "V0010"), fleet))
+    assert "fleet plan plan-20201201T0000-446a6a" in ax.get_title() and "2021-01-10T12:00:00Z" in ax.get_title()
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    boxes = [t.get_window_extent(renderer) for t in texts]
+    assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    ships = {ln.get_marker(): ln for ln in ax.get_lines() if ln.get_linestyle() == "None" and ln.get_marker() in "^s"}
+    at_sea = ships["^"]
+    want = [plots.position_at(lg, now)[:2] for _r, lg in fleet[:3]]
+    got = sorted(zip(np.asarray(at_sea.get_ydata()), np.asarray(at_sea.get_xdata()) % 360.0))
+    np.testing.assert_allclose(got, sorted((la, lo % 360.0) for la, lo in want))
+    (in_port,) = [ln for ln in ax.get_lines() if ln.get_marker() == "s" and ln.get_linestyle() == "None"]
+    assert (in_port.get_xdata()[0] % 360.0, in_port.get_ydata()[0]) == pytest.approx((176.0, 40.0))  # V0010 sails tomorrow
+    assert plots.short_voyage_label("a-very-long-voyage-identifier-2020") == "a-very…er-2020"
+
+
+def test_the_convergence_plot_is_left_out_of_a_run_unless_debug_plots_is_set(monkeypatch):
+    from flows.settings import SettingsError, load_settings
+    from pipeline.export.bundle import OPERATOR_KINDS, kinds_of_run
+
+    monkeypatch.delenv("JITROUTE_DEBUG_PLOTS", raising=False)
+    assert load_settings().debug_plots is False and kinds_of_run(False) == OPERATOR_KINDS == ("rtz", "geojson", "png")
+    monkeypatch.setenv("JITROUTE_DEBUG_PLOTS", "1")
+    assert load_settings().debug_plots is True and "convergence" in kinds_of_run(True)
+    monkeypatch.setenv("JITROUTE_DEBUG_PLOTS", "maybe")
+    with pytest.raises(SettingsError, match="JITROUTE_DEBUG_PLOTS='maybe' is not 1 or 0"):
+        load_settings()
+
+
+def test_a_large_fleet_s_map_labels_only_the_voyages_not_ok():
+    n = plots.MAX_FLEET_LABELS + 1
+    fleet = [(dict(voyage_id=f"V{k:04d}", status="late" if k in (3, 40) else "ok"),
+              make_legs(points=[(20.0 + 0.2 * k, 130.0), (20.0 + 0.2 * k, 131.0)], sog_kn=(12.0,), rpm=(70.0,)))
+             for k in range(n)]
+    ax = plots.fleet_map_figure(fleet, "run r2").axes[0]
+    assert sorted(t.get_text().split(" ETA ")[0] for t in ax.texts) == ["V0003", "V0040"]
+    assert f"labels on 2 voyages not ok only, of {n}" in ax.get_title()

@@ -81,6 +81,25 @@ def test_rtz_exports_validate_against_the_published_schema(fleet_root):
     assert gj["type"] == "FeatureCollection"
 
 
+def test_a_run_exports_the_operator_s_set_each_file_naming_its_run(fleet_root):
+    """No BFOA convergence plot unless asked (JITROUTE_DEBUG_PLOTS); every GeoJSON route names the run that made it;
+    the weather maps show the fleet's ocean at the cycle's valid time, not the globe."""
+    from PIL import Image
+
+    _root, fl, first, _ = fleet_root
+    r = first["routing"]
+    out = Path(r["exports_dir"])
+    assert not list(out.rglob("*.convergence.png"))
+    geojsons = sorted(out.glob("voyages/*/*.geojson"))
+    assert len(geojsons) == len(fl.voyages)
+    for f in geojsons:
+        route = json.loads(f.read_text())["features"][0]["properties"]
+        assert route["kind"] == "route" and route["run_id"] == r["run_id"], f
+    (wind,) = out.glob("weather_wind_*.png")
+    width, height = Image.open(wind).size
+    assert height / width > 0.6  # the whole globe is a 2:1 strip (360 × 160 degrees); the fleet's box is not
+
+
 def test_second_nightly_adds_a_run_but_no_ingest_or_fits(fleet_root):
     from flows.fleet import nightly
 

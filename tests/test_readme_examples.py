@@ -1,4 +1,5 @@
-"""The README's examples run as written on demo data: its analyst SQL, its Python snippets and its `route` lines."""
+"""The manual's examples run as written on demo data: README.md's and every docs/*.md page's analyst SQL, Python
+snippets and `route` lines; every `jitroute` command line they show names a real command and real options."""
 
 from __future__ import annotations
 
@@ -9,7 +10,10 @@ from pathlib import Path
 import duckdb
 import pytest
 
-README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+ROOT = Path(__file__).resolve().parents[1]
+# the manual's two layers: README.md, then every page of docs/ (pages added later are checked the same way)
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+README = "\n".join(page.read_text() for page in PAGES)
 
 
 def _blocks(lang: str) -> list[str]:
@@ -60,7 +64,7 @@ def test_every_analyst_query_of_the_readme_runs_and_the_numbered_ones_answer(rou
     numbered = re.findall(r"-- (\d+)\. ", "\n".join(_blocks("sql")))
     intro = re.search(r"(\w+) questions for analysts", README)
     words = {3: "Three", 4: "Four", 5: "Five", 6: "Six", 7: "Seven", 8: "Eight"}
-    assert intro and intro.group(1) == words[len(numbered)], "the README's count of questions matches its list"
+    assert intro and intro.group(1) == words[len(numbered)], "the manual's count of questions matches its list"
     empty = [s.split("\n")[0] for s, rows in results.items() if not rows]
     # bunker logs, rejected models, flags and fleet plans are not part of this routed root (the demo plans contracts;
     # tests/test_planning.py queries the plan tables)
@@ -77,7 +81,7 @@ def test_the_readme_python_snippets_run_on_the_demo_data(routed, monkeypatch):
     for block in _blocks("python"):
         code = "\n".join(line for line in block.splitlines() if "import polars" not in line and "pl." not in line)
         code = code.replace("import pyarrow.dataset as ds, polars as pl, duckdb", "import pyarrow.dataset as ds, duckdb")
-        exec(compile(code, "README.md", "exec"), {})
+        exec(compile(code, "the manual", "exec"), {})
     for block in _blocks("sh"):
         for line in block.splitlines():
             if line.startswith(".venv/bin/python -c"):
@@ -90,8 +94,56 @@ def test_the_readme_route_example_runs_as_written(routed):
 
     lines = [ln for block in _blocks("sh") for ln in block.replace("\\\n", " ").splitlines()
              if ln.startswith("jitroute route --from")]
-    assert len(lines) == 1
-    args = shlex.split(re.sub(r"\[[^\]]*\]", "", lines[0].split("#")[0]))[1:]
-    r = jitroute(*args, "--solver", "gc", "--data", str(routed), env=tagged_env(new_tag()), timeout_s=600)
-    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    assert "status ok" in r.stdout or "status late" in r.stdout
+    assert len(lines) >= 1
+    for line in lines:
+        args = shlex.split(re.sub(r"\[[^\]]*\]", "", line.split("#")[0]))[1:]
+        r = jitroute(*args, "--solver", "gc", "--data", str(routed), env=tagged_env(new_tag()), timeout_s=600)
+        assert r.returncode == 0, line + "\n" + r.stdout[-2000:] + r.stderr[-2000:]
+        assert "status ok" in r.stdout or "status late" in r.stdout
+
+
+def _command_lines() -> list[tuple[str, str]]:
+    """Every `jitroute …` command shown in a sh block of the manual, as (page, command) with its continuation lines
+    (a trailing backslash, or an indented line under it) joined and comments dropped."""
+    found = []
+    for page in PAGES:
+        for block in re.findall(r"```sh\n(.*?)```", page.read_text(), flags=re.S):
+            current = None
+            for raw in block.replace("\\\n", " ").splitlines():
+                text = raw.split("  #")[0].split(" # ")[0].rstrip()
+                stripped = text.strip()
+                words = stripped.split()
+                if words and words[0].endswith("jitroute") and not raw[:1].isspace():
+                    current = [page.name, stripped]
+                    found.append(current)
+                elif current is not None and raw[:1].isspace() and stripped:
+                    current[1] += " " + stripped
+                else:
+                    current = None
+    return [(page, command) for page, command in found]
+
+
+def test_every_jitroute_command_in_the_manual_names_a_real_command_and_real_options():
+    import typer
+
+    from cli.main import app
+
+    root = typer.main.get_command(app)
+    lines = _command_lines()
+    assert any(command.startswith("jitroute route --from") for _, command in lines)
+    assert len(lines) >= 20
+    wrong = []
+    for page, command in lines:
+        words = command.split()[1:]
+        node, path = root, ["jitroute"]
+        while words and words[0] in getattr(node, "commands", {}):
+            node = node.commands[words[0]]
+            path.append(words.pop(0))
+        if hasattr(node, "commands") and node is not root:
+            wrong.append(f"{page}: `{command}`: {' '.join(path)} needs a sub-command")
+            continue
+        known = {name for param in node.params for name in (*param.opts, *param.secondary_opts)} | {"--help"}
+        for option in re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", command):
+            if option not in known:
+                wrong.append(f"{page}: `{command}`: {' '.join(path)} has no option {option}")
+    assert not wrong, "\n".join(wrong)

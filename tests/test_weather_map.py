@@ -36,3 +36,38 @@ def test_a_map_and_an_animation_are_real_images():
     gif = animation_gif(frames, frame_ms=100)
     img = Image.open(io.BytesIO(gif))
     assert gif[:6] == b"GIF89a" and img.n_frames == 2
+
+
+def test_a_map_says_arrows_point_where_the_flow_goes_and_draws_none_on_land():
+    from pipeline.export.weather_map import weather_map_figure
+    from pipeline.routing.land_mask import is_sea
+
+    lat, lon = np.arange(45.0, 24.9, -0.5), np.arange(125.0, 150.01, 0.5)  # Japan and its seas
+    fig = weather_map_figure(lat, lon, _step(shape=(lat.size, lon.size)), "wind", "wind · valid 2020-12-01T12 UTC")
+    ax = fig.axes[0]
+    assert ax.get_title().splitlines() == ["wind · valid 2020-12-01T12 UTC",
+                                           "arrows point where the wind blows TO (its coming-from direction + 180°)"]
+    (arrows,) = [c for c in ax.collections if type(c).__name__ == "Quiver"]
+    drawn = ~np.ma.getmaskarray(np.ma.array(arrows.U, mask=arrows.Umask))  # quiver keeps the mask apart
+    xy = arrows.XY[drawn]
+    assert len(xy) > 50 and is_sea(xy[:, 1], xy[:, 0]).all()
+    assert (~drawn).sum() > 20  # Honshu, Kyushu, Korea: no arrows there
+
+
+def test_a_box_across_the_antimeridian_is_drawn_in_one_piece():
+    from pipeline.export.weather_map import weather_map_figure
+
+    lat, lon = np.linspace(50.0, 30.0, 21), np.concatenate([np.arange(170.0, 180.0), np.arange(0.0, 11.0) - 180.0])
+    ax = weather_map_figure(lat, lon, _step(shape=(lat.size, lon.size)), "waves", "waves").axes[0]
+    x0, x1 = ax.get_xlim()
+    assert (x0, x1) == pytest.approx((170.0, 190.0))  # 170°E .. 170°W, not −180 .. 180
+
+
+def test_the_fleet_box_holds_every_port_with_a_margin_also_across_the_antimeridian():
+    from flows.jobs.run_pictures import FLEET_MARGIN_DEG, fleet_box
+
+    assert fleet_box([(35.0, 139.8), (13.4, 144.6), (22.5, 120.2)]) == pytest.approx(
+        (13.4 - FLEET_MARGIN_DEG, 35.0 + FLEET_MARGIN_DEG, 120.2 - FLEET_MARGIN_DEG, 144.6 + FLEET_MARGIN_DEG))
+    south, north, west, east = fleet_box([(50.0, 175.0), (52.0, -170.0), (None, 3.0)])
+    assert (west, east) == pytest.approx((170.0, 195.0)) and (south, north) == pytest.approx((45.0, 57.0))
+    assert fleet_box([]) is None

@@ -6,6 +6,7 @@ resident memory and come back when needed."""
 from __future__ import annotations
 
 import inspect
+import json
 import os
 import signal
 import subprocess
@@ -125,8 +126,10 @@ def test_a_child_that_died_is_reported_and_started_again():
         assert draw.pid not in (None, first)
 
 
-def test_a_routing_batch_with_exports_stages_pngs_without_importing_matplotlib(tmp_path):
-    """What keeps a dask worker small: its voyages' route maps and convergence plots are drawn by its child."""
+@pytest.mark.parametrize("debug_plots", [False, True])
+def test_a_routing_batch_with_exports_stages_pngs_without_importing_matplotlib(tmp_path, debug_plots):
+    """What keeps a dask worker small: its voyages' route maps (and with debug_plots, their BFOA convergence plots) are
+    drawn by its child. The operator's set has no convergence plot; the GeoJSON names the run."""
     code = (f"import sys; sys.path.insert(0, {str(Path(__file__).parents[1])!r})\n"
             "import numpy as np\n"
             "from flows.jobs.route_worker import route_batch\n"
@@ -137,15 +140,20 @@ def test_a_routing_batch_with_exports_stages_pngs_without_importing_matplotlib(t
             "          'arr_lon': 147.0, 'depart_utc': np.datetime64('2020-12-01T02'),\n"
             "          'rta_utc': np.datetime64('2020-12-02T18'), 'rpm_options': [70, 85, 100]}\n"
             "job = RouteJob(voyage=voyage, vessel={'rpm_max': 100}, model=reference_model(14.0, 100.0, 1.5).to_json(),\n"
-            "               run_id='r1', cycle=None, exports=True, options=RoutingOptions(n_lines=6, n_points=7))\n"
+            "               run_id='r1', cycle=None, exports=True, options=RoutingOptions(n_lines=6, n_points=7),\n"
+            f"               debug_plots={debug_plots})\n"
             f"out = route_batch([job], None, None, ({str(tmp_path / 'exports')!r}, {{}}))[0]\n"
             "print(out['route']['status'], sorted(f['name'] for f in out['staged']), out['export_errors'],\n"
             "      'matplotlib' in sys.modules, picture_process.of_this_process().pid is not None)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
-    assert out == ("ok ['voyages/VPIC/VPIC.convergence.png', 'voyages/VPIC/VPIC.geojson', 'voyages/VPIC/VPIC.png', "
+    debug = "'voyages/VPIC/VPIC.convergence.png', " if debug_plots else ""
+    assert out == (f"ok [{debug}'voyages/VPIC/VPIC.geojson', 'voyages/VPIC/VPIC.png', "
                    "'voyages/VPIC/VPIC.rtz'] {} False True"), out
     pngs = sorted((tmp_path / "exports").rglob("*.png"))
-    assert [p.name for p in pngs] == ["VPIC.convergence.png", "VPIC.png"]
+    assert [p.name for p in pngs] == ["VPIC.convergence.png", "VPIC.png"][0 if debug_plots else 1:]
+    (geojson,) = (tmp_path / "exports").rglob("*.geojson")
+    route_feature = json.loads(geojson.read_text())["features"][0]["properties"]
+    assert route_feature["kind"] == "route" and route_feature["run_id"] == "r1"
     assert all(p.read_bytes().startswith(b"\x89PNG") and p.stat().st_size > 10_000 for p in pngs)
 
 

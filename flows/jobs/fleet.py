@@ -128,20 +128,23 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
         v["voyage_fingerprint"] = fingerprints.get(str(v["voyage_id"]))
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
                              model_note=notes.get(int(v["imo"])),
-                             run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version))
+                             run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version,
+                             debug_plots=s.debug_plots))
     return jobs
 
 
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None, store_to: tuple[Path, Path],
-                  pictures_of: tuple[str, np.datetime64] | None = None, store_every_s: float = 0.0) -> dict:
+                  pictures_of: tuple[str, np.datetime64, np.datetime64] | None = None,
+                  store_every_s: float = 0.0) -> dict:
     """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves and stage their
     export files under `run_exports`), storing the rows of the batches as they finish in the warehouse and the Parquet
     exports `store_to` = (warehouse, exports folder) of the jobs' run (route_store.write_batch): those finished since
     the last store, at most every `store_every_s` seconds, and the rest at the end. With `pictures_of`
-    = (run_id, cycle) and exports, workers also draw the run's weather maps (while the voyages route) and its fleet
-    map (after them) and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files
-    to the run's folder (`copied`: all copies done). Returns the export errors, the staged files (name → bytes), the
+    = (run_id, cycle, the run's nominal time) and exports, workers also draw the run's weather maps over the fleet's
+    extent (while the voyages route) and its fleet map with the ships' positions at the nominal time (after them)
+    and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files to the run's
+    folder (`copied`: all copies done). Returns the export errors, the staged files (name → bytes), the
     number of voyages stored and `copied`."""
     export_errors, staged, tracks, pending = [], {}, [], {"rows": [], "legs": []}  # staged: name → bytes
     done, stored, copied = 0, 0, False
@@ -160,7 +163,7 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             pending["legs"].extend(res["legs"])
             staged.update((f["name"], f["bytes"]) for f in res.get("staged", []))
             if run_exports is not None and pictures_of is not None:
-                tracks.append((r["voyage_id"], r["status"], run_pictures.track(res["legs"])))
+                tracks.append((r["voyage_id"], r["status"], run_pictures.track(res["legs"]), r.get("start_kind")))
             for kind, err in res.get("export_errors", {}).items():
                 export_errors.append(f"{r['voyage_id']}: {kind}: {err}")
             for kind, data in res.get("exports", {}).items():  # only from a worker given no exports root
@@ -188,16 +191,19 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             exports_to = (run_exports.url, run_exports.storage_options) if run_exports is not None else None
             pictures = []
             if exports_to is not None and pictures_of is not None:
-                run_id, cycle = pictures_of
+                run_id, cycle, nominal = pictures_of
+                box = run_pictures.fleet_box([(j.voyage[f"{end}_lat"], j.voyage[f"{end}_lon"]) for j in jobs
+                                              for end in ("dep", "arr")])
                 pictures.append(client.submit(run_pictures.stage_weather_maps, exports_to, run_id, cube_store.url,
                                               cube_store.options, str(np.datetime64(cycle, "s")), cycle_label(cycle),
-                                              pure=False))
+                                              box, pure=False))
             dask_pool.map_batches(client, route_batch, dask_pool.batches(jobs, per, _length_nm), cube_store.url,
                                   cube_store.options, exports_to, on_done=on_done, on_group_done=store)
             store(final=True)
             if pictures:
                 pictures.append(client.submit(run_pictures.stage_fleet_map, exports_to, run_id,
-                                              f"run {run_id} · cycle {cycle_label(cycle)}", tracks, pure=False))
+                                              f"run {run_id} · cycle {cycle_label(cycle)}", tracks,
+                                              str(np.datetime64(nominal, "s")), pure=False))
             for future in pictures:
                 entries, errors = dask_pool.result_or(
                     future, lambda exc: ([], [f"fleet: pictures: {type(exc).__name__}: {exc}"]))
@@ -272,7 +278,8 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
     try:
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
                        s.dask_address, s.dask_workers, s.routing.voyages_per_task, (layout.warehouse, layout.exports),
-                       (run_id, c), s.routing.store_every_s, name="route-voyages", timeout_s=s.routing.task_timeout_s)
+                       (run_id, c, nominal), s.routing.store_every_s, name="route-voyages",
+                       timeout_s=s.routing.task_timeout_s)
         summary = route_store.finish_run(layout.warehouse, layout.exports, run_id, out["export_errors"])
     except BaseException as exc:
         run_exports.discard(run_id)

@@ -142,10 +142,11 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
     out = {"route": {**plan.route_row(job.run_id), **start_columns(job)}, "legs": plan.leg_rows(job.run_id),
            "exports": {}, "export_errors": {}, "staged": [], "log": []}
     if job.exports and plan.legs:
-        from pipeline.export.bundle import export_plan  # lxml: only workers that export load it
+        from pipeline.export.bundle import export_plan, kinds_of_run  # lxml: only workers that export load it
         from pipeline.export.drawing import draw_here
 
-        bundle = export_plan(plan, weather, job.vessel, job.voyage, draw=draw or draw_here)
+        bundle = export_plan(plan, weather, job.vessel, job.voyage, kinds=kinds_of_run(job.debug_plots),
+                             draw=draw or draw_here, run_id=job.run_id)
         out["export_errors"] = dict(bundle.errors)
         if exports_to is None:
             out["exports"] = dict(bundle.files)  # kind → bytes; the caller names and writes them

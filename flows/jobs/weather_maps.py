@@ -38,17 +38,19 @@ def steps_h(cube_path, cycle) -> list[int]:
     return [int(s) for s in _published_cycle(cube_path, cycle)[0].step_h]
 
 
-def step_fields(cube_path, cycle, step_h: int, stride: int = 1,
-                cache_chunks: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
-    """(lat, lon, variable → (lat, lon) values) of lead `step_h` of the cycle over the whole grid, every
-    `stride`-th point; `cube_path` a path, URL or storage Location (`cache_chunks`: see cube_window.open_published)."""
+def step_fields(cube_path, cycle, step_h: int, stride: int = 1, cache_chunks: bool = True,
+                box: tuple[float, float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """(lat, lon, variable → (lat, lon) values) of lead `step_h` of the cycle over the whole grid, or over `box` =
+    (south, north, west, east in degrees east, east ≥ west: (170, 200) crosses 180°), every `stride`-th point;
+    `cube_path` a path, URL or storage Location (`cache_chunks`: see cube_window.open_published)."""
     pub, c = _published_cycle(cube_path, cycle, cache_chunks)
     have = [int(s) for s in pub.step_h]
     if int(step_h) not in have:
         raise WeatherMapError(f"cycle {cycle_label(cycle)} has no step {step_h} h; it has {have[0]}..{have[-1]} h "
                               f"every {have[1] - have[0] if len(have) > 1 else 0} h")
     valid = c + np.timedelta64(int(step_h), "h")
-    win = cube_window.read_window(cube_path, c, valid_utc=(valid, valid), lat_deg=(-90.0, 90.0), lon_deg=(-180.0, 540.0),
+    lat_deg, lon_deg = ((-90.0, 90.0), (-180.0, 540.0)) if box is None else ((box[0], box[1]), (box[2], box[3]))
+    win = cube_window.read_window(cube_path, c, valid_utc=(valid, valid), lat_deg=lat_deg, lon_deg=lon_deg,
                                   variables=STEP_VARIABLES, margin_cells=0, published=pub)
     k = int(np.flatnonzero(win.step_h == int(step_h))[0])
     s = max(1, int(stride))
@@ -73,12 +75,14 @@ def step_png(cube_path, cycle, step_h: int, var: str) -> bytes:
 
 
 def run_maps_png(cube_path, cycle, variables=("waves", "wind"), step_h: int = 0,
-                 stride: int = RUN_MAP_STRIDE, draw: Draw = draw_here) -> dict[str, bytes]:
-    """A run summary's maps: `variables` at lead `step_h`, the step read once (past the chunk cache: it is read in a
-    routing worker) and drawn every `stride` points by `draw` (pipeline/export/drawing.py)."""
+                 stride: int = RUN_MAP_STRIDE, draw: Draw = draw_here,
+                 box: tuple[float, float, float, float] | None = None) -> dict[str, bytes]:
+    """A run summary's maps: `variables` at lead `step_h` over `box` (the fleet's extent, see step_fields; None: the
+    globe), the step read once (past the chunk cache: it is read in a routing worker) and drawn every `stride` points
+    by `draw` (pipeline/export/drawing.py); a box is drawn at the grid's own resolution (stride 1)."""
     for var in variables:
         _check_var(var)
-    lat, lon, fields = step_fields(cube_path, cycle, step_h, stride, cache_chunks=False)
+    lat, lon, fields = step_fields(cube_path, cycle, step_h, stride if box is None else 1, cache_chunks=False, box=box)
     return {var: draw("weather_map", lat, lon, fields, var, _title(var, cycle, step_h)) for var in variables}
 
 

@@ -1,4 +1,5 @@
-"""A plan's export files as bytes: RTZ (schema-validated), GeoJSON, route map and convergence PNGs.
+"""A plan's export files as bytes: RTZ (schema-validated), GeoJSON and the route map PNG (the operator's set), and the
+BFOA convergence plot (a developer's diagnostic, made only when asked: `kinds` with DEBUG_KINDS).
 
 Each export stands alone: one that fails is reported by name and the others are still made. The
 caller decides where the bytes go (a run's staging folder, a `--rtz` path), so workers need no shared
@@ -18,7 +19,9 @@ from pipeline.export.drawing import Draw, draw_here
 from pipeline.routing import weather_field as wf
 from pipeline.routing.plan import Plan
 
-KINDS = ("rtz", "geojson", "png", "convergence")
+OPERATOR_KINDS = ("rtz", "geojson", "png")  # what a run exports for every voyage
+DEBUG_KINDS = ("convergence",)  # added by the `debug_plots` setting (JITROUTE_DEBUG_PLOTS=1) or asked for by name
+KINDS = OPERATOR_KINDS + DEBUG_KINDS
 SUFFIX = {"rtz": ".rtz", "geojson": ".geojson", "png": ".png", "convergence": ".convergence.png"}
 
 
@@ -29,32 +32,44 @@ class ExportBundle:
     errors: dict[str, str] = field(default_factory=dict)  # kind → what went wrong
 
 
-def named_route(plan: Plan, vessel: dict, voyage: dict) -> dict:
-    """The route row with the names exports show (vessel, departure and arrival ports)."""
-    return dict(plan.route_row(), vessel_name=vessel.get("name"), dep_name=voyage.get("dep_name"),
-                arr_name=voyage.get("arr_name"))
+def kinds_of_run(debug_plots: bool) -> tuple[str, ...]:
+    """The exports a fleet run makes of each voyage: the operator's set, and the diagnostics with `debug_plots`."""
+    return KINDS if debug_plots else OPERATOR_KINDS
 
 
-def rtz_bytes(plan: Plan, vessel: dict, voyage: dict) -> bytes:
-    doc = rtz.route_to_rtz(named_route(plan, vessel, voyage), plan.legs)
+def named_route(plan: Plan, vessel: dict, voyage: dict, run_id: str | None = None) -> dict:
+    """The route row of the run `run_id` with the names exports show (vessel, departure and arrival ports) and where
+    the plan starts (`start_kind`: port, or the noon report / position a plan re-made at sea starts from)."""
+    return dict(plan.route_row(run_id), vessel_name=vessel.get("name"), dep_name=voyage.get("dep_name"),
+                arr_name=voyage.get("arr_name"), start_kind=voyage.get("start_kind"))
+
+
+def rtz_bytes(plan: Plan, vessel: dict, voyage: dict, run_id: str | None = None) -> bytes:
+    doc = rtz.route_to_rtz(named_route(plan, vessel, voyage, run_id), plan.legs)
     rtz.validate_rtz(doc)
     return doc
 
 
-def geojson_bytes(plan: Plan, vessel: dict, voyage: dict) -> bytes:
-    return json.dumps(geojson.route_to_geojson(named_route(plan, vessel, voyage), plan.legs), indent=1).encode()
+def geojson_bytes(plan: Plan, vessel: dict, voyage: dict, run_id: str | None = None) -> bytes:
+    """The GeoJSON; its route feature carries `run_id`, so a file copied out of its run folder still names its run."""
+    return json.dumps(geojson.route_to_geojson(named_route(plan, vessel, voyage, run_id), plan.legs), indent=1).encode()
 
 
-def route_map_bytes(plan: Plan, vessel: dict, voyage: dict, weather: wf.WeatherField, draw: Draw = draw_here) -> bytes:
+def route_map_bytes(plan: Plan, vessel: dict, voyage: dict, weather: wf.WeatherField, draw: Draw = draw_here,
+                    run_id: str | None = None) -> bytes:
     """The route and its baseline over the wind/wave field met at mid-voyage (the field's snapshot is cut here: only
-    it, not the voyage's weather, goes to `draw`)."""
+    it, not the voyage's weather, goes to `draw`); the field carries its valid time (`valid_utc`, ISO UTC), which
+    the map's title names."""
+    from pipeline.export.voyage import iso_utc
+
     lats = [p[0] for p in plan.waypoints]
     lons = [p[1] for p in plan.waypoints]
     mid = plan.legs[len(plan.legs) // 2]["etd_utc"]
     snap = wf.snapshot(weather, mid, (min(lats), max(lats)), (min(lons), max(lons)))
     base_legs = plan.baseline.legs if plan.baseline is not None else None
-    return draw("route_map", named_route(plan, vessel, voyage), plan.legs, base_legs,
-                snap if snap["hs_m"] is not None else None)
+    note = f"the forecast step nearest the ship at mid-voyage, {iso_utc(mid)}"
+    field = dict(snap, valid_utc=iso_utc(snap["valid_utc"]), valid_note=note) if snap["hs_m"] is not None else None
+    return draw("route_map", named_route(plan, vessel, voyage, run_id), plan.legs, base_legs, field)
 
 
 def convergence_bytes(plan: Plan, draw: Draw = draw_here) -> bytes:
@@ -62,16 +77,18 @@ def convergence_bytes(plan: Plan, draw: Draw = draw_here) -> bytes:
 
 
 def export_plan(plan: Plan, weather: wf.WeatherField, vessel: dict, voyage: dict,
-                kinds: Iterable[str] = KINDS, draw: Draw = draw_here) -> ExportBundle:
-    """Every asked-for export of a plan with legs; a failing export is recorded in `errors`, never raised. `draw`
-    draws the PNGs (pipeline/export/drawing.py)."""
+                kinds: Iterable[str] = OPERATOR_KINDS, draw: Draw = draw_here,
+                run_id: str | None = None) -> ExportBundle:
+    """Every asked-for export of a plan with legs (default: the operator's set, no convergence plot); a failing
+    export is recorded in `errors`, never raised. `draw` draws the PNGs (pipeline/export/drawing.py); `run_id` is the
+    run the plan belongs to, written into the files."""
     out = ExportBundle(str(plan.voyage_id))
     if not plan.legs:
         return out
     makers = {
-        "rtz": lambda: rtz_bytes(plan, vessel, voyage),
-        "geojson": lambda: geojson_bytes(plan, vessel, voyage),
-        "png": lambda: route_map_bytes(plan, vessel, voyage, weather, draw),
+        "rtz": lambda: rtz_bytes(plan, vessel, voyage, run_id),
+        "geojson": lambda: geojson_bytes(plan, vessel, voyage, run_id),
+        "png": lambda: route_map_bytes(plan, vessel, voyage, weather, draw, run_id),
         "convergence": lambda: convergence_bytes(plan, draw),
     }
     for kind in kinds:

@@ -1,5 +1,10 @@
 """PNG pictures of plans: a route over the weather, solver convergence, all voyages of a run.
 
+Drawn for an operator: every map says the valid time (UTC) of the weather it shows and the unit of every colour and
+symbol; tracks carry time marks (day/hhmmZ, UTC); a late plan's map says by how many hours; the fleet map shows where
+each ship is at the run's time along its plan, with labels placed clear of each other. The convergence plot is a
+developer's diagnostic (pipeline/export/bundle.py makes it only when asked).
+
 Maps use plain lon/lat axes with a 1/cos(latitude) aspect (locally true shape) and coastlines
 contoured from the `global-land-mask` grid sampled over the map extent. Everything is drawn in
 one longitude frame centred on the voyages (tick labels in °E/°W), so a route across the
@@ -13,6 +18,8 @@ worker threads. The `*_figure` functions return the Figure (for notebooks and te
 
 from __future__ import annotations
 
+import re
+from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +28,8 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, MaxNLocator
 from matplotlib.transforms import ScaledTranslation
 
-from pipeline.export.voyage import (finite_or_none, iso_utc, unwrap_lon_deg, vessel_label, voyage_id,
-                                    waypoint_names, waypoints_deg)
+from pipeline.export.voyage import (centre_lon_deg, finite_or_none, iso_utc, unwrap_lon_deg, utc_datetime, vessel_label,
+                                    voyage_id, waypoint_names, waypoints_deg)
 from pipeline.routing.land_mask import MASK_RES_DEG, is_sea
 from pipeline.routing.sphere import KN_PER_MS, gc_points
 
@@ -43,12 +50,7 @@ def _in_frame(lon_deg, centre_deg: float) -> np.ndarray:
     return centre_deg + (np.asarray(lon_deg, dtype=np.float64) - centre_deg + 180.0) % 360.0 - 180.0
 
 
-def _centre_deg(lon_deg) -> float:
-    """Circular mean of longitudes (so 179 and −179 centre on 180, not 0); 0 when there are none."""
-    lon = np.radians(np.asarray(lon_deg, dtype=np.float64))
-    if lon.size == 0:
-        return 0.0
-    return float(np.degrees(np.arctan2(np.sin(lon).mean(), np.cos(lon).mean())))
+_centre_deg = centre_lon_deg
 
 
 def _track(legs: list[dict], centre_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -188,8 +190,129 @@ def _draw_field(fig, ax, cax, field: dict, centre_deg: float, extent) -> None:
     u, v = cut("u_ms"), cut("v_ms")
     if u is not None and v is not None:
         sy, sx = max(1, y.size // 16), max(1, x.size // 22)
-        ax.barbs(x[::sx], y[::sy], u[::sy, ::sx] * KN_PER_MS, v[::sy, ::sx] * KN_PER_MS,
-                 length=5, linewidth=0.5, color="0.25", zorder=2)
+        bx, by = np.meshgrid(x[::sx], y[::sy])
+        bu, bv = u[::sy, ::sx] * KN_PER_MS, v[::sy, ::sx] * KN_PER_MS
+        keep = is_sea(by, bx) & np.isfinite(bu) & np.isfinite(bv)  # no barb on land: the wind there is not the sea's
+        ax.barbs(bx[keep], by[keep], bu[keep], bv[keep], length=5, linewidth=0.5, color="0.25", zorder=2)
+
+
+def _hours_between(a, b) -> float | None:
+    """Hours from time a to time b (None when either is missing)."""
+    da, db = utc_datetime(a), utc_datetime(b)
+    return None if da is None or db is None else (db - da).total_seconds() / 3600.0
+
+
+def late_hours(route: dict) -> float | None:
+    """How many hours after its RTA the plan arrives (None when it is not late or the times are missing)."""
+    h = _hours_between(route.get("rta_utc"), route.get("eta_utc"))
+    return h if h is not None and h > 1e-6 else None
+
+
+def position_at(legs: list[dict], when, starts_at_sea: bool = False) -> tuple[float, float, str] | None:
+    """(lat, lon, where) of the ship at time `when` along its plan: at the departure before it sails ("in port", or
+    "at sea" for a plan re-made at sea: `starts_at_sea`), on the leg's great circle in proportion to the leg's time
+    ("at sea"; at a waypoint while it waits there), at the arrival after the ETA ("arrived"). None without legs or
+    times."""
+    t = utc_datetime(when)
+    if t is None or not legs:
+        return None
+    etd0, eta_n = utc_datetime(legs[0].get("etd_utc")), utc_datetime(legs[-1].get("eta_utc"))
+    if etd0 is None or eta_n is None:
+        return None
+    if t <= etd0:
+        return float(legs[0]["lat0"]), float(legs[0]["lon0"]), "at sea" if starts_at_sea else "in port"
+    if t >= eta_n:
+        return float(legs[-1]["lat1"]), float(legs[-1]["lon1"]), "arrived"
+    for leg in legs:
+        etd, eta = utc_datetime(leg.get("etd_utc")), utc_datetime(leg.get("eta_utc"))
+        if etd is None or eta is None or t > eta:
+            continue
+        if t <= etd:  # waiting at the leg's start
+            return float(leg["lat0"]), float(leg["lon0"]), "at sea"
+        frac = (t - etd).total_seconds() / max(1e-9, (eta - etd).total_seconds())
+        lat, lon = gc_points(leg["lat0"], leg["lon0"], leg["lat1"], leg["lon1"], frac)
+        return float(lat), float(lon), "at sea"
+    return float(legs[-1]["lat1"]), float(legs[-1]["lon1"]), "arrived"
+
+
+def time_mark_step_h(hours: float) -> int:
+    """Hours between time marks: about 4 to 10 marks along a voyage of `hours`."""
+    for step in (3, 6, 12, 24, 48, 96):
+        if hours / step <= 10:
+            return step
+    return 168
+
+
+def time_marks(legs: list[dict]) -> list[tuple[datetime, float, float]]:
+    """(time, lat, lon) of the ship along its plan at every whole multiple of time_mark_step_h UTC hours after its
+    departure and before its arrival."""
+    if not legs:
+        return []
+    t0, t1 = utc_datetime(legs[0].get("etd_utc")), utc_datetime(legs[-1].get("eta_utc"))
+    if t0 is None or t1 is None or t1 <= t0:
+        return []
+    step = time_mark_step_h((t1 - t0).total_seconds() / 3600.0)
+    t = t0.replace(minute=0, second=0, microsecond=0)
+    t += timedelta(hours=step - t.hour % step if t.hour % step or t <= t0 else 0)
+    marks = []
+    while t < t1:
+        if t > t0:
+            lat, lon, _where = position_at(legs, t)
+            marks.append((t, lat, lon))
+        t += timedelta(hours=step)
+    return marks
+
+
+def dtg(t: datetime) -> str:
+    """day/hhmmZ, the mariner's date-time group in UTC (e.g. 02/0600Z)."""
+    return f"{t:%d/%H%M}Z"
+
+
+MAX_FLEET_LABELS = 60  # beyond this many voyages a fleet map labels only those not ok (placing a label costs a drawing)
+PLAN_VOYAGE_ID = re.compile(r"^plan-\d{8}T\d{4}-[0-9a-f]+-(\d+)-(\d+)$")  # pipeline/planning/voyages.py
+MAX_LABEL_CHARS = 14
+
+
+def short_voyage_label(vid: str) -> str:
+    """A label that fits on a map: a fleet plan's voyage `plan-<time>-<hex>-<imo>-<leg>` becomes `<imo>/<leg>`;
+    other IDs longer than MAX_LABEL_CHARS keep their start and end."""
+    m = PLAN_VOYAGE_ID.match(vid)
+    if m:
+        return f"{m.group(1)}/{m.group(2)}"
+    if len(vid) > MAX_LABEL_CHARS:
+        return vid[:6] + "…" + vid[-(MAX_LABEL_CHARS - 7):]
+    return vid
+
+
+def _place_labels(fig, ax, labels: list[tuple[str, list[tuple[float, float]], str]], avoid=()) -> list:
+    """Annotate each (text, candidate points, colour) at the first candidate (and offset) where its box overlaps no
+    label placed before and none of the `avoid` display boxes; the first candidate when none is free."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = (fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)).get_renderer()
+    placed, out = list(avoid), []
+    offsets = ((4, 4, "left", "bottom"), (4, -4, "left", "top"), (-4, 4, "right", "bottom"), (-4, -4, "right", "top"))
+    for text, points, colour in labels:
+        chosen = None
+        for point in points:
+            for dx, dy, ha, va in offsets:
+                a = ax.annotate(text, point, xytext=(dx, dy), textcoords="offset points", fontsize=7, color=colour,
+                                ha=ha, va=va, zorder=6,
+                                bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none", alpha=0.7))
+                box = a.get_window_extent(renderer)
+                if not any(box.overlaps(b) for b in placed):
+                    chosen = (a, box)
+                    break
+                a.remove()
+            if chosen:
+                break
+        if chosen is None:
+            a = ax.annotate(text, points[0], xytext=(4, 4), textcoords="offset points", fontsize=7, color=colour,
+                            zorder=6)
+            chosen = (a, a.get_window_extent(renderer))
+        placed.append(chosen[1])
+        out.append(chosen[0])
+    return out
 
 
 def _fmt(x, unit: str, decimals: int = 1) -> str:
@@ -199,7 +322,9 @@ def _fmt(x, unit: str, decimals: int = 1) -> str:
 
 def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | None = None,
                      field: dict | None = None, title: str | None = None) -> Figure:
-    """The plan (solid) and the baseline (dashed) over Hs and wind; waypoints marked."""
+    """The plan (solid, with time marks) and the baseline (dashed) over Hs and wind; waypoints marked. The title names
+    the weather's valid time (`field["valid_utc"]`, and `field["valid_note"]` saying which time that is) and, for a
+    late plan, by how many hours it misses the RTA."""
     baseline_legs = baseline_legs or []
     all_lon = np.concatenate([waypoints_deg(legs)[1], waypoints_deg(baseline_legs)[1]])
     if all_lon.size:
@@ -225,8 +350,17 @@ def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | 
     else:
         fuel = (f"fuel {_fmt(route.get('fuel_t'), ' t')} vs baseline {_fmt(route.get('baseline_fuel_t'), ' t')} "
                 f"(saving {_fmt(route.get('savings_pct'), ' %')})")
-    times = f"ETA {iso_utc(route.get('eta_utc')) or 'n/a'} · RTA {iso_utc(route.get('rta_utc')) or 'n/a'}"
-    lines = [head, fuel, times] + ([f"no route: {route.get('reason') or route.get('status')}"] if not legs else [])
+    late = late_hours(route)
+    times = (f"ETD {iso_utc(route.get('depart_utc')) or 'n/a'} · ETA {iso_utc(route.get('eta_utc')) or 'n/a'} · "
+             f"RTA {iso_utc(route.get('rta_utc')) or 'n/a'}" + (f" · LATE by {late:.1f} h" if late is not None else ""))
+    lines = [head, fuel, times]
+    if field is not None:
+        valid = field.get("valid_utc")
+        note = f" ({field['valid_note']})" if field.get("valid_note") else ""
+        lines.append(f"weather valid {iso_utc(valid) if valid is not None else 'n/a (time not given)'}{note}")
+        lines.append("Hs [m] in colour · wind barbs [kn] point where the wind comes FROM: half barb 5, barb 10, "
+                     "pennant 50")
+    lines += [f"no route: {route.get('reason') or route.get('status')}"] if not legs else []
     fig, ax, cax = _map_axes(lines, extent, colorbar=field is not None)
     if field is not None:
         _draw_field(fig, ax, cax, field, centre, extent)
@@ -237,13 +371,29 @@ def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | 
         ax.plot(lon, lat, "-", color="#c2185b", lw=2.0, zorder=4, label="plan")
         wlat, wlon = _waypoints(legs, centre)
         ax.plot(wlon, wlat, "o", ms=3.5, mfc="white", mec="#c2185b", zorder=5, label="waypoints")
-        names = waypoint_names(route, wlat.size)
+        names = waypoint_names(route, wlat.size)  # a plan re-made at sea starts at its report (pipeline/enroute.py)
         for k in (0, wlat.size - 1):
             ax.annotate(names[k], (wlon[k], wlat[k]), xytext=(4, 4), textcoords="offset points", fontsize=8,
                         zorder=6)
+        marks = time_marks(legs)
+        if marks:
+            step = time_mark_step_h(_hours_between(legs[0].get("etd_utc"), legs[-1].get("eta_utc")) or 0.0)
+            mlat = np.array([m[1] for m in marks])
+            mlon = unwrap_lon_deg([m[2] for m in marks], centre)
+            ax.plot(mlon, mlat, "|", ms=7, mew=1.4, color="black", zorder=5,
+                    label=f"ship's position every {step} h (day/hhmmZ, UTC)")
+            for (t, _la, _lo), x, y in zip(marks, mlon, mlat):
+                ax.annotate(dtg(t), (x, y), xytext=(0, -9), textcoords="offset points", fontsize=6.5, ha="center",
+                            va="top", zorder=6, bbox=dict(boxstyle="square,pad=0.05", fc="white", ec="none", alpha=0.6),
+                            clip_on=True, in_layout=False)  # a mark by the map's edge is cut there, never spills
+        if late is not None:
+            ax.annotate(f"ETA {dtg(utc_datetime(route.get('eta_utc')))}: {late:.1f} h after the RTA",
+                        (wlon[-1], wlat[-1]), xytext=(4, -10), textcoords="offset points", fontsize=8,
+                        color="#b34700", fontweight="bold", zorder=6, clip_on=True, in_layout=False,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="#b34700", alpha=0.9))
     if lat.size or blat.size:  # below the map: never over the route, and no search for a free corner
         below = ax.transAxes + ScaledTranslation(0.0, -0.3, fig.dpi_scale_trans)  # under the longitude labels
-        fig.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, ncols=3, fontsize=8,
+        fig.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below, ncols=4, fontsize=8,
                    frameon=False)
     return fig
 
@@ -304,34 +454,71 @@ def convergence_image(history, title: str | None = None) -> bytes:
     return png_bytes(convergence_figure(history, title))
 
 
-def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Figure:
-    """Every voyage of a run on one map, coloured by status and labelled with its voyage id;
-    voyages without legs are listed in a box."""
+def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None,
+                     now_utc=None) -> Figure:
+    """Every voyage of a run on one map, coloured by status, labelled with a short voyage id and its ETA (day/hhmmZ;
+    labels kept clear of each other), each ship's position at `now_utc` (the run's time) along its plan marked; voyages without legs are
+    listed in a box. A route dict needs voyage_id and status (and start_kind: a plan re-made at sea starts at sea);
+    legs need lat0/lon0/lat1/lon1 and, for the positions, etd_utc/eta_utc."""
     all_lon = np.concatenate([waypoints_deg(legs)[1] for _r, legs in routes_with_legs] or [np.empty(0)])
     centre = _centre_deg(all_lon)
-    tracks = [(route, *_track(legs, centre)) for route, legs in routes_with_legs]
-    lat_all = np.concatenate([t[1] for t in tracks] or [np.empty(0)])
-    lon_all = np.concatenate([t[2] for t in tracks] or [np.empty(0)])
+    tracks = [(route, legs, *_track(legs, centre)) for route, legs in routes_with_legs]
+    lat_all = np.concatenate([t[2] for t in tracks] or [np.empty(0)])
+    lon_all = np.concatenate([t[3] for t in tracks] or [np.empty(0)])
     statuses = [str(r.get("status")) for r, _legs in routes_with_legs]
     counts = {s: statuses.count(s) for s in dict.fromkeys(statuses)}
     head = title or f"{len(routes_with_legs)} voyages"
+    now = utc_datetime(now_utc)
+    sub = ", ".join(f"{n} {s}" for s, n in counts.items()) or "no voyages"
+    if now is not None:
+        sub += f" · ships' positions at {iso_utc(now)} along their plans"
+    plans = sorted({m.group(0).rsplit("-", 2)[0] for r, _l in routes_with_legs
+                    if (m := PLAN_VOYAGE_ID.match(voyage_id(r)))})
+    lines = [head, sub] + ([f"labels IMO/leg: voyages of fleet plan {', '.join(plans)}"] if plans else [])
+    routed = [r for r, lg in routes_with_legs if lg]
+    to_label = routed
+    if len(routed) > MAX_FLEET_LABELS:
+        to_label = [r for r in routed if str(r.get("status")) != "ok"][:MAX_FLEET_LABELS]
+        lines.append(f"labels on {len(to_label)} voyages not ok only, of {len(routed)}")
+    labelled = {id(r) for r in to_label}
     extent = _extent(lat_all, lon_all)
-    fig, ax, _ = _map_axes([head, ", ".join(f"{n} {s}" for s, n in counts.items()) or "no voyages"], extent)
+    fig, ax, _ = _map_axes(lines, extent)
     _draw_land(ax, extent)
-    missing = []
-    for route, lat, lon in tracks:
+    missing, labels, ships = [], [], {"at sea": [], "in port": [], "arrived": []}
+    for route, legs, lat, lon in tracks:
         colour = status_colour(route.get("status"))
         if not lat.size:
-            missing.append(f"{voyage_id(route)} ({route.get('status')})")
+            missing.append(f"{short_voyage_label(voyage_id(route))} ({route.get('status')})")
             continue
         ax.plot(lon, lat, "-", color=colour, lw=1.6, zorder=3)
         ax.plot(lon[[0, -1]], lat[[0, -1]], "o", ms=3, color=colour, zorder=4)
-        mid = lat.size // 2
-        ax.annotate(voyage_id(route), (lon[mid], lat[mid]), xytext=(3, 3), textcoords="offset points",
-                    fontsize=7, color=colour, zorder=5)
+        n = lat.size
+        spots = [(lon[k], lat[k]) for k in (n // 2, n // 3, 2 * n // 3, n // 5, 4 * n // 5, 0, n - 1)]
+        eta = utc_datetime(legs[-1].get("eta_utc")) if legs else None
+        if id(route) in labelled:
+            labels.append((short_voyage_label(voyage_id(route)) + (f" ETA {dtg(eta)}" if eta is not None else ""),
+                           spots, colour))
+        at_sea = route.get("start_kind") not in (None, "port")  # re-planned at sea (pipeline/enroute.py)
+        pos = position_at(legs, now, at_sea) if now is not None else None
+        if pos is not None:
+            ships[pos[2]].append((float(unwrap_lon_deg([pos[1]], centre)[0]), pos[0]))
+    marker = {"at sea": dict(marker="^", ms=8, mfc="black", mec="white"),
+              "in port": dict(marker="s", ms=6, mfc="white", mec="black"),
+              "arrived": dict(marker="s", ms=6, mfc="0.6", mec="black")}
     handles = [Line2D([], [], color=status_colour(s), lw=2, label=s) for s in counts]
+    for where, pts in ships.items():
+        if pts:
+            xs, ys = zip(*pts)
+            ax.plot(xs, ys, ls="none", zorder=7, **marker[where])
+            handles.append(Line2D([], [], ls="none", label=f"ship {where} now", **marker[where]))
+    from matplotlib.transforms import Bbox
+
+    pad_px = 5.0 * fig.dpi / 72.0  # half a marker: labels keep off the ships too
+    avoid = [Bbox.from_extents(px - pad_px, py - pad_px, px + pad_px, py + pad_px)
+             for pts in ships.values() for px, py in ax.transData.transform(np.asarray(pts).reshape(-1, 2))]
+    _place_labels(fig, ax, labels, avoid)
     if handles:
-        ax.legend(handles=handles, loc="best", fontsize=8, title="status", title_fontsize=8)
+        ax.legend(handles=handles, loc="best", fontsize=8, title="status / ship now", title_fontsize=8)
     if missing:
         ax.text(0.01, 0.01, "no route: " + ", ".join(missing), transform=ax.transAxes, fontsize=7,
                 va="bottom", ha="left", color=FAILED_COLOUR, zorder=6,
@@ -339,12 +526,14 @@ def fleet_map_figure(routes_with_legs: list[tuple[dict, list[dict]]], title: str
     return fig
 
 
-def fleet_map_png(path, routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> Path:
-    return _save(fleet_map_figure(routes_with_legs, title), path)
+def fleet_map_png(path, routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None,
+                  now_utc=None) -> Path:
+    return _save(fleet_map_figure(routes_with_legs, title, now_utc), path)
 
 
-def fleet_map_image(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None) -> bytes:
-    return png_bytes(fleet_map_figure(routes_with_legs, title))
+def fleet_map_image(routes_with_legs: list[tuple[dict, list[dict]]], title: str | None = None,
+                    now_utc=None) -> bytes:
+    return png_bytes(fleet_map_figure(routes_with_legs, title, now_utc))
 
 
 def png_bytes(fig: Figure) -> bytes:

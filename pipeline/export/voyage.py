@@ -74,6 +74,14 @@ def unwrap_lon_deg(lon_deg, centre_deg: float | None = None) -> np.ndarray:
     return lon
 
 
+def centre_lon_deg(lon_deg) -> float:
+    """Circular mean of longitudes (so 179 and −179 centre on 180, not 0); 0 when there are none."""
+    lon = np.radians(np.asarray(lon_deg, dtype=np.float64))
+    if lon.size == 0:
+        return 0.0
+    return float(np.degrees(np.arctan2(np.sin(lon).mean(), np.cos(lon).mean())))
+
+
 def utc_datetime(t) -> datetime | None:
     """A naive UTC datetime from a datetime (pandas Timestamps are ones), numpy datetime64 or ISO string; None for
     None, NaT and NaN. Aware times are converted to UTC."""

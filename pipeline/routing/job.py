@@ -36,6 +36,7 @@ class RouteJob:
     options: RoutingOptions = field(default_factory=RoutingOptions)
     cycle_version: int | None = None  # the cycle's content version when the run started (storage.cube.cycle_versions)
     model_note: str | None = None  # why there is no usable model (None: the vessel has none)
+    debug_plots: bool = False  # export the developer's diagnostics too (the BFOA convergence plot)
 
     @property
     def voyage_id(self) -> str:

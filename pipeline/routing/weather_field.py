@@ -266,11 +266,13 @@ def sample_nb(w, t_h, lat, lon, out):
 
 
 def snapshot(field: WeatherField, when, lat_range: tuple[float, float], lon_range: tuple[float, float]) -> dict:
-    """Hs and wind on the field's own grid inside a box at the valid time nearest `when` (for maps)."""
+    """Hs and wind on the field's own grid inside a box at the valid time nearest `when` (for maps); `valid_utc` is
+    that valid time (numpy datetime64, UTC)."""
     g = field.grid
     lat = g.lat0 + g.dlat * np.arange(g.nlat)
     lon = g.lon0 + g.dlon * np.arange(g.nlon)
     it = int(np.argmin(np.abs(field.times_h - field.hours_after_ref(when))))
+    valid = np.datetime64(field.t_ref, "s") + np.timedelta64(round(float(field.times_h[it]) * 3600.0), "s")
     iy = np.flatnonzero((lat >= lat_range[0] - 2) & (lat <= lat_range[1] + 2))
     lon_e = ((lon + 180.0) % 360.0) - 180.0
     lo, hi = lon_range
@@ -279,6 +281,6 @@ def snapshot(field: WeatherField, when, lat_range: tuple[float, float], lon_rang
     else:
         ix = np.flatnonzero((lon_e >= lo - 2) & (lon_e <= hi + 2))
     if iy.size < 2 or ix.size < 2:
-        return {"lat": lat[:0], "lon": lon[:0], "hs_m": None, "u_ms": None, "v_ms": None}
+        return {"lat": lat[:0], "lon": lon[:0], "hs_m": None, "u_ms": None, "v_ms": None, "valid_utc": valid}
     sub = field.values[:, it][:, iy][:, :, ix]
-    return {"lat": lat[iy], "lon": lon[ix], "hs_m": sub[SWH], "u_ms": sub[U10], "v_ms": sub[V10]}
+    return {"lat": lat[iy], "lon": lon[ix], "hs_m": sub[SWH], "u_ms": sub[U10], "v_ms": sub[V10], "valid_utc": valid}
