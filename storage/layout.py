@@ -75,6 +75,12 @@ class DataLayout:
     def locks(self) -> Path:
         return self.root / "locks"
 
+    def is_data_root(self) -> bool:
+        """The root exists and holds something a job made (warehouse, cubes/, raw/, exports/ or locks/): a read-only
+        command (a check) given a mistyped root must fail, not report "nothing to check"."""
+        return self.root.is_dir() and any(p.exists() for p in (self.warehouse, self.cubes, self.raw, self.exports,
+                                                                self.locks))
+
     def ensure(self) -> "DataLayout":
         """Create the folders and check the warehouse: a job calls this before it writes anything, so a damaged
         warehouse stops it first (WarehouseCorruptError, naming the newest good snapshot)."""
