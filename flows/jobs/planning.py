@@ -40,6 +40,25 @@ def parse_as_of(as_of: str | None) -> pd.Timestamp:
     return ts
 
 
+MAX_TIME_LIMIT_S = 6 * 3600.0  # as long as a fleet's routing may take; a flow run cannot hold the data root for days
+
+
+def check_parameters(fuel_price: float, penalty: float, time_limit_s: float) -> None:
+    """The plan's own numbers (CLI options, flow parameters): PlanningInputError naming the bad one. A negative fuel
+    price or penalty would make the cheapest plan a nonsense one (and it would become the active plan)."""
+    from pipeline.planning.inputs import MAX_FUEL_PRICE, MAX_MONEY
+
+    for name, value, top in (("--fuel-price", fuel_price, MAX_FUEL_PRICE), ("--penalty", penalty, MAX_MONEY),
+                             ("--time-limit", time_limit_s, MAX_TIME_LIMIT_S)):
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise PlanningInputError(f"{name} {str(value)[:40]!r} is not a number") from None
+        if not 0 <= x <= top or (name == "--time-limit" and x <= 0):
+            raise PlanningInputError(f"{name} {x:g}: give a number {'above 0' if name == '--time-limit' else '≥ 0'} "
+                                     f"and at most {top:g}")
+
+
 def _stored(db: Path, table: str) -> pd.DataFrame:
     with warehouse.connect(db, write=False) as con:
         return con.execute(f"SELECT * FROM {table}").fetchdf()
@@ -111,10 +130,11 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
                    penalty: float = DEFAULT_PENALTY, time_limit_s: float = 60.0, picture: bool = True, *,
                    run=PLAIN) -> dict:
     """Plan the fleet as of `as_of` (default now) for the contracts of `contracts`; returns the plan summary."""
+    check_parameters(fuel_price, penalty, time_limit_s)
+    t_as_of = parse_as_of(as_of)
     s = load_settings(data_root=Path(data_root) if data_root else None)
     layout = s.layout.ensure()
     db = layout.warehouse
-    t_as_of = parse_as_of(as_of)
     imported = run.step(import_planning_files, db, contracts, availability, ports, t_as_of, name="import-planning-files")
     good = imported["contracts"]
     port_rows = _stored(db, "ports")
