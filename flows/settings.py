@@ -183,12 +183,28 @@ def pin_for_serving(data_root: str | None = None, rish_url: str | None = None, o
     os.environ[SERVED_ENV] = "1"
 
 
+def is_served() -> bool:
+    """This flow run takes its parameters from a Prefect API caller: it was started from a deployment (by
+    `jitroute serve`, or by a work-pool worker for deploy/prefect.yaml), or runs under `jitroute serve`. A flow called
+    in-process by the CLI has no deployment: its parameters are the operator's own."""
+    if os.environ.get(SERVED_ENV):
+        return True
+    from prefect.context import FlowRunContext
+
+    ctx = FlowRunContext.get()
+    return ctx is not None and ctx.flow_run is not None and ctx.flow_run.deployment_id is not None
+
+
+_ENV_OF = {"data_root": "JITROUTE_DATA", "rish_url": "JITROUTE_RISH_URL", "oscar_url": "JITROUTE_OSCAR_URL"}
+
+
 def refuse_served_overrides(**given: str | None) -> None:
-    """On a served deployment, a flow-run parameter (`data_root`, `rish_url`, `oscar_url`) that differs from the serve
-    process's settings is refused (SettingsError): anyone who can reach the Prefect API could otherwise point the
-    ingest at another data root, or the OSCAR fetch — which carries the Earthdata token — at their own server.
-    Elsewhere (the CLI, tests) parameters are the operator's own and pass."""
-    if not os.environ.get(SERVED_ENV):
+    """On a served deployment (`is_served`), a flow-run parameter (`data_root`, `rish_url`, `oscar_url`) that differs
+    from the settings of the process running it (`jitroute serve`'s, or the work-pool job's environment) is refused
+    (SettingsError): anyone who can reach the Prefect API could otherwise point the ingest at another data root, or the
+    OSCAR fetch — which carries the Earthdata token — at their own server. Elsewhere (the CLI, tests) parameters are
+    the operator's own and pass."""
+    if not is_served():
         return
     s = load_settings()
     pinned = {"data_root": s.data_root, "rish_url": s.sources.rish_url, "oscar_url": s.sources.oscar_url}
@@ -201,8 +217,24 @@ def refuse_served_overrides(**given: str | None) -> None:
             same = str(value).rstrip("/") == str(pinned[name]).rstrip("/")
         if not same:
             raise SettingsError(f"parameter {name}={str(value)[:200]!r} refused: a served deployment takes {name} from the "
-                                f"settings of its `jitroute serve` process ({pinned[name]}); to change it, restart "
-                                f"`jitroute serve` with it")
+                                f"settings of the flow host ({pinned[name]}); to change it, restart `jitroute serve` "
+                                f"with it, or change the work pool's environment ({_ENV_OF[name]})")
+
+
+def served_input_file(name: str, value: str | None) -> str | None:
+    """The input file a flow-run parameter names (`contracts`, a noon-report file, a fleet folder…). On a served
+    deployment it must lie inside `<data root>/inbox/` (a relative name is taken from there; symbolic links are
+    followed before the check): a Prefect API caller could otherwise make the flow read any file of the flow host and
+    echo its lines into the run's logs as refused rows. Elsewhere the path is returned as given."""
+    if value is None or not is_served():
+        return value
+    inbox = load_settings().layout.inbox.resolve()
+    path = Path(str(value)).expanduser()
+    path = (path if path.is_absolute() else inbox / path).resolve()
+    if not path.is_relative_to(inbox):
+        raise SettingsError(f"parameter {name}={str(value)[:200]!r} refused: a served flow reads input files only "
+                            f"under {inbox}/; copy the file there and give its name")
+    return str(path)
 
 
 def load_settings(**overrides) -> Settings:
@@ -227,4 +259,4 @@ def load_settings(**overrides) -> Settings:
 
 
 __all__ = ["Settings", "SettingsError", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings",
-           "pin_for_serving", "refuse_served_overrides"]
+           "pin_for_serving", "refuse_served_overrides", "is_served", "served_input_file"]

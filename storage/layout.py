@@ -72,6 +72,12 @@ class DataLayout:
         return f"{self.object_root.rstrip('/')}/exports" if self.object_root else str(self.exports)
 
     @property
+    def inbox(self) -> Path:
+        """Input files (contracts, availability, ports, noon reports, fleet folders) for flow runs started through the
+        Prefect API: a served flow reads files only from here (flows.settings.served_input_file)."""
+        return self.root / "inbox"
+
+    @property
     def locks(self) -> Path:
         return self.root / "locks"
 
