@@ -126,3 +126,26 @@ def test_a_plan_with_no_legs_is_stored_with_every_contract_left(fleet_root, tmp_
         assert con.execute("SELECT count(*) FROM fleet_plan_legs WHERE plan_id = ?", [s["plan_id"]]).fetchone() == (0,)
         assert con.execute("SELECT count(*) FROM fleet_plan_unassigned WHERE plan_id = ?",
                            [s["plan_id"]]).fetchone() == (s["n_contracts"],)
+
+
+def test_a_book_larger_than_the_planner_builds_in_bounded_memory_is_refused_before_building(fleet_root, tmp_path,
+                                                                                            monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    monkeypatch.setenv("COLUMNS", "400")
+    root, files = fleet_root
+    one = pd.read_csv(files["contracts"]).iloc[0]
+    early = pd.Timestamp("2020-12-05") + pd.to_timedelta(range(10_000), unit="min")
+    book = pd.DataFrame([one] * 10_000).assign(code=[f"B{i:05d}" for i in range(10_000)], early_utc=early.strftime("%Y-%m-%dT%H:%M"),
+                                               late_utc=(early + pd.Timedelta(days=3)).strftime("%Y-%m-%dT%H:%M"))
+    book.to_csv(tmp_path / "book.csv", index=False)
+    before = _plans(root)
+    res = CliRunner().invoke(app, ["plan", "fleet", "--contracts", str(tmp_path / "book.csv"), "--availability",
+                                   files["availability"], "--ports", files["ports"], "--as-of", "2020-12-01T00:00Z",
+                                   "--time-limit", "30", "--data", str(root)])
+    assert res.exit_code == 2 and "10000 open contracts for 4 vessels: the planner takes at most 2000" in res.output, \
+        res.output
+    assert "shorter horizon" in res.output and _plans(root) == before
