@@ -3,7 +3,7 @@
 Values come from (lowest to highest priority) the defaults below, environment variables
 (`JITROUTE_DATA`, `JITROUTE_OBJECT_ROOT`, `JITROUTE_STORAGE_OPTIONS`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`,
 `JITROUTE_ALLOWED_REDIRECT_HOSTS`, `JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`,
-`JITROUTE_CUBE_RETENTION_DAYS`) and
+`JITROUTE_CUBE_RETENTION_DAYS`, `JITROUTE_EXPORT_RETENTION_DAYS`) and
 explicit overrides from the CLI. Lower layers never read this object; flows pass the values they need as plain arguments.
 
 Object storage: `JITROUTE_OBJECT_ROOT` (e.g. `s3://bucket/jitroute`) puts the cube and the run exports there.
@@ -107,6 +107,10 @@ class Settings:
     # Retention of the weather cube: after each ingest, cycles initialised more than this many days before the
     # newest one are retired (storage.cube.retire_cycles: hidden, their chunks deleted). None keeps every cycle.
     cube_retention_days: float | None = None
+    # Retention of the run exports (RTZ, GeoJSON, maps of each route-fleet run, under the object root or exports/):
+    # after each run, runs started more than this many days before it are deleted
+    # (storage.export_store.RunExports.retire_runs). None keeps every run.
+    export_retention_days: float | None = None
 
     @property
     def performance(self) -> "Gate":
@@ -247,6 +251,7 @@ def load_settings(**overrides) -> Settings:
         dask_address=env.get("JITROUTE_DASK_ADDRESS") or None,
         dask_workers=int(env["JITROUTE_DASK_WORKERS"]) if env.get("JITROUTE_DASK_WORKERS") else None,
         cube_retention_days=_days(env, "JITROUTE_CUBE_RETENTION_DAYS"),
+        export_retention_days=_days(env, "JITROUTE_EXPORT_RETENTION_DAYS"),
         **{
             "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
             "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,
