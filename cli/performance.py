@@ -94,6 +94,10 @@ def register(app: typer.Typer) -> None:
             fail(f"--to {to} is before --from {from_}")
         if not reason.strip():
             fail("--reason must say why the reports are excluded")
+        from pipeline.validate_ids import name_problem
+
+        if name_problem(reason):  # kept with the reports, shown in logs and tables
+            fail(f"--reason: {name_problem(reason)}; give plain text")
         try:
             n = exclude_noon_period(imo, str(t0), str(t1), reason.strip(), data_root=str(data) if data else None)
         except UnknownVesselError as exc:

@@ -79,3 +79,39 @@ def test_model_predict_json_is_strict_json_when_the_model_overflows(runner, tmp_
                               "6", "--json", "--data", str(data)])
     out = json.loads(res.output)
     assert out["not_finite"] == {} and out["stw_kn"] == pytest.approx(1.80521 * 6 + 12.63045 * 2 - 0.13117 * 120, abs=0.02)
+
+
+@pytest.fixture(scope="module")
+def fleet_root(tmp_path_factory):
+    from flows.jobs.refit import import_fleet_folder
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+
+    base = tmp_path_factory.mktemp("fleet")
+    fl = generate_fleet("2020-12-01T00", n_vessels=2, days=30, seed=3)
+    write_fleet(fl, base / "fleet")
+    import_fleet_folder(str(base / "fleet"), data_root=str(base / "data"))
+    return base / "data", fl
+
+
+@pytest.mark.parametrize("note, says", [("ok\nINFO forged line", "control characters or a line break"),
+                                        ("\x1b[2Jcleared", "control characters or a line break"),
+                                        ("=HYPERLINK(\"http://x\")", "starts with =, +, - or @ (a spreadsheet"),
+                                        ("@SUM(A1)", "starts with =, +, - or @ (a spreadsheet")])
+def test_position_notes_and_exclusion_reasons_that_forge_lines_or_run_as_formulas_are_refused(runner, fleet_root,
+                                                                                              note, says):
+    import duckdb
+
+    root, fl = fleet_root
+    voyage = fl.voyages["voyage_id"].iloc[0]
+    imo = str(fl.voyages["imo"].iloc[0])
+    res = runner.invoke(app, ["position", voyage, "--at", "2020-12-02T00", "--pos", "20,140", "--note", note,
+                              "--data", str(root)])
+    assert res.exit_code == 2 and f"--note: {says}" in res.output, res.output
+    res = runner.invoke(app, ["noon", "exclude", "--imo", imo, "--from", "2020-11-01", "--to", "2020-11-02",
+                              "--reason", note, "--data", str(root)])
+    assert res.exit_code == 2 and f"--reason: {says}" in res.output, res.output
+    with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+        tables = {r[0] for r in con.execute("SELECT table_name FROM information_schema.tables").fetchall()}
+        for table in ("voyage_positions", "noon_exclusions"):
+            if table in tables:
+                assert con.execute(f"SELECT count(*) FROM {table}").fetchone()[0] == 0
