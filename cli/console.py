@@ -37,3 +37,13 @@ def fail(msg: str, code: int = 2):
     """One line on stderr, then exit with `code` (2: bad input or a state the user must fix first)."""
     err_console.print(f"[red]error:[/] {msg}", highlight=False)
     raise typer.Exit(code)
+
+
+def require_data_root(layout) -> None:
+    """A check or repair given a data root that is not one (mistyped `--data`) fails with exit 2: a monitoring cron
+    must not stay green on a path that holds nothing."""
+    if not layout.is_data_root():
+        from flows.settings import SettingsError
+
+        raise SettingsError(f"no data root at {layout.root} (no warehouse.duckdb, cubes/ or raw/ there): check --data "
+                            "or JITROUTE_DATA")

@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from cli.console import console
+from cli.console import console, require_data_root
 
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 
@@ -39,7 +39,9 @@ def register(app: typer.Typer) -> None:
         from flows.settings import load_settings
         from storage import cube
 
-        store = load_settings(data_root=data).layout.weather_cube
+        layout = load_settings(data_root=data).layout
+        require_data_root(layout)
+        store = layout.weather_cube
         if not store.exists():
             console.print(f"no weather cube at {store}: nothing to check")
             return
@@ -68,6 +70,7 @@ def register(app: typer.Typer) -> None:
         from storage import cube
 
         s = load_settings(data_root=data)
+        require_data_root(s.layout)
         store = s.layout.weather_cube
         if not store.exists():
             console.print(f"no weather cube at {store}: nothing to repair")
@@ -112,6 +115,7 @@ def register(app: typer.Typer) -> None:
             console.print("no retention given: pass --keep-days N or set JITROUTE_CUBE_RETENTION_DAYS")
             raise typer.Exit(2)
         layout = s.layout
+        require_data_root(layout)
         retired = cube.retire_cycles(layout.cube_store, days, lock_dir=layout.cube_lock_dir)
         console.print(f"retired {len(retired)} cycle(s) older than {days:g} days before the newest"
                       + (f": {', '.join(_cycle_label(c) for c in retired)}" if retired else ""))

@@ -188,13 +188,17 @@ def register(app: typer.Typer) -> None:
               rish_url: Optional[str] = typer.Option(None, help="RISH base URL the deployments fetch from "
                                                                "(default $JITROUTE_RISH_URL or the RISH archive)."),
               oscar_url: Optional[str] = typer.Option(None, help="OSCAR base URL (default $JITROUTE_OSCAR_URL)."),
+              drain_s: float = typer.Option(1800.0, "--drain-s", min=0.0, max=86400.0,
+                                            help="On SIGTERM, how long in-flight flow runs may finish before they are "
+                                                 "cancelled (a second SIGTERM stops at once)."),
               data: Optional[Path] = DataOpt):
         """Register the nightly, ingest and backfill deployments and run their flow runs (needs a Prefect server)."""
         from deploy.serve import check_api, serve_deployments
 
         check_api()
         serve_deployments(timezone=timezone, nightly_cron=nightly_cron, ingest_cron=ingest_cron,
-                          data_root=str(Path(data).resolve()) if data else None, rish_url=rish_url, oscar_url=oscar_url)
+                          data_root=str(Path(data).resolve()) if data else None, rish_url=rish_url, oscar_url=oscar_url,
+                          drain_s=drain_s)
 
 
 def _import_fleet(folder: Path, root: Path) -> None:

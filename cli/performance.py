@@ -31,6 +31,17 @@ def refit_table(summaries: list[dict]) -> Table:
     return t
 
 
+def _json_safe(v):
+    """`v` with every non-finite float (in dicts and lists too) made None, as strict JSON requires."""
+    from pipeline.export.geojson import json_value
+
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    return json_value(v)
+
+
 def register(app: typer.Typer) -> None:
     noon = typer.Typer(help="Noon reports: import with validation.", no_args_is_help=True)
     fleet = typer.Typer(help="Fleet data: vessels, voyages, demo generator.", no_args_is_help=True)
@@ -83,6 +94,10 @@ def register(app: typer.Typer) -> None:
             fail(f"--to {to} is before --from {from_}")
         if not reason.strip():
             fail("--reason must say why the reports are excluded")
+        from pipeline.validate_ids import name_problem
+
+        if name_problem(reason):  # kept with the reports, shown in logs and tables
+            fail(f"--reason: {name_problem(reason)}; give plain text")
         try:
             n = exclude_noon_period(imo, str(t0), str(t1), reason.strip(), data_root=str(data) if data else None)
         except UnknownVesselError as exc:
@@ -205,11 +220,17 @@ def register(app: typer.Typer) -> None:
                "draft_m": draft, "trim_m": trim, "wind_kn": wind_kn, "wind_dir_rel_deg": wind_dir_rel, "hs_m": hs_m,
                "wave_dir_rel_deg": wave_dir_rel, "months_dd": m.months_dd, "stw_kn": stw, "fuel_tph": fuel,
                "out_of_envelope": bool(outside), "outside": outside, "envelope": m.envelope}
+        # far outside its envelope a model's value can overflow: JSON has no Infinity, so null and the reason
+        unusable = {k: f"the model gives {out[k]} at these conditions (far outside those it was fitted on)"
+                    for k in ("stw_kn", "fuel_tph") if not math.isfinite(out[k])}
         if as_json:
-            print(json.dumps(out))
+            out = {**out, **{k: None for k in unusable}, "not_finite": unusable}
+            print(json.dumps(_json_safe(out), allow_nan=False))
             return
         console.print(f"vessel {imo} model v{m.version} ({m.form}, {out['status']}): STW {stw:.2f} kn, fuel {fuel:.3f} t/h "
                       f"at {rpm:g} rpm, draft {draft:.2f} m", highlight=False)
+        for k, why in unusable.items():
+            console.print(f"[yellow]{k}:[/] {why}", highlight=False)
         if outside:
             console.print(f"[yellow]outside the conditions the model was fitted on:[/] {', '.join(outside)}", highlight=False)
 

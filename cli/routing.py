@@ -76,8 +76,11 @@ def register(app: typer.Typer) -> None:
         """Give the position of a voyage at sea; the next route-fleet or nightly re-plans it from there (if it is
         newer than the vessel's noon reports)."""
         from flows.settings import load_settings
+        from pipeline.validate_ids import name_problem
         from storage import fleet_store
 
+        if name_problem(note):  # kept with the position, shown in logs, tables and exports
+            fail(f"--note: {name_problem(note)}; give plain text")
         lat, lon = _latlon(pos, "--pos")
         t = _utc(at, "--at")
         lay = load_settings(data_root=data).layout

@@ -24,6 +24,7 @@ import threading
 
 EXIT_SIGTERM = 128 + signal.SIGTERM  # 143, what shells and systemd expect after SIGTERM
 GRACE_S = 5.0
+_grace_s = GRACE_S  # `jitroute serve` lengthens it: its flow runs finish first (deploy/serve.py)
 
 _stopping = threading.Event()
 _lock = threading.Lock()
@@ -51,7 +52,7 @@ def _begin_stop() -> bool:
             return False
         _stopping.set()
     _cancel_downloads()
-    timer = threading.Timer(GRACE_S, _force_exit)
+    timer = threading.Timer(_grace_s, _force_exit)
     timer.daemon = True
     timer.start()
     return True
@@ -77,6 +78,12 @@ def _watch(fd: int) -> None:
 def _on_sigterm(signum, frame) -> None:
     _begin_stop()  # normally done by the watcher already
     raise SystemExit(EXIT_SIGTERM)
+
+
+def set_grace_s(seconds: float) -> None:
+    """How long the first SIGTERM lets this process unwind before it is ended."""
+    global _grace_s
+    _grace_s = float(seconds)
 
 
 def install() -> None:

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from cli.console import console
+from cli.console import console, require_data_root
 
 DataOpt = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")
 
@@ -24,7 +24,9 @@ def register(app: typer.Typer) -> None:
         from flows.settings import load_settings
         from storage import route_history, warehouse
 
-        db = load_settings(data_root=data).layout.warehouse
+        layout = load_settings(data_root=data).layout
+        require_data_root(layout)
+        db = layout.warehouse
         if not db.exists():
             console.print(f"no warehouse at {db}: nothing to check")
             return

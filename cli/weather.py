@@ -34,6 +34,10 @@ def register(app: typer.Typer) -> None:
 
         if var not in VARIABLES:
             raise weather_maps.WeatherMapError(f"--var {var!r} is not one of {', '.join(VARIABLES)}")
+        suffix = ".gif" if animate else ".png"
+        if out is not None and Path(out).suffix.lower() != suffix:  # a GIF under .png opens as a broken picture
+            raise weather_maps.WeatherMapError(f"--out {out}: {'an animation' if animate else 'a map'} is written as "
+                                               f"{suffix[1:].upper()}; give a file name ending in {suffix}")
         c = parse_cycle(cycle) if cycle else None
         lay = load_settings(data_root=data).layout
         if c is None:

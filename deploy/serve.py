@@ -81,16 +81,70 @@ def build_deployments(*, timezone: str = "UTC", nightly_cron: str = NIGHTLY_CRON
     ]
 
 
-def serve_deployments(**kwargs) -> None:
-    """Register the deployments and run their flow runs until stopped (Ctrl-C or SIGTERM). The data root and source
-    URLs given here (or in this process's environment) are pinned: a flow run asking for others is refused, and
-    secrets (the Earthdata token) come from this process's environment or Prefect Secret block only."""
-    from prefect import serve
+DRAIN_S = 1800.0  # how long a stopping `serve` lets its flow runs finish before it cancels them
 
+
+def draining_runner(drain_s: float = DRAIN_S):
+    """A Prefect Runner that on SIGTERM stops taking new flow runs, lets those in flight finish (up to `drain_s`), then
+    cancels what is left (Prefect's cancellation: the run ends Cancelled, not Crashed) and returns. Prefect's own
+    Runner cancels every run in flight at once, and the CLI's SIGTERM grace (cli/signals.py) would end the process
+    before even that was recorded."""
+    import asyncio
+    import logging
+    import sys
+    import time
+
+    from prefect.runner import Runner
+
+    log = logging.getLogger("jitroute.serve")
+
+    class DrainingRunner(Runner):
+        def handle_sigterm(self, *args, **kwargs) -> None:
+            if not self.started or self.stopping or self._loop is None:
+                sys.exit(0)
+            self.stopping = True  # no new runs from here on
+            poller = getattr(self, "_scheduled_run_poller", None)
+            if poller is not None:
+                poller.stopping = True
+            self.execute_in_background(self._drain_then_stop)
+
+        def _in_flight(self) -> int:
+            return len(getattr(self._process_manager, "_process_map", {}))
+
+        async def _drain_then_stop(self) -> None:
+            deadline = time.monotonic() + drain_s
+            n = self._in_flight()
+            if n:
+                log.info("SIGTERM: no new flow runs; waiting up to %.0f s for %d in flight to finish", drain_s, n)
+            while self._in_flight() and time.monotonic() < deadline:
+                await asyncio.sleep(0.5)
+            if self._in_flight():
+                log.warning("SIGTERM: %d flow run(s) still running after %.0f s: cancelling them", self._in_flight(),
+                            drain_s)
+            await self.astop()
+
+    return DrainingRunner(pause_on_shutdown=True)
+
+
+def serve_deployments(*, drain_s: float = DRAIN_S, **kwargs) -> None:
+    """Register the deployments and run their flow runs until stopped (Ctrl-C, or SIGTERM: in-flight runs finish
+    first, up to `drain_s`, then the rest are cancelled). The data root and source URLs given here (or in this
+    process's environment) are pinned: a flow run asking for others is refused, and secrets (the Earthdata token) come
+    from this process's environment or Prefect Secret block only."""
+    import asyncio
+
+    from cli import signals
     from flows.settings import pin_for_serving
 
     pin_for_serving(kwargs.get("data_root"), kwargs.get("rish_url"), kwargs.get("oscar_url"))
-    serve(*build_deployments(**kwargs))
+    signals.set_grace_s(drain_s + 60.0)  # the drain, then Prefect's cancellation of what is left
+    runner = draining_runner(drain_s)
+    for deployment in build_deployments(**kwargs):
+        runner.add_deployment(deployment)
+    try:
+        asyncio.run(runner.start())
+    except KeyboardInterrupt:
+        pass
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ from prefect import flow
 
 from flows.jobs.planning import DEFAULT_FUEL_PRICE, plan_fleet_job
 from flows.runner import InPrefect, register_flow
+from flows.settings import refuse_served_overrides, served_input_file
 from pipeline.planning.voyages import DEFAULT_PENALTY
 
 
@@ -15,5 +16,8 @@ def plan_fleet(contracts: str, availability: str | None = None, ports: str | Non
                data_root: str | None = None, fuel_price: float = DEFAULT_FUEL_PRICE, penalty: float = DEFAULT_PENALTY,
                time_limit_s: float = 60.0) -> dict:
     """Assign cargo contracts to vessels as of `as_of` (default now); the plan's legs become planned voyages."""
+    refuse_served_overrides(data_root=data_root)
+    contracts, availability, ports = (served_input_file(name, value) for name, value in (
+        ("contracts", contracts), ("availability", availability), ("ports", ports)))
     return plan_fleet_job(contracts, availability, ports, as_of, data_root=data_root, fuel_price=fuel_price,
                           penalty=penalty, time_limit_s=time_limit_s, run=InPrefect())

@@ -7,7 +7,7 @@ from prefect import flow
 
 from flows.jobs.refit import DEFAULT_FORM, import_bunker_file, import_fleet_folder, import_noon_file, refit_job
 from flows.runner import InPrefect, register_flow
-from flows.settings import refuse_served_overrides
+from flows.settings import refuse_served_overrides, served_input_file
 
 
 @register_flow
@@ -15,6 +15,7 @@ from flows.settings import refuse_served_overrides
 def import_noon_reports(path: str, data_root: str | None = None, replace: bool = False) -> dict:
     """Validate a noon-report file and store good rows; bad rows go to noon_reports_rejected with a reason."""
     refuse_served_overrides(data_root=data_root)
+    path = served_input_file("path", path)
     return import_noon_file(path, data_root=data_root, replace=replace, run=InPrefect())
 
 
@@ -23,6 +24,7 @@ def import_noon_reports(path: str, data_root: str | None = None, replace: bool =
 def import_fleet(folder: str, data_root: str | None = None) -> dict:
     """Validate and store vessels.csv and voyages.csv of a folder; refused rows go to *_rejected with their reason."""
     refuse_served_overrides(data_root=data_root)
+    folder = served_input_file("folder", folder)
     return import_fleet_folder(folder, data_root=data_root, run=InPrefect())
 
 
@@ -31,6 +33,7 @@ def import_fleet(folder: str, data_root: str | None = None) -> dict:
 def import_bunker_logs(path: str, data_root: str | None = None) -> dict:
     """Validate a bunker-log file and store good rows; rejected and conflicting rows are returned with a reason."""
     refuse_served_overrides(data_root=data_root)
+    path = served_input_file("path", path)
     return import_bunker_file(path, data_root=data_root, run=InPrefect())
 
 

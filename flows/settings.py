@@ -3,7 +3,7 @@
 Values come from (lowest to highest priority) the defaults below, environment variables
 (`JITROUTE_DATA`, `JITROUTE_OBJECT_ROOT`, `JITROUTE_STORAGE_OPTIONS`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`,
 `JITROUTE_ALLOWED_REDIRECT_HOSTS`, `JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`,
-`JITROUTE_CUBE_RETENTION_DAYS`) and
+`JITROUTE_CUBE_RETENTION_DAYS`, `JITROUTE_EXPORT_RETENTION_DAYS`) and
 explicit overrides from the CLI. Lower layers never read this object; flows pass the values they need as plain arguments.
 
 Object storage: `JITROUTE_OBJECT_ROOT` (e.g. `s3://bucket/jitroute`) puts the cube and the run exports there.
@@ -110,6 +110,10 @@ class Settings:
     # A fleet run's exports are the operator's set (RTZ, GeoJSON, route map, fleet and weather maps); with
     # debug_plots (JITROUTE_DEBUG_PLOTS=1) each voyage's BFOA convergence plot is written beside them.
     debug_plots: bool = False
+    # Retention of the run exports (RTZ, GeoJSON, maps of each route-fleet run, under the object root or exports/):
+    # after each run, runs started more than this many days before it are deleted
+    # (storage.export_store.RunExports.retire_runs). None keeps every run.
+    export_retention_days: float | None = None
 
     @property
     def performance(self) -> "Gate":
@@ -198,12 +202,28 @@ def pin_for_serving(data_root: str | None = None, rish_url: str | None = None, o
     os.environ[SERVED_ENV] = "1"
 
 
+def is_served() -> bool:
+    """This flow run takes its parameters from a Prefect API caller: it was started from a deployment (by
+    `jitroute serve`, or by a work-pool worker for deploy/prefect.yaml), or runs under `jitroute serve`. A flow called
+    in-process by the CLI has no deployment: its parameters are the operator's own."""
+    if os.environ.get(SERVED_ENV):
+        return True
+    from prefect.context import FlowRunContext
+
+    ctx = FlowRunContext.get()
+    return ctx is not None and ctx.flow_run is not None and ctx.flow_run.deployment_id is not None
+
+
+_ENV_OF = {"data_root": "JITROUTE_DATA", "rish_url": "JITROUTE_RISH_URL", "oscar_url": "JITROUTE_OSCAR_URL"}
+
+
 def refuse_served_overrides(**given: str | None) -> None:
-    """On a served deployment, a flow-run parameter (`data_root`, `rish_url`, `oscar_url`) that differs from the serve
-    process's settings is refused (SettingsError): anyone who can reach the Prefect API could otherwise point the
-    ingest at another data root, or the OSCAR fetch — which carries the Earthdata token — at their own server.
-    Elsewhere (the CLI, tests) parameters are the operator's own and pass."""
-    if not os.environ.get(SERVED_ENV):
+    """On a served deployment (`is_served`), a flow-run parameter (`data_root`, `rish_url`, `oscar_url`) that differs
+    from the settings of the process running it (`jitroute serve`'s, or the work-pool job's environment) is refused
+    (SettingsError): anyone who can reach the Prefect API could otherwise point the ingest at another data root, or the
+    OSCAR fetch — which carries the Earthdata token — at their own server. Elsewhere (the CLI, tests) parameters are
+    the operator's own and pass."""
+    if not is_served():
         return
     s = load_settings()
     pinned = {"data_root": s.data_root, "rish_url": s.sources.rish_url, "oscar_url": s.sources.oscar_url}
@@ -216,8 +236,24 @@ def refuse_served_overrides(**given: str | None) -> None:
             same = str(value).rstrip("/") == str(pinned[name]).rstrip("/")
         if not same:
             raise SettingsError(f"parameter {name}={str(value)[:200]!r} refused: a served deployment takes {name} from the "
-                                f"settings of its `jitroute serve` process ({pinned[name]}); to change it, restart "
-                                f"`jitroute serve` with it")
+                                f"settings of the flow host ({pinned[name]}); to change it, restart `jitroute serve` "
+                                f"with it, or change the work pool's environment ({_ENV_OF[name]})")
+
+
+def served_input_file(name: str, value: str | None) -> str | None:
+    """The input file a flow-run parameter names (`contracts`, a noon-report file, a fleet folder…). On a served
+    deployment it must lie inside `<data root>/inbox/` (a relative name is taken from there; symbolic links are
+    followed before the check): a Prefect API caller could otherwise make the flow read any file of the flow host and
+    echo its lines into the run's logs as refused rows. Elsewhere the path is returned as given."""
+    if value is None or not is_served():
+        return value
+    inbox = load_settings().layout.inbox.resolve()
+    path = Path(str(value)).expanduser()
+    path = (path if path.is_absolute() else inbox / path).resolve()
+    if not path.is_relative_to(inbox):
+        raise SettingsError(f"parameter {name}={str(value)[:200]!r} refused: a served flow reads input files only "
+                            f"under {inbox}/; copy the file there and give its name")
+    return str(path)
 
 
 def load_settings(**overrides) -> Settings:
@@ -231,6 +267,7 @@ def load_settings(**overrides) -> Settings:
         dask_workers=int(env["JITROUTE_DASK_WORKERS"]) if env.get("JITROUTE_DASK_WORKERS") else None,
         cube_retention_days=_days(env, "JITROUTE_CUBE_RETENTION_DAYS"),
         debug_plots=_flag(env, "JITROUTE_DEBUG_PLOTS"),
+        export_retention_days=_days(env, "JITROUTE_EXPORT_RETENTION_DAYS"),
         **{
             "sources.rish_url": env.get("JITROUTE_RISH_URL") or None,
             "sources.oscar_url": env.get("JITROUTE_OSCAR_URL") or None,
@@ -243,4 +280,4 @@ def load_settings(**overrides) -> Settings:
 
 
 __all__ = ["Settings", "SettingsError", "GridSettings", "SourceSettings", "RoutingSettings", "load_settings",
-           "pin_for_serving", "refuse_served_overrides"]
+           "pin_for_serving", "refuse_served_overrides", "is_served", "served_input_file"]

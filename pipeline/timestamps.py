@@ -18,6 +18,7 @@ _ISO = re.compile(r"^\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d{1,9})?)?)?(Z|
 _DAY_MONTH = re.compile(r"^\d{1,2}[/.\-]\d{1,2}[/.\-]\d{2,4}\b")
 
 BAD = "bad timestamp"
+OUT_OF_RANGE = "timestamp out of range (give one between 1677-09-22 and 2262-04-11)"
 AMBIGUOUS = "ambiguous timestamp (day/month order unknown; use ISO 8601, e.g. 2020-12-01T12:00Z)"
 
 
@@ -44,8 +45,14 @@ def parse_iso_utc(value) -> tuple[pd.Timestamp | None, str | None]:
     except ValueError:  # e.g. month 13 or hour 25
         return None, BAD
     if dt.tzinfo is not None:
-        dt = dt.astimezone(timezone.utc).replace(tzinfo=None)
-    return pd.Timestamp(dt), None
+        try:
+            dt = dt.astimezone(timezone.utc).replace(tzinfo=None)
+        except OverflowError:  # 9999-12-31T23:00-05:00
+            return None, OUT_OF_RANGE
+    try:  # every table and frame holds nanoseconds: 1677-09-22 … 2262-04-11
+        return pd.Timestamp(dt).as_unit("ns"), None
+    except (pd.errors.OutOfBoundsDatetime, OverflowError):
+        return None, OUT_OF_RANGE
 
 
 def parse_iso_column(values: pd.Series) -> tuple[pd.Series, pd.Series]:

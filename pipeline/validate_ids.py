@@ -6,7 +6,7 @@ That excludes path separators, absolute paths, control characters, newlines and 
 IMO numbers are seven digits whose last is the check digit: the sum of the first six digits weighted
 7, 6, 5, 4, 3, 2, modulo 10.
 Names (vessels, ports, suppliers, …) may hold any printable text but no control character or line break
-(`has_control_characters`): they end up in log lines, terminals, Markdown tables and XML (RTZ), where one such
+(`has_control_characters`; `name_problem` also refuses spreadsheet formulas): they end up in log lines, terminals, Markdown tables and XML (RTZ), where one such
 character forges a line, recolours a terminal or makes the file invalid. `printable` and `markdown_cell` escape
 text for those places when it comes from elsewhere.
 """
@@ -70,6 +70,21 @@ def is_valid_imo(imo: int) -> bool:
 def has_control_characters(value) -> bool:
     """A text value holding a control character or a line break (non-text values: False)."""
     return isinstance(value, str) and _CONTROL.search(value) is not None
+
+
+_FORMULA_START = ("=", "+", "-", "@")  # what a spreadsheet opening an export or a refused-rows CSV would evaluate
+
+
+def name_problem(value) -> str | None:
+    """Why a name (port, cargo type) cannot be used (None when it can): a control character or line break, or text a
+    spreadsheet would run as a formula (starting with =, +, - or @ — a CSV or report opened in one executes it)."""
+    if not isinstance(value, str):
+        return None
+    if has_control_characters(value):
+        return "control characters or a line break"
+    if value.strip().startswith(_FORMULA_START):
+        return "starts with =, +, - or @ (a spreadsheet would run it as a formula)"
+    return None
 
 
 def printable(text) -> str:

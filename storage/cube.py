@@ -522,6 +522,11 @@ def hide_cycles(path: Path, cycles: list, lock_dir: Path | None = None) -> None:
                 _set_state(loc, int(i), STATE_HIDDEN)
 
 
+# a retention longer than this (~146 years) keeps every cycle of any forecast archive, and past it the limit below
+# would overflow datetime64[ns]
+_LONGEST_SPAN_S = 2.0 ** 62 / 1e9
+
+
 def retire_cycles(path, keep_days: float, lock_dir: Path | None = None, storage_options: dict | None = None) -> list:
     """Retention: retire every cycle initialised more than `keep_days` days before the newest cycle in the store.
 
@@ -531,8 +536,10 @@ def retire_cycles(path, keep_days: float, lock_dir: Path | None = None, storage_
     no longer see it; a plain `xr.open_zarr` still lists the row, all NaN. A retired cycle ingested again is
     written back into its row. Returns the retired cycles (datetime64[ns]), oldest first."""
     loc = locate(path, storage_options)
-    if keep_days < 0:
-        raise ValueError(f"cube retention of {keep_days} days: give a number of days ≥ 0")
+    if not keep_days >= 0:  # also NaN
+        raise CubeError(f"cube retention of {keep_days} days: give a number of days ≥ 0")
+    if keep_days * 86400 > _LONGEST_SPAN_S:  # inf, 1e300: keep every cycle
+        return []
     if not loc.has("zarr.json"):
         return []
     with writer_lock(lock_dir, loc):

@@ -19,10 +19,13 @@ from __future__ import annotations
 
 import functools
 import json
+import re
+from datetime import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
 STAGING_PREFIX = ".staging-"
+_RUN_ID = re.compile(r"^(\d{8}T\d{6})-[0-9a-f]+$")  # route-fleet's run ids: start time (UTC) and a random tail
 MANIFEST = "_SUCCESS"
 
 
@@ -190,6 +193,35 @@ class RunExports:
             self.fs.rm(prefix, recursive=True)
         except FileNotFoundError:
             pass
+
+    def retire_runs(self, keep_days: float) -> list[str]:
+        """Retention: delete every published run started more than `keep_days` days before the newest run (the age
+        read from the run id, `YYYYmmddTHHMMSS-…`, so one listing and no read per run). Its manifest goes first, so a
+        reader never trusts a half-deleted run. Runs named otherwise, staging prefixes and unpublished folders are left
+        to `discard_stale`/`discard`. Returns the retired run ids, oldest first."""
+        if not keep_days >= 0:  # also NaN
+            raise ValueError(f"export retention of {keep_days} days: give a number of days ≥ 0")
+        fs, runs = self.fs, self._runs()
+        fs.invalidate_cache(runs)
+        if keep_days == float("inf") or not fs.exists(runs):
+            return []
+        started = {}
+        for p in fs.ls(runs, detail=False):
+            name = p.rstrip("/").rsplit("/", 1)[-1]
+            m = _RUN_ID.match(name)
+            if m:
+                started[name] = datetime.strptime(m.group(1), "%Y%m%dT%H%M%S")
+        if not started:
+            return []
+        newest = max(started.values())
+        old = sorted(n for n, t in started.items() if (newest - t).total_seconds() > keep_days * 86400)
+        for rid in old:
+            try:
+                fs.rm(f"{self._run(rid)}/{MANIFEST}")
+            except FileNotFoundError:
+                pass
+            self._remove(self._run(rid))
+        return old
 
     def discard_stale(self, live_run_ids: set[str]) -> list[str]:
         """Remove staging prefixes of runs that are no longer running (killed processes); returns their run ids."""

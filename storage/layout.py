@@ -72,8 +72,20 @@ class DataLayout:
         return f"{self.object_root.rstrip('/')}/exports" if self.object_root else str(self.exports)
 
     @property
+    def inbox(self) -> Path:
+        """Input files (contracts, availability, ports, noon reports, fleet folders) for flow runs started through the
+        Prefect API: a served flow reads files only from here (flows.settings.served_input_file)."""
+        return self.root / "inbox"
+
+    @property
     def locks(self) -> Path:
         return self.root / "locks"
+
+    def is_data_root(self) -> bool:
+        """The root exists and holds something a job made (warehouse, cubes/, raw/, exports/ or locks/): a read-only
+        command (a check) given a mistyped root must fail, not report "nothing to check"."""
+        return self.root.is_dir() and any(p.exists() for p in (self.warehouse, self.cubes, self.raw, self.exports,
+                                                                self.locks))
 
     def ensure(self) -> "DataLayout":
         """Create the folders and check the warehouse: a job calls this before it writes anything, so a damaged

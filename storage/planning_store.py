@@ -110,14 +110,19 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
                             [_utcnow(), older])
             con.register("p", row)
             con.execute(f"INSERT INTO fleet_plans ({', '.join(PLAN_COLUMNS)}) SELECT * FROM p")
-            con.register("l", legs.reindex(columns=LEG_COLUMNS))
-            con.execute(f"INSERT INTO fleet_plan_legs ({', '.join(LEG_COLUMNS)}) SELECT * FROM l")
-            con.register("u", unassigned.reindex(columns=UNASSIGNED_COLUMNS))
-            con.execute(f"INSERT INTO fleet_plan_unassigned ({', '.join(UNASSIGNED_COLUMNS)}) SELECT * FROM u")
-            v = voyages.reindex(columns=PLANNED_VOYAGE_COLUMNS)
-            con.register("v", v)
-            con.execute("DELETE FROM voyages WHERE voyage_id IN (SELECT voyage_id FROM v)")
-            con.execute(f"INSERT INTO voyages ({', '.join(PLANNED_VOYAGE_COLUMNS)}) SELECT * FROM v")
+            # an empty frame has untyped (object) columns DuckDB cannot compare or cast: a plan with no legs (every
+            # contract refused or left) or none left over inserts nothing there
+            if len(legs):
+                con.register("l", legs.reindex(columns=LEG_COLUMNS))
+                con.execute(f"INSERT INTO fleet_plan_legs ({', '.join(LEG_COLUMNS)}) SELECT * FROM l")
+            if len(unassigned):
+                con.register("u", unassigned.reindex(columns=UNASSIGNED_COLUMNS))
+                con.execute(f"INSERT INTO fleet_plan_unassigned ({', '.join(UNASSIGNED_COLUMNS)}) SELECT * FROM u")
+            if len(voyages):
+                v = voyages.reindex(columns=PLANNED_VOYAGE_COLUMNS)
+                con.register("v", v)
+                con.execute("DELETE FROM voyages WHERE voyage_id IN (SELECT voyage_id FROM v)")
+                con.execute(f"INSERT INTO voyages ({', '.join(PLANNED_VOYAGE_COLUMNS)}) SELECT * FROM v")
     return {"superseded_plans": older, "voyages_replaced": int(replaced), "voyages_kept": int(kept),
             "voyages_added": len(voyages)}
 

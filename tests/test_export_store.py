@@ -163,3 +163,41 @@ def test_voyage_ids_named_like_run_files_or_like_each_other_s_files_overwrite_no
     assert (out / "fleet_map.png").read_bytes() == b"run map"
     assert (out / "voyages" / "V20001" / "V20001.convergence.png").read_bytes() == b"V20001 convergence"
     assert (out / "voyages" / "V20001.convergence" / "V20001.convergence.png").read_bytes() == b"V20001.convergence png"
+
+
+@pytest.mark.parametrize("where", ["local", "s3"])
+def test_runs_older_than_the_retention_are_deleted_whole_and_newer_ones_and_stagings_kept(tmp_path, request, where):
+    if where == "s3":
+        env = request.getfixturevalue("s3_endpoint")
+        runs = RunExports("s3://jitroute/retention/exports", {"endpoint_url": env["AWS_ENDPOINT_URL"],
+                                                              "key": env["AWS_ACCESS_KEY_ID"],
+                                                              "secret": env["AWS_SECRET_ACCESS_KEY"]})
+    else:
+        runs = RunExports(str(tmp_path / "exports"))
+    ids = ["20201201T023000-aaaaaa", "20201203T023000-bbbbbb", "20201205T023000-cccccc"]
+    for rid in ids:
+        for n in ("fleet_map.png", "voyages/V1/V1.rtz"):
+            runs.stage(rid, n, rid.encode())
+        assert runs.publish(rid) is not None
+    runs.stage("20201101T000000-dddddd", "V9.rtz", b"a run still routing")  # staged long ago: not a published run
+    assert runs.retire_runs(float("inf")) == [] and runs.retire_runs(4.0) == []  # the oldest is exactly 4 days older
+    assert runs.retire_runs(2.5) == ids[:1]
+    assert runs.manifest(ids[0]) is None and not runs.fs.exists(runs.run_url(ids[0]))
+    assert all(runs.manifest(rid) is not None for rid in ids[1:])
+    assert runs.fs.cat_file(f"{runs.run_url(ids[1])}/voyages/V1/V1.rtz") == ids[1].encode()
+    assert runs.fs.exists(runs._staging("20201101T000000-dddddd"))
+    assert runs.retire_runs(0) == ids[1:2] and runs.manifest(ids[2]) is not None  # the newest run always stays
+    with pytest.raises(ValueError, match="give a number of days ≥ 0"):
+        runs.retire_runs(float("nan"))
+
+
+def test_the_export_retention_comes_from_the_environment(monkeypatch):
+    from flows.settings import SettingsError, load_settings
+
+    monkeypatch.setenv("JITROUTE_EXPORT_RETENTION_DAYS", "30")
+    assert load_settings().export_retention_days == 30.0
+    monkeypatch.setenv("JITROUTE_EXPORT_RETENTION_DAYS", "-1")
+    with pytest.raises(SettingsError, match="JITROUTE_EXPORT_RETENTION_DAYS"):
+        load_settings()
+    monkeypatch.delenv("JITROUTE_EXPORT_RETENTION_DAYS")
+    assert load_settings().export_retention_days is None

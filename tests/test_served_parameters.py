@@ -70,3 +70,44 @@ def test_the_earthdata_token_goes_only_over_https_or_to_this_machine(monkeypatch
     assert token_may_go_to(url) is sent
     assert (_opts(s, "OSCAR", TOKEN).token == TOKEN) is sent
     assert _opts(s, "GSM", TOKEN).token is None  # RISH never gets it
+
+
+def test_a_served_plan_fleet_reads_input_files_only_from_the_inbox(served, tmp_path):
+    import flows.planning
+
+    secret = tmp_path / "secret.csv"
+    secret.write_text("code,cargo_type\nAWS_SECRET,hunter2\n")
+    inbox = served / "inbox"
+    inbox.mkdir(parents=True)
+    (inbox / "link.csv").symlink_to(secret)  # a link out of the inbox is followed before the check
+    for kwargs, refused in (({"contracts": str(secret)}, "contracts"), ({"contracts": "../../secret.csv"}, "contracts"),
+                            ({"contracts": "link.csv"}, "contracts"), ({"contracts": "/etc/passwd"}, "contracts"),
+                            ({"contracts": "c.csv", "availability": "/proc/self/environ"}, "availability"),
+                            ({"contracts": "c.csv", "ports": str(secret)}, "ports")):
+        with pytest.raises(SettingsError, match=f"parameter {refused}=.* refused: a served flow reads input files only "
+                                                f"under {inbox}/"):
+            flows.planning.plan_fleet.fn(**kwargs)
+    with pytest.raises(SettingsError, match="parameter data_root=.* refused"):
+        flows.planning.plan_fleet.fn("c.csv", data_root=str(tmp_path / "theirs"))
+    for flow, name in ((flows.refit.import_noon_reports, "path"), (flows.refit.import_bunker_logs, "path"),
+                       (flows.refit.import_fleet, "folder")):
+        with pytest.raises(SettingsError, match=f"parameter {name}=.* refused"):
+            flow.fn(str(secret))
+    assert not (served / "warehouse.duckdb").exists() and not (tmp_path / "theirs").exists()
+
+
+def test_a_served_plan_fleet_takes_a_file_of_the_inbox_by_name(served):
+    from flows.settings import served_input_file
+
+    (served / "inbox").mkdir(parents=True)
+    (served / "inbox" / "contracts.csv").write_text("code\n")
+    assert served_input_file("contracts", "contracts.csv") == str((served / "inbox" / "contracts.csv").resolve())
+    assert served_input_file("contracts", str(served / "inbox" / "contracts.csv")).endswith("inbox/contracts.csv")
+    assert served_input_file("contracts", None) is None
+
+
+def test_input_files_are_the_operators_own_when_not_served(monkeypatch, tmp_path):
+    from flows.settings import served_input_file
+
+    monkeypatch.delenv(SERVED_ENV, raising=False)
+    assert served_input_file("contracts", "/srv/plans/contracts.csv") == "/srv/plans/contracts.csv"

@@ -35,3 +35,20 @@ def test_warehouse_migrates_and_snapshots(tmp_path: Path):
     assert (tmp_path / "w.snapshot.duckdb").exists()
     with warehouse.connect(db, write=False) as con:
         assert {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()} == names
+
+
+def test_the_scipy_range_of_pyproject_is_one_whose_highs_the_planner_can_import():
+    """The planner imports scipy's private HiGHS bindings (`scipy.optimize._highspy._core`, from scipy 1.15): the
+    range pyproject allows must not admit a scipy without them."""
+    import tomllib
+
+    import scipy
+    from packaging.requirements import Requirement
+
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]
+    (spec,) = [Requirement(r).specifier for r in project["dependencies"] if Requirement(r).name == "scipy"]
+    assert not spec.contains("1.13.1") and not spec.contains("1.14.1")  # no _highspy._core there
+    assert spec.contains(scipy.__version__)  # the one this venv runs the tests with
+    from pipeline.planning import master_lp
+
+    assert hasattr(master_lp.highs, "_Highs")

@@ -294,6 +294,11 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                    weather_maps=[f"{out_url}/{n}" for n in files if n.startswith("weather_") and n.endswith(".png")])
     for line in summary["export_failures"]:
         LOG.warning("export failed: %s", line)
+    if manifest and s.export_retention_days is not None:
+        retired = run_exports.retire_runs(s.export_retention_days)
+        if retired:
+            LOG.info("retired the exports of %d run(s) older than %g days: %s", len(retired), s.export_retention_days,
+                     ", ".join(retired))
     run.publish(key="route-fleet", markdown=run_markdown(summary), table=summary_table(summary),
                 description=f"jitroute route run {run_id}")
     return summary

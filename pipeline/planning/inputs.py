@@ -9,6 +9,11 @@ availability.csv: imo, from_utc, from_port, [until_utc, until_port, port_hours, 
                   laden_speed_kn, ballast_speed_kn, laden_draft_m, ballast_draft_m]; `ports` and `cargo_types`
                   are lists separated by `;` (empty: any)
 contracts.csv:    code, cargo_type, min_t, max_t, load_port, discharge_port, early_utc, late_utc, [penalty]
+
+Besides each file's own checks, a row is refused for: a name (port, cargo type, a `;` list of them) holding a control
+character or starting like a spreadsheet formula (=, +, -, @); the text `nan` in a number (an empty cell is the
+default, `nan` is a mistake); a number above its LIMITS (a penalty or daily cost above 1e12, a speed above 40 kn, …);
+a laden draft below the ballast draft; a contract window opening more than MAX_AHEAD_DAYS after the planning time.
 """
 
 from __future__ import annotations
@@ -16,14 +21,22 @@ from __future__ import annotations
 import pandas as pd
 
 from pipeline.fleet_validate import FleetFileError, _integer_imo, _is_empty, _numbers, _Reasons, _split, raw_rows
+from pipeline.planning.fuel import DEFAULT_BALLAST_DRAFT_M, DEFAULT_LADEN_DRAFT_M
 from pipeline.timestamps import parse_iso_column
-from pipeline.validate_ids import is_valid_imo, voyage_id_problem
+from pipeline.validate_ids import is_valid_imo, name_problem, voyage_id_problem
 
 PORT_REQUIRED = ("port", "lat", "lon")
 AVAILABILITY_REQUIRED = ("imo", "from_utc", "from_port")
 AVAILABILITY_NUMERIC = ("port_hours", "daily_cost", "laden_speed_kn", "ballast_speed_kn", "laden_draft_m",
                         "ballast_draft_m")
 CONTRACT_REQUIRED = ("code", "cargo_type", "min_t", "max_t", "load_port", "discharge_port", "early_utc", "late_utc")
+# Bounds that keep every cost of a plan a number the LP solves exactly (HiGHS treats 1e20 as infinite; a penalty of
+# 1e308 overflows its sums) and refuse values no ship or market has.
+MAX_MONEY = 1e12  # a penalty, a daily cost (currency of the fuel price)
+MAX_FUEL_PRICE = 1e6  # per tonne
+LIMITS = {"penalty": MAX_MONEY, "daily_cost": MAX_MONEY, "port_hours": 24 * 60.0, "laden_speed_kn": 40.0,
+          "ballast_speed_kn": 40.0, "laden_draft_m": 30.0, "ballast_draft_m": 30.0, "min_t": 1e6, "max_t": 1e6}
+MAX_AHEAD_DAYS = 2 * 366  # a contract window opening later than this after the planning time is a typo in its year
 
 
 def _require(raw: pd.DataFrame, cols, what: str, source: str) -> None:
@@ -36,6 +49,28 @@ def _text(df: pd.DataFrame, col: str) -> pd.Series:
     """Stripped text; None where empty."""
     empty = _is_empty(df[col])
     return pd.Series([None if e else str(x).strip() for x, e in zip(df[col], empty)], index=df.index, dtype=object)
+
+
+def _checked_numbers(df: pd.DataFrame, cols, r: _Reasons) -> None:
+    """`_numbers`, and the text `nan` (which the file's reader keeps as text and `_is_empty` takes as an empty cell,
+    i.e. the default) refused, and each value above its LIMITS refused."""
+    for c in cols:
+        if c in df.columns:
+            literal = df[c].map(lambda x: isinstance(x, str) and x.strip().lower() in ("nan", "-nan", "+nan"))
+            r.flag(literal, f"not a number in {c} (NaN; leave the cell empty for the default)")
+    _numbers(df, cols, r)
+    for c in cols:
+        if c in LIMITS:
+            r.flag(df[c] > LIMITS[c], f"{c} above {LIMITS[c]:g}")
+
+
+def _names(df: pd.DataFrame, cols, r: _Reasons) -> None:
+    """Names (and `;` lists of names) that would forge log lines or run as spreadsheet formulas are refused."""
+    for c in cols:
+        if c in df.columns:
+            why = [next((p for p in map(name_problem, x.split(";")) if p), None) if isinstance(x, str) else None
+                   for x in df[c]]
+            r.flag_each(pd.Series([f"{w} in {c}" if w else pd.NA for w in why], index=df.index, dtype=object))
 
 
 def split_list(value) -> frozenset[str] | None:
@@ -54,8 +89,9 @@ def validate_ports(raw: pd.DataFrame, source: str = "", *, check_land: bool = Tr
     r = _Reasons(df.index)
     for c in PORT_REQUIRED:
         r.flag(_is_empty(df[c]), f"missing {c}")
+    _names(df, ("port",), r)
     df["port"] = _text(df, "port")
-    _numbers(df, ("lat", "lon"), r)
+    _checked_numbers(df, ("lat", "lon"), r)
     r.flag(df["lat"].abs() > 90, "out of range lat")
     r.flag((df["lon"] < -180) | (df["lon"] > 360), "out of range lon")
     if check_land:
@@ -113,6 +149,7 @@ def validate_availability(raw: pd.DataFrame, *, known_imos: set[int] | None = No
         ts, why = parse_iso_column(df[c].where(~_is_empty(df[c]), "2000-01-01"))
         r.flag_each(why.where(~_is_empty(df[c]), pd.NA), prefix=f"{c}: ")
         df[c] = ts.where(~_is_empty(df[c]))
+    _names(df, ("from_port", "until_port", "ports", "cargo_types"), r)
     for c in ("from_port", "until_port", "ports", "cargo_types"):
         df[c] = _text(df, c) if c in df.columns else None
     if ports is not None:
@@ -123,11 +160,14 @@ def validate_availability(raw: pd.DataFrame, *, known_imos: set[int] | None = No
     r.flag(df["until_port"].notna() & df["until_utc"].isna(), "until_port given without until_utc")
     r.flag(df["until_utc"].notna() & (df["until_utc"] <= df["from_utc"]),
            "available nowhere: until_utc is not after from_utc")
-    _numbers(df, AVAILABILITY_NUMERIC, r)
+    _checked_numbers(df, AVAILABILITY_NUMERIC, r)
     for c in AVAILABILITY_NUMERIC:
         r.flag(df[c] < 0, f"negative {c}")
-    for c in ("laden_speed_kn", "ballast_speed_kn"):
+    for c in ("laden_speed_kn", "ballast_speed_kn", "laden_draft_m", "ballast_draft_m"):
         r.flag(df[c] == 0, f"zero {c}")
+    laden, ballast = df["laden_draft_m"].fillna(DEFAULT_LADEN_DRAFT_M), df["ballast_draft_m"].fillna(DEFAULT_BALLAST_DRAFT_M)
+    r.flag(laden < ballast, f"laden_draft_m below ballast_draft_m (empty: {DEFAULT_LADEN_DRAFT_M:g} and "
+                            f"{DEFAULT_BALLAST_DRAFT_M:g} m): a loaded ship floats deeper")
     allowed = df["ports"].map(split_list)
     r.flag(df["from_port"].notna() & allowed.notna() &
            pd.Series([a is not None and p not in a for a, p in zip(allowed, df["from_port"])], index=df.index),
@@ -151,6 +191,7 @@ def validate_contracts(raw: pd.DataFrame, *, as_of: pd.Timestamp | None = None, 
                           dtype=object))
     for c in CONTRACT_REQUIRED:
         r.flag(_is_empty(df[c]), f"missing {c}")
+    _names(df, ("cargo_type", "load_port", "discharge_port"), r)
     for c in ("code", "cargo_type", "load_port", "discharge_port"):
         df[c] = _text(df, c)
     for c in ("early_utc", "late_utc"):
@@ -159,7 +200,7 @@ def validate_contracts(raw: pd.DataFrame, *, as_of: pd.Timestamp | None = None, 
         df[c] = ts
     if "penalty" not in df.columns:
         df["penalty"] = None
-    _numbers(df, ("min_t", "max_t", "penalty"), r)
+    _checked_numbers(df, ("min_t", "max_t", "penalty"), r)
     for c in ("min_t", "max_t", "penalty"):
         r.flag(df[c] < 0, f"negative {c}")
     r.flag(df["max_t"] == 0, "max_t is zero")
@@ -167,6 +208,9 @@ def validate_contracts(raw: pd.DataFrame, *, as_of: pd.Timestamp | None = None, 
     r.flag(df["late_utc"] <= df["early_utc"], "window of zero length: late_utc is not after early_utc")
     if as_of is not None:
         r.flag(df["late_utc"] < pd.Timestamp(as_of), f"window closed before the planning time {pd.Timestamp(as_of)}")
+        r.flag(df["early_utc"] > pd.Timestamp(as_of) + pd.Timedelta(days=MAX_AHEAD_DAYS),
+               f"window opens more than {MAX_AHEAD_DAYS} days after the planning time {pd.Timestamp(as_of)} "
+               "(check its year)")
     if ports is not None:
         for c in ("load_port", "discharge_port"):
             r.flag(df[c].notna() & ~df[c].isin(list(ports)), f"unknown {c} (not in the ports file)")
