@@ -18,7 +18,7 @@ from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
 from pipeline.planning.sea_distances import PortDistance, distance_map, needed_pairs, sea_distance
 from pipeline.planning.voyages import (DEFAULT_PENALTY,
-                                       apply_commitments, committed, plan_contracts, plan_rows, plan_vessels,
+                                       apply_commitments, plan_contracts, plan_rows, plan_vessels, replan,
                                        vessel_drafts)
 from pipeline.timestamps import parse_iso_utc
 from storage import fleet_store, planning_store, warehouse
@@ -38,6 +38,17 @@ def parse_as_of(as_of: str | None) -> pd.Timestamp:
     if ts is None:
         raise PlanningInputError(f"--as-of {as_of!r}: {why}; give ISO 8601, e.g. 2020-12-01T00:00Z")
     return ts
+
+
+def _refuse_going_back(db: Path, as_of: pd.Timestamp) -> None:
+    """A re-plan goes forward in time: one as of a time before the active plan's would take voyages that plan
+    counted as sailed for unsailed ones and replace them."""
+    active = planning_store.active_plan_as_of(db)
+    if active is not None and as_of < active[1]:
+        raise PlanningInputError(
+            f"--as-of {as_of:%Y-%m-%dT%H:%M}Z is before the active plan {active[0]}'s as-of {active[1]:%Y-%m-%dT%H:%M}Z: "
+            f"a re-plan cannot go back in time (voyages sailed by then would be planned again); "
+            f"give --as-of {active[1]:%Y-%m-%dT%H:%M}Z or later (default: now)")
 
 
 def _stored(db: Path, table: str) -> pd.DataFrame:
@@ -115,13 +126,17 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     layout = s.layout.ensure()
     db = layout.warehouse
     t_as_of = parse_as_of(as_of)
+    _refuse_going_back(db, t_as_of)
     imported = run.step(import_planning_files, db, contracts, availability, ports, t_as_of, name="import-planning-files")
     good = imported["contracts"]
     port_rows = _stored(db, "ports")
     port_pos = {r["port"]: (float(r["lat"]), float(r["lon"])) for r in port_rows.to_dict("records")}
     fleet, models = planning_store.load_planning_fleet(db)
-    done, busy = committed(planning_store.active_plan_legs(db), t_as_of)
-    fleet = apply_commitments(fleet, busy)
+    keep = replan(planning_store.voyages_for_replan(db), t_as_of)
+    done = keep.committed
+    fleet = apply_commitments(fleet, keep.busy)
+    for _, name, lat, lon in keep.busy.values():  # a vessel free at the end of a voyage from a file: at its port
+        port_pos.setdefault(name, (lat, lon))
     vessels, fuel_source = plan_vessels(fleet, models, t_as_of)
     cons = plan_contracts(good[~good["code"].isin(list(done))], t_as_of, penalty)
     pairs = {(c.load_port, c.discharge_port) for c in cons}
@@ -134,7 +149,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     plan = run.step(milp.solve, data, time_limit_s=time_limit_s, started_at=started, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"
     row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, vessel_drafts(fleet))
-    stored = planning_store.save_plan(db, row, legs, left, voyages)
+    stored = planning_store.save_plan(db, row, legs, left, voyages, keep.replaced)
     png = None
     if picture:
         png = layout.exports / "plans" / f"{plan_id}.png"
