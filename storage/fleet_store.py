@@ -60,9 +60,22 @@ def import_voyages(db_path: Path, df: pd.DataFrame, rejected: pd.DataFrame | Non
                          else list(map(float, r)) if not isinstance(r, str)
                          else [float(x) for x in r.strip("[]").split(",") if x.strip()]
                          for r in df["rpm_options"]]
+    taken = sorted(set(df["voyage_id"]) & set(plan_voyage_ids(db_path)))
+    if taken:  # validation refuses these (validate_voyages' plan_voyages); never replace a plan's voyage here
+        raise ValueError(f"voyage(s) {', '.join(taken)} are voyages of a fleet plan: a voyages file may not replace "
+                         "them; give the imported voyages other IDs")
     n = _upsert(db_path, "voyages", df, VOYAGE_COLUMNS, "voyage_id")
     _store_rejected(db_path, "voyages_rejected", rejected, ["voyage_id", "imo"])
     return n
+
+
+def plan_voyage_ids(db_path: Path) -> dict[str, str]:
+    """voyage_id → plan_id of the stored voyages a fleet plan made."""
+    if not Path(db_path).exists():
+        return {}
+    with warehouse.connect(db_path, write=False) as con:
+        return {str(v): str(p) for v, p in con.execute(
+            "SELECT voyage_id, plan_id FROM voyages WHERE plan_id IS NOT NULL").fetchall()}
 
 
 def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, keys: list[str]) -> None:

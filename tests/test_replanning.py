@@ -128,6 +128,27 @@ def test_the_planner_does_not_book_a_vessel_during_its_voyages_from_the_voyages_
             assert first["dep_name"] == last_file["arr_name"]  # from where that voyage ends
 
 
+def test_a_voyages_file_cannot_replace_a_plan_voyage_by_reusing_its_id(tmp_path):
+    import shutil
+
+    root, files = _fleet_root(tmp_path)
+    _plan(root, files, "2020-12-01T00:00Z", first=True)
+    plan_voyage = _voyages(root).dropna(subset=["plan_id"]).iloc[0]
+    folder = tmp_path / "again"
+    folder.mkdir()
+    shutil.copy(tmp_path / "fleet" / "vessels.csv", folder)
+    voyages = pd.read_csv(tmp_path / "fleet" / "voyages.csv")
+    voyages.loc[0, "voyage_id"] = plan_voyage["voyage_id"]  # a voyage of the file under the plan voyage's ID
+    voyages.to_csv(folder / "voyages.csv", index=False)
+    r = _cli("fleet", "import", folder, "--data", root)
+    assert r.exit_code == 0, r.output
+    after = _voyages(root).set_index("voyage_id").loc[plan_voyage["voyage_id"]]
+    assert after["plan_id"] == plan_voyage["plan_id"] and after["dep_name"] == plan_voyage["dep_name"]
+    why = _q(root, "SELECT reason FROM voyages_rejected WHERE voyage_id = ?", [plan_voyage["voyage_id"]])["reason"]
+    assert len(why) == 1 and why[0].startswith(f"voyage_id {plan_voyage['voyage_id']} is a voyage of fleet plan "
+                                               f"{plan_voyage['plan_id']}")
+
+
 # ---------------------------------------------------------------------------------------------- replan, unit
 
 
