@@ -149,6 +149,24 @@ def test_a_voyages_file_cannot_replace_a_plan_voyage_by_reusing_its_id(tmp_path)
                                                f"{plan_voyage['plan_id']}")
 
 
+def test_latest_routes_drops_the_plans_of_voyages_a_re_plan_replaced(tmp_path):
+    from storage import warehouse
+
+    root, files = _fleet_root(tmp_path)
+    _plan(root, files, "2020-12-01T00:00Z", first=True)
+    routed = list(_voyages(root)["voyage_id"])  # every voyage routed once, "ok"
+    with warehouse.connect(root / "warehouse.duckdb") as con:
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', now(), 'ok')")
+        for vid in routed:
+            con.execute("INSERT INTO routes (run_id, voyage_id, status, fuel_t) VALUES ('r1', ?, 'ok', 5.0)", [vid])
+        con.execute("INSERT INTO routes (run_id, voyage_id, status, fuel_t) VALUES ('r1', 'ad-hoc', 'ok', 1.0)")
+    second = _plan(root, files, "2020-12-03T00:00Z")
+    assert second["voyages_replaced"] >= 1
+    shown = set(_q(root, "SELECT voyage_id FROM latest_routes")["voyage_id"])
+    stored = set(_voyages(root)["voyage_id"])
+    assert shown == (set(routed) & stored) | {"ad-hoc"}  # a route of no stored voyage but no plan's either stays
+
+
 # ---------------------------------------------------------------------------------------------- replan, unit
 
 
