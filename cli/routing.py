@@ -74,6 +74,7 @@ def register(app: typer.Typer) -> None:
                      data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")):
         """Give the position of a voyage at sea; the next route-fleet or nightly re-plans it from there (if it is
         newer than the vessel's noon reports)."""
+        from flows.jobs.fleet import position_refused
         from flows.settings import load_settings
         from storage import fleet_store
 
@@ -82,6 +83,9 @@ def register(app: typer.Typer) -> None:
         lay = load_settings(data_root=data).layout
         if not lay.warehouse.exists() or fleet_store.load_voyages(lay.warehouse, voyage_ids=[voyage]).empty:
             fail(f"voyage {voyage} is not in {lay.warehouse}: import it with `jitroute fleet import`")
+        why = position_refused(lay.warehouse, voyage, t, lat, lon)
+        if why:
+            fail(f"voyage {voyage}: position not stored: {why}")
         fleet_store.add_position(lay.warehouse, voyage, t, lat, lon, note)
         console.print(f"voyage {voyage}: position {lat:.4f},{lon:.4f} at {str(t)[:16]} UTC stored; the next fleet run "
                       "re-plans it from there")

@@ -167,6 +167,41 @@ def test_latest_routes_drops_the_plans_of_voyages_a_re_plan_replaced(tmp_path):
     assert shown == (set(routed) & stored) | {"ad-hoc"}  # a route of no stored voyage but no plan's either stays
 
 
+@pytest.mark.parametrize("at, pos, why", [
+    ("2020-12-01T12:00", "34.3000,140.3000", "is before its departure 2020-12-01 13:00"),
+    ("2021-12-05T00:00", "13.4000,144.5000", "days after its RTA 2020-12-05 01:12"),
+    ("2020-12-01T18:00", "35.6800,139.7600", "is on land"),
+    ("2020-12-01T18:00", "20.0000,-160.0000", "NM from the departure port at 2020-12-01 13:00"),
+])
+def test_position_refuses_what_cannot_be_the_voyage_at_sea_and_stores_what_can(tmp_path, at, pos, why):
+    root, _ = _fleet_root(tmp_path)
+    r = _cli("position", "V20001", "--at", at, "--pos", pos, "--data", root)  # Tokyo Bay → Guam, 12-01 13:00
+    assert r.exit_code == 2 and "voyage V20001: position not stored:" in r.output and why in r.output, r.output
+    assert len(r.output.strip().splitlines()) == 1
+    assert _q(root, "SELECT count(*) AS n FROM voyage_positions")["n"].item() == 0
+    ok = _cli("position", "V20001", "--at", "2020-12-01T18:00", "--pos", "34.3,140.3", "--data", root)
+    assert ok.exit_code == 0 and "stored" in ok.output, ok.output
+    assert _q(root, "SELECT count(*) AS n FROM voyage_positions")["n"].item() == 1
+
+
+def test_a_position_too_far_from_that_hours_noon_report_is_refused():
+    import numpy as np
+
+    from pipeline import enroute
+
+    v = {"depart_utc": np.datetime64("2020-12-01T00:00"), "rta_utc": np.datetime64("2020-12-10T00:00"),
+         "dep_lat": 34.85, "dep_lon": 139.85}
+    report = enroute.Position(np.datetime64("2020-12-04T12:00"), 30.0, 150.0)
+    near = dict(at_sea=True, reports=[report], top_speed_kn=15.0)
+    # 4.5 days out the ship may be anywhere within 3,240 NM of port: only the noon report of that hour can tell
+    assert enroute.position_problem(v, np.datetime64("2020-12-04T12:30"), 30.2, 150.2, **near) is None
+    why = enroute.position_problem(v, np.datetime64("2020-12-04T13:00"), 34.0, 141.0, **near)
+    assert why is not None and "from the vessel's noon report at 2020-12-04 12:00" in why and "kn, more than 2" in why
+    # a report before the departure is of another voyage: not a reference
+    old = dict(near, reports=[enroute.Position(np.datetime64("2020-11-30T23:00"), 0.0, 0.0)])
+    assert enroute.position_problem(v, np.datetime64("2020-12-01T00:30"), 34.85, 139.9, **old) is None
+
+
 # ---------------------------------------------------------------------------------------------- replan, unit
 
 

@@ -79,6 +79,52 @@ def _length_nm(job: RouteJob) -> float:
         return 0.0
 
 
+def _noon_positions(db: Path, imos: list[int], since) -> dict[int, list[enroute.Position]]:
+    """The vessels' noon-report positions after `since`, by IMO."""
+    positions: dict[int, list[enroute.Position]] = {}
+    for p in fleet_store.positions_after(db, imos, since).to_dict("records"):
+        positions.setdefault(int(p["imo"]), []).append(
+            enroute.Position(np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"])))
+    return positions
+
+
+def plan_starts(s: Settings, db: Path, rows: list[dict], cycle: np.datetime64, ref: np.datetime64,
+                explicit: bool) -> list[enroute.Selection]:
+    """Where each voyage's next plan starts (enroute.select_starts) on `cycle` at `ref`, from its vessel's noon
+    reports, the operators' positions and its current plan; `rows`: voyages as plain values."""
+    # reports of the last MAX_VOYAGE_H only (a voyage is never at sea longer): not every report ever made
+    since = max(min((np.datetime64(r["depart_utc"], "s") for r in rows), default=ref),
+                ref - np.timedelta64(int(MAX_VOYAGE_H * 3600), "s")) if rows else None
+    positions = _noon_positions(db, sorted({int(r["imo"]) for r in rows}), since) if rows else {}
+    given: dict[str, list[enroute.Position]] = {}
+    for p in fleet_store.voyage_positions(db, [x["voyage_id"] for x in rows]).to_dict("records"):
+        given.setdefault(str(p["voyage_id"]), []).append(enroute.Position(
+            np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"]), enroute.START_OPERATOR))
+    r = s.routing
+    return enroute.select_starts(rows, positions, route_store.current_plan_legs(db, [x["voyage_id"] for x in rows]),
+                                 given=given, cycle_utc=cycle, ref_utc=ref, lookahead_h=r.lookahead_h,
+                                 max_report_age_h=r.max_report_age_h, arrived_within_nm=r.arrived_within_nm,
+                                 max_voyage_h=MAX_VOYAGE_H, explicit=explicit)
+
+
+DEFAULT_TOP_SPEED_KN = 15.0  # a vessel without a design speed: a merchant ship's usual top speed
+
+
+def position_refused(db: Path, voyage_id: str, at_utc, lat: float, lon: float) -> str | None:
+    """Why an operator's position of a stored voyage cannot be right (enroute.position_problem), or None: checked
+    against the land mask, the voyage's departure and RTA, and its vessel's noon reports within a day of it."""
+    from pipeline.routing.land import is_sea
+
+    v = {k: plain(x) for k, x in fleet_store.load_voyages(db, voyage_ids=[voyage_id]).iloc[0].to_dict().items()}
+    at = np.datetime64(at_utc, "s")
+    near = [p for p in _noon_positions(db, [int(v["imo"])], at - np.timedelta64(1, "D")).get(int(v["imo"]), [])
+            if p.utc <= at + np.timedelta64(1, "D")]
+    vessels = fleet_store.load_vessels(db)
+    design = vessels.loc[vessels["imo"] == int(v["imo"]), "design_speed_kn"].dropna()
+    top_kn = float(design.iloc[0]) if len(design) and float(design.iloc[0]) > 0 else DEFAULT_TOP_SPEED_KN
+    return enroute.position_problem(v, at, lat, lon, at_sea=bool(is_sea(lat, lon)), reports=near, top_speed_kn=top_kn)
+
+
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
                options: RoutingOptions, exports: bool, cycle_version: int | None = None,
                ref_utc: np.datetime64 | None = None) -> list[RouteJob]:
@@ -92,24 +138,7 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
             raise FleetRunError(f"voyage(s) {', '.join(unknown)} not in {db}: import them with `jitroute fleet import`")
     ref = np.datetime64(ref_utc if ref_utc is not None else cycle, "s")
     rows = [{k: plain(x) for k, x in v.items()} for v in table.to_dict("records")]
-    # reports of the last MAX_VOYAGE_H only (a voyage is never at sea longer): not every report ever made
-    since = max(min((np.datetime64(r["depart_utc"], "s") for r in rows), default=ref),
-                ref - np.timedelta64(int(MAX_VOYAGE_H * 3600), "s")) if rows else None
-    reports = fleet_store.positions_after(db, sorted({int(r["imo"]) for r in rows}), since) if rows else None
-    positions: dict[int, list[enroute.Position]] = {}
-    for p in (reports.to_dict("records") if reports is not None else []):
-        positions.setdefault(int(p["imo"]), []).append(
-            enroute.Position(np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"])))
-    given: dict[str, list[enroute.Position]] = {}
-    for p in fleet_store.voyage_positions(db, [x["voyage_id"] for x in rows]).to_dict("records"):
-        given.setdefault(str(p["voyage_id"]), []).append(enroute.Position(
-            np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"]), enroute.START_OPERATOR))
-    r = s.routing
-    chosen = enroute.select_starts(rows, positions, route_store.current_plan_legs(db, [x["voyage_id"] for x in rows]),
-                                   given=given,
-                                   cycle_utc=cycle, ref_utc=ref, lookahead_h=r.lookahead_h,
-                                   max_report_age_h=r.max_report_age_h, arrived_within_nm=r.arrived_within_nm,
-                                   max_voyage_h=MAX_VOYAGE_H, explicit=bool(voyage_ids))
+    chosen = plan_starts(s, db, rows, cycle, ref, explicit=bool(voyage_ids))
     for sel in chosen:
         if sel.start is None:
             LOG.warning("%s", sel.why)
