@@ -107,6 +107,24 @@ def plan_starts(s: Settings, db: Path, rows: list[dict], cycle: np.datetime64, r
                                  max_voyage_h=MAX_VOYAGE_H, explicit=explicit)
 
 
+def voyage_start(s: Settings, db: Path, voyage_id: str, cycle: np.datetime64 | None) -> dict:
+    """The stored voyage as one plan of it starts (plain values, enroute.voyage_from): at sea, from its latest
+    position, as an operator's route-fleet run of it on `cycle` would start it (at the cycle's time when the cycle
+    is older than routing.max_cycle_age_h, else now; now without a cycle); else from its port."""
+    rows = [{k: plain(x) for k, x in v.items()} for v in fleet_store.load_voyages(db, voyage_ids=[voyage_id]).to_dict("records")]
+    if not rows:
+        raise FleetRunError(f"voyage {voyage_id} not in {db}: import it with `jitroute fleet import`")
+    now = utcnow_h()
+    if cycle is None:
+        ref = now
+    else:
+        ref = np.datetime64(cycle, "s") if cycle_age_h(cycle, now) > s.routing.max_cycle_age_h else max(now, np.datetime64(cycle, "s"))
+    (sel,) = plan_starts(s, db, rows, cycle if cycle is not None else ref, ref, explicit=True)
+    if sel.start is None:
+        raise FleetRunError(sel.why)
+    return enroute.voyage_from(sel.voyage, sel.start)
+
+
 DEFAULT_TOP_SPEED_KN = 15.0  # a vessel without a design speed: a merchant ship's usual top speed
 
 
