@@ -229,3 +229,25 @@ def test_route_voyage_plans_a_ship_at_sea_from_its_latest_position_as_route_flee
     assert (first["lat0"], first["lon0"] % 360.0) == pytest.approx((lat, lon % 360.0), abs=1e-6)
     assert (first["lat0"], first["lon0"]) != pytest.approx((dep_lat, dep_lon), abs=1e-3)
     assert str(first["etd_utc"])[:16].replace("T", " ") >= str(ts)[:16]
+
+
+def test_a_plan_voyage_departing_before_the_routable_cycle_is_listed_as_needing_attention(at_sea_root, monkeypatch):
+    """Departed before the cycle, no position since, no current plan: nothing to route it from. The run stores it
+    as not routed with the reason, so its summary and its page list it, not only a log line."""
+    from flows.jobs.fleet import route_fleet_job, run_markdown
+
+    monkeypatch.setenv("JITROUTE_DASK_WORKERS", "1")
+    with duckdb.connect(str(at_sea_root / "warehouse.duckdb")) as con:
+        con.execute("INSERT INTO voyages (voyage_id, imo, dep_name, dep_lat, dep_lon, arr_name, arr_lat, arr_lon, "
+                    "depart_utc, rta_utc, status, plan_id) VALUES ('plan-x-9140671-0', 9140671, 'Busan', 34.95, 129.15, "
+                    "'Shanghai', 30.9, 122.75, '2020-11-30 20:00', '2020-12-04 00:00', 'planned', 'plan-x')")
+    try:
+        s = route_fleet_job(cycle="2020-12-01T00", data_root=str(at_sea_root), solver="gc", exports=False,
+                            nominal_utc="2020-12-01T20")
+    finally:
+        with duckdb.connect(str(at_sea_root / "warehouse.duckdb")) as con:
+            con.execute("DELETE FROM voyages WHERE voyage_id = 'plan-x-9140671-0'")
+    (p,) = [p for p in s["problems"] if p["voyage_id"] == "plan-x-9140671-0"]
+    assert p["status"] == "failed" and "not routed" in p["reason"] and "neither a position report" in p["reason"]
+    assert s["n_failed"] >= 1 and s["n"] == s["n_voyages"]
+    assert "| plan-x-9140671-0 | failed | not routed" in run_markdown(s)

@@ -24,7 +24,7 @@ import numpy as np
 from flows.jobs import dask_pool, run_pictures
 from flows.jobs.ingest import ingest_cycle
 from flows.jobs.refit import refit_job
-from flows.jobs.route_worker import copy_staged, failed_result, route_batch
+from flows.jobs.route_worker import START_COLUMNS, copy_staged, failed_result, failed_row, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline import enroute
@@ -145,10 +145,13 @@ def position_refused(db: Path, voyage_id: str, at_utc, lat: float, lon: float) -
 
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
                options: RoutingOptions, exports: bool, cycle_version: int | None = None,
-               ref_utc: np.datetime64 | None = None) -> list[RouteJob]:
+               ref_utc: np.datetime64 | None = None, unrouted: list[dict] | None = None) -> list[RouteJob]:
     """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle
     and those at sea (pipeline/enroute.py), each from where its plan starts (its port, or its latest position at
-    `ref_utc`, default the cycle's time); each carries the cycle's content version read at the start of the run."""
+    `ref_utc`, default the cycle's time); each carries the cycle's content version read at the start of the run.
+    A voyage that should be routed but has no start (it departed before the cycle with neither a position since
+    nor a current plan, e.g. a plan voyage departing before the next routable cycle) gets no job: its route row,
+    status failed with the reason, is added to `unrouted` (when given), so the run lists it as needing attention."""
     table = fleet_store.load_voyages(db, voyage_ids=voyage_ids)
     if voyage_ids:
         unknown = sorted(set(voyage_ids) - set(table["voyage_id"].astype(str)))
@@ -160,6 +163,9 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     for sel in chosen:
         if sel.start is None:
             LOG.warning("%s", sel.why)
+            if unrouted is not None:
+                row = failed_row(run_id, sel.voyage, cycle, f"not routed: {sel.why}")
+                unrouted.append({**row, **dict.fromkeys(START_COLUMNS)})
     chosen = [sel for sel in chosen if sel.start is not None]
     fingerprints = fleet_store.voyage_fingerprints(db, [sel.voyage["voyage_id"] for sel in chosen])
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
@@ -300,11 +306,12 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                     str(nominal)[:16], s.routing.max_cycle_age_h)
     options = RoutingOptions.from_settings(s.routing)
     version = cube.cycle_versions(layout.cube_store).get(c)
+    unrouted: list[dict] = []  # voyages due that cannot be routed: stored as failed, with why
     with warehouse.one_reader(layout.warehouse):  # every read of the jobs on one connection
         jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports, version,
-                          ref_utc=c if stale else max(nominal, np.datetime64(c, "s")))
+                          ref_utc=c if stale else max(nominal, np.datetime64(c, "s")), unrouted=unrouted)
     running = route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger,
-                                    n_voyages=len(jobs), nominal_utc=nominal, cycle_age_h=age_h)
+                                    n_voyages=len(jobs) + len(unrouted), nominal_utc=nominal, cycle_age_h=age_h)
     run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
     run_exports.discard_stale(running)
     from flows.jobs.warm import cold_cache_warning
@@ -317,6 +324,8 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
              len(jobs), len(jobs) - n_at_sea, n_at_sea, cycle_label(c), age_h,
              f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
+        if unrouted:
+            route_store.write_batch(layout.warehouse, layout.exports, run_id, unrouted, [])
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
                        s.dask_address, s.dask_workers, s.routing.voyages_per_task, (layout.warehouse, layout.exports),
                        (run_id, c), s.routing.store_every_s, name="route-voyages", timeout_s=s.routing.task_timeout_s)
