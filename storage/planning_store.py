@@ -89,7 +89,7 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
               replaced: list[str] | None = None) -> dict:
     """Store a plan as the active one, in one transaction: earlier active plans become superseded and the voyages
     of earlier plans in `replaced` (pipeline.planning.voyages.replan) are deleted — but never one that has sailed
-    meanwhile (status no longer planned, or a position reported at or after its departure); every other voyage is
+    meanwhile (status no longer planned, or a position reported since its departure); every other voyage is
     kept. Then the plan, its legs and unassigned contracts, and its voyages (status planned, tagged with plan_id).
     Returns {"superseded_plans": [...], "voyages_replaced": n, "voyages_kept": n, "voyages_added": n} (kept: voyages
     of earlier plans still stored)."""
@@ -100,9 +100,8 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
     with warehouse.connect(db_path) as con:
         with warehouse.transaction(con):
             older = [r[0] for r in con.execute("SELECT plan_id FROM fleet_plans WHERE status = 'active'").fetchall()]
-            unsailed = ("voyage_id IN (SELECT unnest(?)) AND plan_id IS NOT NULL AND status = 'planned' AND NOT EXISTS "
-                        "(SELECT 1 FROM voyage_positions p WHERE p.voyage_id = voyages.voyage_id "
-                        "AND p.ts_utc >= voyages.depart_utc)")
+            unsailed = ("voyage_id IN (SELECT unnest(?)) AND plan_id IS NOT NULL AND status = 'planned' AND "
+                        f"{_REPORTED_SQL.format(v='voyages')} IS NULL")
             ids = list(replaced or [])
             n_replaced = con.execute(f"SELECT count(*) FROM voyages WHERE {unsailed}", [ids]).fetchall()[0][0]
             con.execute(f"DELETE FROM voyages WHERE {unsailed}", [ids])
@@ -143,17 +142,22 @@ def load_planning_fleet(db_path: Path) -> tuple[pd.DataFrame, dict[int, dict]]:
         return df, _active_models(con)
 
 
+# The newest position reported of voyage row {v} since its departure: an operator's position of it, or a noon
+# report of its vessel between its departure and its RTA (route-fleet takes both as the ship at sea); NULL: none
+_REPORTED_SQL = ("greatest((SELECT max(p.ts_utc) FROM voyage_positions p WHERE p.voyage_id = {v}.voyage_id "
+                 "AND p.ts_utc >= {v}.depart_utc), (SELECT max(n.ts_utc) FROM noon_reports n WHERE n.imo = {v}.imo "
+                 "AND n.ts_utc > {v}.depart_utc AND n.ts_utc <= {v}.rta_utc AND n.lat IS NOT NULL))")
+
+
 def voyages_for_replan(db_path: Path) -> pd.DataFrame:
     """Every stored voyage as a re-plan weighs it (pipeline.planning.voyages.replan): voyage_id, imo, plan_id,
     status, depart_utc, rta_utc, arr_name, arr_lat, arr_lon; contract_code and kind of the plan leg that made it
-    (NULL for voyages from a voyages file); the vessel's port_hours; reported_utc, the newest operator position of
-    the voyage at or after its departure (NULL: none)."""
+    (NULL for voyages from a voyages file); the vessel's port_hours; reported_utc, the newest position reported
+    since its departure (an operator's, or a noon report of its vessel before its RTA; NULL: none)."""
     with warehouse.connect(db_path, write=False) as con:
         return con.execute(
             "SELECT v.voyage_id, v.imo, v.plan_id, v.status, v.depart_utc, v.rta_utc, v.arr_name, v.arr_lat, v.arr_lon, "
-            "l.contract_code, l.kind, a.port_hours, "
-            "(SELECT max(p.ts_utc) FROM voyage_positions p WHERE p.voyage_id = v.voyage_id AND p.ts_utc >= v.depart_utc) "
-            "AS reported_utc "
+            f"l.contract_code, l.kind, a.port_hours, {_REPORTED_SQL.format(v='v')} AS reported_utc "
             "FROM voyages v LEFT JOIN fleet_plan_legs l ON l.voyage_id = v.voyage_id AND l.plan_id = v.plan_id "
             "LEFT JOIN vessel_availability a ON a.imo = v.imo ORDER BY v.imo, v.depart_utc").fetchdf()
 

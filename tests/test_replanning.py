@@ -128,6 +128,23 @@ def test_the_planner_does_not_book_a_vessel_during_its_voyages_from_the_voyages_
             assert first["dep_name"] == last_file["arr_name"]  # from where that voyage ends
 
 
+def test_a_noon_report_since_its_departure_makes_a_plan_voyage_sailed_whatever_the_as_of(tmp_path):
+    from storage import warehouse
+
+    root, files = _fleet_root(tmp_path)
+    _plan(root, files, "2020-12-01T00:00Z", first=True)
+    voy = _voyages(root).dropna(subset=["plan_id"]).sort_values("depart_utc")
+    leg = voy.iloc[-1]  # the last plan voyage: a re-plan as of just after the first plan keeps nothing else
+    at = pd.Timestamp(leg["depart_utc"]) + (pd.Timestamp(leg["rta_utc"]) - pd.Timestamp(leg["depart_utc"])) / 2
+    with warehouse.connect(root / "warehouse.duckdb") as con:  # its vessel's noon report half way
+        con.execute("INSERT INTO noon_reports (imo, ts_utc, lat, lon) VALUES (?, ?, 30.0, 125.0)",
+                    [int(leg["imo"]), at.to_pydatetime()])
+    second = _plan(root, files, "2020-12-01T00:01Z")
+    assert leg["voyage_id"] in set(_voyages(root)["voyage_id"])
+    if pd.notna(leg["contract_code"]):
+        assert leg["contract_code"] in {r["code"] for r in second["committed"]}
+
+
 def test_a_voyages_file_cannot_replace_a_plan_voyage_by_reusing_its_id(tmp_path):
     import shutil
 

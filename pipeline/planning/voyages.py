@@ -134,11 +134,11 @@ def replan(voyages: pd.DataFrame, as_of: pd.Timestamp) -> Replan:
 
     `voyages`: every stored voyage (storage.planning_store.voyages_for_replan): voyage_id, imo, plan_id (NULL: from a
     voyages file), status, depart_utc, rta_utc, arr_name, arr_lat, arr_lon, contract_code and kind (of the plan leg
-    that made it), port_hours (of the vessel), reported_utc (newest operator position at or after its departure).
+    that made it), port_hours (of the vessel), reported_utc (newest position reported since its departure).
 
-    A plan voyage has sailed when its departure is at or before `as_of`, an operator gave a position of it after its
-    departure (whatever `as_of` says: the report is a fact, the planned time a wish), or its status is no longer
-    "planned". A contract is committed once any voyage serving it has sailed (the ballast towards its load port or
+    A plan voyage has sailed when its departure is at or before `as_of`, a position of it was reported since its
+    departure (an operator's, or a noon report of its vessel before its RTA: whatever `as_of` says, the report is a
+    fact, the planned time a wish), or its status is no longer "planned". A contract is committed once any voyage serving it has sailed (the ballast towards its load port or
     its laden leg): every voyage of it is kept — the laden leg too, though it departs later — and it is not planned
     again. Every other plan voyage is replaced by the new plan. Voyages from a voyages file are always kept.
 
