@@ -236,6 +236,7 @@ def test_replan_keeps_every_voyage_of_a_contract_under_way_and_what_a_position_s
         _row("l2", 2, "p", "2020-12-07", "2020-12-08", "K2", "laden", arr="E"),
         _row("l3", 2, "p", "2020-12-10", "2020-12-11", "K3", "laden"),
         _row("f1", 3, None, "2020-12-01", "2020-12-09", arr="Guam"),
+        _row("f2", 4, None, "2020-12-01", "2020-12-04", arr=None),
     ])
     out = replan(rows, pd.Timestamp("2020-12-02T12"))
     assert set(out.committed) == {"K1", "K2"} and "position reported 2020-12-05 06:00" in out.committed["K2"]
@@ -243,11 +244,13 @@ def test_replan_keeps_every_voyage_of_a_contract_under_way_and_what_a_position_s
     assert out.busy[1][:2] == (pd.Timestamp("2020-12-06T12"), "D")  # discharge + 12 h in port
     assert out.busy[2][:2] == (pd.Timestamp("2020-12-08T12"), "E")
     assert out.busy[3][:2] == (pd.Timestamp("2020-12-09T12"), "Guam")
+    assert out.busy[4] == (pd.Timestamp("2020-12-04T12"), "arrival of f2", 1.0, 2.0)  # a voyage without a port name
     # as of before everything, with no report: nothing of a plan has sailed
     early = replan(rows.assign(reported_utc=pd.NaT), pd.Timestamp("2020-12-01"))
     assert early.committed == {} and early.replaced == ["b1", "b2", "l1", "l2", "l3"]
     # a voyage no longer "planned" (e.g. at sea by the voyages file) has sailed
-    assert "K3" in replan(rows.assign(status=["planned"] * 4 + ["at sea", "planned"]), pd.Timestamp("2020-12-01")).committed
+    at_sea = rows.assign(status=["planned"] * 4 + ["at sea", "planned", "planned"])
+    assert "K3" in replan(at_sea, pd.Timestamp("2020-12-01")).committed
 
 
 @pytest.mark.parametrize("as_of", ["2020-12-07", "2020-12-20"])

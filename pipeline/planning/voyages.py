@@ -172,7 +172,9 @@ def replan(voyages: pd.DataFrame, as_of: pd.Timestamp) -> Replan:
             continue
         imo = int(r["imo"])
         if imo not in busy or free > busy[imo][0]:
-            busy[imo] = (free, str(r["arr_name"]), float(r["arr_lat"]), float(r["arr_lon"]))
+            named = isinstance(r["arr_name"], str) and r["arr_name"].strip()
+            port = r["arr_name"] if named else f"arrival of {r['voyage_id']}"
+            busy[imo] = (free, port, float(r["arr_lat"]), float(r["arr_lon"]))
     return Replan(done, sorted(v.loc[kept & from_plan, "voyage_id"].astype(str)),
                   sorted(v.loc[~kept, "voyage_id"].astype(str)), busy)
 
