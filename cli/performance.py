@@ -62,6 +62,7 @@ def register(app: typer.Typer) -> None:
                     data_root=str(data) if data else None, **kw)
         console.print(f"{file}: {c['rows']} rows → {c['inserted']} imported, {c['already_present']} already present, "
                       + (f"{c['replaced']} replaced (old ones in noon_reports_history), " if c.get("replaced") else "")
+                      + (f"{c['excluded']} excluded earlier (kept out: `noon exclude`), " if c.get("excluded") else "")
                       + f"{c['rejected']} rejected")
         if c["reasons"] or c["conflicts"]:
             t = Table(title="Rejected rows by reason")
@@ -81,15 +82,20 @@ def register(app: typer.Typer) -> None:
                      data: Optional[Path] = DataOpt):
         """Take a vessel's reports of a period out of the refit (e.g. a broken speed log); they are kept in
         noon_reports_history with the reason."""
-        import pandas as pd
+        import re
 
         from flows.jobs.refit import UnknownVesselError, exclude_noon_period
+        from pipeline.timestamps import parse_iso_utc
 
-        try:
-            t0, t1 = (pd.Timestamp(x.strip()) for x in (from_, to))
-        except ValueError:
-            fail(f"--from {from_!r} / --to {to!r}: not times; use ISO 8601 such as 2021-03-01T00")
-        t0, t1 = (t.tz_convert("UTC").tz_localize(None) if t.tzinfo else t for t in (t0, t1))
+        times = []
+        for opt, text in (("--from", from_), ("--to", to)):  # ISO 8601 only: 01/06/2020 is refused, never guessed
+            hour_only = re.fullmatch(r"\d{4}-\d{2}-\d{2}T\d{2}", text.strip())  # 2021-03-01T00, as the help says
+            t, why = parse_iso_utc(text.strip() + (":00" if hour_only else ""))
+            if t is None:
+                fail(f"{opt} {text!r}: {why}; use ISO 8601 (UTC unless an offset is given), e.g. 2021-03-01 or "
+                     "2021-03-01T00:00")
+            times.append(t)
+        t0, t1 = times
         if t1 < t0:
             fail(f"--to {to} is before --from {from_}")
         if not reason.strip():

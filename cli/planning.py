@@ -48,7 +48,7 @@ def show_plan(s: dict) -> None:
     for line in s["no_sea_route"]:
         console.print(f"[yellow]no sea route:[/] {line}")
     console.print(f"voyages: {s['voyages_added']} planned voyages added; {s['voyages_replaced']} unsailed voyages of "
-                  f"superseded plans replaced, {s['voyages_kept']} sailed ones kept")
+                  f"superseded plans replaced, {s['voyages_kept']} of earlier plans kept (sailed, or of a cargo under way)")
     if s.get("gantt_png"):
         console.print(f"gantt: {s['gantt_png']}")
 

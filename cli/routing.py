@@ -75,6 +75,7 @@ def register(app: typer.Typer) -> None:
                      data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")):
         """Give the position of a voyage at sea; the next route-fleet or nightly re-plans it from there (if it is
         newer than the vessel's noon reports)."""
+        from flows.jobs.fleet import position_refused
         from flows.settings import load_settings
         from pipeline.validate_ids import name_problem
         from storage import fleet_store
@@ -86,6 +87,9 @@ def register(app: typer.Typer) -> None:
         lay = load_settings(data_root=data).layout
         if not lay.warehouse.exists() or fleet_store.load_voyages(lay.warehouse, voyage_ids=[voyage]).empty:
             fail(f"voyage {voyage} is not in {lay.warehouse}: import it with `jitroute fleet import`")
+        why = position_refused(lay.warehouse, voyage, t, lat, lon)
+        if why:
+            fail(f"voyage {voyage}: position not stored: {why}")
         fleet_store.add_position(lay.warehouse, voyage, t, lat, lon, note)
         console.print(f"voyage {voyage}: position {lat:.4f},{lon:.4f} at {str(t)[:16]} UTC stored; the next fleet run "
                       "re-plans it from there")
@@ -185,6 +189,19 @@ def register(app: typer.Typer) -> None:
             if c is None:
                 fail(f"no complete forecast cycle in {lay.weather_cube_url}: run `jitroute ingest --cycle …` (or use --calm)")
             version = cube_window.cycle_versions(lay.cube_store).get(c)
+        if voyage:  # a ship at sea is planned from its latest position, as route-fleet plans it
+            from flows.jobs.fleet import FleetRunError, voyage_start
+
+            try:
+                v = {**voyage_start(s, lay.warehouse, voyage, None if c is None else np.datetime64(c, "s")),
+                     "rpm_options": v["rpm_options"]}  # as --rpm may have set them
+            except FleetRunError as exc:
+                fail(str(exc))
+            if v.get("start_kind") not in (None, "port"):
+                _say(as_json, f"voyage {voyage} is at sea: planned from its {v['start_kind']} at "
+                              f"{v['dep_lat']:.4f},{v['dep_lon']:.4f}, {str(v['depart_utc'])[:16]} UTC"
+                              + (f" ({v['start_note']})" if v.get("start_note") else ""))
+        if not calm:
             cube_path, c = lay.weather_cube_url, str(np.datetime_as_string(np.datetime64(c, "s")))
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed,

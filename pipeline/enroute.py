@@ -199,3 +199,40 @@ def select_starts(voyages: list[dict], positions: dict[int, list[Position]], pla
                                  f"voyage {vid} departed {label(dep)} and has neither a position report since nor a "
                                  "current plan: import its noon reports to re-plan it from its position"))
     return out
+
+
+# An operator's position is refused beyond this many hours after the voyage's RTA: the voyage has ended (and a
+# position then would keep re-planning a ship that is no longer on it)
+POSITION_AFTER_RTA_MAX_H = 72.0
+# ... and when reaching it from the nearest known position in time (the departure port at departure, a noon report
+# of the vessel) needs more than this many times the vessel's design speed (at least an hour apart)
+POSITION_MAX_SPEED_FACTOR = 2.0
+
+
+def position_problem(voyage: dict, at_utc, lat: float, lon: float, *, at_sea: bool, reports: list[Position],
+                     top_speed_kn: float) -> str | None:
+    """Why an operator's position of `voyage` at `at_utc` cannot be right (None: it can): before the departure,
+    more than POSITION_AFTER_RTA_MAX_H after the RTA, on land (`at_sea` False, from the land mask), or farther from
+    the known position nearest in time — the departure port at the departure time, or one of `reports` (noon
+    reports of the vessel) — than POSITION_MAX_SPEED_FACTOR × `top_speed_kn` could sail in the time between."""
+    at, dep, rta = _t(at_utc), _t(voyage["depart_utc"]), _t(voyage["rta_utc"])
+    if at < dep:
+        return (f"{label(at)} is before its departure {label(dep)}: a position is of a voyage at sea; give a time "
+                "after the departure")
+    if _hours(rta, at) > POSITION_AFTER_RTA_MAX_H:
+        return (f"{label(at)} is {_hours(rta, at) / 24:.1f} days after its RTA {label(rta)}: the voyage has ended "
+                f"(more than {POSITION_AFTER_RTA_MAX_H:g} h after the RTA); check the date")
+    if not at_sea:
+        return f"{lat:.4f},{lon:.4f} is on land (global land mask): check the position (LAT,LON order, signs)"
+    known = [Position(dep, float(voyage["dep_lat"]), float(voyage["dep_lon"]), START_PORT)] + \
+        [p for p in reports if _t(p.utc) >= dep]
+    ref = min(known, key=lambda p: abs(_hours(p.utc, at)))
+    hours = abs(_hours(ref.utc, at))
+    dist = float(gc_distance_nm(ref.lat, ref.lon, lat, lon))
+    limit = POSITION_MAX_SPEED_FACTOR * top_speed_kn * max(hours, 1.0)
+    if dist > limit:
+        what = "the departure port" if ref.kind == START_PORT else "the vessel's noon report"
+        return (f"{lat:.4f},{lon:.4f} is {dist:,.0f} NM from {what} at {label(ref.utc)} ({ref.lat:.2f},{ref.lon:.2f}), "
+                f"{hours:.1f} h apart: {dist / max(hours, 1.0):.0f} kn, more than {POSITION_MAX_SPEED_FACTOR:g} × the "
+                f"vessel's design speed {top_speed_kn:g} kn; check the position and the time")
+    return None

@@ -151,8 +151,10 @@ def _rpm_options(value) -> tuple[list[float] | None, str | None]:
 
 
 def validate_voyages(raw: pd.DataFrame, known_imos: set[int] | None = None,
-                     source: str = "") -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(good voyage rows, typed: timestamps naive UTC, rpm_options lists; rejected rows with `raw`, `reason`)."""
+                     source: str = "", plan_voyages: dict[str, str] | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(good voyage rows, typed: timestamps naive UTC, rpm_options lists; rejected rows with `raw`, `reason`).
+    `plan_voyages` (voyage_id → plan_id of the voyages fleet plans made): a row with one of those IDs is refused —
+    it would silently replace the plan's voyage (and the cargo it carries); plan voyages change by re-planning."""
     absent = [c for c in VOYAGE_REQUIRED if c not in raw.columns]
     if absent:
         raise FleetFileError(f"{source or 'voyages file'}: required columns missing: {', '.join(absent)}")
@@ -187,6 +189,11 @@ def validate_voyages(raw: pd.DataFrame, known_imos: set[int] | None = None,
     _clean_text(df, [c for c in df.columns if c not in ("voyage_id", "imo", "depart_utc", "rta_utc", "rpm_options",
                                                         *VOYAGE_NUMERIC)], r)
     r.flag(df["voyage_id"].duplicated(keep="first") & r.reason.isna(), "duplicate voyage_id in file")
+    if plan_voyages:
+        r.flag_each(df["voyage_id"].map(lambda v: f"voyage_id {v} is a voyage of fleet plan {plan_voyages[v]}: a voyages "
+                                                  "file may not replace it; give this voyage another ID (plan voyages "
+                                                  "change by re-planning, `jitroute plan fleet`)"
+                                        if v in plan_voyages else pd.NA))
     for c in ("dep_name", "arr_name", "status"):
         if c in df.columns:
             df[c] = df[c].where(~_is_empty(df[c]), None)

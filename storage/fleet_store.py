@@ -60,9 +60,22 @@ def import_voyages(db_path: Path, df: pd.DataFrame, rejected: pd.DataFrame | Non
                          else list(map(float, r)) if not isinstance(r, str)
                          else [float(x) for x in r.strip("[]").split(",") if x.strip()]
                          for r in df["rpm_options"]]
+    taken = sorted(set(df["voyage_id"]) & set(plan_voyage_ids(db_path)))
+    if taken:  # validation refuses these (validate_voyages' plan_voyages); never replace a plan's voyage here
+        raise ValueError(f"voyage(s) {', '.join(taken)} are voyages of a fleet plan: a voyages file may not replace "
+                         "them; give the imported voyages other IDs")
     n = _upsert(db_path, "voyages", df, VOYAGE_COLUMNS, "voyage_id")
     _store_rejected(db_path, "voyages_rejected", rejected, ["voyage_id", "imo"])
     return n
+
+
+def plan_voyage_ids(db_path: Path) -> dict[str, str]:
+    """voyage_id → plan_id of the stored voyages a fleet plan made."""
+    if not Path(db_path).exists():
+        return {}
+    with warehouse.connect(db_path, write=False) as con:
+        return {str(v): str(p) for v, p in con.execute(
+            "SELECT voyage_id, plan_id FROM voyages WHERE plan_id IS NOT NULL").fetchall()}
 
 
 def _store_rejected(db_path: Path, table: str, rejected: pd.DataFrame | None, keys: list[str]) -> None:
@@ -101,7 +114,8 @@ def import_noon(db_path: Path, good: pd.DataFrame, rejected: pd.DataFrame, *, re
     """Insert validated rows; rows identical to stored ones are no-ops, conflicting ones are rejected — or, with
     `replace`, replace the stored ones, which are kept in `noon_reports_history` ("replaced by <source_file>").
 
-    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts, replaced, duplicates_in_file.
+    Returns counts: inserted, already_present, rejected (incl. conflicts), conflicts, replaced, excluded (reports an
+    operator excluded, kept out), duplicates_in_file.
     """
     return import_noon_chunks(db_path, [(good, rejected)], replace=replace)
 
@@ -125,8 +139,10 @@ def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.Da
     `duplicate timestamp in file`, as within a chunk. With `replace`, a row differing from the stored report of its
     vessel and time replaces it (the stored one is kept in noon_reports_history).
 
+    A report of a (vessel, time) an operator excluded (`exclude_noon`) is not stored again: counted as `excluded`.
+
     Returns counts: inserted, already_present, rejected (incl. conflicts and duplicates), conflicts, replaced,
-    duplicates_in_file.
+    excluded, duplicates_in_file.
     """
     same = " AND ".join(f"(n.{c} IS NOT DISTINCT FROM g.{c})" for c in _NOON_VALUES)
     cols = ", ".join(NOON.names)
@@ -156,6 +172,16 @@ def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.Da
             if len(dups):
                 con.execute("DELETE FROM stage WHERE seq IN (SELECT seq FROM stage QUALIFY "
                             "row_number() OVER (PARTITION BY imo, ts_utc ORDER BY seq) > 1)")
+            # a report an operator excluded (noon_reports_history "excluded: …") stays out when the file is
+            # imported again (a cumulative noon file holds it still), corrected or not: the exclusion is of the period
+            n_excluded = con.execute(
+                "SELECT count(*) FROM stage g WHERE EXISTS (SELECT 1 FROM noon_reports_history h WHERE h.imo = g.imo "
+                "AND h.ts_utc = g.ts_utc AND h.reason LIKE 'excluded:%') AND NOT EXISTS "
+                "(SELECT 1 FROM noon_reports n WHERE n.imo = g.imo AND n.ts_utc = g.ts_utc)").fetchall()[0][0]
+            if n_excluded:
+                con.execute("DELETE FROM stage g WHERE EXISTS (SELECT 1 FROM noon_reports_history h WHERE h.imo = g.imo "
+                            "AND h.ts_utc = g.ts_utc AND h.reason LIKE 'excluded:%') AND NOT EXISTS "
+                            "(SELECT 1 FROM noon_reports n WHERE n.imo = g.imo AND n.ts_utc = g.ts_utc)")
             g = "stage g"
             present = con.execute(f"SELECT count(*) FROM {g} JOIN noon_reports n USING (imo, ts_utc) WHERE {same}").fetchall()[0][0]
             conflicts = con.execute(f"SELECT g.* EXCLUDE (seq) FROM {g} JOIN noon_reports n USING (imo, ts_utc) "
@@ -189,7 +215,7 @@ def import_noon_chunks(db_path: Path, chunks: Iterable[tuple[pd.DataFrame, pd.Da
         con.execute("DROP TABLE stage_rejected")
     return {"inserted": int(n_good - present - len(conflicts) - replaced), "already_present": int(present),
             "rejected": n_rejected, "conflicts": len(conflicts), "replaced": int(replaced),
-            "duplicates_in_file": len(dups)}
+            "excluded": int(n_excluded), "duplicates_in_file": len(dups)}
 
 
 def _stage_noon_rejected(con, rejected: pd.DataFrame) -> None:

@@ -85,12 +85,14 @@ def save_port_distances(db_path: Path, rows: pd.DataFrame) -> int:
     return len(df)
 
 
-def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.DataFrame, voyages: pd.DataFrame) -> dict:
-    """Store a plan as the active one, in one transaction: earlier active plans become superseded and their voyages
-    that have not sailed (status planned, departing after the plan's as_of) are deleted; voyages at sea or done are
+def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.DataFrame, voyages: pd.DataFrame,
+              replaced: list[str] | None = None) -> dict:
+    """Store a plan as the active one, in one transaction: earlier active plans become superseded and the voyages
+    of earlier plans in `replaced` (pipeline.planning.voyages.replan) are deleted — but never one that has sailed
+    meanwhile (status no longer planned, or a position reported since its departure); every other voyage is
     kept. Then the plan, its legs and unassigned contracts, and its voyages (status planned, tagged with plan_id).
-    Returns {"superseded_plans": [...], "voyages_replaced": n, "voyages_kept": n, "voyages_added": n}."""
-    as_of = pd.Timestamp(plan["as_of_utc"])
+    Returns {"superseded_plans": [...], "voyages_replaced": n, "voyages_kept": n, "voyages_added": n} (kept: voyages
+    of earlier plans still stored)."""
     row = pd.DataFrame([{**plan, "created_at": _utcnow(), "status": "active", "superseded_at": None}]).reindex(
         columns=PLAN_COLUMNS)
     voyages = voyages.copy()
@@ -98,14 +100,13 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
     with warehouse.connect(db_path) as con:
         with warehouse.transaction(con):
             older = [r[0] for r in con.execute("SELECT plan_id FROM fleet_plans WHERE status = 'active'").fetchall()]
-            replaced = kept = 0
+            unsailed = ("voyage_id IN (SELECT unnest(?)) AND plan_id IS NOT NULL AND status = 'planned' AND "
+                        f"{_REPORTED_SQL.format(v='voyages')} IS NULL")
+            ids = list(replaced or [])
+            n_replaced = con.execute(f"SELECT count(*) FROM voyages WHERE {unsailed}", [ids]).fetchall()[0][0]
+            con.execute(f"DELETE FROM voyages WHERE {unsailed}", [ids])
+            kept = con.execute("SELECT count(*) FROM voyages WHERE plan_id IS NOT NULL").fetchall()[0][0]
             if older:
-                cond = "plan_id IN (SELECT unnest(?))"
-                replaced = con.execute(f"SELECT count(*) FROM voyages WHERE {cond} AND status = 'planned' AND depart_utc > ?",
-                                       [older, as_of]).fetchone()[0]
-                kept = con.execute(f"SELECT count(*) FROM voyages WHERE {cond} AND NOT (status = 'planned' AND depart_utc > ?)",
-                                   [older, as_of]).fetchone()[0]
-                con.execute(f"DELETE FROM voyages WHERE {cond} AND status = 'planned' AND depart_utc > ?", [older, as_of])
                 con.execute("UPDATE fleet_plans SET status = 'superseded', superseded_at = ? WHERE plan_id IN (SELECT unnest(?))",
                             [_utcnow(), older])
             con.register("p", row)
@@ -121,9 +122,13 @@ def save_plan(db_path: Path, plan: dict, legs: pd.DataFrame, unassigned: pd.Data
             if len(voyages):
                 v = voyages.reindex(columns=PLANNED_VOYAGE_COLUMNS)
                 con.register("v", v)
-                con.execute("DELETE FROM voyages WHERE voyage_id IN (SELECT voyage_id FROM v)")
+                taken = [r[0] for r in con.execute("SELECT voyage_id FROM voyages WHERE voyage_id IN (SELECT voyage_id FROM v)"
+                                                   ).fetchall()]
+                if taken:  # plan ids are random: only a voyages file could have taken one, and it is not overwritten
+                    raise ValueError(f"voyage id(s) {', '.join(taken)} of plan {plan['plan_id']} already stored: "
+                                     "plan again (a new plan id is drawn)")
                 con.execute(f"INSERT INTO voyages ({', '.join(PLANNED_VOYAGE_COLUMNS)}) SELECT * FROM v")
-    return {"superseded_plans": older, "voyages_replaced": int(replaced), "voyages_kept": int(kept),
+    return {"superseded_plans": older, "voyages_replaced": int(n_replaced), "voyages_kept": int(kept),
             "voyages_added": len(voyages)}
 
 
@@ -142,14 +147,34 @@ def load_planning_fleet(db_path: Path) -> tuple[pd.DataFrame, dict[int, dict]]:
         return df, _active_models(con)
 
 
-def active_plan_legs(db_path: Path) -> pd.DataFrame:
-    """Legs of the active plan (none: empty), with the vessel's port_hours."""
-    if not Path(db_path).exists():
-        return pd.DataFrame(columns=[*LEG_COLUMNS, "port_hours"])
+# The newest position reported of voyage row {v} since its departure: an operator's position of it, or a noon
+# report of its vessel between its departure and its RTA (route-fleet takes both as the ship at sea); NULL: none
+_REPORTED_SQL = ("greatest((SELECT max(p.ts_utc) FROM voyage_positions p WHERE p.voyage_id = {v}.voyage_id "
+                 "AND p.ts_utc >= {v}.depart_utc), (SELECT max(n.ts_utc) FROM noon_reports n WHERE n.imo = {v}.imo "
+                 "AND n.ts_utc > {v}.depart_utc AND n.ts_utc <= {v}.rta_utc AND n.lat IS NOT NULL))")
+
+
+def voyages_for_replan(db_path: Path) -> pd.DataFrame:
+    """Every stored voyage as a re-plan weighs it (pipeline.planning.voyages.replan): voyage_id, imo, plan_id,
+    status, depart_utc, rta_utc, arr_name, arr_lat, arr_lon; contract_code and kind of the plan leg that made it
+    (NULL for voyages from a voyages file); the vessel's port_hours; reported_utc, the newest position reported
+    since its departure (an operator's, or a noon report of its vessel before its RTA; NULL: none)."""
     with warehouse.connect(db_path, write=False) as con:
-        return con.execute("SELECT l.*, a.port_hours FROM fleet_plan_legs l JOIN fleet_plans p USING (plan_id) "
-                           "LEFT JOIN vessel_availability a USING (imo) WHERE p.status = 'active' "
-                           "ORDER BY l.imo, l.seq").fetchdf()
+        return con.execute(
+            "SELECT v.voyage_id, v.imo, v.plan_id, v.status, v.depart_utc, v.rta_utc, v.arr_name, v.arr_lat, v.arr_lon, "
+            f"l.contract_code, l.kind, a.port_hours, {_REPORTED_SQL.format(v='v')} AS reported_utc "
+            "FROM voyages v LEFT JOIN fleet_plan_legs l ON l.voyage_id = v.voyage_id AND l.plan_id = v.plan_id "
+            "LEFT JOIN vessel_availability a ON a.imo = v.imo ORDER BY v.imo, v.depart_utc").fetchdf()
+
+
+def active_plan_as_of(db_path: Path) -> tuple[str, pd.Timestamp] | None:
+    """(plan_id, as_of_utc) of the active plan, or None."""
+    if not Path(db_path).exists():
+        return None
+    with warehouse.connect(db_path, write=False) as con:
+        row = con.execute("SELECT plan_id, as_of_utc FROM fleet_plans WHERE status = 'active' "
+                          "ORDER BY as_of_utc DESC LIMIT 1").fetchall()
+    return None if not row else (str(row[0][0]), pd.Timestamp(row[0][1]))
 
 
 def load_plan(db_path: Path, plan_id: str) -> tuple[dict, pd.DataFrame, pd.DataFrame]:

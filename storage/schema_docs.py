@@ -55,7 +55,8 @@ VIEWS: dict[str, tuple[str, dict[str, str]]] = {
     "hull_performance": ("hull and propeller performance per vessel and month, with the trend", _view_of(
         {k: v for k, v in _HULL.items() if k != "computed_at"}, vessel_name=_VESSELS["name"],
         trend_pct_per_month="least-squares slope of the vessel's monthly speed loss, percent per month")),
-    "latest_routes": ("the plan to sail per voyage: its newest plan, flagged when a newer attempt failed", _view_of(
+    "latest_routes": ("the plan to sail per voyage: its newest plan, flagged when a newer attempt failed (none for a "
+                      "voyage a fleet re-plan replaced)", _view_of(
         _ROUTES, dep_name=_VOYAGES["dep_name"], arr_name=_VOYAGES["arr_name"], vessel_name=_VESSELS["name"],
         newer_attempt_failed="true when a newer attempt made no plan (this one is still the plan)",
         newer_attempt_run_id="run of that newer attempt", newer_attempt_status="status of that newer attempt",

@@ -47,7 +47,10 @@ LATEST_ROUTES_VIEW = """
         FROM shown s
         JOIN newest n USING (voyage_id)
         LEFT JOIN voyages v USING (voyage_id)
-        LEFT JOIN vessels x ON x.imo = s.imo;
+        LEFT JOIN vessels x ON x.imo = s.imo
+        -- a voyage a fleet re-plan replaced (deleted) has no plan to sail any more
+        WHERE v.voyage_id IS NOT NULL
+           OR s.voyage_id NOT IN (SELECT voyage_id FROM fleet_plan_legs WHERE voyage_id IS NOT NULL);
 """
 
 

@@ -207,3 +207,47 @@ def test_jitroute_position_stores_an_operators_position(at_sea_root):
     bad = jitroute("position", "NOPE", "--at", "2020-12-01T18", "--pos", "24.5,142.0", "--data", str(at_sea_root),
                    env=tagged_env(new_tag()), timeout_s=120)
     assert bad.returncode == 2 and "voyage NOPE is not in" in bad.stderr
+
+
+def test_route_voyage_plans_a_ship_at_sea_from_its_latest_position_as_route_fleet_does(at_sea_root):
+    """`route --voyage` of the ship at sea, on the cycle (too old now, so at the cycle's time, as an operator's
+    route-fleet run): from its newest noon report before then, not from its departure port."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    (dep_lat, dep_lon, dep), = _sql(at_sea_root, "SELECT dep_lat, dep_lon, depart_utc FROM voyages WHERE voyage_id = 'V20001'")
+    lat, lon, ts = _sql(at_sea_root, f"SELECT lat, lon, ts_utc FROM noon_reports WHERE imo = 9140607 AND ts_utc > '{dep}' "
+                                     "AND ts_utc <= '2020-12-01 00:00' ORDER BY ts_utc DESC LIMIT 1")[0]
+    r = CliRunner().invoke(app, ["route", "--voyage", "V20001", "--cycle", "2020-12-01T00", "--solver", "gc", "--json",
+                                 "--data", str(at_sea_root)])
+    assert r.exit_code in (0, 3), r.output
+    plan = json.loads(r.output[r.output.index("{"):])
+    first = plan["legs"][0]
+    assert (first["lat0"], first["lon0"] % 360.0) == pytest.approx((lat, lon % 360.0), abs=1e-6)
+    assert (first["lat0"], first["lon0"]) != pytest.approx((dep_lat, dep_lon), abs=1e-3)
+    assert str(first["etd_utc"])[:16].replace("T", " ") >= str(ts)[:16]
+
+
+def test_a_plan_voyage_departing_before_the_routable_cycle_is_listed_as_needing_attention(at_sea_root, monkeypatch):
+    """Departed before the cycle, no position since, no current plan: nothing to route it from. The run stores it
+    as not routed with the reason, so its summary and its page list it, not only a log line."""
+    from flows.jobs.fleet import route_fleet_job, run_markdown
+
+    monkeypatch.setenv("JITROUTE_DASK_WORKERS", "1")
+    with duckdb.connect(str(at_sea_root / "warehouse.duckdb")) as con:
+        con.execute("INSERT INTO voyages (voyage_id, imo, dep_name, dep_lat, dep_lon, arr_name, arr_lat, arr_lon, "
+                    "depart_utc, rta_utc, status, plan_id) VALUES ('plan-x-9140671-0', 9140671, 'Busan', 34.95, 129.15, "
+                    "'Shanghai', 30.9, 122.75, '2020-11-30 20:00', '2020-12-04 00:00', 'planned', 'plan-x')")
+    try:
+        s = route_fleet_job(cycle="2020-12-01T00", data_root=str(at_sea_root), solver="gc", exports=False,
+                            nominal_utc="2020-12-01T20")
+    finally:
+        with duckdb.connect(str(at_sea_root / "warehouse.duckdb")) as con:
+            con.execute("DELETE FROM voyages WHERE voyage_id = 'plan-x-9140671-0'")
+    (p,) = [p for p in s["problems"] if p["voyage_id"] == "plan-x-9140671-0"]
+    assert p["status"] == "failed" and "not routed" in p["reason"] and "neither a position report" in p["reason"]
+    assert s["n_failed"] >= 1 and s["n"] == s["n_voyages"]
+    assert "| plan-x-9140671-0 | failed | not routed" in run_markdown(s)

@@ -317,6 +317,30 @@ def test_noon_exclude_from_the_command_line(tmp_path, monkeypatch):
         assert con.execute("SELECT count(*) FROM noon_reports").fetchone() == (18,)
 
 
+def test_noon_exclude_refuses_day_month_dates_and_a_re_import_of_the_file_does_not_undo_it(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "400")
+    data, csv = _gas_nirvana_warehouse(tmp_path)
+    r = CliRunner()
+    assert r.invoke(app, ["noon", "import", str(csv), "--data", str(data)]).exit_code == 0
+    for a, b in (("01/06/2020", "10/06/2020"), ("2020-01-31T20:00Z", "31.01.2020")):  # never read month-first
+        res = r.invoke(app, ["noon", "exclude", "--imo", "9140607", "--from", a, "--to", b, "--reason", "x",
+                             "--data", str(data)])
+        assert res.exit_code == 2 and "ambiguous timestamp" in res.output and "ISO 8601" in res.output, res.output
+    res = r.invoke(app, ["noon", "exclude", "--imo", "9140607", "--from", "2020-01-31T20", "--to", "2020-01-31T23:00Z",
+                         "--reason", "speed log broken", "--data", str(data)])
+    assert res.exit_code == 0 and "vessel 9140607: 4 reports" in res.output, res.output
+    again = r.invoke(app, ["noon", "import", str(csv), "--data", str(data)])  # the cumulative file, once more
+    assert again.exit_code == 0 and "0 imported" in again.output and "4 excluded earlier" in again.output, again.output
+    with duckdb.connect(str(data / "warehouse.duckdb"), read_only=True) as con:
+        assert con.execute("SELECT count(*) FROM noon_reports").fetchone() == (18,)
+        assert con.execute("SELECT count(*) FROM noon_reports WHERE ts_utc BETWEEN '2020-01-31 20:00' AND "
+                           "'2020-01-31 23:00'").fetchone() == (0,)
+
+
 def test_fouling_never_comes_out_as_a_gain():
     """Reports in which the hull seems to get faster and cheaper with age (e.g. a speed log drifting up): the fit
     leaves fouling out (β = 0) rather than learn that fouling helps; a real fouling loss is kept."""

@@ -24,7 +24,7 @@ import numpy as np
 from flows.jobs import dask_pool, run_pictures
 from flows.jobs.ingest import ingest_cycle
 from flows.jobs.refit import refit_job
-from flows.jobs.route_worker import copy_staged, failed_result, route_batch
+from flows.jobs.route_worker import START_COLUMNS, copy_staged, failed_result, failed_row, route_batch
 from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline import enroute
@@ -79,12 +79,79 @@ def _length_nm(job: RouteJob) -> float:
         return 0.0
 
 
+def _noon_positions(db: Path, imos: list[int], since) -> dict[int, list[enroute.Position]]:
+    """The vessels' noon-report positions after `since`, by IMO."""
+    positions: dict[int, list[enroute.Position]] = {}
+    for p in fleet_store.positions_after(db, imos, since).to_dict("records"):
+        positions.setdefault(int(p["imo"]), []).append(
+            enroute.Position(np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"])))
+    return positions
+
+
+def plan_starts(s: Settings, db: Path, rows: list[dict], cycle: np.datetime64, ref: np.datetime64,
+                explicit: bool) -> list[enroute.Selection]:
+    """Where each voyage's next plan starts (enroute.select_starts) on `cycle` at `ref`, from its vessel's noon
+    reports, the operators' positions and its current plan; `rows`: voyages as plain values."""
+    # reports of the last MAX_VOYAGE_H only (a voyage is never at sea longer): not every report ever made
+    since = max(min((np.datetime64(r["depart_utc"], "s") for r in rows), default=ref),
+                ref - np.timedelta64(int(MAX_VOYAGE_H * 3600), "s")) if rows else None
+    positions = _noon_positions(db, sorted({int(r["imo"]) for r in rows}), since) if rows else {}
+    given: dict[str, list[enroute.Position]] = {}
+    for p in fleet_store.voyage_positions(db, [x["voyage_id"] for x in rows]).to_dict("records"):
+        given.setdefault(str(p["voyage_id"]), []).append(enroute.Position(
+            np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"]), enroute.START_OPERATOR))
+    r = s.routing
+    return enroute.select_starts(rows, positions, route_store.current_plan_legs(db, [x["voyage_id"] for x in rows]),
+                                 given=given, cycle_utc=cycle, ref_utc=ref, lookahead_h=r.lookahead_h,
+                                 max_report_age_h=r.max_report_age_h, arrived_within_nm=r.arrived_within_nm,
+                                 max_voyage_h=MAX_VOYAGE_H, explicit=explicit)
+
+
+def voyage_start(s: Settings, db: Path, voyage_id: str, cycle: np.datetime64 | None) -> dict:
+    """The stored voyage as one plan of it starts (plain values, enroute.voyage_from): at sea, from its latest
+    position, as an operator's route-fleet run of it on `cycle` would start it (at the cycle's time when the cycle
+    is older than routing.max_cycle_age_h, else now; now without a cycle); else from its port."""
+    rows = [{k: plain(x) for k, x in v.items()} for v in fleet_store.load_voyages(db, voyage_ids=[voyage_id]).to_dict("records")]
+    if not rows:
+        raise FleetRunError(f"voyage {voyage_id} not in {db}: import it with `jitroute fleet import`")
+    now = utcnow_h()
+    if cycle is None:
+        ref = now
+    else:
+        ref = np.datetime64(cycle, "s") if cycle_age_h(cycle, now) > s.routing.max_cycle_age_h else max(now, np.datetime64(cycle, "s"))
+    (sel,) = plan_starts(s, db, rows, cycle if cycle is not None else ref, ref, explicit=True)
+    if sel.start is None:
+        raise FleetRunError(sel.why)
+    return enroute.voyage_from(sel.voyage, sel.start)
+
+
+DEFAULT_TOP_SPEED_KN = 15.0  # a vessel without a design speed: a merchant ship's usual top speed
+
+
+def position_refused(db: Path, voyage_id: str, at_utc, lat: float, lon: float) -> str | None:
+    """Why an operator's position of a stored voyage cannot be right (enroute.position_problem), or None: checked
+    against the land mask, the voyage's departure and RTA, and its vessel's noon reports within a day of it."""
+    from pipeline.routing.land import is_sea
+
+    v = {k: plain(x) for k, x in fleet_store.load_voyages(db, voyage_ids=[voyage_id]).iloc[0].to_dict().items()}
+    at = np.datetime64(at_utc, "s")
+    near = [p for p in _noon_positions(db, [int(v["imo"])], at - np.timedelta64(1, "D")).get(int(v["imo"]), [])
+            if p.utc <= at + np.timedelta64(1, "D")]
+    vessels = fleet_store.load_vessels(db)
+    design = vessels.loc[vessels["imo"] == int(v["imo"]), "design_speed_kn"].dropna()
+    top_kn = float(design.iloc[0]) if len(design) and float(design.iloc[0]) > 0 else DEFAULT_TOP_SPEED_KN
+    return enroute.position_problem(v, at, lat, lon, at_sea=bool(is_sea(lat, lon)), reports=near, top_speed_kn=top_kn)
+
+
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
                options: RoutingOptions, exports: bool, cycle_version: int | None = None,
-               ref_utc: np.datetime64 | None = None) -> list[RouteJob]:
+               ref_utc: np.datetime64 | None = None, unrouted: list[dict] | None = None) -> list[RouteJob]:
     """One RouteJob per voyage to route: the given ones, else those departing within the look-ahead of the cycle
     and those at sea (pipeline/enroute.py), each from where its plan starts (its port, or its latest position at
-    `ref_utc`, default the cycle's time); each carries the cycle's content version read at the start of the run."""
+    `ref_utc`, default the cycle's time); each carries the cycle's content version read at the start of the run.
+    A voyage that should be routed but has no start (it departed before the cycle with neither a position since
+    nor a current plan, e.g. a plan voyage departing before the next routable cycle) gets no job: its route row,
+    status failed with the reason, is added to `unrouted` (when given), so the run lists it as needing attention."""
     table = fleet_store.load_voyages(db, voyage_ids=voyage_ids)
     if voyage_ids:
         unknown = sorted(set(voyage_ids) - set(table["voyage_id"].astype(str)))
@@ -92,27 +159,13 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
             raise FleetRunError(f"voyage(s) {', '.join(unknown)} not in {db}: import them with `jitroute fleet import`")
     ref = np.datetime64(ref_utc if ref_utc is not None else cycle, "s")
     rows = [{k: plain(x) for k, x in v.items()} for v in table.to_dict("records")]
-    # reports of the last MAX_VOYAGE_H only (a voyage is never at sea longer): not every report ever made
-    since = max(min((np.datetime64(r["depart_utc"], "s") for r in rows), default=ref),
-                ref - np.timedelta64(int(MAX_VOYAGE_H * 3600), "s")) if rows else None
-    reports = fleet_store.positions_after(db, sorted({int(r["imo"]) for r in rows}), since) if rows else None
-    positions: dict[int, list[enroute.Position]] = {}
-    for p in (reports.to_dict("records") if reports is not None else []):
-        positions.setdefault(int(p["imo"]), []).append(
-            enroute.Position(np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"])))
-    given: dict[str, list[enroute.Position]] = {}
-    for p in fleet_store.voyage_positions(db, [x["voyage_id"] for x in rows]).to_dict("records"):
-        given.setdefault(str(p["voyage_id"]), []).append(enroute.Position(
-            np.datetime64(plain(p["ts_utc"]), "s"), float(p["lat"]), float(p["lon"]), enroute.START_OPERATOR))
-    r = s.routing
-    chosen = enroute.select_starts(rows, positions, route_store.current_plan_legs(db, [x["voyage_id"] for x in rows]),
-                                   given=given,
-                                   cycle_utc=cycle, ref_utc=ref, lookahead_h=r.lookahead_h,
-                                   max_report_age_h=r.max_report_age_h, arrived_within_nm=r.arrived_within_nm,
-                                   max_voyage_h=MAX_VOYAGE_H, explicit=bool(voyage_ids))
+    chosen = plan_starts(s, db, rows, cycle, ref, explicit=bool(voyage_ids))
     for sel in chosen:
         if sel.start is None:
             LOG.warning("%s", sel.why)
+            if unrouted is not None:
+                row = failed_row(run_id, sel.voyage, cycle, f"not routed: {sel.why}")
+                unrouted.append({**row, **dict.fromkeys(START_COLUMNS)})
     chosen = [sel for sel in chosen if sel.start is not None]
     fingerprints = fleet_store.voyage_fingerprints(db, [sel.voyage["voyage_id"] for sel in chosen])
     vessels = {int(v["imo"]): {k: plain(x) for k, x in v.items()} for v in fleet_store.load_vessels(db).to_dict("records")}
@@ -259,11 +312,12 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                     str(nominal)[:16], s.routing.max_cycle_age_h)
     options = RoutingOptions.from_settings(s.routing)
     version = cube.cycle_versions(layout.cube_store).get(c)
+    unrouted: list[dict] = []  # voyages due that cannot be routed: stored as failed, with why
     with warehouse.one_reader(layout.warehouse):  # every read of the jobs on one connection
         jobs = fleet_jobs(s, layout.warehouse, c, run_id, voyages, options, exports, version,
-                          ref_utc=c if stale else max(nominal, np.datetime64(c, "s")))
+                          ref_utc=c if stale else max(nominal, np.datetime64(c, "s")), unrouted=unrouted)
     running = route_store.begin_run(layout.warehouse, run_id, cycle=c, solver=options.solver, trigger=trigger,
-                                    n_voyages=len(jobs), nominal_utc=nominal, cycle_age_h=age_h)
+                                    n_voyages=len(jobs) + len(unrouted), nominal_utc=nominal, cycle_age_h=age_h)
     run_exports = export_store.RunExports(layout.run_exports_url, s.storage_options)
     run_exports.discard_stale(running)
     from flows.jobs.warm import cold_cache_warning
@@ -276,6 +330,8 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
              len(jobs), len(jobs) - n_at_sea, n_at_sea, cycle_label(c), age_h,
              f"dask at {s.dask_address}" if s.dask_address else f"local dask cluster, {s.dask_workers} workers")
     try:
+        if unrouted:
+            route_store.write_batch(layout.warehouse, layout.exports, run_id, unrouted, [])
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
                        s.dask_address, s.dask_workers, s.routing.voyages_per_task, (layout.warehouse, layout.exports),
                        (run_id, c, nominal), s.routing.store_every_s, name="route-voyages",

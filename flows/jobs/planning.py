@@ -18,7 +18,7 @@ from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
 from pipeline.planning.sea_distances import PortDistance, canal_map, distance_map, needed_pairs, sea_distance
 from pipeline.planning.voyages import (DEFAULT_PENALTY,
-                                       apply_commitments, committed, plan_contracts, plan_rows, plan_vessels,
+                                       apply_commitments, plan_contracts, plan_rows, plan_vessels, replan,
                                        vessel_drafts)
 from pipeline.timestamps import parse_iso_utc
 from storage import fleet_store, planning_store, warehouse
@@ -72,6 +72,17 @@ def check_size(n_vessels: int, n_contracts: int) -> None:
             f"{n_vessels} vessels at a time (vessels × contracts² ≤ {MAX_ARC_CHECKS:,}; its time and memory grow with "
             "that and no time limit can stop the build); plan a shorter horizon (the contracts whose window opens "
             "soonest) or part of the fleet")
+
+
+def _refuse_going_back(db: Path, as_of: pd.Timestamp) -> None:
+    """A re-plan goes forward in time: one as of a time before the active plan's would take voyages that plan
+    counted as sailed for unsailed ones and replace them."""
+    active = planning_store.active_plan_as_of(db)
+    if active is not None and as_of < active[1]:
+        raise PlanningInputError(
+            f"--as-of {as_of:%Y-%m-%dT%H:%M}Z is before the active plan {active[0]}'s as-of {active[1]:%Y-%m-%dT%H:%M}Z: "
+            f"a re-plan cannot go back in time (voyages sailed by then would be planned again); "
+            f"give --as-of {active[1]:%Y-%m-%dT%H:%M}Z or later (default: now)")
 
 
 def _stored(db: Path, table: str) -> pd.DataFrame:
@@ -153,13 +164,17 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     s = load_settings(data_root=Path(data_root) if data_root else None)
     layout = s.layout.ensure()
     db = layout.warehouse
+    _refuse_going_back(db, t_as_of)
     imported = run.step(import_planning_files, db, contracts, availability, ports, t_as_of, name="import-planning-files")
     good = imported["contracts"]
     port_rows = _stored(db, "ports")
     port_pos = {r["port"]: (float(r["lat"]), float(r["lon"])) for r in port_rows.to_dict("records")}
     fleet, models = planning_store.load_planning_fleet(db)
-    done, busy = committed(planning_store.active_plan_legs(db), t_as_of)
-    fleet = apply_commitments(fleet, busy)
+    keep = replan(planning_store.voyages_for_replan(db), t_as_of)
+    done = keep.committed
+    fleet = apply_commitments(fleet, keep.busy)
+    for _, name, lat, lon in keep.busy.values():  # a vessel free at the end of a voyage from a file: at its port
+        port_pos.setdefault(name, (lat, lon))
     open_contracts = good[~good["code"].isin(list(done))]
     check_size(len(fleet), len(open_contracts))
     vessels, fuel_source = plan_vessels(fleet, models, t_as_of)
@@ -174,7 +189,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     plan = run.step(milp.solve, data, time_limit_s=time_limit_s, started_at=started, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"
     row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, vessel_drafts(fleet))
-    stored = planning_store.save_plan(db, row, legs, left, voyages)
+    stored = planning_store.save_plan(db, row, legs, left, voyages, keep.replaced)
     png = None
     if picture:
         png = layout.exports / "plans" / f"{plan_id}.png"

@@ -42,7 +42,8 @@ def import_fleet_folder(folder: str, data_root: str | None = None, *, run=PLAIN)
     db = s.layout.ensure().warehouse
     out = {}
     for name, validate, store in (("vessels", lambda raw, src: validate_vessels(raw, src), fleet_store.import_vessels),
-                                  ("voyages", lambda raw, src: validate_voyages(raw, fleet_store.known_imos(db), src),
+                                  ("voyages", lambda raw, src: validate_voyages(raw, fleet_store.known_imos(db), src,
+                                                                             fleet_store.plan_voyage_ids(db)),
                                    fleet_store.import_voyages)):
         path = Path(folder) / f"{name}.csv"
         good, bad = validate(read_table(path), path.name)

@@ -11,6 +11,7 @@ arrival at the planning speed for its cargo weight, at the draft of that weight.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -23,6 +24,14 @@ from pipeline.planning.problem import SLOWEST_BALLAST_SHARE, Contract, FleetPlan
 
 DEFAULT_PORT_HOURS = 24.0
 DEFAULT_PENALTY = 500_000.0
+
+
+class Replan(NamedTuple):
+    """What a re-plan keeps (see `replan`)."""
+    committed: dict[str, str]  # contract code → why it is not planned again
+    kept_plan_voyages: list[str]  # voyages of earlier plans kept (sailed, or of a committed contract)
+    replaced: list[str]  # voyages of earlier plans the new plan replaces
+    busy: dict[int, tuple[pd.Timestamp, str, float, float]]  # imo → (free from, at port, its lat, its lon)
 
 
 def _hours(ts, as_of: pd.Timestamp) -> float:
@@ -120,31 +129,62 @@ def plan_rows(plan: FleetPlan, data: PlanData, plan_id: str, as_of: pd.Timestamp
     return row, pd.DataFrame(legs), pd.DataFrame(left), pd.DataFrame(voyages)
 
 
-def committed(legs: pd.DataFrame, as_of: pd.Timestamp) -> tuple[dict[str, str], dict[int, tuple[pd.Timestamp, str]]]:
-    """What the active plan has already set going by `as_of`: a contract is committed once a leg serving it has
-    departed (the ballast towards its load port or its laden leg); its vessel is busy until the end of the last
-    committed contract's discharge. `legs`: the active plan's fleet_plan_legs rows with `port_hours` of the vessel.
-    Returns ({contract code: why}, {imo: (free from, at port)})."""
-    out: dict[str, str] = {}
-    busy: dict[int, tuple[pd.Timestamp, str]] = {}
-    if legs is None or not len(legs):
-        return out, busy
-    sailed = legs[(legs["depart_utc"] <= as_of) & legs["contract_code"].notna()]
-    for code, imo, vid in sailed[["contract_code", "imo", "voyage_id"]].drop_duplicates("contract_code").itertuples(index=False):
-        out[str(code)] = f"under way on voyage {vid} (vessel {imo}) of plan {legs['plan_id'].iloc[0]}: not planned again"
-    laden = legs[(legs["kind"] == "laden") & legs["contract_code"].isin(list(out))]
-    for imo, rows in laden.groupby("imo"):
-        last = rows.sort_values("arrive_utc").iloc[-1]
-        port_h = _num(last.get("port_hours"), DEFAULT_PORT_HOURS)
-        busy[int(imo)] = (pd.Timestamp(last["arrive_utc"]) + pd.Timedelta(hours=port_h), str(last["to_port"]))
-    return out, busy
+def replan(voyages: pd.DataFrame, as_of: pd.Timestamp) -> Replan:
+    """What a plan as of `as_of` keeps of the stored voyages, and when and where each vessel is free again.
+
+    `voyages`: every stored voyage (storage.planning_store.voyages_for_replan): voyage_id, imo, plan_id (NULL: from a
+    voyages file), status, depart_utc, rta_utc, arr_name, arr_lat, arr_lon, contract_code and kind (of the plan leg
+    that made it), port_hours (of the vessel), reported_utc (newest position reported since its departure).
+
+    A plan voyage has sailed when its departure is at or before `as_of`, a position of it was reported since its
+    departure (an operator's, or a noon report of its vessel before its RTA: whatever `as_of` says, the report is a
+    fact, the planned time a wish), or its status is no longer "planned". A contract is committed once any voyage serving it has sailed (the ballast towards its load port or
+    its laden leg): every voyage of it is kept — the laden leg too, though it departs later — and it is not planned
+    again. Every other plan voyage is replaced by the new plan. Voyages from a voyages file are always kept.
+
+    A vessel is busy until the last kept voyage still under way at `as_of` ends (its RTA, plus the vessel's time in
+    port at a discharge or a port call; none after a last ballast to an end port): it is free from then, at that
+    voyage's arrival port, so the planner cannot book it elsewhere meanwhile (a vessel with a kept voyage in the
+    future is held until that voyage ends: it may not be given work before it either, which the planner's one start
+    per vessel cannot express)."""
+    if voyages is None or not len(voyages):
+        return Replan({}, [], [], {})
+    v = voyages.copy()
+    from_plan = v["plan_id"].notna()
+    status = v["status"].where(v["status"].notna(), "planned").astype(str)
+    sailed = from_plan & ((v["depart_utc"] <= as_of) | v["reported_utc"].notna() | (status != "planned"))
+    done: dict[str, str] = {}
+    for r in v[sailed & v["contract_code"].notna()].sort_values("depart_utc").to_dict("records"):
+        code = str(r["contract_code"])
+        if code not in done:
+            how = (f"position reported {pd.Timestamp(r['reported_utc']):%Y-%m-%d %H:%M} UTC"
+                   if pd.notna(r["reported_utc"]) else f"departed {pd.Timestamp(r['depart_utc']):%Y-%m-%d %H:%M} UTC")
+            done[code] = (f"under way on voyage {r['voyage_id']} (vessel {int(r['imo'])}, {how}) of plan {r['plan_id']}: "
+                          "its voyages are kept, not planned again")
+    kept = ~from_plan | sailed | v["contract_code"].isin(list(done))
+    busy: dict[int, tuple[pd.Timestamp, str, float, float]] = {}
+    for r in v[kept].to_dict("records"):
+        # time in port after a discharge or a call; none after a ballast leg (its contract's laden voyage is kept
+        # and ends later, or it is the last ballast to an end port)
+        port_h = 0.0 if r["kind"] == "ballast" else _num(r["port_hours"], DEFAULT_PORT_HOURS)
+        free = pd.Timestamp(r["rta_utc"]) + pd.Timedelta(hours=port_h)
+        if free <= as_of:
+            continue
+        imo = int(r["imo"])
+        if imo not in busy or free > busy[imo][0]:
+            named = isinstance(r["arr_name"], str) and r["arr_name"].strip()
+            port = r["arr_name"] if named else f"arrival of {r['voyage_id']}"
+            busy[imo] = (free, port, float(r["arr_lat"]), float(r["arr_lon"]))
+    return Replan(done, sorted(v.loc[kept & from_plan, "voyage_id"].astype(str)),
+                  sorted(v.loc[~kept, "voyage_id"].astype(str)), busy)
 
 
-def apply_commitments(fleet: pd.DataFrame, busy: dict[int, tuple[pd.Timestamp, str]]) -> pd.DataFrame:
-    """Vessels busy with committed contracts become available where and when those end."""
+def apply_commitments(fleet: pd.DataFrame, busy: dict[int, tuple[pd.Timestamp, str, float, float]]) -> pd.DataFrame:
+    """Vessels busy with kept voyages become available where and when the last of those ends (when that is after
+    their availability's start; the availability row's port otherwise)."""
     fleet = fleet.copy()
-    for imo, (free_from, port) in busy.items():
-        at = fleet["imo"] == imo
-        fleet.loc[at, "from_utc"] = fleet.loc[at, "from_utc"].map(lambda t: max(pd.Timestamp(t), free_from))  # noqa: B023 (called here)
+    for imo, (free_from, port, _, _) in busy.items():
+        at = (fleet["imo"] == imo) & (pd.to_datetime(fleet["from_utc"]) < free_from)
+        fleet.loc[at, "from_utc"] = free_from
         fleet.loc[at, "from_port"] = port
     return fleet
