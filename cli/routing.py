@@ -198,7 +198,8 @@ def register(app: typer.Typer) -> None:
             console.print(comparison_table(plan))
             sp = plan.savings
             sav = ("n/a" if sp is None else f"{sp.total_pct:.1f} % (speed profile {sp.speed_profile_pct:.1f} %, route "
-                   f"{sp.route_pct:.1f} %) vs constant {sp.baseline_rpm:.1f} rpm arriving at the RTA")
+                   f"{sp.route_pct:.1f} %; within the forecast {sp.forecast_pct:.1f} %, past its last step "
+                   f"{sp.beyond_forecast_pct:.1f} %) vs constant {sp.baseline_rpm:.1f} rpm arriving at the RTA")
             lim, land_nm = plan.limits_fuel_t, plan.min_land_clearance_nm
             console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
                           f"savings {sav}; engine changes {plan.n_engine_changes}"

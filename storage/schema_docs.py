@@ -36,6 +36,14 @@ _SAVINGS = {
     "savings_total_pct": "fuel saved against the honest baseline, percent (fuel-weighted over the voyages)",
     "savings_speed_profile_pct": "part of savings_total_pct from the speed profile (best engine plan on the base route), percent",
     "savings_route_pct": "part of savings_total_pct from the route, percent",
+    "n_beyond_horizon": "voyages whose plan sails past the forecast's last valid time (forecast_flag beyond horizon)",
+    "n_split": "voyages whose saving is split into forecast and beyond-forecast parts (the split sums are over these)",
+    "fuel_beyond_forecast_t": "planned fuel burnt in tonnes after the forecast's last valid time",
+    "honest_baseline_fuel_beyond_forecast_t": "honest baseline's fuel burnt in tonnes after the forecast's last valid time",
+    "savings_forecast_pct": "the saving the forecast backs: fuel saved within the forecast's valid times, percent of "
+                            "the honest baseline's fuel (fuel-weighted); the figure to quote",
+    "savings_beyond_forecast_pct": "fuel saved after the forecast's last valid time (neutral weather there: an "
+                                   "assumption, not a forecast), percent; with savings_forecast_pct it makes the total",
     "limits_fuel_t": "fuel the engine-change limits cost, tonnes (plan minus the best plan on its route without them)",
     "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plans on the same routes without engine-change limits",
     "discrete_baseline_fuel_t": "fuel burnt in tonnes on the discrete-rpm baseline (arrives early: overstates savings)",

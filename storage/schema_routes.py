@@ -6,7 +6,7 @@ degrees (wind/waves coming-from).
 
 import hashlib
 
-from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS
+from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS, ROUTES
 from storage.warehouse import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -74,6 +74,55 @@ _LATEST_ROUTES_VIEW_006 = """
         JOIN newest n USING (voyage_id)
         LEFT JOIN voyages v USING (voyage_id)
         LEFT JOIN vessels x ON x.imo = s.imo;
+"""
+
+
+# fleet_savings with each run's saving split by when the fuel is burnt (savings.py): within the forecast's valid
+# times (backed by the forecast) and after its last one (the neutral weather past the horizon, an assumption). The
+# split sums run over the voyages that have it (plans made before it existed do not).
+_SPLIT = "r.savings_forecast_pct IS NOT NULL"
+FLEET_SAVINGS_VIEW_013 = f"""
+        CREATE OR REPLACE VIEW fleet_savings AS
+        SELECT u.run_id, u.started_at, u.cycle, u.trigger, u.status AS run_status, count(*) AS n_voyages,
+               count(*) FILTER (WHERE r.status = 'ok') AS n_on_time,
+               count(*) FILTER (WHERE r.status = 'late') AS n_late,
+               count(*) FILTER (WHERE r.status = 'infeasible') AS n_infeasible,
+               count(*) FILTER (WHERE r.status = 'failed') AS n_failed,
+               count(*) FILTER (WHERE r.status IN ('infeasible', 'failed')) AS n_not_routed,
+               coalesce(u.n_export_failed, 0) AS n_export_failed,
+               count(*) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS n_compared,
+               sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS fuel_t,
+               sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS honest_baseline_fuel_t,
+               sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS profile_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_total_pct,
+               100 * (1 - sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_speed_profile_pct,
+               100 * (sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                      - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0)
+                   AS savings_route_pct,
+               count(*) FILTER (WHERE r.forecast_flag LIKE '%beyond horizon%') AS n_beyond_horizon,
+               count(*) FILTER (WHERE {_SPLIT}) AS n_split,
+               sum(r.fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT}) AS fuel_beyond_forecast_t,
+               sum(r.honest_baseline_fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT})
+                   AS honest_baseline_fuel_beyond_forecast_t,
+               100 * ((sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPLIT})
+                       - sum(r.honest_baseline_fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT}))
+                      - (sum(r.fuel_t) FILTER (WHERE {_SPLIT}) - sum(r.fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT})))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPLIT}), 0) AS savings_forecast_pct,
+               100 * (sum(r.honest_baseline_fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT})
+                      - sum(r.fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT}))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPLIT}), 0) AS savings_beyond_forecast_pct,
+               sum(r.limits_fuel_t) AS limits_fuel_t,
+               sum(r.unlimited_fuel_t) FILTER (WHERE r.limits_fuel_t IS NOT NULL) AS unlimited_fuel_t,
+               sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL) AS discrete_baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL)
+                        / nullif(sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL), 0)) AS savings_vs_discrete_pct
+        FROM route_runs u JOIN routes r USING (run_id)
+        GROUP BY ALL;
 """
 
 
@@ -505,6 +554,10 @@ MIGRATIONS: list[Migration] = [
         DROP TABLE route_leg_parts;
         ALTER TABLE route_leg_parts_new RENAME TO route_leg_parts;
         """),
+    # each plan's saving split into what the forecast covers and what it does not (past the last valid time plans
+    # sail in neutral weather, leg_kernel), and fleet_savings with the split
+    Migration("routes_013_savings_forecast_split",
+              ROUTES.add_columns_sql(*ROUTE_FORECAST_SPLIT_ADDED) + "\n" + FLEET_SAVINGS_VIEW_013),
 ]
 
 

@@ -18,7 +18,8 @@ if TYPE_CHECKING:
 
 STATUSES = ("ok", "late", "infeasible", "failed")
 SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_baseline_hours", "profile_fuel_t",
-                   "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct")
+                   "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct", "fuel_beyond_forecast_t",
+                   "honest_baseline_fuel_beyond_forecast_t", "savings_forecast_pct", "savings_beyond_forecast_pct")
 LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
 
 
@@ -87,6 +88,12 @@ class Plan:
         return float(sum(leg.get("hours_beyond_forecast", 0.0) for leg in self.legs))
 
     @property
+    def fuel_beyond_forecast_t(self) -> float:
+        """Fuel (t) burnt after the weather's last valid time (sailing and waiting), where the plan meets the neutral
+        weather of leg_kernel, not a forecast."""
+        return float(sum(leg.get("fuel_beyond_forecast_t", 0.0) for leg in self.legs)) if self.legs else math.nan
+
+    @property
     def hours_before_cycle(self) -> float:
         """Hours of the voyage sailed before the forecast cycle's analysis time (weather of the cycle's first step)."""
         return float(sum(leg.get("hours_before_cycle", 0.0) for leg in self.legs))
@@ -146,10 +153,15 @@ class Plan:
         s = self.savings
         if s is None:
             return dict.fromkeys(SAVINGS_COLUMNS)
+
+        def known(x: float) -> float | None:
+            return x if math.isfinite(x) else None
         return {"honest_baseline_rpm": s.baseline_rpm, "honest_baseline_fuel_t": s.baseline_fuel_t,
                 "honest_baseline_hours": s.baseline_hours, "profile_fuel_t": s.profile_fuel_t,
                 "savings_total_pct": s.total_pct, "savings_speed_profile_pct": s.speed_profile_pct,
-                "savings_route_pct": s.route_pct}
+                "savings_route_pct": s.route_pct, "fuel_beyond_forecast_t": known(s.plan_fuel_beyond_t),
+                "honest_baseline_fuel_beyond_forecast_t": known(s.baseline_fuel_beyond_t),
+                "savings_forecast_pct": known(s.forecast_pct), "savings_beyond_forecast_pct": known(s.beyond_forecast_pct)}
 
     def _limits_row(self) -> dict:
         lim = self.limits
@@ -203,6 +215,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarr
         o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vessel, inst.weather)
         if o[lk.CODE] != lk.OK:
             return legs, int(o[lk.CODE]), i
+        wait_beyond_h = max(0.0, t - max(t - wait, horizon_h))  # the part of the wait past the last valid time
         etd = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
         t += o[lk.H]
         eta = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
@@ -220,6 +233,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarr
             "wave_dir_deg": float(np.degrees(np.arctan2(o[lk.WAVE_FX], o[lk.WAVE_FY])) % 360.0),
             "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
             "hours_beyond_forecast": max(0.0, t - max(t - o[lk.H], horizon_h)),
+            "fuel_beyond_forecast_t": float(o[lk.FUEL_BEYOND]) + wait_beyond_h * float(wait_tph),
             "hours_before_cycle": max(0.0, min(t, cycle_h) - (t - o[lk.H])),
             "hours_without_wind": float(o[lk.NO_WIND_H]),  # a hole in the cube's wind (sailed as calm): in the reason
         })

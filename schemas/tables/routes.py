@@ -52,7 +52,7 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('runtime_s', 'DOUBLE', 's', 'solver run time, seconds'),
     Column('n_legs', 'INTEGER', None, 'number of legs of the plan'),
     Column('n_legs_beyond_forecast', 'INTEGER', None,
-           'number of legs sailed past the forecast horizon (weather of the last step persisted)'),
+           "number of legs sailed past the forecast horizon (in the region's mean wind and waves from near the beam)"),
     Column('forecast_flag', 'VARCHAR', None,
            "'beyond horizon', 'before cycle', 'weather missing' (a hole in the cube's wind, sailed as calm; the "
            'reason names the legs), comma separated, or empty when the voyage lies in the forecast'),
@@ -93,6 +93,16 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('voyage_fingerprint', 'VARCHAR', None,
            'digest of the voyage (vessel, ports, RTA, draft) the plan was made for; latest_routes.stale compares'
            ' it'),
+    Column('fuel_beyond_forecast_t', 'DOUBLE', 't',
+           "part of fuel_t burnt after the forecast's last valid time (sailed in the region's mean wind and waves from "
+           'near the beam, no current: an assumption, not a forecast), tonnes'),
+    Column('honest_baseline_fuel_beyond_forecast_t', 'DOUBLE', 't',
+           "part of honest_baseline_fuel_t burnt after the forecast's last valid time, tonnes"),
+    Column('savings_forecast_pct', 'DOUBLE', '%',
+           "part of savings_total_pct burnt within the forecast's valid times: the saving the forecast backs, percent"),
+    Column('savings_beyond_forecast_pct', 'DOUBLE', '%',
+           "part of savings_total_pct burnt after the forecast's last valid time (an assumption, not a forecast), "
+           'percent; savings_forecast_pct + savings_beyond_forecast_pct = savings_total_pct'),
 ), primary_key=('run_id', 'voyage_id'))
 
 ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met (speeds in knots, times UTC)', (
@@ -118,7 +128,7 @@ ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met 
     Column('wave_dir_deg', 'DOUBLE', 'degree', 'waves coming from, degrees true'),
     Column('current_kn', 'DOUBLE', 'kn', 'current speed on the leg, knots'),
     Column('beyond_forecast', 'BOOLEAN', None,
-           'true when the leg is sailed past the forecast horizon (weather of the last step persisted)'),
+           "true when the leg is sailed past the forecast horizon (in the region's mean wind and waves from near the beam)"),
     Column('hours_beyond_forecast', 'DOUBLE', 'h', "hours of the leg sailed past the forecast's last valid time"),
     Column('hours_before_cycle', 'DOUBLE', 'h', "hours of the leg sailed before the forecast cycle's init time"),
     Column('hours_without_wind', 'DOUBLE', 'h',
@@ -127,10 +137,16 @@ ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met 
            'hours the ship waits (hove to) at the leg\'s start node before sailing it, e.g. for weather to pass; 0 for most '
            'plans; the route\'s hours include it'),
     Column('wait_fuel_t', 'DOUBLE', 't', 'fuel burnt in tonnes while waiting before the leg; the route\'s fuel_t includes it'),
+    Column('fuel_beyond_forecast_t', 'DOUBLE', 't',
+           "fuel burnt in tonnes after the forecast's last valid time, sailing the leg and waiting before it (the "
+           "region's mean wind and waves from near the beam, no current: an assumption, not a forecast)"),
 ), primary_key=('run_id', 'voyage_id', 'leg'))
 
 # the columns routing added to route_legs after they were first made (DDL from the definition above)
 LEG_HOURS_ADDED = ('hours_beyond_forecast', 'hours_before_cycle', 'hours_without_wind')
+# the columns splitting each plan's saving into what the forecast covers and what it does not
+ROUTE_FORECAST_SPLIT_ADDED = ('fuel_beyond_forecast_t', 'honest_baseline_fuel_beyond_forecast_t',
+                              'savings_forecast_pct', 'savings_beyond_forecast_pct')
 
 # route_legs is kept in one Parquet file per run beside the warehouse (storage/route_history.py); this table lists
 # the files of committed runs, so a file is part of the warehouse only once its run's rows are committed
