@@ -128,6 +128,67 @@ FLEET_SAVINGS_VIEW_013 = f"""
 
 ARRIVAL_NM = 10.0  # a noon report this close to the destination is the arrival (plan against actual)
 
+# plan against actual, like with like (migration routes_014). A plan made at sea (a re-plan: latest_routes.start_kind
+# other than port) covers the voyage from its start only, so the actual side is counted from that start too: reports
+# after it, the first one pro rata for the hours it covers after the start. A voyage has ended at its arrival report
+# (within ARRIVAL_NM of the destination) or, without positions, when the vessel's next voyage has departed and
+# reported; a ship still at sea has no arrival, and its errors are empty (its last report is not the arrival).
+VOYAGE_PERFORMANCE_VIEW_014 = f"""
+        CREATE OR REPLACE VIEW voyage_performance AS
+        WITH bounds AS (
+            SELECT voyage_id, imo, depart_utc, rta_utc, arr_lat, arr_lon,
+                   lead(depart_utc) OVER (PARTITION BY imo ORDER BY depart_utc) AS next_depart_utc,
+                   least(coalesce(lead(depart_utc) OVER (PARTITION BY imo ORDER BY depart_utc), rta_utc + INTERVAL 30 DAY),
+                         rta_utc + INTERVAL 30 DAY) AS bound_utc
+            FROM voyages),
+        arrivals AS (
+            SELECT b.voyage_id, min(n.ts_utc) AS arrived_utc
+            FROM bounds b JOIN noon_reports n ON n.imo = b.imo AND n.ts_utc > b.depart_utc AND n.ts_utc <= b.bound_utc
+            WHERE n.lat IS NOT NULL AND n.lon IS NOT NULL AND b.arr_lat IS NOT NULL AND b.arr_lon IS NOT NULL
+              AND 2 * 3440.065 * asin(sqrt(pow(sin(radians(n.lat - b.arr_lat) / 2), 2)
+                    + cos(radians(n.lat)) * cos(radians(b.arr_lat)) * pow(sin(radians(n.lon - b.arr_lon) / 2), 2)))
+                  <= {ARRIVAL_NM}
+            GROUP BY b.voyage_id),
+        last_reports AS (SELECT imo, max(ts_utc) AS last_utc FROM noon_reports GROUP BY imo),
+        windows AS (
+            SELECT b.voyage_id, b.imo, b.depart_utc, coalesce(a.arrived_utc, b.bound_utc) AS window_end_utc,
+                   a.arrived_utc,
+                   a.arrived_utc IS NOT NULL OR (b.next_depart_utc IS NOT NULL AND l.last_utc >= b.next_depart_utc) AS ended,
+                   CASE WHEN coalesce(p.start_kind, 'port') <> 'port' AND p.start_utc > b.depart_utc THEN p.start_utc
+                        ELSE b.depart_utc END AS compared_from_utc,
+                   coalesce(p.start_kind, 'port') <> 'port' AND p.start_utc > b.depart_utc AS from_replan
+            FROM bounds b LEFT JOIN arrivals a USING (voyage_id) LEFT JOIN last_reports l USING (imo)
+            LEFT JOIN latest_routes p USING (voyage_id)),
+        shares AS (  -- each report's share after compared_from_utc (a re-plan's first report covers hours before it)
+            SELECT w.voyage_id, n.ts_utc, n.fuel_t, n.hours, n.dist_nm,
+                   CASE WHEN w.from_replan AND n.hours > 0
+                        THEN least(1.0, date_diff('second', w.compared_from_utc, n.ts_utc) / 3600.0 / n.hours)
+                        ELSE 1.0 END AS share
+            FROM windows w JOIN noon_reports n
+              ON n.imo = w.imo AND n.ts_utc > w.compared_from_utc AND n.ts_utc <= w.window_end_utc
+            WHERE coalesce(n.dist_nm, 0) > 0 OR coalesce(n.stw_kn, 0) > 0.5),  -- at sea
+        sailed AS (
+            SELECT voyage_id, count(*) AS n_reports, sum(fuel_t * share) AS actual_fuel_t, sum(hours * share) AS actual_hours,
+                   sum(dist_nm * share) AS actual_dist_nm, max(ts_utc) AS last_report_utc
+            FROM shares GROUP BY voyage_id)
+        SELECT v.voyage_id, v.imo, s.name AS vessel_name, v.dep_name, v.arr_name, v.depart_utc, v.rta_utc,
+               p.run_id, p.status AS plan_status, p.model_version, coalesce(p.start_kind, 'port') AS plan_start_kind,
+               w.compared_from_utc, p.fuel_t AS planned_fuel_t, p.eta_utc AS planned_eta_utc,
+               a.n_reports, a.actual_fuel_t, a.actual_hours, a.actual_dist_nm, w.ended AS arrived, a.last_report_utc,
+               CASE WHEN w.ended THEN coalesce(w.arrived_utc, a.last_report_utc) END AS actual_arrival_utc,
+               CASE WHEN w.ended THEN 100 * (p.fuel_t - a.actual_fuel_t) / nullif(a.actual_fuel_t, 0) END AS fuel_error_pct,
+               CASE WHEN w.ended THEN date_diff('second', p.eta_utc, coalesce(w.arrived_utc, a.last_report_utc)) / 3600.0
+                    END AS arrival_error_h,
+               CASE WHEN w.ended THEN date_diff('second', v.rta_utc, coalesce(w.arrived_utc, a.last_report_utc)) / 3600.0
+                    END AS late_h
+        FROM voyages v
+        LEFT JOIN vessels s USING (imo)
+        LEFT JOIN latest_routes p USING (voyage_id)
+        LEFT JOIN windows w USING (voyage_id)
+        LEFT JOIN sailed a USING (voyage_id);
+"""
+
+
 MIGRATIONS: list[Migration] = [
     Migration(
         "routes_001_tables",
@@ -558,6 +619,8 @@ MIGRATIONS: list[Migration] = [
     # sail in neutral weather, leg_kernel), and fleet_savings with the split
     Migration("routes_013_savings_forecast_split",
               ROUTES.add_columns_sql(*ROUTE_FORECAST_SPLIT_ADDED) + "\n" + FLEET_SAVINGS_VIEW_013),
+    # plan against actual like with like: a re-plan from its start, a ship at sea without an arrival
+    Migration("routes_014_voyage_performance_like_with_like", VOYAGE_PERFORMANCE_VIEW_014),
 ]
 
 
