@@ -263,6 +263,16 @@ def _lon_slices(lon: np.ndarray, lon_deg: tuple[float, float], pad_deg: float) -
     return slices, lon[k0] + dlon * np.arange(count)
 
 
+def cycle_steps_h(pub: Published, cycle) -> np.ndarray:
+    """The cycle's own leads (h): the cube's step axis up to the cycle's last step with wind. The axis has room for
+    the longest leads any cycle has (the 00/12 UTC cycles' to 264 h); a cycle with shorter ones leaves the rest all
+    NaN (pipeline/weather/assemble.py). GSM wind has no land mask, so one grid point (one chunk) tells."""
+    ci = pub.rows[np.datetime64(cycle, "ns")]
+    wind = np.asarray(pub.group["u10"][ci, :, len(pub.lat) // 2, 0])
+    have = np.flatnonzero(np.isfinite(wind))
+    return pub.step_h[: int(have[-1]) + 1] if have.size else pub.step_h
+
+
 def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], lon_deg: tuple[float, float],
                 variables: tuple[str, ...] = DATA_VARS, margin_cells: int = 3, storage_options: dict | None = None,
                 published: Published | None = None) -> Window:

@@ -172,9 +172,16 @@ def from_window(window) -> WeatherField:
 
 
 def _from_cube(cyc: np.datetime64, step_h, lat, lon, data: dict) -> WeatherField:
-    times = cyc + (np.asarray(step_h, np.int64) * 3600).astype("timedelta64[s]")
-    return from_arrays(lat, lon, times, u10=data["u10"], v10=data["v10"], swh=data["swh"], mwd_deg=data["mwd"],
-                       uo=data["uo"], vo=data["vo"], cycle=cyc, t_ref=cyc)
+    """The cycle's steps up to its last one with wind: the cube's step axis is the longest any cycle has (the 00/12
+    UTC cycles' 264 h), and a cycle with shorter leads leaves the rest all NaN (pipeline/weather/assemble.py), which
+    is its end, not a hole to sail as calm."""
+    wind = np.asarray(data["u10"])
+    have = np.flatnonzero(np.isfinite(wind).reshape(wind.shape[0], -1).any(axis=1)) if wind.size else np.array([], int)
+    n = int(have[-1]) + 1 if have.size else len(step_h)
+    times = cyc + (np.asarray(step_h, np.int64)[:n] * 3600).astype("timedelta64[s]")
+    return from_arrays(lat, lon, times, **{k: np.asarray(data[v])[:n] for k, v in (
+        ("u10", "u10"), ("v10", "v10"), ("swh", "swh"), ("mwd_deg", "mwd"), ("uo", "uo"), ("vo", "vo"))},
+        cycle=cyc, t_ref=cyc)
 
 
 def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0, wave_from_deg=0.0,
