@@ -107,6 +107,10 @@ def register(app: typer.Typer) -> None:
         objective: str = typer.Option("jit", help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
         calm: bool = typer.Option(False, "--calm", help="Ignore the cube: calm water, no current."),
+        ensemble: int = typer.Option(4, "--ensemble", help="Sail the plan and its baseline through this many cycles "
+                                                           "(the one routed on and the complete ones before it, valid "
+                                                           "at the same times): P(on time), fuel and saving P10/P50/P90. "
+                                                           "0: none."),
         rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel); the search uses them, then each run's rpm is refined anywhere between the lowest and the highest (routing.continuous_speed)."),
         png: Optional[Path] = typer.Option(None, help="Write a map of the route, baseline and weather."),
         convergence: Optional[Path] = typer.Option(None, help="Write the BFOA convergence plot."),
@@ -186,9 +190,23 @@ def register(app: typer.Typer) -> None:
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed,
                                                             solver_options=tuple(pairs) or None),
                        cycle_version=version)
+        windows = []  # the voyage's weather window, for the ensemble
+        weather_for = cube_weather(cube_path, job, lay.storage_options)
+        if weather_for is not None:
+            def weather_for(problem, space, _from_cube=weather_for):
+                windows.append(problem.weather_window(space))
+                return _from_cube(problem, space)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
-                plan, weather = plan_voyage(job, cube_weather(cube_path, job, lay.storage_options))
+                plan, weather = plan_voyage(job, weather_for)
+                spread = None
+                if windows and ensemble > 0 and plan.legs and not as_json:
+                    from flows.jobs.route_worker import lagged_members
+                    from pipeline.routing.ensemble import spread as ensemble_spread
+                    from pipeline.routing.job import routing_problem
+
+                    members = lagged_members(cube_path, lay.storage_options, c, windows[-1], ensemble)
+                    spread = ensemble_spread(plan, members, routing_problem(job).kernel_vessel())
         except KeyError as exc:
             fail(str(exc).strip("'\""))
         if as_json:
@@ -206,6 +224,10 @@ def register(app: typer.Typer) -> None:
                           f"{'' if lim != lim else f' (limits cost {lim:.2f} t)'}; runtime {plan.runtime_s:.2f} s; "
                           f"weather {'calm water' if calm else 'cycle ' + c}"
                           f"{'' if land_nm != land_nm else f'; least distance to land {land_nm:.1f} NM (outside the port approaches)'}")
+            if windows and ensemble > 0:
+                from pipeline.routing.ensemble import describe
+
+                console.print(f"uncertainty {describe(spread)}")
         wanted = {"png": png, "convergence": convergence, "rtz": rtz}
         if plan.legs and any(wanted.values()):
             from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for

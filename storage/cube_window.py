@@ -215,15 +215,20 @@ def cycle_versions(path, storage_options: dict | None = None) -> dict[np.datetim
 def newest_complete_cycle(path, storage_options: dict | None = None) -> np.datetime64 | None:
     """The newest complete cycle of the published view (None: none, or no store), for readers such as
     `jitroute route`; a writer asks storage.cube.latest_complete_cycle, which also repairs a half-finished append."""
+    return next(complete_cycles_newest_first(path, storage_options), None)
+
+
+def complete_cycles_newest_first(path, storage_options: dict | None = None):
+    """The complete cycles of the published view, newest first, each state read only when the caller asks for the
+    next (nothing when there is no store)."""
     loc = locate(path, storage_options)
     if not loc.has("zarr.json"):
-        return None
+        return
     pub = open_published(loc)
     state = pub.group["cycle_state"]
-    for c in sorted(pub.rows, reverse=True):  # newest first: one read of its state, most often the only one
+    for c in sorted(pub.rows, reverse=True):
         if int(state[pub.rows[c]]) == STATE_COMPLETE:
-            return c
-    return None
+            yield c
 
 
 def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:

@@ -195,3 +195,29 @@ def test_fleet_savings_reports_what_the_forecast_backs_apart_from_what_lies_past
     assert "backs" in comments["savings_forecast_pct"] and "assumption" in comments["savings_beyond_forecast_pct"]
     md = run_markdown(route_store.run_summary(db, "r1"))
     assert "1.4 % is saved within the forecast's valid times and 1.6 % past them (1 voyage sails" in md
+
+
+def test_the_ensemble_sails_the_plan_and_its_baseline_through_every_member():
+    """Members: the forecast planned on, and one with a 1 m/s current against the voyage (the same everywhere). In
+    the first the plan is on time and burns what it planned; in the second it is late (same rpm, slower over ground)
+    and so is its baseline; the fuel percentiles lie between the two members' fuel."""
+    from pipeline.routing.ensemble import describe, sail_plan, spread
+
+    pr = problem((30.0, -175.0), (31.0, -160.0), 80.0, rpm_options=(70, 85, 100))
+    calm = wf.uniform(T0, 400)
+    plan = solve(pr, calm, solver="dp", savings=True)
+    assert plan.status == "ok" and plan.baseline is not None
+    ves = pr.kernel_vessel()
+    h, f = sail_plan(plan.legs, plan.depart_utc, calm, ves)
+    assert h == pytest.approx(plan.hours, abs=1e-6) and f == pytest.approx(plan.fuel_t, rel=1e-9)
+    against = wf.uniform(T0, 400, current_ms=(-1.0, 0.0))  # the voyage heads east
+    h2, f2 = sail_plan(plan.legs, plan.depart_utc, against, ves)
+    assert h2 > plan.hours + 5.0 and f2 > f
+    s = spread(plan, [calm, against], ves)
+    assert s.n_members == 2 and s.p_on_time == pytest.approx(0.5) and s.baseline_p_on_time == pytest.approx(0.5)
+    assert f < s.fuel_p10_t < s.fuel_p50_t < s.fuel_p90_t < f2
+    assert s.fuel_p50_t == pytest.approx((f + f2) / 2)
+    b_calm = sail_plan(plan.baseline.legs, plan.depart_utc, calm, ves)[1]
+    assert s.savings_p10_pct <= 100 * (b_calm - f) / b_calm + 1e-9 or s.savings_p90_pct >= 100 * (b_calm - f) / b_calm - 1e-9
+    assert "across 2 forecasts: on time 50 %" in describe(s)
+    assert spread(plan, [], ves) is None

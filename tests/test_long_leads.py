@@ -98,3 +98,18 @@ def test_a_cube_made_with_shorter_leads_keeps_its_axis(long_mirror, tmp_path, mo
     assert r00["complete"] and cube.step_axis_h(DataLayout(root).cube_store) == [0, 6, 12]
     assert "leads 24, 36 h are not kept" in caplog.text
 
+
+def test_a_lagged_ensemble_reads_the_same_window_from_each_complete_cycle(long_mirror, tmp_path, monkeypatch):
+    from flows.jobs.route_worker import lagged_members
+    from pipeline.routing.problem import WeatherWindow
+    from storage.layout import DataLayout
+
+    root = tmp_path / "data"
+    for c in ("2020-12-01T00", "2020-12-01T06"):
+        assert _ingest(monkeypatch, root, long_mirror, c, **{"sources.gsm_long_lead_h": 36})["complete"]
+    store = DataLayout(root).weather_cube_url
+    window = WeatherWindow(np.datetime64("2020-12-01T08"), np.datetime64("2020-12-01T16"), (10.0, 30.0), (140.0, 160.0))
+    members = lagged_members(store, None, "2020-12-01T06", window, 4)
+    assert [m.cycle for m in members] == [np.datetime64("2020-12-01T06"), np.datetime64("2020-12-01T00")]
+    assert members[0].horizon_utc == np.datetime64("2020-12-01T18") and members[1].horizon_utc == np.datetime64("2020-12-02T00")
+    assert lagged_members(store, None, "2020-12-01T06", window, 1)[0].cycle == np.datetime64("2020-12-01T06")

@@ -12,6 +12,7 @@ windows are cached per (store, cycle, content version, window), so a re-ingested
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 import logging
 import traceback
@@ -74,6 +75,27 @@ def window_field(store: str, options_json: str, cycle: str, version: int | None,
                                   storage_options=json.loads(options_json),
                                   published=published_view(store, options_json, cycle, version))
     return wf.from_window(win)
+
+
+def lagged_members(cube_path: str, storage_options: dict | None, cycle: str, window: WeatherWindow,
+                   n_members: int) -> list[wf.WeatherField]:
+    """A lagged ensemble for a voyage: its window of `cycle` and of the complete cycles before it (newest first, up to
+    `n_members` in all), valid at the same times; a cycle whose leads end before the window starts is left out."""
+    options_json = json.dumps(storage_options or {}, sort_keys=True)
+    c = np.datetime64(cycle, "ns")
+    older = (x for x in cube_window.complete_cycles_newest_first(cube_path, storage_options) if x < c)
+    members = []
+    for x in itertools.chain([c], older):
+        if len(members) >= n_members:
+            break
+        try:
+            field = window_field(str(cube_path), options_json, str(np.datetime_as_string(np.datetime64(x, "s"))), None,
+                                 window)
+        except KeyError:  # retired or being re-written meanwhile
+            continue
+        if field.horizon_utc > np.datetime64(window.from_utc, "s"):
+            members.append(field)
+    return members
 
 
 def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | None = None) -> WeatherFor | None:
