@@ -121,10 +121,10 @@ def register(app: typer.Typer) -> None:
         """Plan one voyage: waypoints, rpm per leg and ETAs, compared with the great-circle baseline."""
         import numpy as np
 
-        from flows.jobs.route_worker import cube_weather
+        from flows.jobs.route_worker import planned
         from flows.settings import load_settings
         from pipeline.performance.model import model_from_stored, unusable_reason
-        from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
+        from pipeline.routing.job import RouteJob, RoutingOptions
         from pipeline.sources.cycles import parse_cycle
         from storage import cube_window, export_store, fleet_store
 
@@ -190,23 +190,9 @@ def register(app: typer.Typer) -> None:
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed,
                                                             solver_options=tuple(pairs) or None),
                        cycle_version=version)
-        windows = []  # the voyage's weather window, for the ensemble
-        weather_for = cube_weather(cube_path, job, lay.storage_options)
-        if weather_for is not None:
-            def weather_for(problem, space, _from_cube=weather_for):
-                windows.append(problem.weather_window(space))
-                return _from_cube(problem, space)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
-                plan, weather = plan_voyage(job, weather_for)
-                spread = None
-                if windows and ensemble > 0 and plan.legs and not as_json:
-                    from flows.jobs.route_worker import lagged_members
-                    from pipeline.routing.ensemble import spread as ensemble_spread
-                    from pipeline.routing.job import routing_problem
-
-                    members = lagged_members(cube_path, lay.storage_options, c, windows[-1], ensemble)
-                    spread = ensemble_spread(plan, members, routing_problem(job).kernel_vessel())
+                plan, weather = planned(job, cube_path, lay.storage_options, n_members=max(0, ensemble))
         except KeyError as exc:
             fail(str(exc).strip("'\""))
         if as_json:
@@ -224,10 +210,10 @@ def register(app: typer.Typer) -> None:
                           f"{'' if lim != lim else f' (limits cost {lim:.2f} t)'}; runtime {plan.runtime_s:.2f} s; "
                           f"weather {'calm water' if calm else 'cycle ' + c}"
                           f"{'' if land_nm != land_nm else f'; least distance to land {land_nm:.1f} NM (outside the port approaches)'}")
-            if windows and ensemble > 0:
+            if cube_path is not None and ensemble > 0:
                 from pipeline.routing.ensemble import describe
 
-                console.print(f"uncertainty {describe(spread)}")
+                console.print(f"uncertainty {describe(plan.spread)}")
         wanted = {"png": png, "convergence": convergence, "rtz": rtz}
         if plan.legs and any(wanted.values()):
             from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for

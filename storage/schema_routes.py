@@ -6,7 +6,8 @@ degrees (wind/waves coming-from).
 
 import hashlib
 
-from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS, ROUTES
+from schemas.tables.routes import (LEG_HOURS_ADDED, ROUTE_ENSEMBLE_ADDED, ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS,
+                                   ROUTE_LEGS, ROUTES)
 from storage.warehouse import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -621,6 +622,8 @@ MIGRATIONS: list[Migration] = [
               ROUTES.add_columns_sql(*ROUTE_FORECAST_SPLIT_ADDED) + "\n" + FLEET_SAVINGS_VIEW_013),
     # plan against actual like with like: a re-plan from its start, a ship at sea without an arrival
     Migration("routes_014_voyage_performance_like_with_like", VOYAGE_PERFORMANCE_VIEW_014),
+    # each plan's spread across a lagged ensemble of cycles
+    Migration("routes_015_plan_ensemble_spread", ROUTES.add_columns_sql(*ROUTE_ENSEMBLE_ADDED)),
 ]
 
 

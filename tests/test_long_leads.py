@@ -113,3 +113,21 @@ def test_a_lagged_ensemble_reads_the_same_window_from_each_complete_cycle(long_m
     assert [m.cycle for m in members] == [np.datetime64("2020-12-01T06"), np.datetime64("2020-12-01T00")]
     assert members[0].horizon_utc == np.datetime64("2020-12-01T18") and members[1].horizon_utc == np.datetime64("2020-12-02T00")
     assert lagged_members(store, None, "2020-12-01T06", window, 1)[0].cycle == np.datetime64("2020-12-01T06")
+    # a voyage routed by a fleet worker keeps its spread across both cycles in its routes row
+    from flows.jobs.route_worker import route_one
+    from pipeline.performance.model import reference_model
+    from pipeline.routing.job import RouteJob
+    from schemas.tables.routes import ROUTES
+
+    voyage = {"voyage_id": "VENS", "imo": 9140607, "dep_lat": 20.0, "dep_lon": 150.0, "arr_lat": 20.0, "arr_lon": 151.5,
+              "depart_utc": np.datetime64("2020-12-01T08"), "rta_utc": np.datetime64("2020-12-01T16"),
+              "draft_m": 10.0, "trim_m": 0.0, "rpm_options": [70.0, 85.0, 100.0]}
+    job = RouteJob(voyage=voyage, vessel={"imo": 9140607, "rpm_max": 100.0}, model=reference_model().to_json(),
+                   run_id="r1", cycle="2020-12-01T06:00:00", exports=False)
+    row = route_one(job, store)["route"]
+    assert row["status"] == "ok", row["reason"]
+    assert set(ROUTES.names) >= set(row) and row["ensemble_members"] == 2
+    assert 0.0 <= row["p_on_time"] <= 1.0 and row["fuel_p10_t"] <= row["fuel_p50_t"] <= row["fuel_p90_t"]
+    assert row["savings_p10_pct"] <= row["savings_p50_pct"] <= row["savings_p90_pct"]
+    job0 = RouteJob(**{**job.__dict__, "options": job.options.__class__(ensemble_members=0)})
+    assert route_one(job0, store)["route"]["ensemble_members"] is None

@@ -91,11 +91,33 @@ def lagged_members(cube_path: str, storage_options: dict | None, cycle: str, win
         try:
             field = window_field(str(cube_path), options_json, str(np.datetime_as_string(np.datetime64(x, "s"))), None,
                                  window)
-        except KeyError:  # retired or being re-written meanwhile
+        except (KeyError, CubeError):  # retired, being re-written or damaged meanwhile: one member less
             continue
         if field.horizon_utc > np.datetime64(window.from_utc, "s"):
             members.append(field)
     return members
+
+
+def planned(job: RouteJob, cube_path: str | None, storage_options: dict | None = None,
+            n_members: int | None = None) -> tuple[Plan, wf.WeatherField]:
+    """`plan_voyage` in the job's cube weather; with a cube, the plan's spread across a lagged ensemble of
+    `n_members` cycles (default the job's `ensemble_members`; 0: none) in `Plan.spread`."""
+    from pipeline.routing.ensemble import spread
+    from pipeline.routing.job import routing_problem
+
+    windows = []
+    from_cube = cube_weather(cube_path, job, storage_options)
+    weather_for = None
+    if from_cube is not None:
+        def weather_for(problem, space):
+            windows.append(problem.weather_window(space))  # the voyage's window: the members' too
+            return from_cube(problem, space)
+    plan, weather = plan_voyage(job, weather_for)
+    n = job.options.ensemble_members if n_members is None else n_members
+    if windows and n > 0 and plan.legs:
+        members = lagged_members(cube_path, storage_options, job.cycle, windows[-1], n)
+        plan.spread = spread(plan, members, routing_problem(job).kernel_vessel())
+    return plan, weather
 
 
 def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | None = None) -> WeatherFor | None:
@@ -155,7 +177,7 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
     from pipeline.routing.search_space import VoyageGeometryError
 
     try:
-        plan, weather = plan_voyage(job, cube_weather(cube_path, job, storage_options))
+        plan, weather = planned(job, cube_path, storage_options)
     except (RoutingInputError, VoyageGeometryError, KeyError, CubeError) as exc:  # the message says what to do
         return failed_result(job, str(exc).strip("'\""))
     except Exception as exc:  # a bug or bad data: record it, keep the rest of the fleet going

@@ -14,6 +14,7 @@ from pipeline.routing import leg_kernel as lk
 
 if TYPE_CHECKING:
     from pipeline.routing.engine_limits import EngineLimits
+    from pipeline.routing.ensemble import Spread
     from pipeline.routing.savings import SavingsSplit
 
 STATUSES = ("ok", "late", "infeasible", "failed")
@@ -21,6 +22,8 @@ SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_base
                    "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct", "fuel_beyond_forecast_t",
                    "honest_baseline_fuel_beyond_forecast_t", "savings_forecast_pct", "savings_beyond_forecast_pct")
 LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
+ENSEMBLE_COLUMNS = ("ensemble_members", "p_on_time", "baseline_p_on_time", "fuel_p10_t", "fuel_p50_t", "fuel_p90_t",
+                    "savings_p10_pct", "savings_p50_pct", "savings_p90_pct")
 
 
 def _utc(t) -> datetime | None:
@@ -54,6 +57,8 @@ class Plan:
     unlimited_fuel_t: float = math.nan
     # the savings against the honest constant-rpm baseline, split (savings.py; None: not computed)
     savings: "SavingsSplit | None" = None
+    # the plan and its baseline sailed through a lagged ensemble (ensemble.py; None: not computed)
+    spread: "Spread | None" = None
 
     @property
     def hours(self) -> float:
@@ -146,8 +151,17 @@ class Plan:
             "n_legs_beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
             "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
             "min_land_clearance_nm": self.min_land_clearance_nm,
-            **self._savings_row(), **self._limits_row(),
+            **self._savings_row(), **self._limits_row(), **self._ensemble_row(),
         }
+
+    def _ensemble_row(self) -> dict:
+        s = self.spread
+        if s is None:
+            return dict.fromkeys(ENSEMBLE_COLUMNS)
+        return {"ensemble_members": s.n_members, "p_on_time": s.p_on_time, "baseline_p_on_time": s.baseline_p_on_time,
+                "fuel_p10_t": s.fuel_p10_t, "fuel_p50_t": s.fuel_p50_t, "fuel_p90_t": s.fuel_p90_t,
+                "savings_p10_pct": s.savings_p10_pct, "savings_p50_pct": s.savings_p50_pct,
+                "savings_p90_pct": s.savings_p90_pct}
 
     def _savings_row(self) -> dict:
         s = self.savings
@@ -189,7 +203,8 @@ class Plan:
         row = self.route_row()
         keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
                 "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "n_legs_beyond_forecast",
-                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm") + SAVINGS_COLUMNS + LIMITS_COLUMNS
+                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm") + SAVINGS_COLUMNS + LIMITS_COLUMNS \
+            + ENSEMBLE_COLUMNS
         out = {k: clean(row[k]) for k in keys}
         out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
         return out

@@ -103,6 +103,19 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('savings_beyond_forecast_pct', 'DOUBLE', '%',
            "part of savings_total_pct burnt after the forecast's last valid time (an assumption, not a forecast), "
            'percent; savings_forecast_pct + savings_beyond_forecast_pct = savings_total_pct'),
+    Column('ensemble_members', 'INTEGER', None,
+           'forecast cycles the plan and its baseline were sailed through (the one routed on and the complete ones '
+           'before it, valid at the same times); empty: not computed'),
+    Column('p_on_time', 'DOUBLE', None,
+           'share of those cycles in which the plan, sailed as made, arrives by the RTA (+ 0.5 h), 0..1'),
+    Column('baseline_p_on_time', 'DOUBLE', None, 'the same share for the constant-speed baseline, 0..1'),
+    Column('fuel_p10_t', 'DOUBLE', 't', "10th percentile of the plan's fuel over those cycles, tonnes"),
+    Column('fuel_p50_t', 'DOUBLE', 't', "median of the plan's fuel over those cycles, tonnes"),
+    Column('fuel_p90_t', 'DOUBLE', 't', "90th percentile of the plan's fuel over those cycles, tonnes"),
+    Column('savings_p10_pct', 'DOUBLE', '%',
+           '10th percentile over those cycles of the saving against the baseline sailed in the same cycle, percent'),
+    Column('savings_p50_pct', 'DOUBLE', '%', 'median of that saving, percent'),
+    Column('savings_p90_pct', 'DOUBLE', '%', '90th percentile of that saving, percent'),
 ), primary_key=('run_id', 'voyage_id'))
 
 ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met (speeds in knots, times UTC)', (
@@ -147,6 +160,9 @@ LEG_HOURS_ADDED = ('hours_beyond_forecast', 'hours_before_cycle', 'hours_without
 # the columns splitting each plan's saving into what the forecast covers and what it does not
 ROUTE_FORECAST_SPLIT_ADDED = ('fuel_beyond_forecast_t', 'honest_baseline_fuel_beyond_forecast_t',
                               'savings_forecast_pct', 'savings_beyond_forecast_pct')
+# the plan's spread across a lagged ensemble of cycles (pipeline/routing/ensemble.py)
+ROUTE_ENSEMBLE_ADDED = ('ensemble_members', 'p_on_time', 'baseline_p_on_time', 'fuel_p10_t', 'fuel_p50_t', 'fuel_p90_t',
+                        'savings_p10_pct', 'savings_p50_pct', 'savings_p90_pct')
 
 # route_legs is kept in one Parquet file per run beside the warehouse (storage/route_history.py); this table lists
 # the files of committed runs, so a file is part of the warehouse only once its run's rows are committed
