@@ -33,6 +33,9 @@ def run_table(summary: dict) -> Table:
     t.add_row("savings vs constant speed arriving at the RTA", _f(summary.get("savings_total_pct"), "{:.1f} %"))
     t.add_row("  of which speed profile / route", f"{_f(summary.get('savings_speed_profile_pct'), '{:.1f} %')} / "
               f"{_f(summary.get('savings_route_pct'), '{:.1f} %')}")
+    t.add_row("  within the forecast / past its last step", f"{_f(summary.get('savings_forecast_pct'), '{:.1f} %')} / "
+              f"{_f(summary.get('savings_beyond_forecast_pct'), '{:.1f} %')} "
+              f"({summary.get('n_beyond_horizon')} voyages past it)")
     t.add_row("constant-speed baseline fuel (t), same voyages", _f(summary.get("honest_baseline_fuel_t")))
     t.add_row("engine-change limits cost (t)", _f(summary.get("limits_fuel_t"), "{:.2f}"))
     return t

@@ -115,6 +115,10 @@ def register(app: typer.Typer) -> None:
         objective: str = typer.Option(RoutingOptions.objective, help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
         calm: bool = typer.Option(False, "--calm", help="Ignore the cube: calm water, no current."),
+        ensemble: int = typer.Option(4, "--ensemble", help="Sail the plan and its baseline through this many cycles "
+                                                           "(the one routed on and the complete ones before it, valid "
+                                                           "at the same times): P(on time), fuel and saving P10/P50/P90. "
+                                                           "0: none."),
         rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel); the search uses them, then each run's rpm is refined anywhere between the lowest and the highest (routing.continuous_speed)."),
         png: Optional[Path] = typer.Option(None, help="Write a map of the route, baseline and weather."),
         convergence: Optional[Path] = typer.Option(None, help="Write the BFOA convergence plot."),
@@ -125,10 +129,10 @@ def register(app: typer.Typer) -> None:
         """Plan one voyage: waypoints, rpm per leg and ETAs, compared with the great-circle baseline."""
         import numpy as np
 
-        from flows.jobs.route_worker import cube_weather
+        from flows.jobs.route_worker import planned
         from flows.settings import load_settings
         from pipeline.performance.model import model_from_stored, unusable_reason
-        from pipeline.routing.job import RouteJob, RoutingOptions, plan_voyage
+        from pipeline.routing.job import RouteJob, RoutingOptions
         from pipeline.sources.cycles import parse_cycle
         from storage import cube_window, export_store, fleet_store
 
@@ -209,7 +213,7 @@ def register(app: typer.Typer) -> None:
                        cycle_version=version)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
-                plan, weather = plan_voyage(job, cube_weather(cube_path, job, lay.storage_options))
+                plan, weather = planned(job, cube_path, lay.storage_options, n_members=max(0, ensemble))
         except KeyError as exc:
             fail(str(exc).strip("'\""))
         if as_json:
@@ -219,13 +223,18 @@ def register(app: typer.Typer) -> None:
             console.print(comparison_table(plan))
             sp = plan.savings
             sav = ("n/a" if sp is None else f"{sp.total_pct:.1f} % (speed profile {sp.speed_profile_pct:.1f} %, route "
-                   f"{sp.route_pct:.1f} %) vs constant {sp.baseline_rpm:.1f} rpm arriving at the RTA")
+                   f"{sp.route_pct:.1f} %; within the forecast {sp.forecast_pct:.1f} %, past its last step "
+                   f"{sp.beyond_forecast_pct:.1f} %) vs constant {sp.baseline_rpm:.1f} rpm arriving at the RTA")
             lim, land_nm = plan.limits_fuel_t, plan.min_land_clearance_nm
             console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
                           f"savings {sav}; engine changes {plan.n_engine_changes}"
                           f"{'' if lim != lim else f' (limits cost {lim:.2f} t)'}; runtime {plan.runtime_s:.2f} s; "
                           f"weather {'calm water' if calm else 'cycle ' + c}"
                           f"{'' if land_nm != land_nm else f'; least distance to land {land_nm:.1f} NM (outside the port approaches)'}")
+            if cube_path is not None and ensemble > 0:
+                from pipeline.routing.ensemble import describe
+
+                console.print(f"uncertainty {describe(plan.spread)}")
         wanted = {"png": png, "convergence": convergence, "rtz": rtz}
         if plan.legs and any(wanted.values()):
             from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for

@@ -55,6 +55,11 @@ class SourceSettings:
     step_timeout_s: float = 3600.0  # Prefect task timeout of each ingest step
     gsm_max_lead_h: int = 132
     gsm_step_h: int = 6
+    # JMA runs GSM (and GWM) on to 264 h on the 00 and 12 UTC cycles, 12-hourly past 132 h (FD0600…FD1100). These
+    # longer leads are fetched and kept whenever a cycle lists them, and never required: a cycle without them (06 and
+    # 18 UTC, an archive that lacks them) is complete with its leads to gsm_max_lead_h. 0 (or None): not fetched.
+    gsm_long_lead_h: int | None = 264
+    gsm_long_step_h: int = 12
     allowed_redirect_hosts: tuple[str, ...] = ()
     http_timeout_s: float = 60.0
     http_retries: int = 3

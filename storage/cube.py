@@ -394,6 +394,15 @@ def cycle_states(path, lock_dir: Path | None = None, storage_options: dict | Non
         return dict(zip(ds["cycle"].values.astype("datetime64[ns]"), ds["cycle_state"].values.astype(int)))
 
 
+def step_axis_h(path, storage_options: dict | None = None) -> list[int] | None:
+    """The cube's step axis in whole hours (every cycle's slots); None when there is no cube yet."""
+    loc = locate(path, storage_options)
+    if not loc.has("zarr.json"):
+        return None
+    group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
+    return [int(h) for h in cv.step_hours(np.asarray(group["step"][:]))]
+
+
 def complete_cycles(path, storage_options: dict | None = None) -> list[np.datetime64]:
     return sorted(c for c, s in cycle_states(path, storage_options=storage_options).items() if s == STATE_COMPLETE)
 

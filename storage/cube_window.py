@@ -215,15 +215,20 @@ def cycle_versions(path, storage_options: dict | None = None) -> dict[np.datetim
 def newest_complete_cycle(path, storage_options: dict | None = None) -> np.datetime64 | None:
     """The newest complete cycle of the published view (None: none, or no store), for readers such as
     `jitroute route`; a writer asks storage.cube.latest_complete_cycle, which also repairs a half-finished append."""
+    return next(complete_cycles_newest_first(path, storage_options), None)
+
+
+def complete_cycles_newest_first(path, storage_options: dict | None = None):
+    """The complete cycles of the published view, newest first, each state read only when the caller asks for the
+    next (nothing when there is no store)."""
     loc = locate(path, storage_options)
     if not loc.has("zarr.json"):
-        return None
+        return
     pub = open_published(loc)
     state = pub.group["cycle_state"]
-    for c in sorted(pub.rows, reverse=True):  # newest first: one read of its state, most often the only one
+    for c in sorted(pub.rows, reverse=True):
         if int(state[pub.rows[c]]) == STATE_COMPLETE:
-            return c
-    return None
+            yield c
 
 
 def _step_slice(valid: np.ndarray, t_from, t_to) -> slice:
@@ -261,6 +266,16 @@ def _lon_slices(lon: np.ndarray, lon_deg: tuple[float, float], pad_deg: float) -
     first = slice(k0, min(n, k0 + count))
     slices = [first] if k0 + count <= n else [first, slice(0, k0 + count - n)]
     return slices, lon[k0] + dlon * np.arange(count)
+
+
+def cycle_steps_h(pub: Published, cycle) -> np.ndarray:
+    """The cycle's own leads (h): the cube's step axis up to the cycle's last step with wind. The axis has room for
+    the longest leads any cycle has (the 00/12 UTC cycles' to 264 h); a cycle with shorter ones leaves the rest all
+    NaN (pipeline/weather/assemble.py). GSM wind has no land mask, so one grid point (one chunk) tells."""
+    ci = pub.rows[np.datetime64(cycle, "ns")]
+    wind = np.asarray(pub.group["u10"][ci, :, len(pub.lat) // 2, 0])
+    have = np.flatnonzero(np.isfinite(wind))
+    return pub.step_h[: int(have[-1]) + 1] if have.size else pub.step_h
 
 
 def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], lon_deg: tuple[float, float],

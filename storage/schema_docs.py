@@ -36,6 +36,14 @@ _SAVINGS = {
     "savings_total_pct": "fuel saved against the honest baseline, percent (fuel-weighted over the voyages)",
     "savings_speed_profile_pct": "part of savings_total_pct from the speed profile (best engine plan on the base route), percent",
     "savings_route_pct": "part of savings_total_pct from the route, percent",
+    "n_beyond_horizon": "voyages whose plan sails past the forecast's last valid time (forecast_flag beyond horizon)",
+    "n_split": "voyages whose saving is split into forecast and beyond-forecast parts (the split sums are over these)",
+    "fuel_beyond_forecast_t": "planned fuel burnt in tonnes after the forecast's last valid time",
+    "honest_baseline_fuel_beyond_forecast_t": "honest baseline's fuel burnt in tonnes after the forecast's last valid time",
+    "savings_forecast_pct": "the saving the forecast backs: fuel saved within the forecast's valid times, percent of "
+                            "the honest baseline's fuel (fuel-weighted); the figure to quote",
+    "savings_beyond_forecast_pct": "fuel saved after the forecast's last valid time (neutral weather there: an "
+                                   "assumption, not a forecast), percent; with savings_forecast_pct it makes the total",
     "limits_fuel_t": "fuel the engine-change limits cost, tonnes (plan minus the best plan on its route without them)",
     "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plans on the same routes without engine-change limits",
     "discrete_baseline_fuel_t": "fuel burnt in tonnes on the discrete-rpm baseline (arrives early: overstates savings)",
@@ -77,14 +85,23 @@ VIEWS: dict[str, tuple[str, dict[str, str]]] = {
         "voyage_id": _VOYAGES["voyage_id"], "imo": _VOYAGES["imo"], "vessel_name": _VESSELS["name"],
         "dep_name": _VOYAGES["dep_name"], "arr_name": _VOYAGES["arr_name"], "depart_utc": _VOYAGES["depart_utc"],
         "rta_utc": _VOYAGES["rta_utc"], "run_id": "run of the plan (latest_routes)", "plan_status": _ROUTES["status"],
-        "model_version": _ROUTES["model_version"], "planned_fuel_t": "planned fuel burnt in tonnes",
-        "planned_eta_utc": f"planned arrival {UTC}", "n_reports": "noon reports at sea on the voyage",
-        "actual_fuel_t": "fuel burnt in tonnes, from the noon reports", "actual_hours": "hours steamed, from the noon reports",
-        "actual_dist_nm": "distance sailed, nautical miles, from the noon reports",
+        "model_version": _ROUTES["model_version"],
+        "plan_start_kind": "where the plan starts: port, or a position at sea (a re-plan, compared from its start)",
+        "compared_from_utc": f"the time plan and actual are compared from: the departure, or a re-plan's start {UTC}",
+        "planned_fuel_t": "planned fuel burnt in tonnes from compared_from_utc",
+        "planned_eta_utc": f"planned arrival {UTC}", "n_reports": "noon reports at sea after compared_from_utc",
+        "actual_fuel_t": "fuel burnt in tonnes after compared_from_utc, from the noon reports (a re-plan's first report "
+                         "pro rata for its hours after the start)",
+        "actual_hours": "hours steamed after compared_from_utc, from the noon reports",
+        "actual_dist_nm": "distance sailed after compared_from_utc, nautical miles, from the noon reports",
+        "arrived": "true when the voyage has ended: a noon report within 10 NM of the destination, or (without "
+                   "positions) the vessel's next voyage has departed; false for a ship still at sea",
+        "last_report_utc": f"the voyage's last noon report at sea so far {UTC}",
         "actual_arrival_utc": f"the arrival: the first noon report within 10 NM of the destination, else the last report at "
-                              f"sea before the next voyage (at most RTA + 30 days) {UTC}",
-        "fuel_error_pct": "planned minus actual fuel, percent of actual",
-        "arrival_error_h": "actual minus planned arrival, hours", "late_h": "actual arrival minus RTA, hours"}),
+                              f"sea before the next voyage; empty while the ship is at sea {UTC}",
+        "fuel_error_pct": "planned minus actual fuel from compared_from_utc, percent of actual; empty while at sea",
+        "arrival_error_h": "actual minus planned arrival, hours; empty while at sea",
+        "late_h": "actual arrival minus RTA, hours; empty while at sea"}),
 }
 
 

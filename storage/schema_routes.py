@@ -6,7 +6,8 @@ degrees (wind/waves coming-from).
 
 import hashlib
 
-from schemas.tables.routes import LEG_HOURS_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS
+from schemas.tables.routes import (LEG_HOURS_ADDED, ROUTE_ENSEMBLE_ADDED, ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS,
+                                   ROUTE_LEGS, ROUTES)
 from storage.warehouse import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -80,7 +81,117 @@ _LATEST_ROUTES_VIEW_006 = """
 """
 
 
+# fleet_savings with each run's saving split by when the fuel is burnt (savings.py): within the forecast's valid
+# times (backed by the forecast) and after its last one (the neutral weather past the horizon, an assumption). The
+# split sums run over the voyages that have it (plans made before it existed do not).
+_SPLIT = "r.savings_forecast_pct IS NOT NULL"
+FLEET_SAVINGS_VIEW_013 = f"""
+        CREATE OR REPLACE VIEW fleet_savings AS
+        SELECT u.run_id, u.started_at, u.cycle, u.trigger, u.status AS run_status, count(*) AS n_voyages,
+               count(*) FILTER (WHERE r.status = 'ok') AS n_on_time,
+               count(*) FILTER (WHERE r.status = 'late') AS n_late,
+               count(*) FILTER (WHERE r.status = 'infeasible') AS n_infeasible,
+               count(*) FILTER (WHERE r.status = 'failed') AS n_failed,
+               count(*) FILTER (WHERE r.status IN ('infeasible', 'failed')) AS n_not_routed,
+               coalesce(u.n_export_failed, 0) AS n_export_failed,
+               count(*) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS n_compared,
+               sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS fuel_t,
+               sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS honest_baseline_fuel_t,
+               sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL) AS profile_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_total_pct,
+               100 * (1 - sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0))
+                   AS savings_speed_profile_pct,
+               100 * (sum(r.profile_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL)
+                      - sum(r.fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE r.savings_total_pct IS NOT NULL), 0)
+                   AS savings_route_pct,
+               count(*) FILTER (WHERE r.forecast_flag LIKE '%beyond horizon%') AS n_beyond_horizon,
+               count(*) FILTER (WHERE {_SPLIT}) AS n_split,
+               sum(r.fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT}) AS fuel_beyond_forecast_t,
+               sum(r.honest_baseline_fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT})
+                   AS honest_baseline_fuel_beyond_forecast_t,
+               100 * ((sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPLIT})
+                       - sum(r.honest_baseline_fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT}))
+                      - (sum(r.fuel_t) FILTER (WHERE {_SPLIT}) - sum(r.fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT})))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPLIT}), 0) AS savings_forecast_pct,
+               100 * (sum(r.honest_baseline_fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT})
+                      - sum(r.fuel_beyond_forecast_t) FILTER (WHERE {_SPLIT}))
+                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPLIT}), 0) AS savings_beyond_forecast_pct,
+               sum(r.limits_fuel_t) AS limits_fuel_t,
+               sum(r.unlimited_fuel_t) FILTER (WHERE r.limits_fuel_t IS NOT NULL) AS unlimited_fuel_t,
+               sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL) AS discrete_baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE r.baseline_fuel_t IS NOT NULL)
+                        / nullif(sum(r.baseline_fuel_t) FILTER (WHERE r.fuel_t IS NOT NULL), 0)) AS savings_vs_discrete_pct
+        FROM route_runs u JOIN routes r USING (run_id)
+        GROUP BY ALL;
+"""
+
+
 ARRIVAL_NM = 10.0  # a noon report this close to the destination is the arrival (plan against actual)
+
+# plan against actual, like with like (migration routes_014). A plan made at sea (a re-plan: latest_routes.start_kind
+# other than port) covers the voyage from its start only, so the actual side is counted from that start too: reports
+# after it, the first one pro rata for the hours it covers after the start. A voyage has ended at its arrival report
+# (within ARRIVAL_NM of the destination) or, without positions, when the vessel's next voyage has departed and
+# reported; a ship still at sea has no arrival, and its errors are empty (its last report is not the arrival).
+VOYAGE_PERFORMANCE_VIEW_014 = f"""
+        CREATE OR REPLACE VIEW voyage_performance AS
+        WITH bounds AS (
+            SELECT voyage_id, imo, depart_utc, rta_utc, arr_lat, arr_lon,
+                   lead(depart_utc) OVER (PARTITION BY imo ORDER BY depart_utc) AS next_depart_utc,
+                   least(coalesce(lead(depart_utc) OVER (PARTITION BY imo ORDER BY depart_utc), rta_utc + INTERVAL 30 DAY),
+                         rta_utc + INTERVAL 30 DAY) AS bound_utc
+            FROM voyages),
+        arrivals AS (
+            SELECT b.voyage_id, min(n.ts_utc) AS arrived_utc
+            FROM bounds b JOIN noon_reports n ON n.imo = b.imo AND n.ts_utc > b.depart_utc AND n.ts_utc <= b.bound_utc
+            WHERE n.lat IS NOT NULL AND n.lon IS NOT NULL AND b.arr_lat IS NOT NULL AND b.arr_lon IS NOT NULL
+              AND 2 * 3440.065 * asin(sqrt(pow(sin(radians(n.lat - b.arr_lat) / 2), 2)
+                    + cos(radians(n.lat)) * cos(radians(b.arr_lat)) * pow(sin(radians(n.lon - b.arr_lon) / 2), 2)))
+                  <= {ARRIVAL_NM}
+            GROUP BY b.voyage_id),
+        last_reports AS (SELECT imo, max(ts_utc) AS last_utc FROM noon_reports GROUP BY imo),
+        windows AS (
+            SELECT b.voyage_id, b.imo, b.depart_utc, coalesce(a.arrived_utc, b.bound_utc) AS window_end_utc,
+                   a.arrived_utc,
+                   a.arrived_utc IS NOT NULL OR (b.next_depart_utc IS NOT NULL AND l.last_utc >= b.next_depart_utc) AS ended,
+                   CASE WHEN coalesce(p.start_kind, 'port') <> 'port' AND p.start_utc > b.depart_utc THEN p.start_utc
+                        ELSE b.depart_utc END AS compared_from_utc,
+                   coalesce(p.start_kind, 'port') <> 'port' AND p.start_utc > b.depart_utc AS from_replan
+            FROM bounds b LEFT JOIN arrivals a USING (voyage_id) LEFT JOIN last_reports l USING (imo)
+            LEFT JOIN latest_routes p USING (voyage_id)),
+        shares AS (  -- each report's share after compared_from_utc (a re-plan's first report covers hours before it)
+            SELECT w.voyage_id, n.ts_utc, n.fuel_t, n.hours, n.dist_nm,
+                   CASE WHEN w.from_replan AND n.hours > 0
+                        THEN least(1.0, date_diff('second', w.compared_from_utc, n.ts_utc) / 3600.0 / n.hours)
+                        ELSE 1.0 END AS share
+            FROM windows w JOIN noon_reports n
+              ON n.imo = w.imo AND n.ts_utc > w.compared_from_utc AND n.ts_utc <= w.window_end_utc
+            WHERE coalesce(n.dist_nm, 0) > 0 OR coalesce(n.stw_kn, 0) > 0.5),  -- at sea
+        sailed AS (
+            SELECT voyage_id, count(*) AS n_reports, sum(fuel_t * share) AS actual_fuel_t, sum(hours * share) AS actual_hours,
+                   sum(dist_nm * share) AS actual_dist_nm, max(ts_utc) AS last_report_utc
+            FROM shares GROUP BY voyage_id)
+        SELECT v.voyage_id, v.imo, s.name AS vessel_name, v.dep_name, v.arr_name, v.depart_utc, v.rta_utc,
+               p.run_id, p.status AS plan_status, p.model_version, coalesce(p.start_kind, 'port') AS plan_start_kind,
+               w.compared_from_utc, p.fuel_t AS planned_fuel_t, p.eta_utc AS planned_eta_utc,
+               a.n_reports, a.actual_fuel_t, a.actual_hours, a.actual_dist_nm, w.ended AS arrived, a.last_report_utc,
+               CASE WHEN w.ended THEN coalesce(w.arrived_utc, a.last_report_utc) END AS actual_arrival_utc,
+               CASE WHEN w.ended THEN 100 * (p.fuel_t - a.actual_fuel_t) / nullif(a.actual_fuel_t, 0) END AS fuel_error_pct,
+               CASE WHEN w.ended THEN date_diff('second', p.eta_utc, coalesce(w.arrived_utc, a.last_report_utc)) / 3600.0
+                    END AS arrival_error_h,
+               CASE WHEN w.ended THEN date_diff('second', v.rta_utc, coalesce(w.arrived_utc, a.last_report_utc)) / 3600.0
+                    END AS late_h
+        FROM voyages v
+        LEFT JOIN vessels s USING (imo)
+        LEFT JOIN latest_routes p USING (voyage_id)
+        LEFT JOIN windows w USING (voyage_id)
+        LEFT JOIN sailed a USING (voyage_id);
+"""
+
 
 MIGRATIONS: list[Migration] = [
     Migration(
@@ -508,6 +619,14 @@ MIGRATIONS: list[Migration] = [
         DROP TABLE route_leg_parts;
         ALTER TABLE route_leg_parts_new RENAME TO route_leg_parts;
         """),
+    # each plan's saving split into what the forecast covers and what it does not (past the last valid time plans
+    # sail in neutral weather, leg_kernel), and fleet_savings with the split
+    Migration("routes_013_savings_forecast_split",
+              ROUTES.add_columns_sql(*ROUTE_FORECAST_SPLIT_ADDED) + "\n" + FLEET_SAVINGS_VIEW_013),
+    # plan against actual like with like: a re-plan from its start, a ship at sea without an arrival
+    Migration("routes_014_voyage_performance_like_with_like", VOYAGE_PERFORMANCE_VIEW_014),
+    # each plan's spread across a lagged ensemble of cycles
+    Migration("routes_015_plan_ensemble_spread", ROUTES.add_columns_sql(*ROUTE_ENSEMBLE_ADDED)),
 ]
 
 

@@ -132,6 +132,26 @@ def test_route_cli_json_png_and_rtz(fleet_root, tmp_path):
     validate_rtz((tmp_path / "r.rtz").read_bytes())
 
 
+def test_route_cli_shows_the_plans_spread_across_the_cycles_it_has(fleet_root, monkeypatch):
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    monkeypatch.setenv("COLUMNS", "300")  # one line per sentence
+
+    root, fl, _, _ = fleet_root
+    vid = fl.voyages.voyage_id.iloc[1]
+    res = CliRunner().invoke(app, ["route", "--voyage", vid, "--data", str(root), "--solver", "gc"])
+    assert res.exit_code == 0, res.output
+    # one complete cycle in this warehouse: a one-member ensemble, where the plan is on time as planned
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("uncertainty"))
+    assert "across 1 forecast: on time 100 % (baseline 100 %)" in line, line
+    assert "saving P10/P50/P90 0.0/0.0/0.0 %" in line  # the gc plan is the constant-speed voyage itself
+    assert "within the forecast" in res.output  # the saving split of the route line
+    res = CliRunner().invoke(app, ["route", "--voyage", vid, "--data", str(root), "--solver", "gc", "--ensemble", "0"])
+    assert res.exit_code == 0 and "uncertainty" not in res.output
+
+
 def test_route_cli_says_what_is_missing(tmp_path):
     from typer.testing import CliRunner
 

@@ -192,7 +192,9 @@ def test_ingested_cube_is_cf(ingested):
     assert ds.cf.axes == {"X": ["lon"], "Y": ["lat"], "T": ["valid_time"]}
     assert ds.cf["time"].dims == ("cycle", "step")
     np.testing.assert_array_equal(ds.cf["time"].values, ds.cycle.values[:, None] + ds.step.values[None, :])
-    assert ds.step.values[-1] == np.timedelta64(132, "h") and ds.step.encoding["units"] == "hours"
+    # the step axis has room for the 00/12 UTC cycles' leads to 264 h; the demo cycle lists leads to 132 h only
+    assert ds.step.values[-1] == np.timedelta64(264, "h") and ds.step.encoding["units"] == "hours"
+    assert bool(ds.u10.sel(step=np.timedelta64(144, "h")).isnull().all())
     assert ds.current_age_h.attrs["units"] == "h"
     flags = ds.cycle_state.attrs["flag_values"]  # Zarr keeps attributes as JSON: typed again by the variable's dtype
     assert cube_variables.attrs("cycle_state")["flag_values"].dtype == ds.cycle_state.dtype == np.int8

@@ -853,6 +853,53 @@ def test_plan_against_actual_ends_a_late_voyage_at_its_arrival_not_at_rta_plus_3
     assert v.arrival_error_h == pytest.approx(4 * 24 + 6) and v.late_h == pytest.approx(96.0)
 
 
+def test_plan_against_actual_compares_a_replan_from_its_start_and_a_ship_at_sea_has_no_arrival(tmp_path):
+    """A voyage re-planned at sea at 12-08 06:00 (plan: 50 t to go) is compared from there: the 12-08 noon report
+    counts for its 6 h after the start (5 of 20 t), the later ones whole. While the ship is at sea its last report is
+    no arrival: no errors (the old view put 50 t against the whole voyage's fuel); once it reports at the destination
+    the errors are those of the re-plan's part."""
+    from storage import warehouse
+
+    db = tmp_path / "w.duckdb"
+    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
+    fleet_store.import_voyages(db, pd.DataFrame([dict(
+        voyage_id="voy20200001", imo=9140607, dep_name="Hai Phong", arr_name="Sai Gon", dep_lat=20.8, dep_lon=106.8,
+        arr_lat=10.7, arr_lon=106.8, depart_utc="2020-12-06T00:00Z", rta_utc="2020-12-10T12:00Z", draft_m=6.0, trim_m=2.0,
+        rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)]))
+
+    def reports(days, lats):
+        return pd.DataFrame({"imo": "9140607", "ts_utc": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "lat": lats, "lon": "106.8",
+                             "rpm": "120", "draft_m": "6", "stw_kn": "5", "sog_kn": "5", "dist_nm": "120",
+                             "hours": "24", "fuel_t": "20"})
+    at_sea = reports(pd.date_range("2020-12-06T12:00", "2020-12-09T12:00", freq="D"), ["18.75", "16.75", "14.75", "12.75"])
+    good, bad = validate_noon(at_sea, {9140607})
+    assert len(good) == 4 and len(bad) == 0
+    fleet_store.import_noon(db, good, bad)
+    with warehouse.connect(db) as con:
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', '2020-12-05', 'ok'), "
+                    "('r2', '2020-12-08 06:00', 'ok')")
+        con.execute("INSERT INTO routes (run_id, voyage_id, imo, status, depart_utc, eta_utc, rta_utc, fuel_t, start_kind, "
+                    "start_utc) VALUES ('r1', 'voy20200001', 9140607, 'ok', '2020-12-06', '2020-12-10 06:00', "
+                    "'2020-12-10 12:00', 95.0, 'port', '2020-12-06'), ('r2', 'voy20200001', 9140607, 'ok', '2020-12-08 06:00', "
+                    "'2020-12-10 06:00', '2020-12-10 12:00', 50.0, 'noon report', '2020-12-08 06:00')")
+
+    def row():
+        with duckdb.connect(str(db), read_only=True) as con:
+            return con.execute("SELECT * FROM voyage_performance").fetchdf().iloc[0]
+    v = row()
+    assert v.run_id == "r2" and v.plan_start_kind == "noon report" and str(v.compared_from_utc) == "2020-12-08 06:00:00"
+    assert v.n_reports == 2 and v.actual_fuel_t == pytest.approx(25.0) and v.actual_hours == pytest.approx(30.0)
+    assert not v.arrived and str(v.last_report_utc) == "2020-12-09 12:00:00"
+    assert pd.isna(v.actual_arrival_utc) and pd.isna(v.fuel_error_pct) and pd.isna(v.arrival_error_h) and pd.isna(v.late_h)
+    good, bad = validate_noon(reports(pd.DatetimeIndex(["2020-12-10T12:00"]), ["10.75"]), {9140607})
+    assert len(good) == 1 and len(bad) == 0
+    fleet_store.import_noon(db, good, bad)
+    v = row()
+    assert v.arrived and str(v.actual_arrival_utc) == "2020-12-10 12:00:00" and v.n_reports == 3
+    assert v.actual_fuel_t == pytest.approx(45.0) and v.fuel_error_pct == pytest.approx(100 * (50 - 45) / 45)
+    assert v.arrival_error_h == pytest.approx(6.0) and v.late_h == pytest.approx(0.0)
+
+
 def test_a_noon_file_imported_in_chunks_stores_what_a_whole_file_import_stores(fleet, tmp_path, monkeypatch):
     """Read, validated and stored 500 rows at a time (in one transaction): the same rows, rejected rows and reasons as
     one chunk, including a (vessel, time) repeated in another chunk of the file (a duplicate, not a second report)."""

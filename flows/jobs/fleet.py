@@ -444,6 +444,10 @@ def summary_table(r: dict) -> list[dict]:
             {"what": "savings % vs constant speed arriving at the RTA", "value": _r(r.get("savings_total_pct"))},
             {"what": "… of which speed profile %", "value": _r(r.get("savings_speed_profile_pct"))},
             {"what": "… of which route %", "value": _r(r.get("savings_route_pct"))},
+            {"what": "savings % within the forecast's valid times", "value": _r(r.get("savings_forecast_pct"))},
+            {"what": "savings % past the forecast (neutral weather, not forecast)",
+             "value": _r(r.get("savings_beyond_forecast_pct"))},
+            {"what": "voyages past the forecast's last step", "value": r.get("n_beyond_horizon")},
             {"what": "constant-speed baseline fuel t", "value": _r(r.get("honest_baseline_fuel_t"))},
             {"what": "engine-change limits cost t", "value": _r(r.get("limits_fuel_t"), 2)}]
     return rows
@@ -462,7 +466,18 @@ def headline(r: dict) -> str:
     return (f"Savings {total} % against sailing the base route at the one constant speed that arrives at the RTA "
             f"({r.get('n_compared')} voyages, fuel-weighted): speed profile {_r(r.get('savings_speed_profile_pct'))} %, "
             f"route {_r(r.get('savings_route_pct'))} %. The engine-change limits cost "
-            f"{_r(r.get('limits_fuel_t'), 2)} t.")
+            f"{_r(r.get('limits_fuel_t'), 2)} t.{_forecast_split(r)}")
+
+
+def _forecast_split(r: dict) -> str:
+    """What of the saving the forecast backs, when the run's plans have the split (savings.py)."""
+    inside = _r(r.get("savings_forecast_pct"))
+    if inside is None:
+        return ""
+    n = r.get("n_beyond_horizon") or 0
+    return (f" Of it, {inside} % is saved within the forecast's valid times and "
+            f"{_r(r.get('savings_beyond_forecast_pct'))} % past them ({n} voyage{'s sail' if n != 1 else ' sails'} past "
+            "the forecast's last step, where every route meets the same neutral weather: not a forecast).")
 
 
 def run_markdown(r: dict) -> str:

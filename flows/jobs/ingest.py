@@ -114,9 +114,11 @@ class Listing:
         return "; ".join([what, *self.problems])
 
 
-def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[int], opts: dict[str, FetchOptions]) -> Listing:
-    """The files each registered source has for the cycle (`base_urls`: source name → base URL). Each index page is
-    read once; the secondary sources are listed only when a primary one has files for the cycle."""
+def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[int], opts: dict[str, FetchOptions],
+                 optional: list[int] = ()) -> Listing:
+    """The files each registered source has for the cycle (`base_urls`: source name → base URL) at the leads it must
+    have (`steps`) and at the optional ones it lists (`optional`). Each index page is read once; the secondary
+    sources are listed only when a primary one has files for the cycle."""
     pages: dict[str, tuple[list[str], list[str]]] = {}
     problems: list[str] = []
 
@@ -142,7 +144,7 @@ def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[in
         url, names = names_at(src)
         if src.primary and url not in index_urls:
             index_urls.append(url)
-        chosen = src.select(names, cycle, steps)
+        chosen = src.select(names, cycle, steps, optional)
         items += [Download(src.name, name, url + name) for name in chosen.names]
         n_expected += chosen.n_expected
         if chosen.gaps_h is not None:
@@ -194,9 +196,11 @@ def _decode_one(it: Download, grid: tuple, quarantine_dir: Path):
     return ds if ds is None or src.role == "currents" else regrid(ds, grid[0], grid[1])
 
 
-def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path):
+def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path,
+                        optional: list[int] = ()):
     """Files of thread-safe decoders (GRIB2) decoded DECODE_WORKERS at a time, the others (OSCAR NetCDF: HDF5 is not
-    thread-safe) in this thread meanwhile; then assembled by the role of their source."""
+    thread-safe) in this thread meanwhile; then assembled by the role of their source onto the cube's step axis
+    (`steps` and then `optional`, the leads a cycle may add)."""
     usable = [it for it in items if it.status in ("ok", "skipped")]
     pooled = [it for it in usable if BY_NAME[it.source].thread_safe_decode]
     with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
@@ -208,7 +212,8 @@ def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list
         if ds is not None:
             by_role[BY_NAME[it.source].role].append(ds)
     currents = xr.concat(by_role["currents"], dim="time").sortby("time") if by_role["currents"] else None
-    ds, missing_steps = assemble_cycle(cycle, steps, grid[0], grid[1], by_role["wind"], by_role["waves"], currents)
+    ds, missing_steps = assemble_cycle(cycle, [*steps, *optional], grid[0], grid[1], by_role["wind"], by_role["waves"],
+                                       currents, optional_after_h=max(steps) if optional else None)
     return ds, missing_steps, currents is not None
 
 
@@ -266,6 +271,22 @@ def ingest_cycle(cycle: str | None = None, data_root: str | None = None, rish_ur
         return _ingest_locked(s, layout, c, label, force, run)
 
 
+def _optional_leads(s: Settings, layout, label: str) -> list[int]:
+    """The leads past gsm_max_lead_h a cycle may add (the 00/12 UTC cycles' to 264 h), as far as the cube's step axis
+    has room for them: a cube made with shorter leads keeps its axis (start a new cube to keep the longer ones)."""
+    wanted = rish.long_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_long_lead_h, s.sources.gsm_long_step_h)
+    have = cube.step_axis_h(layout.cube_store)
+    if have is None:
+        return wanted
+    base = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
+    kept = [h for h in have if h not in base]  # the store's axis is every cycle's: its slots, whatever the settings
+    lost = sorted(set(wanted) - set(kept))
+    if lost:
+        LOG.warning("cycle %s: the cube's step axis ends at %d h, so leads %s h are not kept; to keep them move the cube "
+                    "%s aside and ingest again", label, max(have), ", ".join(map(str, lost)), layout.weather_cube_url)
+    return kept
+
+
 def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: bool, run) -> dict:
     if not force and c in cube.complete_cycles(layout.cube_store) and _recorded_complete(layout.warehouse, c):
         bad = cube.corrupt_chunks(layout.cube_store, [c])  # "complete" must also mean readable
@@ -277,9 +298,11 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
     token = earthdata_token(s, blocks=run.prefect)
     opts = {src.name: _opts(s, src.name, token) for src in SOURCES}
     steps = rish.expected_gsm_leads(s.sources.gsm_max_lead_h, s.sources.gsm_step_h)
+    optional = _optional_leads(s, layout, label)
     timeout = s.sources.step_timeout_s
     base_urls = {src.name: getattr(s.sources, src.url_setting) for src in SOURCES}
-    listing = run.step(list_sources, base_urls, c, steps, opts, name="list-sources", retries=2, timeout_s=timeout)
+    listing = run.step(list_sources, base_urls, c, steps, opts, optional, name="list-sources", retries=2,
+                       timeout_s=timeout)
     for name, url in listing.rejected:
         LOG.warning("ignored unsafe name %r listed at %s", name, url)
     if not listing.items:  # unpublished, or the listing unreachable: recorded missing, the cycle incomplete
@@ -290,7 +313,7 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
     known = ingest_log.known_checksums(layout.warehouse, [it.name for it in listing.items])
     items = run.step(download_all, listing.items, layout.raw, c, opts, known, name="download", timeout_s=timeout)
     grid = routing_grid(s.grid.res_deg, s.grid.lat_min_deg, s.grid.lat_max_deg)
-    ds, missing_steps, have_currents = run.step(decode_and_assemble, items, c, steps, grid, layout.quarantine,
+    ds, missing_steps, have_currents = run.step(decode_and_assemble, items, c, steps, grid, layout.quarantine, optional,
                                                 name="decode-and-assemble", timeout_s=timeout)
     problems = listing.problems + [f"{it.source} {it.name}: {it.status}" for it in items if it.status not in ("ok", "skipped")]
     for source, leads in listing.gaps.items():

@@ -12,6 +12,7 @@ windows are cached per (store, cycle, content version, window), so a re-ingested
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 import logging
 import traceback
@@ -76,6 +77,49 @@ def window_field(store: str, options_json: str, cycle: str, version: int | None,
     return wf.from_window(win)
 
 
+def lagged_members(cube_path: str, storage_options: dict | None, cycle: str, window: WeatherWindow,
+                   n_members: int) -> list[wf.WeatherField]:
+    """A lagged ensemble for a voyage: its window of `cycle` and of the complete cycles before it (newest first, up to
+    `n_members` in all), valid at the same times; a cycle whose leads end before the window starts is left out."""
+    options_json = json.dumps(storage_options or {}, sort_keys=True)
+    c = np.datetime64(cycle, "ns")
+    older = (x for x in cube_window.complete_cycles_newest_first(cube_path, storage_options) if x < c)
+    members = []
+    for x in itertools.chain([c], older):
+        if len(members) >= n_members:
+            break
+        try:
+            field = window_field(str(cube_path), options_json, str(np.datetime_as_string(np.datetime64(x, "s"))), None,
+                                 window)
+        except (KeyError, CubeError):  # retired, being re-written or damaged meanwhile: one member less
+            continue
+        if field.horizon_utc > np.datetime64(window.from_utc, "s"):
+            members.append(field)
+    return members
+
+
+def planned(job: RouteJob, cube_path: str | None, storage_options: dict | None = None,
+            n_members: int | None = None) -> tuple[Plan, wf.WeatherField]:
+    """`plan_voyage` in the job's cube weather; with a cube, the plan's spread across a lagged ensemble of
+    `n_members` cycles (default the job's `ensemble_members`; 0: none) in `Plan.spread`."""
+    from pipeline.routing.ensemble import spread
+    from pipeline.routing.job import routing_problem
+
+    windows = []
+    from_cube = cube_weather(cube_path, job, storage_options)
+    weather_for = None
+    if from_cube is not None:
+        def weather_for(problem, space):
+            windows.append(problem.weather_window(space))  # the voyage's window: the members' too
+            return from_cube(problem, space)
+    plan, weather = plan_voyage(job, weather_for)
+    n = job.options.ensemble_members if n_members is None else n_members
+    if windows and n > 0 and plan.legs:
+        members = lagged_members(cube_path, storage_options, job.cycle, windows[-1], n)
+        plan.spread = spread(plan, members, routing_problem(job).kernel_vessel())
+    return plan, weather
+
+
 def cube_weather(cube_path: str | None, job: RouteJob, storage_options: dict | None = None) -> WeatherFor | None:
     """Where a job's weather comes from: its voyage's window of the job's cube cycle (None: calm water)."""
     if cube_path is None:
@@ -133,7 +177,7 @@ def route_one(job: RouteJob, cube_path: str | None, storage_options: dict | None
     from pipeline.routing.search_space import VoyageGeometryError
 
     try:
-        plan, weather = plan_voyage(job, cube_weather(cube_path, job, storage_options))
+        plan, weather = planned(job, cube_path, storage_options)
     except (RoutingInputError, VoyageGeometryError, KeyError, CubeError) as exc:  # the message says what to do
         return failed_result(job, str(exc).strip("'\""))
     except Exception as exc:  # a bug or bad data: record it, keep the rest of the fleet going

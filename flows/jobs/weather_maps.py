@@ -35,7 +35,9 @@ def _published_cycle(cube_path, cycle, cache_chunks: bool = True) -> tuple[cube_
 
 
 def steps_h(cube_path, cycle) -> list[int]:
-    return [int(s) for s in _published_cycle(cube_path, cycle)[0].step_h]
+    """The cycle's own leads (not the empty slots past them that the cube keeps for longer cycles)."""
+    pub, c = _published_cycle(cube_path, cycle)
+    return [int(s) for s in cube_window.cycle_steps_h(pub, c)]
 
 
 def step_fields(cube_path, cycle, step_h: int, stride: int = 1, cache_chunks: bool = True,
@@ -44,7 +46,7 @@ def step_fields(cube_path, cycle, step_h: int, stride: int = 1, cache_chunks: bo
     (south, north, west, east in degrees east, east ≥ west: (170, 200) crosses 180°), every `stride`-th point;
     `cube_path` a path, URL or storage Location (`cache_chunks`: see cube_window.open_published)."""
     pub, c = _published_cycle(cube_path, cycle, cache_chunks)
-    have = [int(s) for s in pub.step_h]
+    have = [int(s) for s in cube_window.cycle_steps_h(pub, c)]
     if int(step_h) not in have:
         raise WeatherMapError(f"cycle {cycle_label(cycle)} has no step {step_h} h; it has {have[0]}..{have[-1]} h "
                               f"every {have[1] - have[0] if len(have) > 1 else 0} h")

@@ -554,7 +554,7 @@ def reachable_weather_ranges(inst, windows) -> np.ndarray:
     rng = np.zeros((L2, P, 2 * sp.max_shift + 1, 9))
     reachable_ranges_nb(wf.cells, wf.times_h, wf.grid, np.ascontiguousarray(t_lo, dtype=np.float64),
                         np.ascontiguousarray(t_hi, dtype=np.float64),
-                        sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), rng)
+                        sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), *wf.neutral_beyond, rng)
     rng[..., [WIND_LO, WIND_HI, CUR_HI]] *= geo.KN_PER_MS
     return rng
 

@@ -8,6 +8,9 @@ along course), and advances. Hours and fuel (rate × time) accumulate; weather l
 make the leg infeasible with a code. Where the wind is missing (a hole in the cube: every corner and both
 bracketing times NaN; GSM wind has no land mask, so this is never land) the step is sailed as calm but its
 hours are counted in NO_WIND_H, so the plan can say so instead of passing the hole off as calm weather.
+Past the weather's last valid time a step is sailed in the field's neutral weather (its mean wind speed and Hs at
+BEYOND_REL_DEG off the bow on every course, no current: weather_field.WeatherField.neutral_beyond), never the last
+step frozen in place; the fuel burnt there is FUEL_BEYOND, the part of a saving no forecast backs.
 The weather met along the leg (mean wind, Hs, directions, current, STW) is what a plan's legs show; the
 searches, which sail a leg hundreds of thousands of times a voyage, skip it (`sail_leg_nb` against
 `sail_leg_weather_nb`).
@@ -26,8 +29,8 @@ import numpy as np
 
 # The performance functions compiled in here live in another file; numba's cache folder is keyed on the
 # digest of every pipeline source (pipeline.compile_cache), so their edits are seen.
-from pipeline.performance.features import (FORM_PHYSICAL, fuel_physical_terms_nb, fuel_tph_nb, stw_kn_nb,
-                                           stw_physical_terms_nb, weather_terms_nb)
+from pipeline.performance.features import (DIR_B, DIR_C, FORM_PHYSICAL, fuel_physical_terms_nb, fuel_tph_nb,
+                                           stw_kn_nb, stw_physical_terms_nb, weather_terms_nb)
 from pipeline.routing import geodesy as geo
 from pipeline.routing.weather_field import N_VARS, SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, sample_nb
 
@@ -40,11 +43,17 @@ REASONS = {
     NO_EDGE: "leg crosses land, a limit line or the latitude limits",
     TOO_LONG: "voyage takes longer than the planning horizon",
 }
-N_LEG_OUT = 15
-# leg_out fields (NO_WIND_H: hours of the leg sailed where the wind is missing)
+N_LEG_OUT = 16
+# leg_out fields (NO_WIND_H: hours of the leg sailed where the wind is missing; FUEL_BEYOND: the part of FUEL burnt
+# after the weather's last valid time, where the leg is sailed in the neutral weather)
 (H, FUEL, CODE, BEYOND, WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, SOG_KN, CUR_KN,
- NO_WIND_H) = range(N_LEG_OUT)
+ NO_WIND_H, FUEL_BEYOND) = range(N_LEG_OUT)
 MIN_SOG_KN = 0.5
+# Past the weather's last valid time wind and waves meet the ship at this angle off the bow, whatever its course: the
+# angle at which the physical form's direction weight w(θ) = A + B·cos θ + C·cos² θ equals its mean over all
+# headings, A + C/2 (B·c + C·c² = C/2), so the added resistance there is the mean over headings (≈ 82.3°; the thesis
+# form, linear in the folded angle, has its mean at 90°)
+BEYOND_REL_DEG = math.degrees(math.acos((-DIR_B + math.sqrt(DIR_B * DIR_B + 2.0 * DIR_C * DIR_C)) / (2.0 * DIR_C)))
 
 
 class Vessel(NamedTuple):
@@ -102,19 +111,34 @@ def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
     w = np.empty(N_VARS)
     chord = geo.chord(lat0, lon0, lat1, lon1)  # the leg's trigonometry once, not at every step
     done, t, fuel = 0.0, t0_h, 0.0
+    horizon_h = wx.times_h[wx.times_h.shape[0] - 1]
     while done < dist - 1e-9:
         lat, lon = geo.chord_point(chord, done / dist)
         hdg = geo.chord_course_deg(chord, lat, lon)
-        if sample_nb(wx, t, lat, lon, w):
+        beyond = sample_nb(wx, t, lat, lon, w)
+        if beyond:
+            # past the last valid time: the neutral weather (weather_field.WeatherField.neutral_beyond), the same
+            # wind speed and Hs at BEYOND_REL_DEG off the bow and no current everywhere, never the last step frozen
             out[BEYOND] = 1.0
-        no_wind = math.isnan(w[U10]) or math.isnan(w[V10])
-        u = 0.0 if math.isnan(w[U10]) else w[U10]
-        v = 0.0 if math.isnan(w[V10]) else w[V10]
-        hs = 0.0 if math.isnan(w[SWH]) else w[SWH]
-        wave_x = 0.0 if math.isnan(w[WAVE_X]) else w[WAVE_X]
-        wave_y = 1.0 if math.isnan(w[WAVE_Y]) else w[WAVE_Y]
-        uo = 0.0 if math.isnan(w[UO]) else w[UO]
-        vo = 0.0 if math.isnan(w[VO]) else w[VO]
+            no_wind = False
+            wind_from = hdg + BEYOND_REL_DEG
+            wave_from = wind_from
+            u = -wx.beyond_wind_ms * math.sin(math.radians(wind_from))
+            v = -wx.beyond_wind_ms * math.cos(math.radians(wind_from))
+            hs = wx.beyond_hs_m
+            wave_x, wave_y = math.sin(math.radians(wave_from)), math.cos(math.radians(wave_from))
+            uo, vo = 0.0, 0.0
+        else:
+            no_wind = math.isnan(w[U10]) or math.isnan(w[V10])
+            u = 0.0 if math.isnan(w[U10]) else w[U10]
+            v = 0.0 if math.isnan(w[V10]) else w[V10]
+            hs = 0.0 if math.isnan(w[SWH]) else w[SWH]
+            wave_x = 0.0 if math.isnan(w[WAVE_X]) else w[WAVE_X]
+            wave_y = 1.0 if math.isnan(w[WAVE_Y]) else w[WAVE_Y]
+            uo = 0.0 if math.isnan(w[UO]) else w[UO]
+            vo = 0.0 if math.isnan(w[VO]) else w[VO]
+            wind_from = math.degrees(math.atan2(-u, -v))
+            wave_from = math.degrees(math.atan2(wave_x, wave_y))
         wind_kn = math.sqrt(u * u + v * v) * geo.KN_PER_MS
         if hs > ves.max_hs_m:
             out[CODE] = WAVE_LIMIT
@@ -122,8 +146,6 @@ def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
         if wind_kn > ves.max_wind_kn:
             out[CODE] = WIND_LIMIT
             return
-        wind_from = math.degrees(math.atan2(-u, -v))
-        wave_from = math.degrees(math.atan2(wave_x, wave_y))
         wind_rel = wind_from - hdg
         wave_rel = wave_from - hdg
         stw, fuel_tph = _stw_and_fuel_rate(ves, rpm, wind_kn, wind_rel, hs, wave_rel)
@@ -135,6 +157,7 @@ def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
         ds = min(dist - done, sog * ves.max_step_h)
         dt = ds / sog
         fuel += fuel_tph * dt
+        out[FUEL_BEYOND] += fuel_tph * max(0.0, t + dt - max(t, horizon_h))
         if weather_met:
             out[WIND_KN] += wind_kn * dt
             out[WIND_FX] += math.sin(math.radians(wind_from)) * dt

@@ -14,12 +14,16 @@ from pipeline.routing import leg_kernel as lk
 
 if TYPE_CHECKING:
     from pipeline.routing.engine_limits import EngineLimits
+    from pipeline.routing.ensemble import Spread
     from pipeline.routing.savings import SavingsSplit
 
 STATUSES = ("ok", "late", "infeasible", "failed")
 SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_baseline_hours", "profile_fuel_t",
-                   "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct")
+                   "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct", "fuel_beyond_forecast_t",
+                   "honest_baseline_fuel_beyond_forecast_t", "savings_forecast_pct", "savings_beyond_forecast_pct")
 LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
+ENSEMBLE_COLUMNS = ("ensemble_members", "p_on_time", "baseline_p_on_time", "fuel_p10_t", "fuel_p50_t", "fuel_p90_t",
+                    "savings_p10_pct", "savings_p50_pct", "savings_p90_pct")
 
 
 def _utc(t) -> datetime | None:
@@ -53,6 +57,8 @@ class Plan:
     unlimited_fuel_t: float = math.nan
     # the savings against the honest constant-rpm baseline, split (savings.py; None: not computed)
     savings: "SavingsSplit | None" = None
+    # the plan and its baseline sailed through a lagged ensemble (ensemble.py; None: not computed)
+    spread: "Spread | None" = None
 
     @property
     def hours(self) -> float:
@@ -85,6 +91,12 @@ class Plan:
     def hours_beyond_forecast(self) -> float:
         """Hours of the voyage sailed after the weather's last valid time (its last step persisted)."""
         return float(sum(leg.get("hours_beyond_forecast", 0.0) for leg in self.legs))
+
+    @property
+    def fuel_beyond_forecast_t(self) -> float:
+        """Fuel (t) burnt after the weather's last valid time (sailing and waiting), where the plan meets the neutral
+        weather of leg_kernel, not a forecast."""
+        return float(sum(leg.get("fuel_beyond_forecast_t", 0.0) for leg in self.legs)) if self.legs else math.nan
 
     @property
     def hours_before_cycle(self) -> float:
@@ -139,17 +151,31 @@ class Plan:
             "n_legs_beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
             "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
             "min_land_clearance_nm": self.min_land_clearance_nm,
-            **self._savings_row(), **self._limits_row(),
+            **self._savings_row(), **self._limits_row(), **self._ensemble_row(),
         }
+
+    def _ensemble_row(self) -> dict:
+        s = self.spread
+        if s is None:
+            return dict.fromkeys(ENSEMBLE_COLUMNS)
+        return {"ensemble_members": s.n_members, "p_on_time": s.p_on_time, "baseline_p_on_time": s.baseline_p_on_time,
+                "fuel_p10_t": s.fuel_p10_t, "fuel_p50_t": s.fuel_p50_t, "fuel_p90_t": s.fuel_p90_t,
+                "savings_p10_pct": s.savings_p10_pct, "savings_p50_pct": s.savings_p50_pct,
+                "savings_p90_pct": s.savings_p90_pct}
 
     def _savings_row(self) -> dict:
         s = self.savings
         if s is None:
             return dict.fromkeys(SAVINGS_COLUMNS)
+
+        def known(x: float) -> float | None:
+            return x if math.isfinite(x) else None
         return {"honest_baseline_rpm": s.baseline_rpm, "honest_baseline_fuel_t": s.baseline_fuel_t,
                 "honest_baseline_hours": s.baseline_hours, "profile_fuel_t": s.profile_fuel_t,
                 "savings_total_pct": s.total_pct, "savings_speed_profile_pct": s.speed_profile_pct,
-                "savings_route_pct": s.route_pct}
+                "savings_route_pct": s.route_pct, "fuel_beyond_forecast_t": known(s.plan_fuel_beyond_t),
+                "honest_baseline_fuel_beyond_forecast_t": known(s.baseline_fuel_beyond_t),
+                "savings_forecast_pct": known(s.forecast_pct), "savings_beyond_forecast_pct": known(s.beyond_forecast_pct)}
 
     def _limits_row(self) -> dict:
         lim = self.limits
@@ -177,7 +203,8 @@ class Plan:
         row = self.route_row()
         keys = ("voyage_id", "imo", "status", "reason", "solver", "objective", "fuel_t", "hours", "eta_utc", "rta_utc",
                 "depart_utc", "baseline_fuel_t", "savings_pct", "distance_nm", "runtime_s", "seed", "n_legs_beyond_forecast",
-                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm") + SAVINGS_COLUMNS + LIMITS_COLUMNS
+                "forecast_flag", "hours_beyond_forecast", "hours_before_cycle", "min_land_clearance_nm") + SAVINGS_COLUMNS + LIMITS_COLUMNS \
+            + ENSEMBLE_COLUMNS
         out = {k: clean(row[k]) for k in keys}
         out["legs"] = [{k: clean(v) for k, v in leg.items()} for leg in self.legs]
         return out
@@ -203,6 +230,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarr
         o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vessel, inst.weather)
         if o[lk.CODE] != lk.OK:
             return legs, int(o[lk.CODE]), i
+        wait_beyond_h = max(0.0, t - max(t - wait, horizon_h))  # the part of the wait past the last valid time
         etd = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
         t += o[lk.H]
         eta = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
@@ -220,6 +248,7 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarr
             "wave_dir_deg": float(np.degrees(np.arctan2(o[lk.WAVE_FX], o[lk.WAVE_FY])) % 360.0),
             "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
             "hours_beyond_forecast": max(0.0, t - max(t - o[lk.H], horizon_h)),
+            "fuel_beyond_forecast_t": float(o[lk.FUEL_BEYOND]) + wait_beyond_h * float(wait_tph),
             "hours_before_cycle": max(0.0, min(t, cycle_h) - (t - o[lk.H])),
             "hours_without_wind": float(o[lk.NO_WIND_H]),  # a hole in the cube's wind (sailed as calm): in the reason
         })

@@ -134,6 +134,11 @@ class RoutingProblem:
         """The longest passage the solvers consider (hours after departure); longer ones are refused."""
         return max(1.6 * self.t_req_h, 1.6 * space.base_distance_nm / self.slowest_kn())
 
+    def kernel_vessel(self) -> Vessel:
+        """The ship as the leg kernel sees it: the model at this voyage's loading, its weather limits and settings."""
+        return vessel(self.model, draft_m=self.draft_m, trim_m=self.trim_m, max_hs_m=self.max_hs_m,
+                      max_wind_kn=self.max_wind_kn, max_step_h=self.max_step_h, rpm_options=self.rpm_options)
+
     def weather_window(self, space: SearchSpace) -> WeatherWindow:
         """The weather this voyage can meet: departure .. departure + planning horizon, over its search space."""
         end = self.depart_utc + np.timedelta64(int(np.ceil(self.planning_horizon_h(space) * 3600.0)), "s")
@@ -156,12 +161,10 @@ class Instance:
 
     @classmethod
     def build(cls, problem: RoutingProblem, space: SearchSpace, weather: WeatherField) -> "Instance":
-        m = problem.model
         problem.slowest_kn()  # refuses a model that barely moves the ship, before the weather is looked at
         _check_coverage(problem, space, weather)
         max_hours = problem.planning_horizon_h(space)
-        ves = vessel(m, draft_m=problem.draft_m, trim_m=problem.trim_m, max_hs_m=problem.max_hs_m,
-                     max_wind_kn=problem.max_wind_kn, max_step_h=problem.max_step_h, rpm_options=problem.rpm_options)
+        ves = problem.kernel_vessel()
         obj = objective(problem.objective, t_dep_h=weather.hours_after_ref(problem.depart_utc), max_hours=max_hours,
                         t_req_h=problem.t_req_h, window_h=problem.window_h, early_t_per_h=problem.early_t_per_h,
                         late_t_per_h=problem.late_t_per_h)

@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.leg_kernel import N_LEG_OUT, sail_leg_nb
+from pipeline.routing.leg_kernel import BEYOND_REL_DEG, N_LEG_OUT, sail_leg_nb
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y
 
 WINDOW_SLACK_H = 1.0  # widening of every window (h): covers rounding in the kernels' time sums
@@ -225,11 +225,14 @@ def _cos_range(lo_deg, hi_deg):
 
 
 @numba.njit(cache=True)
-def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max_shift, out):
+def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max_shift, beyond_wind_ms, beyond_hs_m,
+                        out):
     """Per leg (i, a) → (i + 1, a + s − max_shift): out[i, a, s] = (wind lo, wind hi (m/s), wind relative direction
     lo, hi (folded deg 0..180), Hs lo, hi (m), wave relative direction lo, hi, current along course hi (m/s)) over
-    the leg's cells (`_edge_box`) and the valid times a sample at t_lo[i, a]..t_hi[i + 1, b] (h) reads; NaN when
-    that window is empty (no plan within the windows sails the leg); legs that are not edges are left as they are."""
+    the leg's cells (`_edge_box`) and the valid times a sample at t_lo[i, a]..t_hi[i + 1, b] (h) reads, widened to
+    the neutral weather past the last valid time (beyond_wind_ms and beyond_hs_m at BEYOND_REL_DEG, no current) when the
+    window reaches past it; NaN when that window is empty (no plan within the windows sails the leg); legs that are
+    not edges are left as they are."""
     nt = times_h.shape[0]
     L2, P = lat.shape
     nlon, wraps = grid.nlon, grid.wraps
@@ -260,3 +263,9 @@ def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max
                 o[4], o[5] = h_lo, h_hi
                 o[6], o[7] = math.degrees(math.acos(min(w_hi, 1.0))), math.degrees(math.acos(max(w_lo, -1.0)))
                 o[8] = cur_hi
+                if t1 > times_h[nt - 1]:  # the leg may be sailed past the last valid time: the neutral weather too
+                    o[0], o[1] = min(o[0], beyond_wind_ms), max(o[1], beyond_wind_ms)
+                    o[2], o[3] = min(o[2], BEYOND_REL_DEG), max(o[3], BEYOND_REL_DEG)
+                    o[4], o[5] = min(o[4], beyond_hs_m), max(o[5], beyond_hs_m)
+                    o[6], o[7] = min(o[6], BEYOND_REL_DEG), max(o[7], BEYOND_REL_DEG)
+                    o[8] = max(o[8], 0.0)

@@ -13,6 +13,15 @@ the plan's `baseline` too. Against its fuel F_b:
                                        it has them); ≥ 0, as the constant-speed voyage is one of those plans
     route          (F_p − F) / F_b     F: the plan's fuel
     total          (F_b − F) / F_b     = speed profile + route
+
+and, by when the fuel is burnt, into what the forecast covers and what it does not (F' and F_b': the fuel each
+burns after the weather's last valid time, where they sail in the neutral weather of leg_kernel, not a forecast):
+
+    forecast       ((F_b − F_b') − (F − F')) / F_b    burnt within the forecast's valid times: backed by it
+    beyond         (F_b' − F') / F_b                  burnt past them: an assumption, not a forecast
+    total          = forecast + beyond
+
+Both voyages leave at the same time, so the forecast's last valid time cuts both at the same instant.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
 from pipeline.routing.continuous_speed import as_settings, refine_rpm
 from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, EngineLimits, best_engine_plan, limited_plan
@@ -42,6 +52,10 @@ class SavingsSplit:
     speed_profile_pct: float
     route_pct: float
     total_pct: float
+    baseline_fuel_beyond_t: float = math.nan  # the baseline's fuel burnt past the forecast's last valid time
+    plan_fuel_beyond_t: float = math.nan  # the plan's
+    forecast_pct: float = math.nan  # the part of total_pct burnt within the forecast's valid times
+    beyond_forecast_pct: float = math.nan  # the part burnt past them (total_pct − forecast_pct)
 
 
 def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | None = None,
@@ -72,11 +86,30 @@ def fuel_of(inst: Instance, nodes: np.ndarray, rpm_per_leg: np.ndarray) -> float
     return float(evaluate(at, nodes, rpm_idx)[2])
 
 
+def fuel_beyond_forecast_t(inst: Instance, nodes: np.ndarray, rpm_per_leg: np.ndarray) -> float:
+    """Fuel (t) the route sailed at rpm_per_leg[i] on leg i burns after the weather's last valid time (NaN when a
+    leg cannot be sailed)."""
+    out = np.empty(lk.N_LEG_OUT)
+    lat, lon, t = inst.space.lat, inst.space.lon, inst.t_dep_h
+    beyond = 0.0
+    for i in range(len(nodes) - 1):
+        a, b = int(nodes[i]), int(nodes[i + 1])
+        lk.sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, float(rpm_per_leg[i]), inst.vessel,
+                       inst.wx, out)
+        if out[lk.CODE] != lk.OK:
+            return math.nan
+        t += out[lk.H]
+        beyond += out[lk.FUEL_BEYOND]
+    return float(beyond)
+
+
 def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float, limits: EngineLimits | None = None,
-             profile: tuple[np.ndarray, float] | None = None) -> SavingsSplit | None:
-    """The split for a plan burning `plan_fuel_t` in the instance whose base route is `base_nodes` (None: no
-    baseline can be sailed). With engine-change limits the speed-profile plan obeys them too (engine_limits);
-    `profile`, when known, is that plan (`profile_plan`)."""
+             profile: tuple[np.ndarray, float] | None = None, plan_fuel_beyond_t: float = math.nan
+             ) -> SavingsSplit | None:
+    """The split for a plan burning `plan_fuel_t`, `plan_fuel_beyond_t` of it past the forecast's last valid time
+    (NaN: unknown, no forecast/beyond split), in the instance whose base route is `base_nodes` (None: no baseline
+    can be sailed). With engine-change limits the speed-profile plan obeys them too (engine_limits); `profile`,
+    when known, is that plan (`profile_plan`)."""
     if base_nodes is None or not math.isfinite(plan_fuel_t):
         return None
     base = constant_rpm_for_rta(inst, base_nodes)
@@ -88,8 +121,11 @@ def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float, limits:
         return None
     f_p = fuel_of(inst, base_nodes, profile_rpm)
     f = plan_fuel_t
-    return SavingsSplit(rpm, f_b, hours, f_p, f, 100.0 * (f_b - f_p) / f_b, 100.0 * (f_p - f) / f_b,
-                        100.0 * (f_b - f) / f_b)
+    total = 100.0 * (f_b - f) / f_b
+    f_b_beyond = fuel_beyond_forecast_t(inst, base_nodes, np.full(len(base_nodes) - 1, rpm))
+    beyond = 100.0 * (f_b_beyond - plan_fuel_beyond_t) / f_b
+    return SavingsSplit(rpm, f_b, hours, f_p, f, 100.0 * (f_b - f_p) / f_b, 100.0 * (f_p - f) / f_b, total,
+                        f_b_beyond, plan_fuel_beyond_t, total - beyond, beyond)
 
 
 def savings_split(problem, weather, plan: Plan, space=None, limits: EngineLimits | None = None) -> SavingsSplit | None:
@@ -98,7 +134,8 @@ def savings_split(problem, weather, plan: Plan, space=None, limits: EngineLimits
     inst, base_nodes = solver_instance(problem, space, weather)
     if plan.baseline is not None and plan.baseline.legs:
         inst.f_target = max(plan.baseline.fuel_t, 1e-6)  # as solve() sets it (the thesis objective's scale)
-    return split_of(inst, base_nodes, plan.fuel_t if plan.legs else math.nan, limits)
+    return split_of(inst, base_nodes, plan.fuel_t if plan.legs else math.nan, limits,
+                    plan_fuel_beyond_t=plan.fuel_beyond_forecast_t if plan.legs else math.nan)
 
 
 def solver_instance(problem, space, weather) -> tuple[Instance, np.ndarray | None]:

@@ -89,7 +89,8 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
             if plan.hours_beyond_forecast > 1e-9:
                 n = plan.n_beyond_forecast
                 notes.append(f"{plan.hours_beyond_forecast:.1f} h of the voyage ({n} leg{'s' if n != 1 else ''}) beyond "
-                             f"the forecast horizon {inst.weather.horizon_utc} (its last step persisted)")
+                             f"the forecast horizon {inst.weather.horizon_utc} (sailed in the region's mean wind and waves from "
+                             "near the beam, the same for every route)")
             no_wind = [leg["leg"] for leg in plan.legs if leg.get("hours_without_wind", 0.0) > 1e-9]
             if no_wind:
                 hours = sum(leg.get("hours_without_wind", 0.0) for leg in plan.legs)
@@ -336,7 +337,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         plan = _never_worse(inst, plan, baseline, base, limits, profile, t0, continuous)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:
-        plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits, profile)
+        plan.savings = split_of(inst, base.nodes, plan.fuel_t, plan.limits, profile,
+                                plan_fuel_beyond_t=plan.fuel_beyond_forecast_t)
     plan.runtime_s = time.perf_counter() - t0
     return plan
 

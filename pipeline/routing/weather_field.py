@@ -11,8 +11,9 @@ times counted in hours from `t_ref` (UTC):
 Sampling is bilinear in space (NaN-aware: NaN corners such as land are ignored and the others
 re-weighted) and linear in time between the two bracketing valid times, with the weight taken
 over that interval. Directions are never averaged as angles: wave direction is interpolated
-through its components and turned back into an angle by the caller. Past the last valid time the
-last step is persisted and the sample is flagged `beyond`.
+through its components and turned back into an angle by the caller. Past the last valid time the sampler
+persists the last step and flags the sample `beyond`; the leg kernel does not sail in that frozen weather but in the
+field's neutral weather (`beyond_wind_ms`, `beyond_hs_m`, see `neutral_beyond`), the same for every route.
 
 The field is stored in the sampling layout `cells` (nlat, nlon, nt, 7): a sample reads 4 corners × 2
 valid times, and in this layout each corner's two times and seven variables are 56 contiguous bytes, and
@@ -54,11 +55,14 @@ class Grid(NamedTuple):
 
 
 class Weather(NamedTuple):
-    """What the compiled kernels see of a `WeatherField`: its cells, valid times and grid."""
+    """What the compiled kernels see of a `WeatherField`: its cells, valid times and grid, and the neutral weather a
+    ship meets past the last valid time (`neutral_beyond`: this wind speed and Hs, no current)."""
 
     cells: np.ndarray  # (nlat, nlon, nt, 7) float32, C-contiguous (the sampling layout)
     times_h: np.ndarray  # (nt,) float64, hours after t_ref, increasing
     grid: Grid
+    beyond_wind_ms: float = 0.0
+    beyond_hs_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -71,15 +75,35 @@ class WeatherField:
 
     @property
     def kernel(self) -> Weather:
-        return Weather(self.cells, self.times_h, self.grid)
+        wind_ms, hs_m = self.neutral_beyond
+        return Weather(self.cells, self.times_h, self.grid, wind_ms, hs_m)
+
+    @cached_property
+    def neutral_beyond(self) -> tuple[float, float]:
+        """(wind speed m/s, Hs m) a ship meets past the last valid time: the means over the field's whole area and
+        every valid time (missing values left out), met at leg_kernel.BEYOND_REL_DEG off the bow on any course (where
+        the physical form's added resistance is its mean over all headings) and without current.
+
+        Nobody forecast the weather there, and persisting the last step (a storm frozen in place) lets a plan route
+        round weather that will not be there. This assumption is the same at every position and on every course, so
+        no route can profit from it, while the time and fuel it costs stay of the region's order (not calm)."""
+        c = self.cells
+        wind = np.hypot(c[..., U10].astype(np.float64), c[..., V10].astype(np.float64))
+        hs = c[..., SWH].astype(np.float64)
+        wind_ms = float(np.nanmean(wind)) if np.isfinite(wind).any() else 0.0
+        hs_m = float(np.nanmean(hs)) if np.isfinite(hs).any() else 0.0
+        return wind_ms, hs_m
 
     @cached_property
     def max_over_time(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(wind speed in kn, Hs in m, current speed in kn) per grid point (nlat, nlon): the largest at any valid
-        time, missing values as 0. Computed once per field (the exact solvers' bounds ask for it per route), in one
-        compiled pass over the cells."""
+        time or past the last one (`neutral_beyond`), missing values as 0. Computed once per field (the exact
+        solvers' bounds ask for it per route), in one compiled pass over the cells."""
         wind_ms, hs, cur_ms = (np.empty(self.cells.shape[:2]) for _ in range(3))
         _max_over_time_nb(self.cells, wind_ms, hs, cur_ms)
+        beyond_wind_ms, beyond_hs_m = self.neutral_beyond
+        np.maximum(wind_ms, beyond_wind_ms, out=wind_ms)
+        np.maximum(hs, beyond_hs_m, out=hs)
         return wind_ms * KN_PER_MS, hs, cur_ms * KN_PER_MS
 
     @property
@@ -148,9 +172,16 @@ def from_window(window) -> WeatherField:
 
 
 def _from_cube(cyc: np.datetime64, step_h, lat, lon, data: dict) -> WeatherField:
-    times = cyc + (np.asarray(step_h, np.int64) * 3600).astype("timedelta64[s]")
-    return from_arrays(lat, lon, times, u10=data["u10"], v10=data["v10"], swh=data["swh"], mwd_deg=data["mwd"],
-                       uo=data["uo"], vo=data["vo"], cycle=cyc, t_ref=cyc)
+    """The cycle's steps up to its last one with wind: the cube's step axis is the longest any cycle has (the 00/12
+    UTC cycles' 264 h), and a cycle with shorter leads leaves the rest all NaN (pipeline/weather/assemble.py), which
+    is its end, not a hole to sail as calm."""
+    wind = np.asarray(data["u10"])
+    have = np.flatnonzero(np.isfinite(wind).reshape(wind.shape[0], -1).any(axis=1)) if wind.size else np.array([], int)
+    n = int(have[-1]) + 1 if have.size else len(step_h)
+    times = cyc + (np.asarray(step_h, np.int64)[:n] * 3600).astype("timedelta64[s]")
+    return from_arrays(lat, lon, times, **{k: np.asarray(data[v])[:n] for k, v in (
+        ("u10", "u10"), ("v10", "v10"), ("swh", "swh"), ("mwd_deg", "mwd"), ("uo", "uo"), ("vo", "vo"))},
+        cycle=cyc, t_ref=cyc)
 
 
 def uniform(t_start_utc, hours: float = 240.0, *, wind_ms=(0.0, 0.0), swh_m=0.0, wave_from_deg=0.0,
@@ -221,7 +252,7 @@ def _time_index_nb(times_h, t_h):
 @numba.njit(cache=True)
 def sample_nb(w, t_h, lat, lon, out):
     """Fill out[0:7] with the weather `w` (a `Weather`) at (t_h, lat, lon); return True when t_h is past the last
-    valid time."""
+    valid time (out then holds the last step's weather: the leg kernel sails in `w`'s neutral weather there)."""
     times_h = w.times_h
     nt = times_h.shape[0]
     beyond = t_h > times_h[nt - 1] + 1e-9

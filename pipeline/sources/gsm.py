@@ -9,10 +9,12 @@ from pipeline.sources import rish
 from pipeline.sources.source import Selection, Source
 
 
-def select(names: list[str], cycle: np.datetime64, steps_h: list[int]) -> Selection:
-    """The cycle's GSM files at the cube's lead times."""
+def select(names: list[str], cycle: np.datetime64, steps_h: list[int], optional_h: list[int] = ()) -> Selection:
+    """The cycle's GSM files at the lead times it must have (`steps_h`, a gap when not listed) and at the optional
+    ones it lists (`optional_h`: the 00/12 UTC cycles' leads past 132 h)."""
     files = [f for f in rish.prefer_resolution(rish.files_for_cycle(names, cycle)) if f.model == "GSM"]
-    return Selection([f.name for f in files if f.first_lead_h in steps_h], len(steps_h),
+    extra = [f.name for f in files if f.first_lead_h in optional_h and f.first_lead_h not in steps_h]
+    return Selection([f.name for f in files if f.first_lead_h in steps_h] + extra, len(steps_h) + len(extra),
                      rish.coverage(files, steps_h)["GSM"])
 
 

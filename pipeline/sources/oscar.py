@@ -63,8 +63,10 @@ def index_url(base_url: str, cycle: np.datetime64) -> str:
     return base_url.rstrip("/") + "/"
 
 
-def select(names: list[str], cycle: np.datetime64, steps_h: list[int]) -> Selection:
-    """The analyses covering the cycle's valid times (latest at or before the cycle, then every later one)."""
+def select(names: list[str], cycle: np.datetime64, steps_h: list[int], optional_h: list[int] = ()) -> Selection:
+    """The analyses covering the valid times every cycle has (latest at or before the cycle, then every later one);
+    the optional leads past them (the 00/12 UTC cycles' to 264 h) get the latest of these persisted, as any lead
+    past the newest analysis does."""
     files = files_for_window(names, cycle, cycle + np.timedelta64(max(steps_h), "h"))
     return Selection([f.name for f in files], len(files))
 

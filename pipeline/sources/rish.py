@@ -99,7 +99,16 @@ def files_for_cycle(names: list[str], cycle: np.datetime64) -> list[SourceFile]:
 
 
 def expected_gsm_leads(max_lead_h: int = 132, step_h: int = 6) -> list[int]:
+    """The leads every cycle must have (h): 0..max_lead_h every step_h."""
     return list(range(0, max_lead_h + 1, step_h))
+
+
+def long_gsm_leads(max_lead_h: int = 132, long_lead_h: int | None = 264, long_step_h: int = 12) -> list[int]:
+    """The leads past max_lead_h that the 00 and 12 UTC cycles add (h): every long_step_h to long_lead_h (JMA:
+    144..264 h every 12 h, FD0600…FD1100); empty when long_lead_h is None or not past max_lead_h."""
+    if not long_lead_h:
+        return []
+    return list(range(max_lead_h + long_step_h, long_lead_h + 1, long_step_h))
 
 
 def coverage(files: list[SourceFile], steps_h: list[int]) -> dict[str, list[int]]:

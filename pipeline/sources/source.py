@@ -19,7 +19,7 @@ class Selection:
     """The files a cycle needs from one source's index page."""
 
     names: list[str]
-    n_expected: int  # files a complete cycle has from this source
+    n_expected: int  # files a complete cycle has from this source (and the listed files of optional leads)
     gaps_h: list[int] | None = None  # leads no listed file covers (None: not a lead-time product)
 
 
@@ -36,7 +36,8 @@ class Source:
     role: str  # one of ROLES
     url_setting: str  # the settings.sources field holding the base URL
     index_url: Callable[[str, np.datetime64], str]  # (base URL, cycle) → URL of the HTML index listing the files
-    select: Callable[[list[str], np.datetime64, list[int]], Selection]  # (listed names, cycle, steps_h)
+    # (listed names, cycle, steps_h, optional_h): the leads a cycle must have, and those it may add (taken when listed)
+    select: Callable[..., Selection]
     decode: Callable[[Path], xr.Dataset]  # raises DecodeError for a corrupt file
     primary: bool = True  # a cycle exists when a primary source lists files for it; the others are listed only then
     listing_may_fail: bool = False  # an unreachable index leaves the cycle incomplete instead of failing the listing

@@ -24,6 +24,7 @@ from pipeline.synthetic.grib_writer import jma_grid, write_gsm_file, write_gwm_f
 from pipeline.synthetic.oscar_writer import V1_EPOCH, write_oscar_v1
 
 GWM_SPLIT_H = 84  # JMA splits GWM files at 84 h: FD0000-0312 and FD0318-0512
+LONG_CYCLES_UTC = (0, 12)  # the cycles JMA runs on past 132 h
 OSCAR_EVERY_DAYS = 5
 
 
@@ -65,8 +66,11 @@ def _cycle_times(start: np.datetime64, end: np.datetime64, cycles: Sequence[int]
 
 
 def write_cycle(rish_dir: Path, cycle: np.datetime64, *, seed: int = 0, max_lead_h: int = 132, step_h: int = 6,
-                res_deg: float = 0.5, gwm_land_as: str = "bitmap") -> list[Path]:
-    """All GSM files and the GWM files of one cycle into its day folder."""
+                res_deg: float = 0.5, gwm_land_as: str = "bitmap", long_lead_h: int | None = None,
+                long_step_h: int = 12) -> list[Path]:
+    """All GSM files and the GWM files of one cycle into its day folder. With `long_lead_h`, a 00 or 12 UTC cycle goes
+    on to it every `long_step_h` past max_lead_h, as JMA's do (GSM FD0600…FD1100, GWM FD0600-1100); the demo and
+    most tests leave it out (every lead is a global file to write and decode)."""
     day = np.datetime_as_string(np.datetime64(cycle, "D"))
     folder = rish_dir / day[:4] / day[5:7] / day[8:10]
     folder.mkdir(parents=True, exist_ok=True)
@@ -75,6 +79,10 @@ def write_cycle(rish_dir: Path, cycle: np.datetime64, *, seed: int = 0, max_lead
     land = ~is_sea(L, O)
     t0 = weather.hours_since_epoch(np.datetime64(cycle, "ns"))
     steps = list(range(0, max_lead_h + 1, step_h))
+    long_steps = []
+    if long_lead_h is not None and int(np.datetime_as_string(np.datetime64(cycle, "h"))[11:13]) in LONG_CYCLES_UTC:
+        long_steps = list(range(max_lead_h + long_step_h, long_lead_h + 1, long_step_h))
+    steps += long_steps
     written = []
     waves = {"swh": [], "mwd": [], "mwp": []}
     for s in steps:
@@ -85,7 +93,7 @@ def write_cycle(rish_dir: Path, cycle: np.datetime64, *, seed: int = 0, max_lead
         waves["swh"].append(swh)
         waves["mwd"].append(mwd)
         waves["mwp"].append(mwp)
-    for lo, hi in ((0, GWM_SPLIT_H), (GWM_SPLIT_H + step_h, max_lead_h)):
+    for lo, hi in ((0, GWM_SPLIT_H), (GWM_SPLIT_H + step_h, max_lead_h), (max_lead_h + 1, long_lead_h or -1)):
         idx = [i for i, s in enumerate(steps) if lo <= s <= hi]
         if not idx:
             continue
@@ -96,7 +104,8 @@ def write_cycle(rish_dir: Path, cycle: np.datetime64, *, seed: int = 0, max_lead
 
 
 def write_mirror(out_dir: Path, start, end, *, seed: int = 0, cycles: Sequence[int] = (0, 12), max_lead_h: int = 132,
-                 step_h: int = 6, res_deg: float = 0.5, oscar_res_deg: float = 1 / 3, progress=None) -> Path:
+                 step_h: int = 6, res_deg: float = 0.5, oscar_res_deg: float = 1 / 3, progress=None,
+                 long_lead_h: int | None = None, long_step_h: int = 12) -> Path:
     """Write the mirror for every cycle of the days start..end (inclusive); returns `out_dir`.
 
     `progress(done, total, label)`, if given, is called after each cycle.
@@ -107,7 +116,8 @@ def write_mirror(out_dir: Path, start, end, *, seed: int = 0, cycles: Sequence[i
     oscar.mkdir(parents=True, exist_ok=True)
     cycle_list = _cycle_times(np.datetime64(start), np.datetime64(end), cycles)
     for k, c in enumerate(cycle_list):
-        write_cycle(rish, c, seed=seed, max_lead_h=max_lead_h, step_h=step_h, res_deg=res_deg)
+        write_cycle(rish, c, seed=seed, max_lead_h=max_lead_h, step_h=step_h, res_deg=res_deg, long_lead_h=long_lead_h,
+                    long_step_h=long_step_h)
         if progress:
             progress(k + 1, len(cycle_list), str(c))
     for folder in {p.parent for p in rish.rglob("*.bin")}:

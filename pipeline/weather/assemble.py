@@ -21,8 +21,13 @@ CURRENT_VARS = provided_by("OSCAR")
 
 
 def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray, lon: np.ndarray,
-                   gsm: Sequence[xr.Dataset], gwm: Sequence[xr.Dataset], oscar: xr.Dataset | None) -> tuple[xr.Dataset, list[int]]:
-    """(cycle dataset with dims (step, lat, lon), steps with missing wind or waves)."""
+                   gsm: Sequence[xr.Dataset], gwm: Sequence[xr.Dataset], oscar: xr.Dataset | None,
+                   optional_after_h: int | None = None) -> tuple[xr.Dataset, list[int]]:
+    """(cycle dataset with dims (step, lat, lon), steps with missing wind or waves).
+
+    Steps past `optional_after_h` are leads a cycle may add (the 00/12 UTC cycles' to 264 h): never reported missing,
+    used up to the first of them without wind or waves, and from there on left all NaN (currents too), so the cycle
+    ends at its last step with both: readers take the trailing NaN steps for the cycle's end, never for a hole."""
     steps = np.asarray(steps_h, dtype=np.int32)
     shape = (steps.size, lat.size, lon.size)
     # uninitialised: every slot is written once below, by a field or by NaN (no full-size NaN prefill to overwrite)
@@ -62,7 +67,15 @@ def assemble_cycle(cycle: np.datetime64, steps_h: Sequence[int], lat: np.ndarray
         age = np.full(steps.size, np.nan, np.float32)
         for v in CURRENT_VARS:
             out[v].fill(np.nan)
-    missing = [int(s) for s, w, a in zip(steps, have_wind, have_waves) if not (w and a)]
+    if optional_after_h is not None:
+        gap = np.flatnonzero((steps > optional_after_h) & ~(have_wind & have_waves))
+        if gap.size:
+            for v in out.values():
+                v[gap[0]:] = np.nan
+            age = np.array(age, np.float32)
+            age[gap[0]:] = np.nan
+    missing = [int(s) for s, w, a in zip(steps, have_wind, have_waves)
+               if not (w and a) and (optional_after_h is None or s <= optional_after_h)]
     ds = xr.Dataset(
         {k: (("step", "lat", "lon"), v) for k, v in out.items()} | {"current_age_h": (("step",), age.astype(np.float32))},
         coords={"step": steps, "lat": lat, "lon": lon, "cycle": np.datetime64(cycle, "ns")},

@@ -52,7 +52,7 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('runtime_s', 'DOUBLE', 's', 'solver run time, seconds'),
     Column('n_legs', 'INTEGER', None, 'number of legs of the plan'),
     Column('n_legs_beyond_forecast', 'INTEGER', None,
-           'number of legs sailed past the forecast horizon (weather of the last step persisted)'),
+           "number of legs sailed past the forecast horizon (in the region's mean wind and waves from near the beam)"),
     Column('forecast_flag', 'VARCHAR', None,
            "'beyond horizon', 'before cycle', 'weather missing' (a hole in the cube's wind, sailed as calm; the "
            'reason names the legs), comma separated, or empty when the voyage lies in the forecast'),
@@ -93,6 +93,29 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('voyage_fingerprint', 'VARCHAR', None,
            'digest of the voyage (vessel, ports, RTA, draft) the plan was made for; latest_routes.stale compares'
            ' it'),
+    Column('fuel_beyond_forecast_t', 'DOUBLE', 't',
+           "part of fuel_t burnt after the forecast's last valid time (sailed in the region's mean wind and waves from "
+           'near the beam, no current: an assumption, not a forecast), tonnes'),
+    Column('honest_baseline_fuel_beyond_forecast_t', 'DOUBLE', 't',
+           "part of honest_baseline_fuel_t burnt after the forecast's last valid time, tonnes"),
+    Column('savings_forecast_pct', 'DOUBLE', '%',
+           "part of savings_total_pct burnt within the forecast's valid times: the saving the forecast backs, percent"),
+    Column('savings_beyond_forecast_pct', 'DOUBLE', '%',
+           "part of savings_total_pct burnt after the forecast's last valid time (an assumption, not a forecast), "
+           'percent; savings_forecast_pct + savings_beyond_forecast_pct = savings_total_pct'),
+    Column('ensemble_members', 'INTEGER', None,
+           'forecast cycles the plan and its baseline were sailed through (the one routed on and the complete ones '
+           'before it, valid at the same times); empty: not computed'),
+    Column('p_on_time', 'DOUBLE', None,
+           'share of those cycles in which the plan, sailed as made, arrives by the RTA (+ 0.5 h), 0..1'),
+    Column('baseline_p_on_time', 'DOUBLE', None, 'the same share for the constant-speed baseline, 0..1'),
+    Column('fuel_p10_t', 'DOUBLE', 't', "10th percentile of the plan's fuel over those cycles, tonnes"),
+    Column('fuel_p50_t', 'DOUBLE', 't', "median of the plan's fuel over those cycles, tonnes"),
+    Column('fuel_p90_t', 'DOUBLE', 't', "90th percentile of the plan's fuel over those cycles, tonnes"),
+    Column('savings_p10_pct', 'DOUBLE', '%',
+           '10th percentile over those cycles of the saving against the baseline sailed in the same cycle, percent'),
+    Column('savings_p50_pct', 'DOUBLE', '%', 'median of that saving, percent'),
+    Column('savings_p90_pct', 'DOUBLE', '%', '90th percentile of that saving, percent'),
 ), primary_key=('run_id', 'voyage_id'))
 
 ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met (speeds in knots, times UTC)', (
@@ -118,7 +141,7 @@ ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met 
     Column('wave_dir_deg', 'DOUBLE', 'degree', 'waves coming from, degrees true'),
     Column('current_kn', 'DOUBLE', 'kn', 'current speed on the leg, knots'),
     Column('beyond_forecast', 'BOOLEAN', None,
-           'true when the leg is sailed past the forecast horizon (weather of the last step persisted)'),
+           "true when the leg is sailed past the forecast horizon (in the region's mean wind and waves from near the beam)"),
     Column('hours_beyond_forecast', 'DOUBLE', 'h', "hours of the leg sailed past the forecast's last valid time"),
     Column('hours_before_cycle', 'DOUBLE', 'h', "hours of the leg sailed before the forecast cycle's init time"),
     Column('hours_without_wind', 'DOUBLE', 'h',
@@ -127,10 +150,19 @@ ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met 
            'hours the ship waits (hove to) at the leg\'s start node before sailing it, e.g. for weather to pass; 0 for most '
            'plans; the route\'s hours include it'),
     Column('wait_fuel_t', 'DOUBLE', 't', 'fuel burnt in tonnes while waiting before the leg; the route\'s fuel_t includes it'),
+    Column('fuel_beyond_forecast_t', 'DOUBLE', 't',
+           "fuel burnt in tonnes after the forecast's last valid time, sailing the leg and waiting before it (the "
+           "region's mean wind and waves from near the beam, no current: an assumption, not a forecast)"),
 ), primary_key=('run_id', 'voyage_id', 'leg'))
 
 # the columns routing added to route_legs after they were first made (DDL from the definition above)
 LEG_HOURS_ADDED = ('hours_beyond_forecast', 'hours_before_cycle', 'hours_without_wind')
+# the columns splitting each plan's saving into what the forecast covers and what it does not
+ROUTE_FORECAST_SPLIT_ADDED = ('fuel_beyond_forecast_t', 'honest_baseline_fuel_beyond_forecast_t',
+                              'savings_forecast_pct', 'savings_beyond_forecast_pct')
+# the plan's spread across a lagged ensemble of cycles (pipeline/routing/ensemble.py)
+ROUTE_ENSEMBLE_ADDED = ('ensemble_members', 'p_on_time', 'baseline_p_on_time', 'fuel_p10_t', 'fuel_p50_t', 'fuel_p90_t',
+                        'savings_p10_pct', 'savings_p50_pct', 'savings_p90_pct')
 
 # route_legs is kept in one Parquet file per run beside the warehouse (storage/route_history.py); this table lists
 # the files of committed runs, so a file is part of the warehouse only once its run's rows are committed

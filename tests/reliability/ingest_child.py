@@ -31,6 +31,7 @@ from pathlib import Path
 
 FAST_OVERRIDES = {
     "sources.gsm_max_lead_h": 12,
+    "sources.gsm_long_lead_h": 0,  # the mirrors here have no leads past 12 h: no empty slots for them in the cube
     "sources.http_timeout_s": 2.0,
     "sources.http_retries": 1,
     "sources.http_backoff_s": 0.01,
