@@ -234,3 +234,32 @@ def test_the_rhumb_line_is_not_laid_along_a_sea_route():
     pr = problem(FLORIDA[0], FLORIDA[-1], 60.0, base_route=sea_route(FLORIDA))
     with pytest.raises(RoutingInputError, match="sea route"):
         replace(pr, base="rhumb").search_space()
+
+
+# from the German Bight up the Elbe, through the Kiel Canal (its locks at Brunsbüttel and Holtenau), into Kiel Bay
+KIEL = [(54.0, 8.3), (53.95, 8.6), (53.89, 9.14), (54.1, 9.5), (54.3, 9.9), (54.37, 10.14), (54.45, 10.25), (54.6, 10.5)]
+
+
+def test_a_canal_fairway_over_the_land_mask_is_sailed_as_given():
+    canal = PassageTransit("Kiel Canal", "canal", 2, 6, transit_h=8.0, wait_h=1.0)
+    route = sea_route(KIEL, [canal])
+    dep, arr = KIEL[0], KIEL[-1]
+    assert not reachable(build_search_space(dep, arr))  # Jutland lies across the great circle
+    space = build_search_space(dep, arr, base_route=route)
+    assert reachable(space)
+    c = space.centre
+    gates = np.nonzero(space.gate)[0]
+    assert [tuple(np.round((space.lat[i, c], space.lon[i, c]), 6)) for i in gates] == KIEL[2:7]
+    assert all(space.node_ok[i].sum() == 1 for i in gates)
+    # the fairway's legs cross what the land mask calls land, and are kept: the mask cannot see a canal
+    inland = [i for i in gates[:-1] if land_on_legs([(space.lat[i, c], space.lon[i, c]),
+                                                     (space.lat[i + 1, c], space.lon[i + 1, c])], step_nm=0.5)]
+    assert inland and all(space.edge_ok[i, c, c] for i in inland)
+    weather = field(wavy(2), lat=(50.0, 58.0), lon=(5.0, 15.0))
+    pr = problem(dep, arr, 12.0, n_lines=None, n_points=11, base_route=route)
+    plan = solve(pr, weather, solver="bfoa", seed=1, options=FAST)
+    assert plan.status == "ok", plan.reason
+    # the plan sails the fairway, waypoint by waypoint; outside it, it stays at sea
+    assert all(min(haversine_nm(*wp, *p) for p in plan.waypoints) < 1e-6 for wp in KIEL[2:7])
+    outside = [p for p in plan.waypoints if not any(haversine_nm(*p, *wp) < 1e-6 for wp in KIEL[3:6])]
+    assert not any(globe.is_land(*p) for p in outside)

@@ -2,14 +2,15 @@
 instead of across the great circle.
 
 Lines stand perpendicular to the route with the centre node of each line on the route: one at every waypoint where
-the route turns (by `MIN_TURN_DEG` or more; so the centre nodes follow the route turn by turn), and between them
-spread evenly about `CORRIDOR_SPACING_NM` apart (more lines on long voyages than the great-circle layout allows:
-the voyage's length / `CORRIDOR_SPACING_NM`, up to `CORRIDOR_MAX_LINES`, plus the waypoints). A line's half-width comes from the open
-water beside the route, not from the voyage's length: at most `CORRIDOR_HALF_WIDTH_NM`, on each side no further
-than the first point where the perpendicular comes within the clearance of land, and on the inside of a bend no
-further than where it would cross its neighbour line. A line none of whose nodes keeps the clearance (the route
-passes closer to land there) is left out. Nodes are spread over the wider side's width (so the centre
-node stays on the route), those beyond their side's width are not used.
+the route turns (by `MIN_TURN_DEG` or more; so the centre nodes follow the route turn by turn), and between them,
+outside the passages, spread evenly about `CORRIDOR_SPACING_NM` apart (the voyage's length / `CORRIDOR_SPACING_NM`
+lines, up to `CORRIDOR_MAX_LINES`: more on long voyages than the great-circle layout's 80, plus those at turns).
+A line's half-width comes from the open water beside the route, not from the voyage's length: at most
+`default_half_width_nm` (±20 % of the voyage, 60..`CORRIDOR_HALF_WIDTH_NM`), on each side no further than the first
+point where the perpendicular comes within the clearance of land, and on the inside of a bend no further than where
+it would cross its neighbour line. Nodes are spread over the wider side's width (so the centre node stays on the
+route); those beyond their own side's reach are not used. A line none of whose nodes keeps the clearance (the route
+passes closer to land there) is left out.
 
 Passages are fixed gates: every waypoint of a passage's fairway is a line of one node, on the fairway, and no other
 line is laid inside a passage. Legs between two fairway waypoints are the fairway as the sea-route layer gave it
@@ -33,7 +34,7 @@ from pipeline.routing.land import land_grid
 from pipeline.routing.sea_route import SeaRoute
 
 CORRIDOR_SPACING_NM = 40.0  # about one line this far apart, as across the great circle
-CORRIDOR_MAX_LINES = 250  # lines of a long voyage at most (a 10,000 NM voyage: one every 40 NM)
+CORRIDOR_MAX_LINES = 140  # evenly spread lines of a long voyage at most (a 10,000 NM voyage: one every 75 NM)
 CORRIDOR_MIN_LINES = 8
 CORRIDOR_HALF_WIDTH_NM = 150.0  # the widest a line reaches to either side of the route
 MIN_NODE_SPACING_NM = 0.5  # nodes of a line never closer than this (a line in a narrow channel)
