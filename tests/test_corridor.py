@@ -150,7 +150,7 @@ def test_solve_routes_round_florida_clear_of_land_on_time_and_never_worse_than_c
     weather = field(wavy(5), lat=(20.0, 35.0), lon=(270.0, 290.0))
     pr = problem(FLORIDA[0], FLORIDA[-1], 666.0 / 12.0, n_lines=None, n_points=11, base_route=route)
     space = pr.search_space()
-    rpm_b, hours_b, fuel_b = constant_speed(pr, space, weather)
+    rpm_b, _, fuel_b = constant_speed(pr, space, weather)
     opts = FAST if solver == "bfoa" else None
     plan = solve(pr, weather, solver=solver, seed=2, options=opts, savings=True)
     assert plan.status == "ok" and plan.legs, plan.reason
