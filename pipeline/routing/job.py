@@ -14,6 +14,7 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing import weather_field as wf
+from pipeline.routing.base_route import with_base_route
 from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
@@ -50,11 +51,12 @@ def routing_problem(job: RouteJob) -> RoutingProblem:
         raise RoutingInputError(f"voyage {job.voyage_id}: " + (job.model_note or f"vessel {job.voyage.get('imo')} has no active "
                                 "performance model; import its noon reports and run `jitroute refit` first"))
     model = PerformanceModel.from_json(job.model)
-    return problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
-                               base=solver_spec(o.solver).base,
-                               window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
-                               d_point_nm=o.d_point_nm, land_clearance_nm=o.land_clearance_nm,
-                               port_approach_nm=o.port_approach_nm, barred_rpm=job.vessel.get("barred_rpm"))
+    problem = problem_from_voyage(job.voyage, model, rpm_max=job.vessel.get("rpm_max"), objective=o.objective,
+                                  base=solver_spec(o.solver).base,
+                                  window_h=o.arrival_window_h, n_lines=o.n_lines, n_points=o.n_points,
+                                  d_point_nm=o.d_point_nm, land_clearance_nm=o.land_clearance_nm,
+                                  port_approach_nm=o.port_approach_nm, barred_rpm=job.vessel.get("barred_rpm"))
+    return with_base_route(problem, o)  # the one place a voyage's base route is decided (base_route.py)
 
 
 def calm_weather(problem: RoutingProblem) -> wf.WeatherField:

@@ -11,6 +11,7 @@ import numpy as np
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing.leg_kernel import Vessel, vessel
 from pipeline.routing.objectives import OBJECTIVES, Objective, objective
+from pipeline.routing.sea_route import SeaRoute
 from pipeline.routing.search_space import Graph, SearchSpace, build_search_space
 from pipeline.routing.weather_field import Weather, WeatherField
 
@@ -81,6 +82,8 @@ class RoutingProblem:
     rpm_note: str | None = None  # why allowed rpm settings were clipped to the model's range (said on the plan)
     # the engine's barred speed ranges: open intervals (lo, hi) of rpm it must not be held in (continuous_speed.py)
     barred_rpm: tuple = ()
+    # the sea route the node lines are laid along (corridor.py); None: across the great circle or rhumb line (`base`)
+    base_route: SeaRoute | None = field(default=None, compare=False)
 
     def __post_init__(self):
         object.__setattr__(self, "depart_utc", np.datetime64(self.depart_utc, "s"))
@@ -113,12 +116,16 @@ class RoutingProblem:
         return float((self.rta_utc - self.depart_utc) / np.timedelta64(1, "s")) / 3600.0
 
     def search_space(self) -> SearchSpace:
+        if self.base_route is not None and self.base != "gc":
+            raise RoutingInputError(f"voyage {self.voyage_id}: its lines are laid along a sea route of great-circle legs; "
+                                    f"the {self.base} base route applies only across the open sea (route it with base 'gc')")
         return build_search_space(self.dep, self.arr, n_lines=self.n_lines, n_points=self.n_points,
                                   d_point_nm=self.d_point_nm, base=self.base, max_shift=self.max_shift,
                                   lat_limits=self.lat_limits, limit_lines=list(self.limit_lines),
                                   clearance_nm=self.land_clearance_nm, approach_nm=self.port_approach_nm,
                                   dep_name=f"voyage {self.voyage_id}: {_place('departure', self.dep_name)}",
-                                  arr_name=f"voyage {self.voyage_id}: {_place('destination', self.arr_name)}")
+                                  arr_name=f"voyage {self.voyage_id}: {_place('destination', self.arr_name)}",
+                                  base_route=self.base_route)
 
     def slowest_kn(self) -> float:
         """Calm-water speed at the lowest allowed rpm; RoutingInputError when the model gives next to nothing."""

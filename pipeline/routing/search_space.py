@@ -11,7 +11,7 @@ crosses no limit line. Nodes are held to the same clearance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numba
@@ -21,6 +21,7 @@ from pipeline.routing import geodesy as geo
 from pipeline.routing.clearance import (DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, Clearance, clearance, leg_is_clear_nb,
                                         point_is_clear_nb)
 from pipeline.routing.land import is_sea, land_grid
+from pipeline.routing.sea_route import SeaRoute
 
 
 class VoyageGeometryError(ValueError):
@@ -48,6 +49,11 @@ class SearchSpace:
     max_shift: int
     base_distance_nm: float
     clearance: Clearance | None = None  # None: land was not checked
+    # laid along a sea route (corridor.py; None: across the great circle or rhumb line): the route, which lines are
+    # a passage's gates (one node, on the fairway) and each line's node spacing (NM; 0 at the ports and gates)
+    sea_route: SeaRoute | None = None
+    gate: np.ndarray | None = None  # (L+2,) bool
+    line_d_point_nm: np.ndarray | None = None  # (L+2,)
 
     @property
     def graph(self) -> Graph:
@@ -140,14 +146,16 @@ def build_search_space(dep: tuple[float, float], arr: tuple[float, float], *, n_
     most = int(space.base_distance_nm / MIN_LINE_SPACING_NM)
     n_points = space.lat.shape[1]
     d_point = kw.pop("d_point_nm", None)
-    d_point = d_point if d_point is not None else default_d_point_nm(space.base_distance_nm, n_points)
+    if d_point is None and kw.get("base_route") is None:  # a corridor's lines take their widths from the open water
+        d_point = default_d_point_nm(space.base_distance_nm, n_points)
     max_shift = kw.pop("max_shift", None)
     kw.pop("n_points", None)
     for k_lines, k_points in DENSER:
         lines, points = space.n_lines * k_lines, (n_points // 2) * k_points * 2 + 1
         if (k_lines > 1 and lines > most) or points > MAX_POINTS:  # more nodes along the lines suit any length
             continue
-        denser = lay_out_lines(dep, arr, n_lines=lines, n_points=points, d_point_nm=d_point * (n_points // 2) / (points // 2),
+        denser = lay_out_lines(dep, arr, n_lines=lines, n_points=points,
+                               d_point_nm=None if d_point is None else d_point * (n_points // 2) / (points // 2),
                                max_shift=None if max_shift is None else max_shift * k_points, **kw)
         if reachable(denser):
             return denser
@@ -158,10 +166,16 @@ def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines
                   n_points: int = 21, d_point_nm: float | None = None, base: str = "gc", max_shift: int | None = None,
                   lat_limits: tuple[float, float] = (-75.0, 75.0), limit_lines: list[list[tuple[float, float]]] | None = None,
                   clearance_nm: float = DEFAULT_CLEARANCE_NM, approach_nm: float = DEFAULT_APPROACH_NM,
-                  check_land: bool = True, dep_name: str = "departure", arr_name: str = "destination") -> SearchSpace:
-    """The node lines for a voyage from `dep` to `arr` with `n_lines` lines (None: `default_n_lines`)."""
+                  check_land: bool = True, dep_name: str = "departure", arr_name: str = "destination",
+                  base_route: SeaRoute | None = None) -> SearchSpace:
+    """The node lines for a voyage from `dep` to `arr` with `n_lines` lines (None: `default_n_lines`, or along a
+    `base_route` `corridor.default_corridor_lines`). With `base_route` (a `SeaRoute` from `dep` to `arr`) the lines
+    are laid along it (corridor.py) and `base` must be 'gc' (its legs are great-circle chords)."""
     if base not in ("gc", "rhumb"):
         raise ValueError(f"base route must be 'gc' or 'rhumb', not {base!r}")
+    if base_route is not None and base != "gc":
+        raise ValueError(f"a {base} base route cannot be laid along a sea route: its legs are great-circle chords; "
+                         "use base 'gc'")
     for name, (la, lo) in ((dep_name, dep), (arr_name, arr)):
         if not (-90 <= la <= 90) or not (-180 <= lo <= 360):
             raise VoyageGeometryError(f"{name} {la:.4f},{lo:.4f} is not a valid position")
@@ -177,6 +191,11 @@ def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines
         if who and arr_name.startswith(who + ": "):  # name the voyage once
             raise VoyageGeometryError(f"{who}: {dep_short} and {arr_name[len(who) + 2:]} are the same place ({dist:.2f} NM apart)")
         raise VoyageGeometryError(f"{dep_name} and {arr_name} are the same place ({dist:.2f} NM apart)")
+    if base_route is not None:
+        return _along_sea_route(base_route, dep, arr, dep_name, arr_name, n_lines=n_lines, n_points=n_points,
+                                d_point_nm=d_point_nm, max_shift=max_shift, lat_limits=lat_limits,
+                                limit_lines=limit_lines, clearance_nm=clearance_nm, approach_nm=approach_nm,
+                                check_land=check_land)
     L = n_lines if n_lines is not None else default_n_lines(dist)
     P = int(n_points) | 1  # odd, so there is a centre node
     dp = d_point_nm if d_point_nm is not None else default_d_point_nm(dist, P)
@@ -217,6 +236,32 @@ def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines
         _forbid_crossing(lat, lon, edge_ok, line)
     return SearchSpace(lat=lat, lon=lon, node_ok=node_ok, edge_ok=edge_ok, d_point_nm=float(dp), base=base,
                        max_shift=int(ms), base_distance_nm=float(dist), clearance=rule)
+
+
+SEA_ROUTE_END_TOL_NM = 1.0  # a sea route must start and end this close to the voyage's ports
+
+
+def _along_sea_route(route: SeaRoute, dep, arr, dep_name: str, arr_name: str, *, limit_lines, **kw) -> SearchSpace:
+    from pipeline.routing.corridor import lay_out_corridor  # the corridor builds on this module's kernels
+
+    for name, (la, lo), k in ((dep_name, dep, 0), (arr_name, arr, -1)):
+        off = geo.gc_distance_nm(la, lo, float(route.lat[k]), float(route.lon[k]))
+        if off > SEA_ROUTE_END_TOL_NM:
+            raise VoyageGeometryError(f"{name} {la:.4f},{lo:.4f} is {off:.1f} NM from the {'first' if k == 0 else 'last'} "
+                                      f"waypoint of its sea route; the route must run from port to port")
+    # the ports themselves, to the last decimal, as the route's ends
+    wp_lat, wp_lon = np.array(route.lat, np.float64), np.array(route.lon, np.float64)
+    wp_lat[0], wp_lon[0], wp_lat[-1], wp_lon[-1] = dep[0], dep[1], arr[0], arr[1]
+    try:
+        lat, lon, node_ok, edge_ok, d_line, ms, gate, rule, total = lay_out_corridor(
+            replace(route, lat=wp_lat, lon=wp_lon), **kw)
+    except ValueError as e:
+        raise VoyageGeometryError(f"{dep_name} to {arr_name}: {e}") from None
+    for line in limit_lines or []:
+        _forbid_crossing(lat, lon, edge_ok, line)
+    return SearchSpace(lat=lat, lon=lon, node_ok=node_ok, edge_ok=edge_ok, d_point_nm=float(d_line.max()), base="gc",
+                       max_shift=int(ms), base_distance_nm=float(total), clearance=rule, sea_route=route, gate=gate,
+                       line_d_point_nm=d_line)
 
 
 def _forbid_crossing(lat, lon, edge_ok, polyline):
