@@ -119,6 +119,10 @@ def register(app: typer.Typer) -> None:
                                                            "(the one routed on and the complete ones before it, valid "
                                                            "at the same times): P(on time), fuel and saving P10/P50/P90. "
                                                            "0: none."),
+        avoid: Optional[list[str]] = typer.Option(None, "--avoid", help="A passage to keep out of (suez, panama, "
+                                                  "kiel, singapore, gibraltar, …: docs/sea-routes.md), repeatable: "
+                                                  "--avoid suez rounds the Cape. Adds to the fleet's "
+                                                  "JITROUTE_AVOID_PASSAGES."),
         rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel); the search uses them, then each run's rpm is refined anywhere between the lowest and the highest (routing.continuous_speed)."),
         png: Optional[Path] = typer.Option(None, help="Write a map of the route, baseline and weather."),
         convergence: Optional[Path] = typer.Option(None, help="Write the BFOA convergence plot."),
@@ -141,12 +145,12 @@ def register(app: typer.Typer) -> None:
 
         try:
             pairs = [_option_pair(x) for x in solver_option or ()]
-            chosen = _Options(solver=solver, solver_options=tuple(pairs))
+            chosen = _Options(solver=solver, solver_options=tuple(pairs), avoid_passages=tuple(avoid or ()))
             from pipeline.routing.solvers import SOLVERS
 
             SOLVERS[solver].make_options(chosen.solver_overrides())
             bad_solver = None
-        except UnknownSolverError as exc:
+        except (UnknownSolverError, ValueError) as exc:  # an unknown solver, solver option or passage
             bad_solver = str(exc)
         if bad_solver:  # outside the except block: the message is said once, not again for the exception behind it
             fail(bad_solver)
@@ -209,7 +213,9 @@ def register(app: typer.Typer) -> None:
             cube_path, c = lay.weather_cube_url, str(np.datetime_as_string(np.datetime64(c, "s")))
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed,
-                                                            solver_options=tuple(pairs) or None),
+                                                            solver_options=tuple(pairs) or None,
+                                                            avoid_passages=(*s.routing.avoid_passages, *(avoid or ()))
+                                                            or None),
                        cycle_version=version)
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():

@@ -3,7 +3,7 @@
 Values come from (lowest to highest priority) the defaults below, environment variables
 (`JITROUTE_DATA`, `JITROUTE_OBJECT_ROOT`, `JITROUTE_STORAGE_OPTIONS`, `JITROUTE_RISH_URL`, `JITROUTE_OSCAR_URL`,
 `JITROUTE_ALLOWED_REDIRECT_HOSTS`, `JITROUTE_DASK_ADDRESS`, `JITROUTE_DASK_WORKERS`, `JITROUTE_EARTHDATA_TOKEN`,
-`JITROUTE_CUBE_RETENTION_DAYS`, `JITROUTE_EXPORT_RETENTION_DAYS`) and
+`JITROUTE_CUBE_RETENTION_DAYS`, `JITROUTE_EXPORT_RETENTION_DAYS`, `JITROUTE_AVOID_PASSAGES`) and
 explicit overrides from the CLI. Lower layers never read this object; flows pass the values they need as plain arguments.
 
 Object storage: `JITROUTE_OBJECT_ROOT` (e.g. `s3://bucket/jitroute`) puts the cube and the run exports there.
@@ -279,6 +279,8 @@ def load_settings(**overrides) -> Settings:
             "sources.earthdata_token": env.get("JITROUTE_EARTHDATA_TOKEN") or None,
             "sources.allowed_redirect_hosts": tuple(h.strip() for h in env.get("JITROUTE_ALLOWED_REDIRECT_HOSTS", "").split(",")
                                                     if h.strip()) or None,
+            "routing.avoid_passages": tuple(p.strip() for p in env.get("JITROUTE_AVOID_PASSAGES", "").split(",")
+                                            if p.strip()) or None,
         },
     )
     return s.with_overrides(**overrides)

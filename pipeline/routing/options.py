@@ -47,11 +47,22 @@ class RoutingOptions:
     # a lagged ensemble of this many cycles (the one routed on and the complete ones before it) sails each plan and
     # its baseline (ensemble.py): P(on time), fuel and saving P10/P50/P90 stored with the plan; 0: none
     ensemble_members: int = 4
+    # passages (pipeline.routing.passages names, e.g. ("suez",)) the base route keeps out of: round the Cape instead
+    # of Suez. Per fleet in the settings (JITROUTE_AVOID_PASSAGES=suez,panama), per voyage with `route --avoid`
+    avoid_passages: tuple = ()
 
     def __post_init__(self):
         if self.solver not in SOLVER_NAMES:
             raise UnknownSolverError(f"unknown solver {self.solver!r}; use one of {', '.join(SOLVER_NAMES)}")
         object.__setattr__(self, "solver_options", tuple((str(k), v) for k, v in dict(self.solver_options).items()))
+        avoid = tuple(sorted({str(a).strip().lower() for a in self.avoid_passages if str(a).strip()}))
+        from pipeline.routing.passages import PASSAGES  # plain data, no compiled code
+
+        unknown = sorted(set(avoid) - {p.name for p in PASSAGES})
+        if unknown:
+            raise ValueError(f"unknown passage(s) to avoid: {', '.join(unknown)}; known: "
+                             f"{', '.join(p.name for p in PASSAGES)}")
+        object.__setattr__(self, "avoid_passages", avoid)
 
     def solver_overrides(self) -> dict:
         """The solver's option values of this run: the product defaults, then `solver_options`."""
