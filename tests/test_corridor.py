@@ -220,11 +220,19 @@ def test_a_corridor_across_the_antimeridian():
     assert gj["features"][0]["geometry"]["type"] == "MultiLineString"  # cut at ±180, not drawn across the map
 
 
-def test_the_base_route_is_the_great_circle_until_a_sea_route_layer_is_plugged_in():
+def test_the_base_route_is_the_sea_route_where_the_great_circle_crosses_land():
+    """Round Florida the great circle crosses the peninsula: bfoa and dp get the global sea route (clear of land,
+    round the Keys); the rhumb line never does; an open-ocean voyage keeps the great circle's layout."""
     pr = problem(FLORIDA[0], FLORIDA[-1], 60.0)
-    for solver in ("bfoa", "dp", "rhumb"):
-        assert base_route_for(pr.dep, pr.arr, RoutingOptions(solver=solver)) is None
-        assert with_base_route(pr, RoutingOptions(solver=solver)) is pr
+    for solver in ("bfoa", "dp"):
+        route = base_route_for(pr.dep, pr.arr, RoutingOptions(solver=solver))
+        assert route is not None and len(route.lat) > 2 and route.lat.min() < 25.0  # south of the peninsula's tip
+        laid = with_base_route(pr, RoutingOptions(solver=solver))
+        assert laid.base_route is not None and laid.base_route.dist_nm == pytest.approx(route.dist_nm)
+    assert base_route_for(pr.dep, pr.arr, RoutingOptions(solver="rhumb")) is None
+    assert with_base_route(pr, RoutingOptions(solver="rhumb")) is pr
+    ocean = problem((30.0, -160.0), (33.0, -145.0), 72.0)
+    assert base_route_for(ocean.dep, ocean.arr, RoutingOptions(solver="bfoa")) is None
 
 
 def test_the_rhumb_line_is_not_laid_along_a_sea_route():

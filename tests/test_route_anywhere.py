@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from conftest import fleet_data_root, mirror_urls
+from tests.conftest import fleet_data_root, mirror_urls
 
 pytestmark = pytest.mark.slow
 

@@ -293,7 +293,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     (engine_limits.EngineLimits; None: none) the solver's route gets the best engine plan holding each setting;
     `savings` adds the split against the constant-speed voyage (savings.py) to the plan and lets the best engine
     plan on the base route compete in never-worse. A `space` laid along another base route than the solver's
-    (`rhumb`) is refused. With `continuous` the speeds of the solver's plan and of the best engine plan on the base
+    (`rhumb`) is refused; without a `space`, the problem's lines are laid along the global sea route when its great
+    circle crosses land (base_route.py), as for every voyage the CLI and the fleet runs route. With `continuous` the speeds of the solver's plan and of the best engine plan on the base
     route are refined continuously between the lowest and the highest allowed rpm (continuous_speed.py); without it
     plans use only the settings. The bare search (the solver's options class's defaults, no limits, no savings) is
     `solve(..., options=SOLVERS[solver].options(), limits=None, savings=False)`.
@@ -303,6 +304,11 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     _check_forecast(problem, weather)
     t0 = time.perf_counter()
     if space is None:
+        if problem.base_route is None and spec.base == "gc":  # the base route every entry point decides alike
+            from pipeline.routing.base_route import with_base_route  # it imports this module
+
+            problem = with_base_route(problem, replace(PRODUCT, solver=solver, land_clearance_nm=problem.land_clearance_nm,
+                                                       port_approach_nm=problem.port_approach_nm))
         space = (replace(problem, base=spec.base) if spec.base != problem.base else problem).search_space()
     elif space.base != spec.base:
         raise RoutingInputError(f"voyage {problem.voyage_id}: solver {solver!r} routes along the {spec.base} base route, "
