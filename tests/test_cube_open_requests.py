@@ -135,3 +135,32 @@ def test_a_cube_with_one_chunk_per_cycle_still_opens_and_its_next_write_bounds_t
         bounded[n] = gets()
         assert list(xr.open_zarr(url, storage_options=options)["cycle"].values) == [*cycles, later]
     assert bounded[12] == bounded[3], f"GETs of one open after the next write: {bounded}"
+
+
+def test_a_rechunking_cut_short_hides_the_cycles_and_the_next_write_finishes_it(tmp_path, monkeypatch):
+    store = tmp_path / "weather.zarr"
+    cycles = [FIRST + np.timedelta64(6 * k, "h") for k in range(3)]
+    for c in cycles:
+        cube.write_cycle(store, cycle_ds(c), complete=True)
+    to_one_row_chunks(store)
+    real = zarr.Group.create_array
+
+    def disk_full_after_creating_cycle_state(self, name, **kw):
+        arr = real(self, name, **kw)
+        if name == "cycle_state":  # created, its values not written yet
+            raise OSError(28, "No space left on device")
+        return arr
+
+    later = cycles[-1] + np.timedelta64(6, "h")
+    with monkeypatch.context() as m:
+        m.setattr(zarr.Group, "create_array", disk_full_after_creating_cycle_state)
+        with pytest.raises(cube.CubeError, match="No space left"):
+            cube.write_cycle(store, cycle_ds(later), complete=True)
+    assert cube.CYCLE_INDEX_MOVING in zarr.open_group(str(store), mode="r").attrs  # the values kept for the redo
+    assert cube.complete_cycles(store) == []  # states lost meanwhile read as hidden: nothing half-known is used
+    cube.write_cycle(store, cycle_ds(later), complete=True)
+    assert cube.complete_cycles(store) == [*cycles, later]
+    group = zarr.open_group(str(store), mode="r")
+    assert cube.CYCLE_INDEX_MOVING not in group.attrs
+    assert group["cycle"].chunks == group["cycle_state"].chunks == (cube.CYCLE_INDEX_ROWS,)
+    assert list(xr.open_zarr(store)["cycle"].values) == [*cycles, later]  # the consolidated view is whole
