@@ -10,6 +10,9 @@ Store contents (names, units and CF attributes from schemas/cube_variables.py):
   cycle_state   (cycle)        0 = being written (hidden), 1 = complete, 2 = incomplete (visible, flagged)
   coordinates: cycle (forecast_reference_time), step (forecast_period, a duration stored in whole hours),
                valid_time (cycle, step) = cycle + step, lat, lon (axes Y, X); none has a fill value
+  `cycle` and `cycle_state` hold CYCLE_INDEX_ROWS rows per chunk, so listing the cycles and their states is one
+  read of each, whatever the number of cycles (on S3 the flow host's open costs the same GETs for a year of cycles
+  as for a day); a store written with one chunk per row is rechunked in place by its next write.
 
 Where it lives: a local path, or a URL (`s3://bucket/…/weather.zarr` through s3fs, `file://…`) with fsspec
 `storage_options` (for S3 e.g. {"endpoint_url": …, "key": …, "secret": …}). One writer per store (the ingest of the

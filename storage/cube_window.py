@@ -8,8 +8,8 @@ The coordinates are decoded from their CF attributes as storage/cube.py writes t
 
 Opening costs the same whatever the archive's length: the published cycles, their rows and content versions are
 root attributes of the consolidated metadata (`cycle_rows`, `cycle_versions`, written at publication), so the
-`cycle` coordinate (one chunk per cycle) is not read. A store published before `cycle_rows` existed is read the
-old way (the whole `cycle` coordinate) until its next publication.
+`cycle` coordinate is not read. A store published before `cycle_rows` existed is read the old way (the whole `cycle`
+coordinate: one read since storage/cube.py keeps it in one chunk, one per cycle before) until its next publication.
 
 Chunk cache: every data chunk a process reads goes through one process-wide cache (CHUNK_CACHE), bounded in bytes
 (`JITROUTE_CUBE_CACHE_MB`, default 64) and keyed by store, variable, cycle, the cycle's content version and chunk:
