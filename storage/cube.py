@@ -77,6 +77,7 @@ from zarr.codecs import BloscCodec
 from schemas import cube_variables as cv
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
 from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, fs_options, locate
+from storage.cube_window import cycle_times
 from storage.cube_window import cycle_versions  # noqa: F401  (zarr alone; flows ask the cube module for it)
 
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
@@ -426,8 +427,15 @@ def cycle_states(path, lock_dir: Path | None = None, storage_options: dict | Non
     loc = locate(path, storage_options)
     if not loc.has("zarr.json"):
         return {}
-    with _open_consistent(loc, lock_dir) as ds:
-        return dict(zip(ds["cycle"].values.astype("datetime64[ns]"), ds["cycle_state"].values.astype(int)))
+    """Every cycle row's state (hidden rows included), read with zarr alone: the `cycle` and `cycle_state` arrays, one
+    chunk each (no xarray open of every array's metadata: on S3 a handful of GETs whatever the number of cycles)."""
+    group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
+    if group["cycle"].shape != group["cycle_state"].shape:
+        # A writer was killed mid-append (or is appending right now): wait for the lock, trim, reopen.
+        with writer_lock(lock_dir, loc):
+            _repair(loc)
+        group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
+    return dict(zip(cycle_times(group["cycle"]), np.asarray(group["cycle_state"][:]).astype(int)))
 
 
 def step_axis_h(path, storage_options: dict | None = None) -> list[int] | None:

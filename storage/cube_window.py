@@ -144,7 +144,7 @@ class Window(NamedTuple):
     data: dict
 
 
-def _times(arr) -> np.ndarray:
+def cycle_times(arr) -> np.ndarray:
     """A CF time coordinate ("hours since 2000-01-01 …") as datetime64[ns]."""
     m = re.fullmatch(r"\s*(\w+) since (\S+)(?: (\S+))?\s*", str(arr.attrs.get("units", "")))
     if m is None or m.group(1) not in _UNITS:
@@ -185,7 +185,7 @@ def open_published(path, storage_options: dict | None = None, cache_chunks: bool
         n = group["cycle_state"].shape[0]  # rows past the published shapes are a publication under way
         rows = {np.datetime64(k, "ns"): int(r) for k, r in dict(attrs["cycle_rows"]).items() if int(r) < n}
     else:  # published before `cycle_rows` existed (or opened without consolidated metadata)
-        rows = {c: i for i, c in enumerate(_times(group["cycle"]))}
+        rows = {c: i for i, c in enumerate(cycle_times(group["cycle"]))}
     versions = {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
     if cache_chunks:  # a chunk whose row is not known here is read from the store every time
         by_row.update({r: (str(np.datetime64(c, "s")), versions[c]) for c, r in rows.items() if c in versions})

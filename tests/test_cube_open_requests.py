@@ -115,7 +115,7 @@ def test_the_flow_hosts_open_costs_the_same_gets_for_3_and_12_cycles(counting_s3
         assert flow_host_open(url, options)[0] == cycles[-1]
         cost[n] = gets()
     assert cost[12] == cost[3], f"GETs of one open: {cost}"
-    assert 0 < cost[3] <= 64, cost  # two reads of the metadata of the group and its arrays, coordinates, states
+    assert 0 < cost[3] <= 32, cost  # the root, and `cycle`, `cycle_state` (metadata and one chunk each) per read
 
 
 @pytest.mark.slow  # an S3 server
