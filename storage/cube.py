@@ -10,6 +10,9 @@ Store contents (names, units and CF attributes from schemas/cube_variables.py):
   cycle_state   (cycle)        0 = being written (hidden), 1 = complete, 2 = incomplete (visible, flagged)
   coordinates: cycle (forecast_reference_time), step (forecast_period, a duration stored in whole hours),
                valid_time (cycle, step) = cycle + step, lat, lon (axes Y, X); none has a fill value
+  `cycle` and `cycle_state` hold CYCLE_INDEX_ROWS rows per chunk, so listing the cycles and their states is one
+  read of each, whatever the number of cycles (on S3 the flow host's open costs the same GETs for a year of cycles
+  as for a day); a store written with one chunk per row is rechunked in place by its next write.
 
 Where it lives: a local path, or a URL (`s3://bucket/…/weather.zarr` through s3fs, `file://…`) with fsspec
 `storage_options` (for S3 e.g. {"endpoint_url": …, "key": …, "secret": …}). One writer per store (the ingest of the
@@ -74,6 +77,7 @@ from zarr.codecs import BloscCodec
 from schemas import cube_variables as cv
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
 from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, fs_options, locate
+from storage.cube_window import cycle_times
 from storage.cube_window import cycle_versions  # noqa: F401  (zarr alone; flows ask the cube module for it)
 
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
@@ -89,6 +93,12 @@ SPATIAL_SPLITS = 8
 # LZ4 after byte shuffle: about as small as zstd on smooth float32 fields, faster to write and ~3× faster to
 # read (routing workers read the cube). Fixed when the store is created; appended cycles inherit it.
 DATA_CODEC = BloscCodec(cname="lz4", clevel=5, shuffle="shuffle")
+# Rows of the per-cycle index arrays (`cycle`, `cycle_state`) per chunk: listing the cycles and their states is one
+# read of each whatever the archive's length (one chunk per row cost 2 GETs per cycle ever written on S3). Rows are
+# never removed (retention empties them), so this is ~45 years of 4 cycles a day; the chunks stay a few kB stored.
+CYCLE_INDEX_ROWS = 1 << 16
+CYCLE_INDEX_ARRAYS = ("cycle", "cycle_state")
+CYCLE_INDEX_MOVING = "cycle_index_moving"  # root attribute: the index values while _rechunk_cycle_index moves them
 
 
 METADATA_NODES = ("", *DATA_VARS, "cycle", "step", "lat", "lon", "cycle_state", "current_age_h")  # "" is the group
@@ -146,12 +156,12 @@ def _encoding(ds: xr.Dataset) -> dict:
     nstep = ds.sizes["step"]
     chunks = tuple(ds[DATA_VARS[0]].data.chunksize)  # the template's: (1, steps, lat, lon)
     enc = {v: {"chunks": chunks, "compressors": (DATA_CODEC,)} for v in DATA_VARS}
-    enc["cycle"] = CYCLE_ENCODING | NO_FILL
+    enc["cycle"] = CYCLE_ENCODING | NO_FILL | {"chunks": (CYCLE_INDEX_ROWS,)}
     enc["step"] = STEP_ENCODING | NO_FILL
     enc["valid_time"] = CYCLE_ENCODING | NO_FILL | {"chunks": (1, nstep)}
     enc["lat"] = enc["lon"] = dict(NO_FILL)
     enc["current_age_h"] = {"chunks": (1, nstep)}
-    enc["cycle_state"] = {"chunks": (1,)}
+    enc["cycle_state"] = {"chunks": (CYCLE_INDEX_ROWS,)}
     return enc
 
 
@@ -256,6 +266,7 @@ def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_di
         else:
             _repair(loc)
             _upgrade(loc)
+            _rechunk_cycle_index(loc)
             _check_grid(loc, cycle_ds)
             cycles = _cycles_in_store(loc)
             hits = np.flatnonzero(cycles == cycle)
@@ -296,6 +307,32 @@ def _upgrade(loc: Location) -> None:
     for name in ("lat", "lon"):
         group[name].attrs.pop("_FillValue", None)
     step.attrs.update(cv.attrs("step") | {"dtype": "timedelta64[ns]"})  # xarray decodes a duration by this
+
+
+def _rechunk_cycle_index(loc: Location) -> None:
+    """Give `cycle` and `cycle_state` of a store written with one chunk per cycle row CYCLE_INDEX_ROWS rows per
+    chunk, in place, values and attributes kept, then republish (the consolidated metadata holds the chunk shape).
+    Crash-safe: the values are first kept in the root attribute CYCLE_INDEX_MOVING (one atomic write of the root
+    `zarr.json`), the arrays are rewritten from it, and it is dropped last; a write killed in between leaves it, and
+    the next write redoes the move from it. Meanwhile (a few small writes, once per store) a reader may find an index
+    array being replaced; the flows read the cube after the ingest, not during it."""
+    group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
+    moving = group.attrs.get(CYCLE_INDEX_MOVING)
+    if moving is None:
+        if all(group[name].chunks[0] >= CYCLE_INDEX_ROWS for name in CYCLE_INDEX_ARRAYS):
+            return
+        moving = {name: np.asarray(group[name][:]).tolist() for name in CYCLE_INDEX_ARRAYS}
+        zarr.open_group(loc.zarr_store(), mode="r+").attrs[CYCLE_INDEX_MOVING] = moving  # keeps the published view
+    for name, values in moving.items():
+        arr = group[name]
+        new = group.create_array(name, shape=(len(values),), chunks=(CYCLE_INDEX_ROWS,), dtype=arr.dtype,
+                                 dimension_names=arr.metadata.dimension_names, attributes=arr.attrs.asdict(),
+                                 fill_value=arr.metadata.fill_value, compressors=arr.compressors, overwrite=True)
+        if values:
+            new[:] = np.asarray(values, arr.dtype)
+    root = zarr.open_group(loc.zarr_store(), mode="r+")
+    del root.attrs[CYCLE_INDEX_MOVING]
+    _consolidate(loc)
 
 
 def _write_region(loc: Location, index: int, cycle_ds: xr.Dataset) -> None:
@@ -390,8 +427,15 @@ def cycle_states(path, lock_dir: Path | None = None, storage_options: dict | Non
     loc = locate(path, storage_options)
     if not loc.has("zarr.json"):
         return {}
-    with _open_consistent(loc, lock_dir) as ds:
-        return dict(zip(ds["cycle"].values.astype("datetime64[ns]"), ds["cycle_state"].values.astype(int)))
+    """Every cycle row's state (hidden rows included), read with zarr alone: the `cycle` and `cycle_state` arrays, one
+    chunk each (no xarray open of every array's metadata: on S3 a handful of GETs whatever the number of cycles)."""
+    group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
+    if group["cycle"].shape != group["cycle_state"].shape:
+        # A writer was killed mid-append (or is appending right now): wait for the lock, trim, reopen.
+        with writer_lock(lock_dir, loc):
+            _repair(loc)
+        group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
+    return dict(zip(cycle_times(group["cycle"]), np.asarray(group["cycle_state"][:]).astype(int)))
 
 
 def step_axis_h(path, storage_options: dict | None = None) -> list[int] | None:

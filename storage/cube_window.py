@@ -8,8 +8,8 @@ The coordinates are decoded from their CF attributes as storage/cube.py writes t
 
 Opening costs the same whatever the archive's length: the published cycles, their rows and content versions are
 root attributes of the consolidated metadata (`cycle_rows`, `cycle_versions`, written at publication), so the
-`cycle` coordinate (one chunk per cycle) is not read. A store published before `cycle_rows` existed is read the
-old way (the whole `cycle` coordinate) until its next publication.
+`cycle` coordinate is not read. A store published before `cycle_rows` existed is read the old way (the whole `cycle`
+coordinate: one read since storage/cube.py keeps it in one chunk, one per cycle before) until its next publication.
 
 Chunk cache: every data chunk a process reads goes through one process-wide cache (CHUNK_CACHE), bounded in bytes
 (`JITROUTE_CUBE_CACHE_MB`, default 64) and keyed by store, variable, cycle, the cycle's content version and chunk:
@@ -144,7 +144,7 @@ class Window(NamedTuple):
     data: dict
 
 
-def _times(arr) -> np.ndarray:
+def cycle_times(arr) -> np.ndarray:
     """A CF time coordinate ("hours since 2000-01-01 …") as datetime64[ns]."""
     m = re.fullmatch(r"\s*(\w+) since (\S+)(?: (\S+))?\s*", str(arr.attrs.get("units", "")))
     if m is None or m.group(1) not in _UNITS:
@@ -185,7 +185,7 @@ def open_published(path, storage_options: dict | None = None, cache_chunks: bool
         n = group["cycle_state"].shape[0]  # rows past the published shapes are a publication under way
         rows = {np.datetime64(k, "ns"): int(r) for k, r in dict(attrs["cycle_rows"]).items() if int(r) < n}
     else:  # published before `cycle_rows` existed (or opened without consolidated metadata)
-        rows = {c: i for i, c in enumerate(_times(group["cycle"]))}
+        rows = {c: i for i, c in enumerate(cycle_times(group["cycle"]))}
     versions = {np.datetime64(k, "ns"): int(v) for k, v in dict(attrs.get("cycle_versions", {})).items()}
     if cache_chunks:  # a chunk whose row is not known here is read from the store every time
         by_row.update({r: (str(np.datetime64(c, "s")), versions[c]) for c, r in rows.items() if c in versions})
