@@ -241,7 +241,9 @@ def test_a_strait_routes_when_its_corridor_keeps_the_clearance_and_says_why_not_
     dep, arr, narrow_nm = STRAITS[name]
     hours = 1.3 * float(haversine_nm(*dep, *arr)) / 10.0
     pr = problem(dep, arr, hours, n_lines=None, n_points=21)
-    plan = solve(pr, CALM, solver="bfoa", seed=1, params=FAST)
+    # the lines across the great circle (given as the space): the global sea route would sail the strait on its
+    # passage fairway, at the fairway's own clearance (tests/test_sea_routes.py)
+    plan = solve(pr, CALM, solver="bfoa", seed=1, params=FAST, space=pr.search_space())
     if narrow_nm is None:
         assert plan.status == "ok", plan.reason
         assert plan.min_land_clearance_nm >= 2.0 - 1e-6
@@ -251,7 +253,7 @@ def test_a_strait_routes_when_its_corridor_keeps_the_clearance_and_says_why_not_
         assert abs(widest - narrow_nm) <= 0.2, plan.reason
         assert "routing.land_clearance_nm" in plan.reason
         pr = problem(dep, arr, hours, n_lines=None, n_points=21, land_clearance_nm=1.0)
-        plan = solve(pr, CALM, solver="bfoa", seed=1, params=FAST)
+        plan = solve(pr, CALM, solver="bfoa", seed=1, params=FAST, space=pr.search_space())
         assert plan.status == "ok", plan.reason
         assert plan.min_land_clearance_nm >= 1.0 - 1e-6
     lat, lon = np.array(plan.waypoints).T

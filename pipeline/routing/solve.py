@@ -307,8 +307,12 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         if problem.base_route is None and spec.base == "gc":  # the base route every entry point decides alike
             from pipeline.routing.base_route import with_base_route  # it imports this module
 
-            problem = with_base_route(problem, replace(PRODUCT, solver=solver, land_clearance_nm=problem.land_clearance_nm,
-                                                       port_approach_nm=problem.port_approach_nm))
+            try:
+                problem = with_base_route(problem, replace(PRODUCT, solver=solver,
+                                                           land_clearance_nm=problem.land_clearance_nm,
+                                                           port_approach_nm=problem.port_approach_nm))
+            except VoyageGeometryError:  # no sea route: the great circle's lines, whose plan then says why not
+                pass
         space = (replace(problem, base=spec.base) if spec.base != problem.base else problem).search_space()
     elif space.base != spec.base:
         raise RoutingInputError(f"voyage {problem.voyage_id}: solver {solver!r} routes along the {spec.base} base route, "
