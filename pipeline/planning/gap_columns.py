@@ -50,8 +50,8 @@ def completion_bound(table: tuple, prize: np.ndarray, mu: float) -> np.ndarray:
 def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, slack: float,
                           max_labels: int = 500_000, deadline: float = np.inf) -> tuple[list[Column], bool]:
     """(least-cost column per set of contracts vessel k can lift whose reduced cost under (π, μ) is ≤ `slack`,
-    enumeration complete). Past `max_labels` partial sequences or the `deadline` (cpu_s()) it stops:
-    ([], False)."""
+    enumeration complete). Past `max_labels` partial sequences or the `deadline` (a cpu_clock.cpu_s() reading, CPU
+    seconds) it stops: ([], False)."""
     glob, table = _pricing_table(data, k)
     if glob.size == 0:
         return [], True
