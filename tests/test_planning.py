@@ -434,6 +434,7 @@ def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(plann
     assert r.exit_code == 0, r.output
     out = json.loads(r.output)
     assert out["solve_status"] == "optimal" and {"vessels", "unassigned", "total_cost"} <= set(out)
+    assert out["stopped_by"] == "proven optimal"
     bad = CliRunner().invoke(app, ["plan", "fleet", "--contracts", files["contracts"], "--as-of", "01/12/2020",
                                    "--data", str(root)])
     assert bad.exit_code == 2
