@@ -32,9 +32,7 @@ def show_plan(s: dict) -> None:
     console.print(t)
     console.print(f"cost: fuel {_money(s['fuel_cost'])} + out of service {_money(s['out_of_service_cost'])} "
                   f"({s['out_of_service_days']:.1f} days) + penalties {_money(s['penalty_cost'])} = {_money(s['total_cost'])}"
-                  f" (fuel price {s['fuel_price']:g}/t; planner {s['runtime_s']:.1f} CPU s)")
-    if s.get("stopped_by"):
-        console.print(f"search stopped: {s['stopped_by']}")
+                  f" (fuel price {s['fuel_price']:g}/t; planner {s['runtime_s']:.1f} s)")
     if s["unassigned"]:
         u = Table(title="Contracts left")
         for col in ("contract", "penalty", "why"):
@@ -68,8 +66,7 @@ def plan_fleet_cmd(contracts: Path = typer.Option(..., "--contracts", help="cont
                    fuel_price: float = typer.Option(600.0, "--fuel-price", help="Fuel price per tonne."),
                    penalty: float = typer.Option(500_000.0, "--penalty", help="Cost of leaving a contract unassigned "
                                                  "when its row gives none."),
-                   time_limit: float = typer.Option(60.0, "--time-limit", min=0.1, help="Planner time limit, CPU seconds "
-                                                    "of the planner (a busy host does not shorten its search), from "
+                   time_limit: float = typer.Option(60.0, "--time-limit", min=0.1, help="Planner time limit, seconds, from "
                                                     "building the problem to the plan."),
                    as_json: bool = typer.Option(False, "--json", help="Print the plan as JSON."),
                    data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")):

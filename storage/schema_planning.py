@@ -118,10 +118,4 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE port_distances ADD COLUMN canal_h DOUBLE;
         """,
     ),
-    Migration(
-        "planning_003_plan_stopped_by",
-        """
-        ALTER TABLE fleet_plans ADD COLUMN stopped_by VARCHAR;  -- what ended the search (time limit in CPU seconds)
-        """,
-    ),
 ]

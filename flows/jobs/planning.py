@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import secrets
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -14,7 +15,6 @@ from flows.runner import PLAIN
 from flows.settings import load_settings
 from pipeline.export.plan_gantt import plan_gantt_png
 from pipeline.planning import milp, problem
-from pipeline.planning.cpu_clock import cpu_s
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
 from pipeline.planning.sea_distances import PortDistance, canal_map, distance_map, needed_pairs, sea_distance
 from pipeline.planning.voyages import (DEFAULT_PENALTY,
@@ -184,7 +184,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     pairs |= {(a.discharge_port, b.load_port) for a in cons for b in cons}
     pairs |= {(c.discharge_port, v.end_port) for v in vessels for c in cons if v.end_port}
     dists = run.step(complete_distances, db, port_pos, pairs, name="sea-distances")
-    started = cpu_s()  # the time limit (CPU seconds) covers building the problem too
+    started = time.perf_counter()  # the time limit covers building the problem too
     data = problem.build(vessels, cons, distance_map(dists), fuel_price, canals=canal_map(dists))
     plan = run.step(milp.solve, data, time_limit_s=time_limit_s, started_at=started, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"

@@ -28,12 +28,12 @@ from __future__ import annotations
 import dataclasses
 import heapq
 import itertools
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
-from pipeline.planning.cpu_clock import cpu_s
 from pipeline.planning import colgen, local_search
 from pipeline.planning.master_lp import MasterLP
 from pipeline.planning.problem import FleetPlan, PlanData, assemble
@@ -85,7 +85,7 @@ def solve_node(data: PlanData, master: MasterLP, blocked: np.ndarray, compulsory
         z, pi, mu, y = master.solve()
         least, new = 0.0, []
         for k in range(master.V):
-            if cpu_s() > deadline:  # a round cut short proves nothing (y must stay one per pool column)
+            if time.perf_counter() > deadline:  # a round cut short proves nothing (y must stay one per pool column)
                 return bound, y, False
             pik = pi.copy()
             pik[blocked[k]] = BLOCKED
@@ -95,7 +95,7 @@ def solve_node(data: PlanData, master: MasterLP, blocked: np.ndarray, compulsory
         bound = max(bound, z + least)
         if least > -colgen.EPS * max(1.0, abs(z)):
             return max(bound, z), y, True
-        if bound >= cutoff or cpu_s() > deadline or not master.add(new):  # y: one per pool column
+        if bound >= cutoff or time.perf_counter() > deadline or not master.add(new):  # y: one per pool column
             return bound, y, False
 
 
@@ -144,7 +144,7 @@ def dive(data: PlanData, master: MasterLP, decisions: tuple, deadline: float, *,
         whole = _whole_plan(master, y)
         if whole is not None:
             return whole
-        if cpu_s() > deadline or np.any(master.slack()[compulsory] > 1e-6):
+        if time.perf_counter() > deadline or np.any(master.slack()[compulsory] > 1e-6):
             return colgen.round_lp(data, master.columns, y * master.allowed(blocked))
         order = [i for i in np.argsort(-y, kind="stable") if y[i] > 1e-6 and master.columns[i].k not in fixed]
         take = [i for i in order if y[i] >= fix_at] or order[:1]
@@ -175,7 +175,7 @@ def penalty_dives(data: PlanData, master: MasterLP, deadline: float,
     the penalties, so each dive starts from the pool `master` holds, and the columns it prices join that pool."""
     plans = []
     for factor in factors:
-        if cpu_s() > deadline:
+        if time.perf_counter() > deadline:
             break
         dearer = dataclasses.replace(data, contracts=[dataclasses.replace(c, penalty=c.penalty * factor)
                                                       for c in data.contracts])
@@ -205,7 +205,7 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
     counter = itertools.count()
     open_nodes = [Node(root_bound, 0, next(counter), ())]
     solved = 0
-    t0, diving_s = cpu_s(), 0.0
+    t0, diving_s = time.perf_counter(), 0.0
     floor = np.inf  # the least bound of the nodes dropped only because they are within `rel_gap` of the incumbent
 
     def cutoff() -> float:
@@ -214,7 +214,7 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
     def plan_of(sequences) -> FleetPlan:
         return assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
 
-    while open_nodes and cpu_s() < deadline:
+    while open_nodes and time.perf_counter() < deadline:
         node = heapq.heappop(open_nodes)
         if node.bound >= cutoff():
             floor = min(floor, node.bound)
@@ -241,12 +241,12 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
         rounded = plan_of(colgen.round_lp(data, master.columns, y * master.allowed(blocked)))
         if rounded.cost < best.cost:
             best = rounded
-        if diving_s < dive_share * (cpu_s() - t0):
-            t1 = cpu_s()
+        if diving_s < dive_share * (time.perf_counter() - t0):
+            t1 = time.perf_counter()
             dived = local_search.improve(data, dive(data, master, node.decisions, deadline),
-                                         time_limit_s=min(1.0, deadline - cpu_s()))
+                                         time_limit_s=min(1.0, deadline - time.perf_counter()))
             best = min(best, plan_of(dived), key=lambda p: p.cost)
-            diving_s += cpu_s() - t1
+            diving_s += time.perf_counter() - t1
         if improve is not None:
             best = min(best, improve(best, min([bound] + [o.bound for o in open_nodes])), key=lambda p: p.cost)
         if bound >= cutoff():

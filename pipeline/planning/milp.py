@@ -29,7 +29,6 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from pipeline.planning.cpu_clock import cpu_s, wall_s_for
 from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, FleetPlan, PlanData, assemble
 from pipeline.planning import branch_price, colgen, gap_columns, local_search
 from pipeline.planning.master_lp import MasterLP
@@ -191,21 +190,13 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
     optimal; stopped by the time limit, its dual bound is a proven bound. For large fleets not proven optimal so
     far, branch-and-price (branch_price.search) takes the rest of the time: it raises the bound by branching on
     vessel–contract pairs and dives for better plans. The best plan is returned with `gap`, its proven relative gap
-    to the best lower bound. The time limit is CPU seconds of this process (cpu_clock.py: a busy host slows the
-    search down but does not shorten it), and covers all of it, counted from `started_at` (a `cpu_clock.cpu_s()`
+    to the best lower bound. The time limit covers all of it, counted from `started_at` (a `time.perf_counter()`
     reading; default: the call), so a caller can count building `data` too; every step stops at it (one LP solve
-    or pricing of one vessel may finish past it), and each HiGHS call gets at most the time left (HiGHS counts it
-    on its own wall clock, so on a busy host a MILP stopped by it does less). The plan's `stopped_by` says what
-    ended the search: "proven optimal" or "time limit: N CPU s" with the gap."""
-    t0 = cpu_s() if started_at is None else float(started_at)
-    called_cpu_s, called_wall_s = cpu_s(), time.perf_counter()
+    or pricing of one vessel may finish past it)."""
+    t0 = time.perf_counter() if started_at is None else float(started_at)
 
     def left() -> float:
-        return float(time_limit_s) - (cpu_s() - t0)
-
-    def highs_left(cpu_left_s: float) -> float:
-        """HiGHS's own (wall-clock) limit giving it about `cpu_left_s` CPU seconds at this process's share of a core."""
-        return wall_s_for(cpu_left_s, cpu_s() - called_cpu_s, time.perf_counter() - called_wall_s)
+        return float(time_limit_s) - (time.perf_counter() - t0)
 
     def plan_of(sequences: dict) -> FleetPlan:
         return assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
@@ -215,15 +206,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
                                    else np.inf)
         status = "optimal" if optimal or gap <= 1e-9 else "feasible"
         return assemble(data, {s.k: s.sequence for s in best.schedules}, solver="milp", status=status, gap=gap,
-                        runtime_s=cpu_s() - t0, n_columns=n_columns, stopped_by=stopped_by(status, gap))
-
-    def stopped_by(status: str, gap: float) -> str:
-        if status == "optimal":
-            return "proven optimal"
-        if mip_rel_gap > 0 and gap <= mip_rel_gap:
-            return f"gap {100 * gap:.2f} % within the {100 * mip_rel_gap:g} % asked"
-        return f"time limit: {float(time_limit_s):g} CPU s, " + (f"gap {100 * gap:.2f} %" if np.isfinite(gap)
-                                                                  else "no lower bound yet")
+                        runtime_s=time.perf_counter() - t0, n_columns=n_columns)
 
     columns, complete = [], True
     for k in range(len(data.vessels)):
@@ -233,22 +216,21 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         if not complete:
             break
     if complete and not columns:
-        return assemble(data, {}, solver="milp", status="optimal", gap=0.0, runtime_s=cpu_s() - t0,
-                        stopped_by="proven optimal")
+        return assemble(data, {}, solver="milp", status="optimal", gap=0.0, runtime_s=time.perf_counter() - t0)
     if complete:
         bound, pi, mu, y = colgen.solve_lp(data, columns)
         best = plan_of(local_search.improve(data, colgen.round_lp(data, columns, y),
                                             time_limit_s=0.1 * left()))
         rc = colgen.reduced_costs(data, columns, pi, mu)
         pool = [col for col, r in zip(columns, rc) if r <= _slack(best.cost, bound)]
-        best, bound, optimal = _exact_within_gap(data, pool, best, bound, highs_left(left()), mip_rel_gap)
+        best, bound, optimal = _exact_within_gap(data, pool, best, bound, left(), mip_rel_gap)
         return result(best, bound, optimal, len(columns))
     master = MasterLP(data)
     bound, converged = branch_price.solve_root(data, master, deadline=t0 + 0.4 * float(time_limit_s))
     _, pi, mu, _ = master.solve()
-    dived = branch_price.dive(data, master, (), cpu_s() + 0.3 * left())
+    dived = branch_price.dive(data, master, (), time.perf_counter() + 0.3 * left())
     best = plan_of(local_search.improve(data, dived, time_limit_s=min(0.1 * float(time_limit_s), 0.5 * left())))
-    for sequences in branch_price.penalty_dives(data, master, cpu_s() + 0.3 * left()):
+    for sequences in branch_price.penalty_dives(data, master, time.perf_counter() + 0.3 * left()):
         better = plan_of(local_search.improve(data, sequences, time_limit_s=min(1.0, 0.1 * left())))
         best = min(best, better, key=lambda p: p.cost)
     finish_bound = -np.inf
@@ -257,7 +239,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
         # (given up as soon as it falls behind 4 × an even pace over the vessels, counting at least 1 s: on 50 × 200
         # at a 1.2 % gap its second vessel alone takes ~2 s to pass `max_gap_labels`, and 48 more would follow)
         pool, complete = [], True
-        began = cpu_s()
+        began = time.perf_counter()
         budget = min(0.5 * left(), 0.1 * float(time_limit_s))
         V = len(data.vessels)
         for k in range(V):
@@ -268,8 +250,7 @@ def solve(data: PlanData, *, time_limit_s: float = 60.0, mip_rel_gap: float = 0.
                 break
             pool += cols
         if complete:
-            best, finish_bound, optimal = _exact_within_gap(data, pool, best, bound, highs_left(0.5 * left()),
-                                                                   mip_rel_gap)
+            best, finish_bound, optimal = _exact_within_gap(data, pool, best, bound, 0.5 * left(), mip_rel_gap)
             if optimal:
                 return result(best, finish_bound, True, len(master.columns) + len(pool))
     tree = branch_price.search(data, master, best, t0 + float(time_limit_s), root_bound=bound, rel_gap=mip_rel_gap)

@@ -338,7 +338,6 @@ class FleetPlan:
     gap: float  # proven relative optimality gap (0 when optimal)
     runtime_s: float
     n_columns: int = 0  # columns (vessel sequences) the MILP chose among
-    stopped_by: str = ""  # what ended the search: "proven optimal" | "time limit: N CPU s, gap G %" | ...
 
     @property
     def cost(self) -> float:
@@ -346,7 +345,7 @@ class FleetPlan:
 
 
 def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: str, status: str, gap: float,
-             runtime_s: float, n_columns: int = 0, left_reason: str | None = None, stopped_by: str = "") -> FleetPlan:
+             runtime_s: float, n_columns: int = 0, left_reason: str | None = None) -> FleetPlan:
     """The plan of `sequences` (vessel index → contract indices in order), each scheduled earliest."""
     scheds = []
     for k, seq in sorted(sequences.items()):
@@ -364,6 +363,5 @@ def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: s
             f"left to the spot market: lifting it costs more than its penalty "
             f"{data.contracts[j].penalty:.0f}, or its window clashes with contracts that save more")
     return FleetPlan(tuple(scheds), left, sum(s.fuel_cost for s in scheds), sum(s.out_of_service_cost for s in scheds),
-                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_columns,
-                     stopped_by)
+                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_columns)
 

@@ -102,7 +102,7 @@ FLEET_PLANS = Table(
     Column('solve_status', 'VARCHAR', None,
            'optimal (proven) | feasible (best found; gap says how far from optimal at most) | no plan'),
     Column('gap', 'DOUBLE', None, 'proven relative optimality gap (0 when optimal)'),
-    Column('runtime_s', 'DOUBLE', 's', 'planner run time, CPU seconds of the planning process'),
+    Column('runtime_s', 'DOUBLE', 's', 'planner run time, seconds'),
     Column('n_contracts', 'INTEGER', None, 'contracts planned'),
     Column('n_assigned', 'INTEGER', None, 'contracts given to a vessel'),
     Column('n_unassigned', 'INTEGER', None, 'contracts left (fleet_plan_unassigned says why)'),
@@ -117,8 +117,6 @@ FLEET_PLANS = Table(
     Column('total_cost', 'DOUBLE', None,
            'fuel + out of service + penalties, in the currency of the fuel price (e.g. USD)'),
     Column('gantt_png', 'VARCHAR', None, "picture of each vessel's schedule"),
-    Column('stopped_by', 'VARCHAR', None, 'what ended the search: proven optimal | time limit: N CPU s, gap G % '
-           '(the time limit counts CPU seconds, so a busy host does not shorten it); NULL: planned before it was recorded'),
 ), primary_key=('plan_id',))
 
 FLEET_PLAN_LEGS = Table('fleet_plan_legs', 'legs of each fleet plan, ballast and laden, with the voyage each became', (
