@@ -195,7 +195,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
         png = layout.exports / "plans" / f"{plan_id}.png"
         windows = {r["code"]: (r["early_utc"], r["late_utc"]) for r in good.to_dict("records")}
         names = {int(r["imo"]): str(r["name"]) for r in fleet.to_dict("records")}
-        plan_gantt_png(png, row, legs, windows, left, names)
+        plan_gantt_png(png, row, legs, windows, left, names, fleet=list(names))
         planning_store.set_plan_picture(db, plan_id, str(png))
     summary = {**{k: (v.isoformat() if isinstance(v, pd.Timestamp) else v) for k, v in row.items()},
                "gantt_png": str(png) if png else None, **stored,
