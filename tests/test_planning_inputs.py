@@ -95,6 +95,8 @@ def _plans(root) -> int:
                                                  ("--penalty", "-1", "--penalty -1: give a number ≥ 0"),
                                                  ("--penalty", "1e308", "and at most 1e+12"),
                                                  ("--time-limit", "inf", "--time-limit inf: give a number above 0"),
+                                                 ("--effort", "0", "--effort 0: give a number above 0"),
+                                                 ("--effort", "1e9", "--effort 1e+09: give a number above 0 and at most 300"),
                                                  ("--as-of", "9999-01-01T00:00Z", "timestamp out of range")])
 def test_plan_fleet_refuses_its_own_absurd_numbers_before_storing_anything(fleet_root, monkeypatch, option, value, says):
     from typer.testing import CliRunner

@@ -417,7 +417,7 @@ async function planPage(main) {
   if (!d.plan) { main.replaceChildren(el("h1", { text: "Fleet plan" }), el("p", { text: "no active fleet plan: `jitroute plan fleet` makes one" })); return; }
   const p = d.plan;
   main.replaceChildren(el("h1", { text: `Fleet plan ${p.plan_id}` }),
-    el("p", { cls: "summary", id: "plan-summary" }, `${p.solve_status} (${p.solver}, gap ${num(100 * (p.gap || 0), 2)} %) · made ${utc(p.created_at)} for ${utc(p.as_of_utc)} · `,
+    el("p", { cls: "summary", id: "plan-summary" }, `${p.solve_status} (${p.solver}, gap ${num(100 * (p.gap || 0), 2)} %${p.stopped_by ? `; search: ${p.stopped_by}` : ""}) · made ${utc(p.created_at)} for ${utc(p.as_of_utc)} · `,
       `${p.n_assigned} of ${p.n_contracts} contracts given to ${p.n_vessels_used} of ${d.rows.length} vessels · ${p.n_unassigned} left · fuel ${num(p.fuel_t, 0)} t · total cost ${num(p.total_cost, 0)} (fuel ${num(p.fuel_cost, 0)} + out of service ${num(p.out_of_service_cost, 0)} + penalties ${num(p.penalty_cost, 0)})`));
   const rowH = 34, L = 170, W = 1200, R = 20, T = 28, H = T + rowH * d.rows.length + 10;
   const t0 = Date.parse(d.start_utc), t1 = Date.parse(d.end_utc);
