@@ -156,3 +156,123 @@ def test_fleet_savings_adds_up_the_realised_saving_and_the_spread_like_with_like
     assert f.p_on_time == pytest.approx((1 + 0.5 + 0.75 + 1) / 4) and f.n_ensemble == 4
     summary = route_store.run_summary(db, run)
     assert summary["n_verified"] == 3 and summary["realised_savings_pct"] == pytest.approx(f.realised_savings_pct)
+
+
+# --- the nightly, end to end on a generated mirror with two cycles --------------------------------------------------
+
+class Recorder:
+    """The plain runner, keeping what the nightly publishes."""
+
+    prefect = False
+
+    def __init__(self):
+        self.published = {}
+
+    def step(self, fn, *a, name, **kw):
+        return fn(*a, **{k: v for k, v in kw.items() if k not in ("retries", "retry_delay_s", "timeout_s")})
+
+    def subflow(self, name, job, **kw):
+        return job(run=self, **kw)
+
+    def publish(self, *, key, markdown, table=None, description=""):
+        self.published[key] = markdown
+
+
+@pytest.fixture(scope="module")
+def two_cycle_root(tmp_path_factory):
+    """A mirror with the 00 and 12 UTC cycles of 2020-12-01 (leads to 12 h, to stay small) and a 3-vessel fleet whose
+    first voyage is at sea, refitted; nothing routed yet."""
+    from cli.fleet import _import_fleet
+    from flows.jobs.refit import refit_job
+    from pipeline.synthetic.fleet import generate_fleet, write_fleet
+    from pipeline.synthetic.mirror import write_mirror
+
+    base = tmp_path_factory.mktemp("verify")
+    mirror = write_mirror(base / "mirror", "2020-12-01", "2020-12-01", cycles=(0, 12), seed=0, max_lead_h=12)
+    write_fleet(generate_fleet("2020-12-01T00", n_vessels=3, days=120, seed=3, at_sea=(0,)), base / "fleet")
+    root = base / "data"
+    root.mkdir()
+    _import_fleet(base / "fleet", root)
+    refit_job(data_root=str(root))
+    return root, mirror
+
+
+def test_the_nightly_verifies_the_plans_of_the_cycle_before_in_the_analysed_weather(two_cycle_root, monkeypatch):
+    import duckdb
+
+    import flows.jobs.fleet as fleet
+    import flows.jobs.ingest as ingest
+    import flows.jobs.verify as verify_job
+    from flows.settings import load_settings
+    from tests.conftest import mirror_urls
+
+    def settings(**overrides):  # the mirror's short leads; the constant-speed solver, to stay quick
+        return load_settings(**overrides).with_overrides(**{"sources.gsm_max_lead_h": 12, "routing.solver": "gc"})
+    for module in (fleet, ingest, verify_job):
+        monkeypatch.setattr(module, "load_settings", settings)
+    monkeypatch.setenv("JITROUTE_DASK_WORKERS", "1")
+    root, mirror = two_cycle_root
+    first = fleet.nightly_job(date="2020-12-01", cycles="00", data_root=str(root), run=Recorder(), **mirror_urls(mirror))
+    run1 = first["routing"]["run_id"]
+    rec = Recorder()
+    second = fleet.nightly_job(date="2020-12-01", cycles="12", data_root=str(root), run=rec, **mirror_urls(mirror))
+    assert second["cycle_used"] == "2020-12-01T12"
+    with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+        rows = con.execute("SELECT p.*, r.depart_utc FROM plan_verification p JOIN routes r USING (run_id, voyage_id) "
+                           "WHERE run_id = ?", [run1]).fetchdf()
+        f = con.execute("SELECT * FROM fleet_savings WHERE run_id = ?", [run1]).fetchdf().iloc[0]
+    assert len(rows) >= 1 and second["verification"]["n_verified"] >= len(rows)
+    # the analysis runs from 00 to 18 UTC (each cycle's leads to 6 h); the voyages last days: partly verified
+    for r in rows.to_dict("records"):
+        assert r["cycles_used"] == "2020-12-01T00, 2020-12-01T12" and r["coverage"] == "partly verified"
+        assert str(r["analysed_until_utc"]) == "2020-12-01 18:00:00"
+        start = max(r["depart_utc"], r["analysed_until_utc"].replace(hour=0))
+        assert 0 < r["hours_analysed"] <= (r["analysed_until_utc"] - start).total_seconds() / 3600 + 1e-6
+        assert r["hours_analysed"] < r["hours_total"]
+        # a gc plan is the constant-speed voyage itself: sailed against itself it realises exactly no saving
+        assert r["realised_savings_pct"] == pytest.approx(0.0, abs=1e-9)
+        assert r["realised_baseline_fuel_t"] == pytest.approx(r["realised_fuel_t"])
+    assert f.n_verified == len(rows) and f.n_verified_whole == 0
+    text = rec.published["nightly-summary"]
+    assert "## Verification" in text and "Verified " in text and "partly" in text and "claimed saving" in text
+
+    # by hand: `jitroute verify --run` re-sails a run's plans again once their rows are gone
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    with duckdb.connect(str(root / "warehouse.duckdb")) as con:
+        con.execute("DELETE FROM plan_verification WHERE run_id = ?", [run1])
+    monkeypatch.setenv("COLUMNS", "250")
+    res = CliRunner().invoke(app, ["verify", "--run", run1, "--data", str(root)])
+    assert res.exit_code == 0, res.output
+    assert f"Verified {len(rows)} plan" in res.output and "partly" in res.output
+    assert all(vid in res.output for vid in rows.voyage_id)
+    with duckdb.connect(str(root / "warehouse.duckdb"), read_only=True) as con:
+        again = con.execute("SELECT voyage_id, hours_analysed, realised_fuel_t FROM plan_verification WHERE run_id = ? "
+                            "ORDER BY voyage_id", [run1]).fetchall()
+    assert again == [(r.voyage_id, pytest.approx(r.hours_analysed), pytest.approx(r.realised_fuel_t))
+                     for r in rows.sort_values("voyage_id").itertuples()]
+
+
+def test_the_voyage_map_states_the_plans_spread_and_geojson_keeps_the_baseline_track():
+    import json
+
+    from pipeline.export.geojson import route_to_geojson
+    from pipeline.export.plots import route_map_figure
+    from pipeline.export.voyage import spread_text
+
+    legs = [dict(g, etd_utc=np.datetime64("2020-12-01T00").item(), eta_utc=np.datetime64("2020-12-01T20").item(),
+                 fuel_t=10.0, hours=20.0, dist_nm=260.0) for g in constant_rpm_legs([30.0, 31.0], [200.0, 205.0], 90.0)]
+    route = {"voyage_id": "V1", "status": "ok", "solver": "bfoa", "fuel_t": 10.0, "ensemble_members": 4,
+             "p_on_time": 0.75, "savings_p10_pct": -0.42, "savings_p90_pct": 2.1,
+             "baseline_lat_deg": np.array([30.0, 31.0]), "baseline_lon_deg": np.array([200.0, 205.0]),
+             "baseline_leg_rpm": np.array([90.0])}
+    said = "across 4 forecasts: on time 75 %, saving P10–P90 -0.4 to 2.1 %"
+    assert spread_text(route) == said
+    assert spread_text({**route, "p_on_time": None}) is None and spread_text({}) is None
+    title = route_map_figure(route, legs).axes[0].get_title()
+    assert f"uncertainty {said}" in title
+    assert "uncertainty" not in route_map_figure({**route, "ensemble_members": None}, legs).axes[0].get_title()
+    props = json.loads(json.dumps(route_to_geojson(route, legs), allow_nan=False))["features"][0]["properties"]
+    assert props["baseline_lat_deg"] == [30.0, 31.0] and props["baseline_leg_rpm"] == [90.0]
