@@ -276,3 +276,16 @@ def test_the_voyage_map_states_the_plans_spread_and_geojson_keeps_the_baseline_t
     assert "uncertainty" not in route_map_figure({**route, "ensemble_members": None}, legs).axes[0].get_title()
     props = json.loads(json.dumps(route_to_geojson(route, legs), allow_nan=False))["features"][0]["properties"]
     assert props["baseline_lat_deg"] == [30.0, 31.0] and props["baseline_leg_rpm"] == [90.0]
+
+
+def test_each_older_cycle_gives_its_short_leads_from_the_one_just_before_the_departure():
+    from flows.jobs.verify import _cycle_windows
+    from pipeline.routing.problem import WeatherWindow
+
+    cycles = [np.datetime64(c, "s") for c in ("2020-12-02T12", "2020-12-02T00", "2020-12-01T12", "2020-12-01T00")]
+    window = WeatherWindow(np.datetime64("2020-12-01T19", "s"), np.datetime64("2020-12-03T00", "s"), (30.0, 40.0),
+                           (200.0, 210.0))
+    got = {str(c)[:13]: (str(w.from_utc)[:13], str(w.to_utc)[:13]) for c, w in _cycle_windows(cycles, window, 6.0)}
+    # the newest whole; 01T12's 12..18 h (the analysis just before a 19 h departure, to interpolate from); 01T00 not
+    assert got == {"2020-12-02T12": ("2020-12-01T19", "2020-12-03T00"), "2020-12-02T00": ("2020-12-02T00", "2020-12-02T06"),
+                   "2020-12-01T12": ("2020-12-01T12", "2020-12-01T18")}

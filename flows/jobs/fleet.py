@@ -468,7 +468,8 @@ def summary_table(r: dict) -> list[dict]:
             {"what": "plans verified in analysed weather (wholly)",
              "value": f"{r.get('n_verified') or 0} ({r.get('n_verified_whole') or 0})"},
             {"what": "… their saving % claimed / realised",
-             "value": f"{_r(r.get('verified_claimed_savings_pct'))} / {_r(r.get('realised_savings_pct'))}"},
+             "value": f"{_r(r.get('verified_claimed_savings_pct'))} / {_r(r.get('realised_savings_pct'))}"
+                      if _r(r.get("realised_savings_pct")) is not None else "not known yet"},
             {"what": "constant-speed baseline fuel t", "value": _r(r.get("honest_baseline_fuel_t"))},
             {"what": "engine-change limits cost t", "value": _r(r.get("limits_fuel_t"), 2)}]
     return rows

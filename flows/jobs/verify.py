@@ -42,16 +42,17 @@ def _plain(x):
 
 
 def _cycle_windows(cycles: list[np.datetime64], window: WeatherWindow, lead_h: float) -> list[tuple[np.datetime64, WeatherWindow]]:
-    """(cycle, the part of `window` to read of it): of each older cycle its valid times up to `lead_h` inside the
-    window, of the newest (first) the whole window."""
+    """(cycle, the part of `window` to read of it): of the newest (first) the whole window; of each older one its
+    valid times up to `lead_h`, when they reach into the window or end at most `lead_h` before it (so the analysed
+    valid time just before the departure is there to interpolate from)."""
     out = []
     lead = np.timedelta64(int(lead_h * 3600), "s")
     for k, c in enumerate(cycles):
         c_s = np.datetime64(c, "s")
         if k == 0:
             out.append((c, window))
-        elif c_s + lead >= window.from_utc and c_s <= window.to_utc:
-            out.append((c, window._replace(from_utc=max(c_s, window.from_utc), to_utc=min(c_s + lead, window.to_utc))))
+        elif c_s + lead >= window.from_utc - lead and c_s <= window.to_utc:
+            out.append((c, window._replace(from_utc=c_s, to_utc=c_s + lead)))
     return out
 
 
