@@ -36,7 +36,8 @@ def run_table(summary: dict) -> Table:
     t.add_row("  within the forecast / past its last step", f"{_f(summary.get('savings_forecast_pct'), '{:.1f} %')} / "
               f"{_f(summary.get('savings_beyond_forecast_pct'), '{:.1f} %')} "
               f"({summary.get('n_beyond_horizon')} voyages past it)")
-    t.add_row("on time across the lagged ensemble (mean of the voyages)", _f(summary.get("p_on_time"), "{:.0%}"))
+    p = summary.get("p_on_time")
+    t.add_row("on time across the lagged ensemble (mean of the voyages)", _f(None if p is None else 100 * p, "{:.0f} %"))
     t.add_row("  saving P10 – P90 (fuel-weighted)", f"{_f(summary.get('savings_p10_pct'), '{:.1f} %')} – "
               f"{_f(summary.get('savings_p90_pct'), '{:.1f} %')}")
     if summary.get("n_verified"):

@@ -289,3 +289,19 @@ def test_each_older_cycle_gives_its_short_leads_from_the_one_just_before_the_dep
     # the newest whole; 01T12's 12..18 h (the analysis just before a 19 h departure, to interpolate from); 01T00 not
     assert got == {"2020-12-02T12": ("2020-12-01T19", "2020-12-03T00"), "2020-12-02T00": ("2020-12-02T00", "2020-12-02T06"),
                    "2020-12-01T12": ("2020-12-01T12", "2020-12-01T18")}
+
+
+def test_route_fleet_s_run_table_gives_the_spread_and_the_realised_saving_beside_the_claim():
+    from rich.console import Console
+
+    from cli.fleet import run_table
+
+    def shown(summary):
+        console = Console(width=150, record=True)
+        console.print(run_table(summary))
+        return console.export_text()
+
+    text = shown({"p_on_time": 0.75, "savings_p10_pct": -0.42, "savings_p90_pct": 2.1, "n_verified": 3,
+                  "n_verified_whole": 1, "verified_claimed_savings_pct": 1.24, "realised_savings_pct": 0.31})
+    assert "75 %" in text and "-0.4 % – 2.1 %" in text and "3 (1)" in text and "1.2 % / 0.3 %" in text
+    assert "claimed / realised" not in shown({"n_verified": 0})  # nothing verified: no realised row
