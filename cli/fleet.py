@@ -90,8 +90,9 @@ def show_verification(out: dict, db: Path, run_id: str | None = None) -> None:
     from flows.jobs.verify import verification_sentence
     from storage.verification_store import verifications
 
-    console.print(verification_sentence(out) or f"no plan to verify with the analysed weather up to cycle "
-                                                f"{out.get('newest_cycle') or '(none: the cube has no complete cycle)'}")
+    if out.get("newest_cycle"):
+        console.print(verification_sentence(out) or f"no plan to verify with the analysed weather up to cycle "
+                                                    f"{out['newest_cycle']}")
     for why in out.get("skipped") or []:
         console.print(f"[yellow]not verified:[/] {why}", highlight=False)
     if not out.get("n_verified"):
