@@ -20,6 +20,7 @@ import socket
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -52,6 +53,9 @@ def _frame(rows: list[dict], table: Table, run_id: str) -> pd.DataFrame:
     for c in table.columns:
         if c.duckdb == "TIMESTAMP":
             df[c.name] = pd.to_datetime(df[c.name], utc=True).dt.floor("us")
+        elif c.duckdb.endswith("[]"):  # a list column missing from older rows is NaN there: Arrow wants null
+            df[c.name] = pd.Series([list(v) if isinstance(v, (list, tuple, np.ndarray)) else None for v in df[c.name]],
+                                   index=df.index, dtype=object)
     return df
 
 

@@ -305,3 +305,20 @@ def test_route_fleet_s_run_table_gives_the_spread_and_the_realised_saving_beside
                   "n_verified_whole": 1, "verified_claimed_savings_pct": 1.24, "realised_savings_pct": 0.31})
     assert "75 %" in text and "-0.4 % – 2.1 %" in text and "3 (1)" in text and "1.2 % / 0.3 %" in text
     assert "claimed / realised" not in shown({"n_verified": 0})  # nothing verified: no realised row
+
+
+def test_runs_in_the_old_parquet_layout_move_with_the_baseline_track_columns_empty(tmp_path):
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from schemas.tables.routes import ROUTE_BASELINE_TRACK_ADDED, ROUTES
+    from storage import route_store
+
+    old = tmp_path / "routes" / "run_id=R0"
+    old.mkdir(parents=True)
+    row = {k: v for k, v in _route("R0", "A", 9.0, 10.0, 0.0, 1.0, 1.0).items() if k not in ROUTE_BASELINE_TRACK_ADDED}
+    pd.DataFrame([row]).drop(columns=["run_id"]).to_parquet(old / "routes.parquet")  # written before the columns
+    assert route_store.migrate_old_parquet_layout(tmp_path) == ["R0"]
+    moved = pq.read_table(route_store.parquet_dir(tmp_path, "routes") / "run_id=R0" / "part-0.parquet")
+    assert moved.schema.field("baseline_lat_deg").type == ROUTES.arrow_schema().field("baseline_lat_deg").type
+    assert moved.column("baseline_lat_deg").to_pylist() == [None] and moved.column("fuel_t").to_pylist() == [9.0]
