@@ -264,5 +264,11 @@ def test_the_runs_page_lists_the_runs_and_cycles(visit, demo_root, shots):
     runs = _q(demo_root, "SELECT run_id FROM route_runs")
     assert len(visit.page.query_selector_all("#runs tbody tr")) == len(runs)
     assert runs[0][0] in visit.page.inner_text("#runs")
+    header = visit.page.eval_on_selector_all("#runs thead th", "els => els.map(e => e.innerText.trim())")
+    assert {"in forecast %", "P10–P90 %", "Verified", "claimed %", "realised %"} <= set(header)
+    verified = _q(demo_root, "SELECT count(*) FROM plan_verification")[0][0]  # one cycle: nothing to verify with
+    column = header.index("Verified")
+    cells = visit.page.eval_on_selector_all(f"#runs tbody tr td:nth-child({column + 1})", "els => els.map(e => e.innerText)")
+    assert cells == ["–"] * len(runs) if verified == 0 else any(c != "–" for c in cells)
     assert len(visit.page.query_selector_all("#cycles tbody tr")) == _q(demo_root, "SELECT count(*) FROM cycles")[0][0]
     _shot(visit, shots, "runs")
