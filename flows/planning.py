@@ -17,7 +17,8 @@ def plan_fleet(contracts: str, availability: str | None = None, ports: str | Non
                time_limit_s: float = 60.0) -> dict:
     """Assign cargo contracts to vessels as of `as_of` (default now); the plan's legs become planned voyages."""
     refuse_served_overrides(data_root=data_root)
-    contracts, availability, ports = (served_input_file(name, value) for name, value in (
-        ("contracts", contracts), ("availability", availability), ("ports", ports)))
+    contracts = served_input_file("contracts", contracts)
+    availability = served_input_file("availability", availability)
+    ports = served_input_file("ports", ports)
     return plan_fleet_job(contracts, availability, ports, as_of, data_root=data_root, fuel_price=fuel_price,
                           penalty=penalty, time_limit_s=time_limit_s, run=InPrefect())
