@@ -20,22 +20,22 @@ CHROMIUM = Path("/usr/bin/chromium")
 SHOTS_VAR = "JITROUTE_CONSOLE_SHOTS"
 
 
-def _skip_without_browser() -> None:
+def _browser_or_skip() -> None:
     if not CHROMIUM.exists():
-        pytest.skip(f"BROWSER TESTS SKIPPED: {CHROMIUM} is missing; install Debian's chromium "
+        pytest.skip(f"machine capability: BROWSER TESTS SKIPPED, {CHROMIUM} is missing; install Debian's chromium "
                     "(`apt-get install -y chromium`, as .ci/run does as root) to run the console's browser tests")
     try:
         import playwright.sync_api  # noqa: F401
-    except ImportError:
-        pytest.skip("BROWSER TESTS SKIPPED: the playwright package is missing; install the test extras "
-                    "(`pip install -c constraints.txt -e '.[test]'`)")
+    except ImportError:  # a package of the test extras, not a capability of the machine: an incomplete install fails
+        pytest.fail("the playwright package is missing; install the test extras (`pip install -c constraints.txt -e "
+                    "'.[test]'`)")
 
 
 @pytest.fixture(scope="module")
 def demo_root(tmp_path_factory, demo_mirror) -> Path:
     """The demo's data root, made as `jitroute demo` makes it (cycle ingested, demo fleet with two ships at sea
     imported and refitted, demo contracts planned, the fleet routed), with the fast `gc` solver."""
-    _skip_without_browser()
+    _browser_or_skip()
     from cli.fleet import DEMO_AT_SEA, _import_fleet
     from flows.jobs.fleet import route_fleet_job
     from flows.jobs.ingest import ingest_cycle
@@ -97,7 +97,7 @@ def shots(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def browser():
-    _skip_without_browser()
+    _browser_or_skip()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
