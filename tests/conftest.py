@@ -71,6 +71,20 @@ def demo_mirror(tmp_path_factory) -> Path:
     return out
 
 
+def route_demo_cycle(root: Path) -> None:
+    """The fleet of `root` routed on the 2020-12-01T00 cycle as the demo does (gc, no exports, as of 06 UTC), in one
+    dask worker."""
+    from flows.jobs.fleet import route_fleet_job
+
+    old = os.environ.get("JITROUTE_DASK_WORKERS")
+    os.environ["JITROUTE_DASK_WORKERS"] = "1"
+    try:
+        route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc", exports=False,
+                        nominal_utc="2020-12-01T06")
+    finally:
+        os.environ.pop("JITROUTE_DASK_WORKERS") if old is None else os.environ.__setitem__("JITROUTE_DASK_WORKERS", old)
+
+
 def mirror_urls(mirror: Path) -> dict[str, str]:
     return {"rish_url": (mirror / "rish").as_uri() + "/", "oscar_url": (mirror / "oscar").as_uri() + "/"}
 

@@ -37,13 +37,12 @@ def demo_root(tmp_path_factory, demo_mirror) -> Path:
     imported and refitted, demo contracts planned, the fleet routed), with the fast `gc` solver."""
     _browser_or_skip()
     from cli.fleet import DEMO_AT_SEA, _import_fleet
-    from flows.jobs.fleet import route_fleet_job
     from flows.jobs.ingest import ingest_cycle
     from flows.jobs.planning import plan_fleet_job
     from flows.jobs.refit import refit_job
     from pipeline.synthetic.contracts import write_demo_planning
     from pipeline.synthetic.fleet import generate_fleet, write_fleet
-    from tests.conftest import mirror_urls
+    from tests.conftest import mirror_urls, route_demo_cycle
 
     base = tmp_path_factory.mktemp("console")
     root = base / "data"
@@ -55,13 +54,7 @@ def demo_root(tmp_path_factory, demo_mirror) -> Path:
     files = write_demo_planning(fleet.vessels, "2020-12-01T00", base / "planning")
     plan_fleet_job(contracts=files["contracts"], availability=files["availability"], ports=files["ports"],
                    as_of="2020-12-01T00:00Z", data_root=str(root))
-    old = os.environ.get("JITROUTE_DASK_WORKERS")
-    os.environ["JITROUTE_DASK_WORKERS"] = "1"
-    try:
-        route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc", exports=False,
-                        nominal_utc="2020-12-01T06")
-    finally:
-        os.environ.pop("JITROUTE_DASK_WORKERS") if old is None else os.environ.__setitem__("JITROUTE_DASK_WORKERS", old)
+    route_demo_cycle(root)
     return root
 
 
