@@ -26,13 +26,29 @@ SLOW_FILES = (
     "test_ingest.py", "test_served_parameters.py", "test_export_store.py",  # Prefect API, served flows, S3 server
     "test_readme_examples.py", "test_routing_suite.py",  # the README's commands; the bench suite's voyages
     "test_routing_twin.py",  # every search again with the JIT off, in a child process
+    "test_console_browser.py",  # a served console on a routed demo data root, driven in a real browser
 )
+
+
+def _slow_file(rel: str) -> bool:
+    return any(rel == f or (f.endswith("/") and (rel + "/").startswith(f)) for f in SLOW_FILES)
+
+
+def pytest_ignore_collect(collection_path, config):
+    """Under `-m "not slow"` (`make test-fast`) the files that are slow as a whole are not even imported: their imports
+    and assertion rewriting are a few seconds of the fast run. Any other selection collects them as usual."""
+    if config.getoption("markexpr", "").replace(" ", "") != "notslow":
+        return None
+    try:
+        rel = collection_path.resolve().relative_to(TESTS).as_posix()
+    except ValueError:
+        return None
+    return True if _slow_file(rel) else None
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        rel = item.path.resolve().relative_to(TESTS).as_posix()
-        if any(rel == f or (f.endswith("/") and rel.startswith(f)) for f in SLOW_FILES):
+        if _slow_file(item.path.resolve().relative_to(TESTS).as_posix()):
             item.add_marker(pytest.mark.slow)
 
 
