@@ -19,7 +19,8 @@ def plan_fleet(contracts: str, availability: str | None = None, ports: str | Non
     search gets `effort` (1: the default; counted in work, not time); `time_limit_s` is an optional wall-clock
     safety cap."""
     refuse_served_overrides(data_root=data_root)
-    contracts, availability, ports = (served_input_file(name, value) for name, value in (
-        ("contracts", contracts), ("availability", availability), ("ports", ports)))
+    contracts = served_input_file("contracts", contracts)
+    availability = served_input_file("availability", availability)
+    ports = served_input_file("ports", ports)
     return plan_fleet_job(contracts, availability, ports, as_of, data_root=data_root, fuel_price=fuel_price,
                           penalty=penalty, effort=effort, time_limit_s=time_limit_s, run=InPrefect())

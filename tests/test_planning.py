@@ -367,6 +367,7 @@ def planned(tmp_path_factory):
     return root, files, first
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_plan_is_stored_with_its_legs_and_its_voyages(planned):
     root, files, s = planned
     assert s["solve_status"] == "optimal" and s["n_assigned"] >= 1
@@ -389,6 +390,7 @@ def test_a_plan_is_stored_with_its_legs_and_its_voyages(planned):
     assert (root / "exports" / "plans" / f"{s['plan_id']}.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_re_planning_replaces_unsailed_voyages_of_the_old_plan_and_keeps_those_at_sea(planned):
     from flows.jobs.planning import plan_fleet_job
 
@@ -424,6 +426,7 @@ def test_re_planning_replaces_unsailed_voyages_of_the_old_plan_and_keeps_those_a
     assert first_new is None or first_new >= end
 
 
+@pytest.mark.slow  # end to end through the `jitroute` command on a warehouse
 def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(planned, monkeypatch):
     from typer.testing import CliRunner
 
@@ -448,6 +451,7 @@ def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(plann
     assert no_time.exit_code == 2 and "--time-limit" in no_time.output
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_routing_run_says_which_voyages_came_from_a_plan(planned, tmp_path):
     import shutil
 

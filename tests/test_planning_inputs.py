@@ -113,6 +113,7 @@ def test_plan_fleet_refuses_its_own_absurd_numbers_before_storing_anything(fleet
     assert _plans(root) == before
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_plan_with_no_legs_is_stored_with_every_contract_left(fleet_root, tmp_path):
     from flows.jobs.planning import plan_fleet_job
 
@@ -130,6 +131,7 @@ def test_a_plan_with_no_legs_is_stored_with_every_contract_left(fleet_root, tmp_
                            [s["plan_id"]]).fetchone() == (s["n_contracts"],)
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_book_larger_than_the_planner_builds_in_bounded_memory_is_refused_before_building(fleet_root, tmp_path,
                                                                                             monkeypatch):
     from typer.testing import CliRunner

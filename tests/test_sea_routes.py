@@ -56,6 +56,7 @@ def names(route):
     return [p.name for p in route.passages]
 
 
+@pytest.mark.slow  # a bench-sized voyage over the whole ocean
 def test_shanghai_rotterdam_goes_through_suez_and_avoiding_it_goes_round_africa():
     r = sea_route(SHANGHAI, ROTTERDAM)
     check(r)
@@ -83,6 +84,7 @@ def test_new_york_los_angeles_through_panama():
     assert_clear_outside_fairways(r, NEW_YORK, LOS_ANGELES)
 
 
+@pytest.mark.slow  # bench-sized voyages over the whole ocean
 def test_singapore_shanghai_and_rotterdam_piraeus_through_gibraltar():
     r = sea_route(SINGAPORE, SHANGHAI)
     check(r)
@@ -129,6 +131,7 @@ def test_pacific_crossing_over_the_antimeridian():
     assert back.dist_nm == pytest.approx(r.dist_nm, rel=0.01)
 
 
+@pytest.mark.slow  # bench-sized voyages over the whole ocean
 def test_black_sea_through_the_turkish_straits_and_refused_when_they_are_avoided():
     r = sea_route(PIRAEUS, CONSTANTA)
     check(r)

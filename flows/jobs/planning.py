@@ -128,7 +128,7 @@ def import_planning_files(db: Path, contracts: str, availability: str | None, po
     vessels = fleet_store.load_vessels(db)
     dwt = vessels[vessels["imo"].isin(avail["imo"])]["dwt"].dropna()
     types = [split_list(x) for x in avail["cargo_types"]]
-    carried = None if any(t is None for t in types) else set().union(*types)
+    carried = None if any(t is None for t in types) else set[str]().union(*(t for t in types if t is not None))
     parts["contracts"] = validate_contracts(read_table(Path(contracts)), as_of=as_of, ports=known_ports,
                                             max_dwt_t=float(dwt.max()) if len(dwt) else None, cargo_types=carried,
                                             source=Path(contracts).name)
