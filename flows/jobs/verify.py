@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+from typing import Any
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -69,7 +70,7 @@ def _fields(cube_url: str, options: dict, cycles: list[np.datetime64], window: W
 
 def _baseline_legs(plan: dict, legs: list[dict]) -> list[dict] | None:
     lat, lon, rpm = (plan.get(k) for k in ("baseline_lat_deg", "baseline_lon_deg", "baseline_leg_rpm"))
-    if lat is not None and len(lat) >= 2:
+    if lat is not None and lon is not None and rpm is not None and len(lat) >= 2:
         return vf.constant_rpm_legs(list(lat), list(lon), list(rpm))
     try:
         if solver_spec(str(plan.get("solver"))).is_baseline:  # the constant-speed voyage itself: its own baseline
@@ -110,7 +111,7 @@ def verify_plans_job(data_root: str | None = None, run_id: str | None = None, *,
     layout = s.layout.ensure()
     loc = layout.cube_store
     cycles = list(cube_window.complete_cycles_newest_first(loc.url, loc.options))
-    out = {"run_id": run_id, "newest_cycle": cycle_label(cycles[0]) if cycles else None, "n_cycles": len(cycles),
+    out: dict[str, Any] = {"run_id": run_id, "newest_cycle": cycle_label(cycles[0]) if cycles else None, "n_cycles": len(cycles),
            "n_candidates": 0, "n_verified": 0, "n_whole": 0, "skipped": []}
     if not cycles:
         out["skipped"].append("no complete cycle in the cube: nothing to verify with")
@@ -124,7 +125,9 @@ def verify_plans_job(data_root: str | None = None, run_id: str | None = None, *,
     voyages = {str(v["voyage_id"]): {k: _plain(x) for k, x in v.items()} for v in fleet_store.load_voyages(
         layout.warehouse, voyage_ids=sorted({str(p["voyage_id"]) for p in plans})).to_dict("records")} if plans else {}
     vessels = {int(v["imo"]): v for v in fleet_store.load_vessels(layout.warehouse).to_dict("records")} if plans else {}
-    rows, now, models = [], datetime.now(timezone.utc).replace(tzinfo=None), {}
+    rows: list[dict] = []
+    now = datetime.now(timezone.utc).replace(tzinfo=None)
+    models: dict[tuple, dict | None] = {}
     for p in plans:
         key = (str(p["run_id"]), str(p["voyage_id"]))
         legs, voyage = legs_of.get(key), voyages.get(key[1])
@@ -135,13 +138,14 @@ def verify_plans_job(data_root: str | None = None, run_id: str | None = None, *,
         if mkey not in models:
             m = model_from_stored(fleet_store.model_version(layout.warehouse, *mkey), mkey[0])
             models[mkey] = m.to_json() if m is not None else None
-        if models[mkey] is None:
+        model_json = models[mkey]
+        if model_json is None:
             out["skipped"].append(f"{key[1]} (run {key[0]}): performance model version {mkey[1]} of vessel {mkey[0]} "
                                   "is not usable now (refit it)")
             continue
         depart = np.datetime64(_plain(p["depart_utc"]), "s")
         try:
-            vessel = vf.sailing_vessel({**voyage, "depart_utc": depart}, models[mkey],
+            vessel = vf.sailing_vessel({**voyage, "depart_utc": depart}, model_json,
                                        rpm_max=_plain(vessels.get(int(p["imo"]), {}).get("rpm_max")))
         except RoutingInputError as exc:
             out["skipped"].append(f"{key[1]} (run {key[0]}): {exc}")
