@@ -270,6 +270,7 @@ def test_a_canal_fairway_over_the_land_mask_is_sailed_as_given():
     # the canal's legs take its transit and waiting hours, whatever the plan's speed (canal_time.py)
     in_canal = [g for g in plan.legs if any(haversine_nm(g["lat0"], g["lon0"], *wp) < 1e-6 for wp in KIEL[2:6])]
     assert len(in_canal) == 4 and sum(g["hours"] for g in in_canal) == pytest.approx(8.0 + 1.0)
+    assert "through Kiel Canal (8 h transit + 1 h waiting" in plan.reason
     # the plan sails the fairway, waypoint by waypoint; outside it, it stays at sea
     assert all(min(haversine_nm(*wp, *p) for p in plan.waypoints) < 1e-6 for wp in KIEL[2:7])
     outside = [p for p in plan.waypoints if not any(haversine_nm(*p, *wp) < 1e-6 for wp in KIEL[3:6])]

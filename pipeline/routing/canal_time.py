@@ -84,8 +84,9 @@ def passages_note(space) -> str | None:
     if route is None or not route.passages:
         return None
     canals = {name: (t, w) for name, t, w, _ in canal_lines(space)}
-    parts = [f"{p.name} canal ({canals[p.name][0]:g} h transit + {canals[p.name][1]:g} h waiting, at the lowest "
-             "setting's calm-water fuel rate)" if p.name in canals else p.name for p in route.passages]
+    parts = [f"{p.name}{'' if 'canal' in p.name.lower() else ' canal'} ({canals[p.name][0]:g} h transit + "
+             f"{canals[p.name][1]:g} h waiting, at the lowest setting's calm-water fuel rate)" if p.name in canals
+             else p.name for p in route.passages]
     return "through " + ", ".join(parts)
 
 
