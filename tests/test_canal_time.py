@@ -73,3 +73,25 @@ def test_the_suez_voyage_s_clearance_is_measured_outside_the_canal(suez):
     assert whole == 0.0
     # outside the fairway (and the approach radius at its ends, as at a port) the route keeps the clearance
     assert 2.0 - 0.1 <= plan.min_land_clearance_nm < 25.0
+
+
+def test_the_dp_s_bounds_count_the_canal_s_hours_and_stay_below_a_plan(suez):
+    """The exact DP prunes with the least hours and fuel to finish: across a canal those are its fixed hours and
+    fuel (not the open sea's), and still no more than a plan that sails the canal needs."""
+    from pipeline.routing.canal_time import canal_lines
+    from pipeline.routing.dp import finish_bounds
+    from pipeline.routing.problem import Instance
+
+    route, weather, pr = suez
+    space = pr.search_space()
+    inst = Instance.build(pr, space, weather)
+    _, m_lam, t_min, _, _ = finish_bounds(inst)
+    c = space.centre
+    (_, _, _, lines), = canal_lines(space)
+    first = lines[0]
+    assert t_min[first, c] >= TRANSIT_H + WAIT_H - 1e-6
+    assert m_lam[0, first, c] >= (TRANSIT_H + WAIT_H) * MODEL.fuel_tph(LOWEST_RPM, 10.0, 0.0) - 1e-6  # λ = 0: fuel
+    plan = solve(pr, weather, solver="gc")
+    after = plan.legs[first:]
+    assert sum(g["hours"] for g in after) >= t_min[first, c]
+    assert sum(g["fuel_t"] for g in after) >= m_lam[0, first, c]
