@@ -242,9 +242,13 @@ def test_a_canal_fairway_over_the_land_mask_is_sailed_as_given():
                                                      (space.lat[i + 1, c], space.lon[i + 1, c])], step_nm=0.5)]
     assert inland and all(space.edge_ok[i, c, c] for i in inland)
     weather = field(wavy(2), lat=(50.0, 58.0), lon=(5.0, 15.0))
-    pr = problem(dep, arr, 12.0, n_lines=None, n_points=11, base_route=route)
+    pr = problem(dep, arr, 14.0, n_lines=None, n_points=11, base_route=route)  # the canal alone takes 9 h
     plan = solve(pr, weather, solver="bfoa", seed=1, options=FAST)
     assert plan.status == "ok", plan.reason
+    # the canal's legs take its transit and waiting hours, whatever the plan's speed (canal_time.py)
+    in_canal = [g for g in plan.legs if any(haversine_nm(g["lat0"], g["lon0"], *wp) < 1e-6 for wp in KIEL[2:6])]
+    assert len(in_canal) == 4 and sum(g["hours"] for g in in_canal) == pytest.approx(8.0 + 1.0)
+    assert "through Kiel Canal (8 h transit + 1 h waiting" in plan.reason
     # the plan sails the fairway, waypoint by waypoint; outside it, it stays at sea
     assert all(min(haversine_nm(*wp, *p) for p in plan.waypoints) < 1e-6 for wp in KIEL[2:7])
     outside = [p for p in plan.waypoints if not any(haversine_nm(*p, *wp) < 1e-6 for wp in KIEL[3:6])]

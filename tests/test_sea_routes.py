@@ -182,3 +182,11 @@ def test_the_sea_route_command_prints_the_route_and_refuses_with_the_reason(tmp_
     assert res.exit_code == 0 and "panama" not in res.output
     res = CliRunner().invoke(app, ["sea-route", "42.0,51.0", "40.0,-40.0"])
     assert res.exit_code == 2 and "on land" in res.output
+
+
+def test_colon_balboa_is_at_least_the_canal_s_published_length():
+    """searoute gives 37.7 NM, shorter than the canal itself; the bench's reference for the pair is the Panama Canal
+    Authority's length, about 80 km (43.2 NM) from deep water to deep water (bench/sea_routes_searoute.json)."""
+    r = sea_route((9.42, -79.93), (8.85, -79.5))  # Colón and Balboa anchorages, the bench's positions
+    assert [p.name for p in r.passages] == ["panama"]
+    assert 43.2 <= r.dist_nm <= 43.2 * 1.08

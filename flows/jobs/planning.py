@@ -15,7 +15,8 @@ from flows.settings import load_settings
 from pipeline.export.plan_gantt import plan_gantt_png
 from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
-from pipeline.planning.sea_distances import PortDistance, canal_map, distance_map, needed_pairs, sea_distance
+from pipeline.planning.sea_distances import (PortDistance, avoiding, canal_map, distance_map, needed_pairs,
+                                             sea_distance)
 from pipeline.planning.work_budget import WorkBudget
 from pipeline.planning.voyages import (DEFAULT_PENALTY,
                                        apply_commitments, plan_contracts, plan_rows, plan_vessels, replan,
@@ -139,8 +140,11 @@ def import_planning_files(db: Path, contracts: str, availability: str | None, po
     return {"counts": counts, "contracts": parts["contracts"][0], "contracts_rejected": parts["contracts"][1]}
 
 
-def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: set[tuple[str, str]]) -> list[PortDistance]:
-    """Stored distances of `pairs`, computing (and storing) those missing or made for other positions."""
+def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: set[tuple[str, str]],
+                       avoid=()) -> list[PortDistance]:
+    """Stored distances of `pairs`, computing (and storing) those missing or made for other positions; with the
+    passages `avoid` closed (the fleet's routing.avoid_passages) those through them computed again without them
+    (sea_distances.avoiding; not stored)."""
     stored = planning_store.load_port_distances(db)
     known = {(r["port_a"], r["port_b"]): PortDistance(r["port_a"], r["port_b"], r["lat_a"], r["lon_a"], r["lat_b"],
                                                       r["lon_b"], float("nan") if pd.isna(r["dist_nm"]) else r["dist_nm"],
@@ -158,7 +162,8 @@ def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: s
             known[(r.port_a, r.port_b)] = r
             if r.reason:
                 LOG.warning("ports %s and %s: %s", r.port_a, r.port_b, r.reason)
-    return [known[tuple(sorted(p))] for p in {tuple(sorted(p)) for p in pairs if p[0] != p[1]}]
+    rows = [known[tuple(sorted(p))] for p in {tuple(sorted(p)) for p in pairs if p[0] != p[1]}]
+    return avoiding(rows, avoid) if avoid else rows
 
 
 def plan_fleet_job(contracts: str, availability: str | None = None, ports: str | None = None, as_of: str | None = None,
@@ -193,7 +198,7 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     pairs |= {(v.start_port, c.load_port) for v in vessels for c in cons}
     pairs |= {(a.discharge_port, b.load_port) for a in cons for b in cons}
     pairs |= {(c.discharge_port, v.end_port) for v in vessels for c in cons if v.end_port}
-    dists = run.step(complete_distances, db, port_pos, pairs, name="sea-distances")
+    dists = run.step(complete_distances, db, port_pos, pairs, tuple(s.routing.avoid_passages), name="sea-distances")
     budget = WorkBudget.of_effort(float(effort), wall_limit_s=time_limit_s)  # the safety cap covers the build too
     data = problem.build(vessels, cons, distance_map(dists), fuel_price, canals=canal_map(dists))
     plan = run.step(milp.solve, data, budget=budget, name="plan")
