@@ -28,7 +28,7 @@ def test_a_distance_through_suez_carries_the_canal_time():
     c = Contract("C1", "grain", 10000, 40000, "Rotterdam", "Shanghai", 0.0, 100.0, 1e6)
     data = problem.build([v], [c], distance_map([d]), 500.0, canals=canal_map([d]))
     assert data.per_vessel[0].dur_h[0] == pytest.approx(48.0 + (d.dist_nm - d.canal_nm) / 12.0 + 26.0)
-    plan = milp.solve(data, time_limit_s=10.0)
+    plan = milp.solve(data)
     (laden,) = [leg for s in plan.schedules for leg in s.legs if leg.kind == "laden"]
     assert laden.arrive_h - laden.depart_h == pytest.approx((d.dist_nm - d.canal_nm) / 12.0 + 26.0)
     # without the canal map the same distance would be sailed at 12 kn all the way: 24 h shorter than the truth
@@ -48,13 +48,13 @@ def test_a_missing_start_distance_leaves_the_cargo_to_be_lifted_after_another():
     va = data.per_vessel[0]
     assert va.contracts == [0, 1] and ("s", 1) not in va.arcs and (0, 1) in va.arcs
     assert 1 not in data.reasons
-    for plan in (brute.solve(data), milp.solve(data, time_limit_s=10.0)):
+    for plan in (brute.solve(data), milp.solve(data)):
         assert plan.status == "optimal" and not plan.unassigned
         assert [s.sequence for s in plan.schedules] == [(0, 1)]
     # with no way into B at all (no start arc, no earlier cargo reaching it) it is left with a reason that says so
     cut = {**dist, ("D1", "L2"): math.nan}
     data = problem.build([v], [a, b], cut, 500.0)
-    plan = milp.solve(data, time_limit_s=10.0)
+    plan = milp.solve(data)
     assert list(plan.unassigned) == [1] and "no sea route from any start port" in plan.unassigned[1]
 
 
