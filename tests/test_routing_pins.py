@@ -116,9 +116,10 @@ def _cpu_flags() -> set[str]:
     return set(line.split(":", 1)[-1].split())
 
 
-# Prescott (SSE3) runs on any x86-64; Haswell needs AVX2. Each sums a dot product in its own order, so a plan that took
-# its arithmetic through BLAS would differ in its last bits under one of them.
-CORE_TYPES = {"Prescott": "sse3", "Haswell": "avx2"}
+# Prescott (SSE3, which Linux's /proc/cpuinfo calls "pni") runs on any x86-64 made since 2004; Haswell needs AVX2. Each
+# sums a dot product in its own order, so a plan that took its arithmetic through BLAS would differ in its last bits
+# under one of them.
+CORE_TYPES = {"Prescott": ("pni", "SSE3"), "Haswell": ("avx2", "AVX2")}
 
 
 @pytest.mark.slow
@@ -127,8 +128,9 @@ CORE_TYPES = {"Prescott": "sse3", "Haswell": "avx2"}
 @pytest.mark.parametrize("core", sorted(CORE_TYPES))
 def test_pins_hold_under_other_blas_kernels(core):
     """The pinned plans, recomputed in a process whose OpenBLAS uses `core`'s kernels, match the pins bit for bit."""
-    if CORE_TYPES[core] not in _cpu_flags():
-        pytest.skip(f"machine capability: this CPU has no {CORE_TYPES[core].upper()}, which OpenBLAS's {core} kernels need")
+    flag, name = CORE_TYPES[core]
+    if flag not in _cpu_flags():
+        pytest.skip(f"machine capability: this CPU has no {name}, which OpenBLAS's {core} kernels need")
     script = ("from test_routing_pins import PINS, _plans, _offsets\n"
               "for name, plan, space in _plans():\n"
               "    got = (plan.status, float(plan.cost).hex(), plan.n_evals,\n"
