@@ -124,8 +124,11 @@ def test_a_plan_that_wins_in_one_member_and_loses_in_the_other_gives_way_to_its_
     assert robust_plan(job, jplan, storm, wf_storm, [storm, elsewhere])[0].distance_nm == pytest.approx(
         jplan.baseline.distance_nm)
     assert robust_plan(_job(), jplan, storm, wf_storm, [storm, elsewhere])[0] is jplan
-    # a plan that wins in every member stays
+    # a plan that wins in every member stays, and so does a plan that is its baseline (a tie everywhere)
     assert robust.wins_across(plan, [storm, storm], v).preferred(1.0)
+    same = robust.wins_across(plan.baseline.__class__(**{**plan.baseline.__dict__, "baseline": plan.baseline}),
+                              [storm, elsewhere], v)
+    assert (same.n_members, same.n_wins) == (2, 2)
 
 
 def test_a_replan_at_sea_with_a_gain_smaller_than_its_spread_is_not_taken():

@@ -61,7 +61,7 @@ def arrival_margin_h(plan: Plan, members: list[WeatherField], vessel: lk.Vessel,
 @dataclass(frozen=True)
 class Wins:
     n_members: int  # members where both the plan and its baseline can be sailed
-    n_wins: int  # of those, where the plan burns less and is not late where the baseline is on time
+    n_wins: int  # of those, where the plan burns no more and is not late where the baseline is on time
 
     def preferred(self, min_share: float) -> bool:
         """Whether the plan is preferred to its baseline (True with fewer than two members: nothing to go by)."""
@@ -78,7 +78,8 @@ def wins_across(plan: Plan, members: list[WeatherField], vessel: lk.Vessel) -> W
     b = sailed(base.legs, base.depart_utc, members, vessel)
     ok = np.isfinite(p[:, 0]) & np.isfinite(b[:, 0])
     on_time_p, on_time_b = p[:, 0] <= allowed_h, b[:, 0] <= allowed_h
-    wins = ok & (p[:, 1] < b[:, 1]) & (on_time_p | ~on_time_b)
+    # a tie is a win: a plan that is its baseline (never-worse kept it) gives way to nothing
+    wins = ok & (p[:, 1] <= b[:, 1] * (1.0 + 1e-12)) & (on_time_p | ~on_time_b)
     return Wins(int(ok.sum()), int(wins.sum()))
 
 
