@@ -27,7 +27,7 @@ strategies   each sailed on the TRUTH with the product's leg kernel (leg_kernel.
                       pipeline/enroute.voyage_from), until less than 12 h or 60 NM are left;
              perfect  `solve()` on the truth itself, sailed as made.
              `--robust` adds the robust decisions (pipeline/routing/robust.py) over a lagged ensemble of the newest
-             4 cycles, each rule alone and all together, to `once` and `replan`.
+             4 cycles: (a) margin and (b) win share alone to `once`; each alone and all three to `replan`.
 measures     fleet fuel saving vs the master: Σ(F_master − F) / Σ F_master; arrival-corrected: each voyage's fuel
              scaled by (passage hours / RTA hours)² (fuel ∝ speed² over a fixed distance), so arriving late saves
              nothing and early costs nothing; voyages worse than the master by > 1 % (corrected); on time: arrival
