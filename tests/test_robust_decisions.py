@@ -207,3 +207,21 @@ def _on_plan(legs, at):
     from pipeline.enroute import position_on_plan
 
     return position_on_plan(legs, at)
+
+
+def test_a_stored_current_plan_reaches_the_job_with_its_rpm_and_waits_a_missing_wait_as_none(tmp_path):
+    from flows.jobs.fleet import _plan_leg
+    from storage import route_store
+    from tests.test_route_store import _leg, _route
+
+    db = tmp_path / "w.duckdb"
+    route_store.begin_run(db, "r1", cycle="2020-12-01T00", solver="bfoa", trigger="manual", n_voyages=1)
+    legs = [_leg("V1", 0), {**_leg("V1", 1), "wait_h": 2.0, "wait_fuel_t": 0.5, "rpm": 75.0}]
+    route_store.write_run_results(db, tmp_path / "exports", "r1", [_route("V1", "ok", 90.0, 100.0)], legs)
+    stored = [_plan_leg(g) for g in route_store.current_plan_legs(db, ["V1"])["V1"]]
+    assert [g["rpm"] for g in stored] == [80.0, 75.0]
+    assert [(g["wait_h"], g["wait_fuel_t"]) for g in stored] == [(0.0, 0.0), (2.0, 0.5)]  # unset: no wait
+    assert stored[0]["etd_utc"] == np.datetime64("2020-12-01T06:00", "s")
+    ahead = robust.legs_ahead(stored, np.datetime64("2020-12-01T08:00"), 34.6, 140.4)
+    assert len(ahead) == 2 and (ahead[0]["lat0"], ahead[0]["lon0"], ahead[0]["wait_h"]) == (34.6, 140.4, 0.0)
+    assert ahead[1]["wait_h"] == 2.0  # a leg not begun keeps its wait
