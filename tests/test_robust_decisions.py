@@ -20,7 +20,7 @@ from pipeline.routing.ensemble import sail_plan
 from pipeline.routing.job import RouteJob, robust_plan
 from pipeline.routing.options import RoutingOptions
 from pipeline.routing.solve import solve
-from routing_cases import MODEL, T0, field, problem
+from routing_cases import T0, field, problem
 
 DEP, ARR = (30.0, 200.0), (30.0, 212.0)  # ~623 NM along 30 N, eastbound
 
@@ -98,7 +98,7 @@ def _vessel(job):
 
 
 def test_a_plan_that_wins_in_one_member_and_loses_in_the_other_gives_way_to_its_baseline():
-    storm, calm = _storm_on_route(), _current(0.0)
+    storm = _storm_on_route()
     p, plan = _plan(storm)
     v = p.kernel_vessel()
     assert plan.baseline is not None and plan.legs
