@@ -445,9 +445,11 @@ def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules()) -> Outcome:
         n_kept += int(kept)
         if rules.replan_gain_sigmas > 0:
             ahead = [{**g, "lat0": ship.lat, "lon0": ship.lon} if i == 0 else g for i, g in enumerate(legs)]
+            ahead = robust.retimed(ahead, new.depart_utc, new.rta_utc, fc.cycle(fc.newest_at(ship.t_h)), VESSEL)
             d = robust.replan_decision(ahead, new, members, VESSEL, rules.replan_gain_sigmas)
             if not d.take_new:
                 n_kept += 1
+                legs = ahead  # the current route, re-timed to the RTA (as route-fleet keeps it)
                 continue
         legs = new.legs
         margins.append(margin)

@@ -191,9 +191,13 @@ def test_a_fleet_replan_at_sea_that_gains_nothing_keeps_the_current_plan():
     new, _ = plan_voyage(job, weather_for)
     kept = kept_or_replanned(job, new, calm, [calm, _current(0.0)])
     assert kept is not new and kept.reason.startswith("current plan kept")
-    assert [(g["lat1"], g["lon1"], g["rpm"]) for g in kept.legs] == [(g["lat1"], g["lon1"], g["rpm"]) for g in ahead]
+    # the current route ahead, re-timed to the RTA: its speeds scaled by one factor
+    assert [(g["lat1"], g["lon1"]) for g in kept.legs] == [(g["lat1"], g["lon1"]) for g in ahead]
+    ratio = [k["rpm"] / g["rpm"] for k, g in zip(kept.legs, ahead)]
+    assert max(ratio) - min(ratio) < 1e-9
     assert kept.legs[0]["etd_utc"] == np.datetime64(at, "s").item()
     assert kept.status == "ok" and kept.savings is not None
+    assert np.datetime64(kept.legs[-1]["eta_utc"], "s") <= np.datetime64(kept.rta_utc, "s")
     assert kept.savings.total_pct == pytest.approx(
         100.0 * (kept.savings.baseline_fuel_t - kept.fuel_t) / kept.savings.baseline_fuel_t)
     # the rule off, one forecast, or a plan from the port: the new plan
@@ -225,3 +229,21 @@ def test_a_stored_current_plan_reaches_the_job_with_its_rpm_and_waits_a_missing_
     ahead = robust.legs_ahead(stored, np.datetime64("2020-12-01T08:00"), 34.6, 140.4)
     assert len(ahead) == 2 and (ahead[0]["lat0"], ahead[0]["lon0"], ahead[0]["wait_h"]) == (34.6, 140.4, 0.0)
     assert ahead[1]["wait_h"] == 2.0  # a leg not begun keeps its wait
+
+
+def test_a_route_is_re_timed_to_the_rta_by_one_factor_on_its_speeds():
+    calm, head = _current(0.0), _current(-0.3)
+    p, plan = _plan(calm, hours=60.0)
+    v = p.kernel_vessel()
+    rta = plan.rta_utc
+    late_h = sail_plan(plan.legs, plan.depart_utc, head, v)[0] - 60.0
+    assert late_h > 1.0  # sailed as made into a head current it is late
+    legs = robust.retimed(plan.legs, plan.depart_utc, rta, head, v)
+    hours = sail_plan(legs, plan.depart_utc, head, v)[0]
+    assert 60.0 - 0.05 <= hours <= 60.0  # re-timed: in at the RTA
+    ratio = [g["rpm"] / h["rpm"] for g, h in zip(legs, plan.legs)]
+    assert min(ratio) > 1.0 and max(ratio) - min(ratio) < 1e-9
+    assert [(g["lat1"], g["lon1"]) for g in legs] == [(g["lat1"], g["lon1"]) for g in plan.legs]
+    # no rpm above the highest setting, even when the RTA cannot be met
+    fastest = robust.retimed(plan.legs, plan.depart_utc, plan.depart_utc + np.timedelta64(10, "h"), head, v)
+    assert max(g["rpm"] for g in fastest) == pytest.approx(100.0)

@@ -129,13 +129,15 @@ def kept_or_replanned(job: RouteJob, plan: Plan, weather: wf.WeatherField, membe
     """For a voyage re-planned at sea with a current plan (`job.current_legs`) and `replan_gain_sigmas` > 0: the new
     plan when it is on time in more members of the lagged ensemble than the current plan's legs ahead of the ship,
     or gains more fuel than that many standard deviations of its gain across them (robust.replan_decision); else
-    the current plan's legs ahead, sailed in this cycle's weather, saying why. Otherwise the plan as it is."""
+    the current plan's route ahead, re-timed to the RTA in this cycle's weather (robust.retimed), saying why.
+    Otherwise the plan as it is."""
     k = job.options.replan_gain_sigmas
     if k <= 0 or not job.current_legs or job.voyage.get("start_kind") in (None, "port") or not plan.legs \
             or len(members) < 2:
         return plan
     vessel = routing_problem(job).kernel_vessel()
     ahead = robust.legs_ahead(list(job.current_legs), plan.depart_utc, plan.legs[0]["lat0"], plan.legs[0]["lon0"])
+    ahead = robust.retimed(ahead, plan.depart_utc, plan.rta_utc, weather, vessel)  # its route, re-timed to the RTA
     decision = robust.replan_decision(ahead, plan, members, vessel, k)
     if decision.take_new:
         plan.reason = decision.reason if plan.reason is None else f"{plan.reason}; {decision.reason}"

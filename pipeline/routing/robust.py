@@ -172,6 +172,33 @@ def replan_decision(current_legs: list[dict], new_plan: Plan, members: list[Weat
     return ReplanDecision(take, int(ok.sum()), mean, sd, on_c, on_n, why)
 
 
+def retimed(legs: list[dict], depart_utc, rta_utc, weather: WeatherField, vessel: lk.Vessel) -> list[dict]:
+    """The legs with every rpm scaled by one factor (each kept within the vessel's lowest and highest setting) so
+    that, sailed in `weather` from `depart_utc`, they arrive at `rta_utc`: the current route kept, the ship re-timed
+    (bisection; the slowest when even that is early, the fastest when none is in time). Waits are kept."""
+    if not legs:
+        return legs
+    lo_rpm, hi_rpm = float(vessel.rpm_options[0]), float(vessel.rpm_options[-1])
+    need_h = _hours_between(depart_utc, rta_utc)
+    rpm0 = np.array([float(g["rpm"]) for g in legs])
+
+    def at(f):
+        return [{**g, "rpm": float(min(max(r * f, lo_rpm), hi_rpm))} for g, r in zip(legs, rpm0)]
+
+    lo, hi = lo_rpm / rpm0.max(), hi_rpm / rpm0.min()
+    if sail_plan(at(lo), depart_utc, weather, vessel)[0] <= need_h:
+        return at(lo)
+    if not sail_plan(at(hi), depart_utc, weather, vessel)[0] <= need_h:
+        return at(hi)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if sail_plan(at(mid), depart_utc, weather, vessel)[0] <= need_h:
+            hi = mid
+        else:
+            lo = mid
+    return at(hi)
+
+
 def current_plan_kept(new_plan: Plan, ahead: list[dict], weather: WeatherField, vessel: lk.Vessel,
                       why: str) -> Plan | None:
     """The current plan's legs ahead of the ship (`ahead`, legs_ahead) as the plan of this run in place of
