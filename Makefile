@@ -10,7 +10,7 @@ export PREFECT_HOME ?= $(CURDIR)/.prefect
 export PREFECT_LOGGING_LEVEL ?= WARNING
 export PREFECT_SERVER_ANALYTICS_ENABLED ?= false
 
-.PHONY: install demo test test-fast lint docs bench clean
+.PHONY: install demo test test-fast lint typecheck docs bench clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -35,6 +35,10 @@ test-fast: install
 
 lint: install
 	$(BIN)/ruff check .
+
+# the packages' interfaces checked by mypy (configured in pyproject.toml, [tool.mypy])
+typecheck: install
+	$(BIN)/python -m mypy
 
 # the manual's second layer; --strict: a broken link or a missing page fails the build. The test extras hold mkdocs.
 docs: $(STAMP)

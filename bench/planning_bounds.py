@@ -29,6 +29,8 @@ from scipy.optimize import linprog
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from pipeline.planning.work_budget import WorkBudget  # noqa: E402
+
 
 def lp_with_row(data, columns: list, kind: str, rhs: float, at_least: bool) -> tuple[float, float]:
     """(LP optimum with the row `kind` ≤ rhs, or ≥ rhs with `at_least`, priced to its optimum; the row's value)."""
@@ -79,7 +81,7 @@ def main() -> None:
     data = planning_data(a.size)
     master = MasterLP(data)
     t0 = time.perf_counter()
-    lp, converged = branch_price.solve_root(data, master, time.perf_counter() + 300)
+    lp, converged = branch_price.solve_root(data, master, WorkBudget(wall_limit_s=300))
     _, pi, mu, y = master.solve()
     print(f"{a.size}: root LP {lp:,.0f} ({'converged' if converged else 'NOT converged'}, "
           f"{time.perf_counter() - t0:.1f} s, {len(master.columns)} columns)")
@@ -112,7 +114,7 @@ def main() -> None:
         else:
             enum_s = time.perf_counter() - t1
             t2 = time.perf_counter()
-            sequences, pool_bound, finished = milp._set_partitioning(data, pool, a.milp_s, 0.0, 1.0)
+            sequences, pool_bound, finished = milp._set_partitioning(data, pool, WorkBudget(wall_limit_s=a.milp_s), 0.0, 1.0)
             plan = (problem.assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0).cost
                     if sequences is not None else np.inf)
             print(f"  Δ {share} % ({slack:,.0f}): {len(pool):,} columns in {enum_s:.1f} s; HiGHS "

@@ -28,6 +28,8 @@ from scipy.optimize import LinearConstraint, linprog, milp
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from pipeline.planning.work_budget import WorkBudget  # noqa: E402
+
 
 def violated_triples(members: np.ndarray, y: np.ndarray, most: int = 50) -> list[tuple[int, int, int]]:
     """The `most` most violated subset-row triples of the LP solution `y` (columns × contracts `members`)."""
@@ -56,7 +58,7 @@ def main() -> None:
     data = planning_data(a.size)
     n_v, n_c = len(data.vessels), len(data.contracts)
     master = MasterLP(data)
-    lp, converged = branch_price.solve_root(data, master, time.perf_counter() + 300)
+    lp, converged = branch_price.solve_root(data, master, WorkBudget(wall_limit_s=300))
     _, pi, mu, _ = master.solve()
     pool = list(master.columns)
     top = a.optimum or a.plan

@@ -29,6 +29,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from pipeline.planning.work_budget import WorkBudget  # noqa: E402
+
 
 def pool_milp(data, columns, start: dict, time_limit_s: float, effort: float) -> dict:
     """HiGHS's MILP over `columns` (each vessel and contract at most once), started from the plan `start`."""
@@ -83,8 +85,10 @@ def neighbourhoods(data, sequences: dict, link: np.ndarray, time_limit_s: float,
         columns = [Column(k, seqs[k], schedule(data, k, seqs[k]).cost) for k in chosen if k in seqs]
         before = sum(col.cost for col in columns) + sum(pen[j] for j in free - lifted)
         for k in chosen:
-            columns += vessel_columns(data, k, max_labels=20_000, among=free, deadline=deadline)[0]
-        got, _, _ = milp._set_partitioning(data, columns, min(3.0, max(0.01, deadline - time.perf_counter())), 0.0, 1.0)
+            columns += vessel_columns(data, k, max_labels=20_000, among=free,
+                                    budget=WorkBudget(wall_limit_s=max(1e-3, deadline - time.perf_counter())))[0]
+        got, _, _ = milp._set_partitioning(
+            data, columns, WorkBudget(wall_limit_s=min(3.0, max(0.01, deadline - time.perf_counter()))), 0.0, 1.0)
         if got is None:
             continue
         lifted_after = {j for s in got.values() for j in s}
@@ -117,10 +121,10 @@ def main() -> None:
         return assemble(data, sequences, solver="t", status="", gap=np.nan, runtime_s=0.0).cost
 
     master = MasterLP(data)
-    lp, converged = branch_price.solve_root(data, master, time.perf_counter() + 300)
+    lp, converged = branch_price.solve_root(data, master, WorkBudget(wall_limit_s=300))
     _, pi, mu, y = master.solve()
     x = master.lifted_by(y)
-    plan = local_search.improve(data, branch_price.dive(data, master, (), time.perf_counter() + 60), time_limit_s=6.0)
+    plan = local_search.improve(data, branch_price.dive(data, master, (), WorkBudget(wall_limit_s=60)), budget=WorkBudget(wall_limit_s=6.0))
     first = cost(plan)
     print(f"{a.size}: LP bound {lp:,.0f} (converged {converged}), first plan {first:,.0f} "
           f"({100 * (first - lp) / first:.2f} % above), {len(master.columns)} columns", flush=True)
@@ -141,7 +145,7 @@ def main() -> None:
 
     if a.tree_s > 0:
         tree = branch_price.search(data, master, assemble(data, plan, solver="t", status="", gap=np.nan, runtime_s=0.0),
-                                   time.perf_counter() + a.tree_s, root_bound=lp)
+                                   WorkBudget(wall_limit_s=a.tree_s), root_bound=lp)
         best = {s.k: s.sequence for s in tree.plan.schedules}
         report(f"branch-and-price, {tree.nodes} nodes", best, a.tree_s, f"  bound {tree.bound:,.0f}")
         pool = list(master.columns) + [Column(k, s, schedule(data, k, s).cost) for k, s in best.items()

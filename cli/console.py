@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from typing import NoReturn
 
 import typer
 from rich.console import Console
@@ -33,7 +34,7 @@ def show_progress(level: int = logging.INFO) -> None:
     root.setLevel(level)
 
 
-def fail(msg: str, code: int = 2):
+def fail(msg: str, code: int = 2) -> NoReturn:
     """One line on stderr, then exit with `code` (2: bad input or a state the user must fix first)."""
     err_console.print(f"[red]error:[/] {msg}", highlight=False)
     raise typer.Exit(code)

@@ -45,7 +45,8 @@ def is_user_error(exc: BaseException | None) -> bool:
 
 def user_error_of(exc: BaseException) -> BaseException:
     """The user error in `exc`'s chain (the one whose message to show)."""
-    seen, cur = 0, exc
+    seen = 0
+    cur: BaseException | None = exc
     while cur is not None and seen < 10:
         if any(cls.__name__ in USER_ERRORS or cls.__name__ in EXIT_CODES for cls in type(cur).__mro__):
             return cur

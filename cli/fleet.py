@@ -36,6 +36,15 @@ def run_table(summary: dict) -> Table:
     t.add_row("  within the forecast / past its last step", f"{_f(summary.get('savings_forecast_pct'), '{:.1f} %')} / "
               f"{_f(summary.get('savings_beyond_forecast_pct'), '{:.1f} %')} "
               f"({summary.get('n_beyond_horizon')} voyages past it)")
+    p = summary.get("p_on_time")
+    t.add_row("on time across the lagged ensemble (mean of the voyages)", _f(None if p is None else 100 * p, "{:.0f} %"))
+    t.add_row("  saving P10 – P90 (fuel-weighted)", f"{_f(summary.get('savings_p10_pct'), '{:.1f} %')} – "
+              f"{_f(summary.get('savings_p90_pct'), '{:.1f} %')}")
+    if summary.get("n_verified"):
+        t.add_row("verified in analysed weather: plans (wholly)",
+                  f"{summary.get('n_verified')} ({summary.get('n_verified_whole')})")
+        t.add_row("  saving claimed / realised, same plans", f"{_f(summary.get('verified_claimed_savings_pct'), '{:.1f} %')} / "
+                  f"{_f(summary.get('realised_savings_pct'), '{:.1f} %')}")
     t.add_row("constant-speed baseline fuel (t), same voyages", _f(summary.get("honest_baseline_fuel_t")))
     t.add_row("engine-change limits cost (t)", _f(summary.get("limits_fuel_t"), "{:.2f}"))
     return t
@@ -76,6 +85,30 @@ def show_run(summary: dict, data_root: Path) -> None:
     console.print(f"exports: {summary.get('exports_dir')}")
 
 
+def show_verification(out: dict, db: Path, run_id: str | None = None) -> None:
+    """The verification's outcome: one sentence, and the rows of the plans verified now."""
+    from flows.jobs.verify import verification_sentence
+    from storage.verification_store import verifications
+
+    if out.get("newest_cycle"):
+        console.print(verification_sentence(out) or f"no plan to verify with the analysed weather up to cycle "
+                                                    f"{out['newest_cycle']}")
+    for why in out.get("skipped") or []:
+        console.print(f"[yellow]not verified:[/] {why}", highlight=False)
+    if not out.get("n_verified"):
+        return
+    rows = verifications(db, run_id).head(out["n_verified"])
+    t = Table(title="Plans re-sailed in the analysed weather (plan_verification)")
+    for col in ("voyage", "run", "coverage", "analysed h", "fuel t claimed / realised", "late h", "saving % claimed / realised"):
+        t.add_column(col)
+    for r in rows.to_dict("records"):
+        t.add_row(str(r["voyage_id"]), str(r["run_id"]), str(r["coverage"]),
+                  f"{_f(r['hours_analysed'], '{:.0f}')} of {_f(r['hours_total'], '{:.0f}')}",
+                  f"{_f(r['claimed_fuel_t'])} / {_f(r['realised_fuel_t'])}", _f(r["realised_late_h"]),
+                  f"{_f(r['claimed_savings_pct'])} / {_f(r['realised_savings_pct'])}")
+    console.print(t)
+
+
 def register(app: typer.Typer) -> None:
     @app.command("route-fleet")
     def route_fleet_cmd(cycle: Optional[str] = typer.Option(None, help="Cube cycle (default: newest complete)."),
@@ -97,6 +130,18 @@ def register(app: typer.Typer) -> None:
         summary = run_job("flows.fleet", "route_fleet", route_fleet_job, cycle=cycle, voyages=voyage or None,
                           data_root=str(data) if data else None, solver=solver, batch_size=batch_size)
         show_run(summary, load_settings(data_root=data).data_root)
+
+    @app.command()
+    def verify(run: Optional[str] = typer.Option(None, "--run", help="Only this routing run's plans (default: every "
+                                                                     "stored plan the analysed weather covers)."),
+               data: Optional[Path] = DataOpt):
+        """Re-sail stored plans and their constant-speed baselines in the analysed weather of the cube's newest cycles
+        (each cycle's leads to 6 h): realised fuel and arrival against the claim, in the table plan_verification."""
+        from flows.jobs.verify import verify_plans_job
+        from flows.settings import load_settings
+
+        out = run_job("flows.fleet", "verify_plans", verify_plans_job, data_root=str(data) if data else None, run_id=run)
+        show_verification(out, load_settings(data_root=data).data_root / "warehouse.duckdb", run)
 
     @app.command()
     def nightly(date: Optional[str] = typer.Option(None, help="Date (UTC, YYYY-MM-DD) whose cycles to ingest; "
@@ -244,6 +289,12 @@ def _show_nightly(s: dict, root: Path) -> None:
     console.print(f"models: {s['models_changed']} of {s['vessels']} vessels changed")
     if s.get("routing"):
         show_run(s["routing"], Path(root))
+    if s.get("verification"):
+        from flows.jobs.verify import verification_sentence
+
+        v = s["verification"]
+        console.print(f"[yellow]verification failed:[/] {v['error']}" if v.get("error") else
+                      verification_sentence(v) or "verification: no plan to verify yet with the analysed weather")
     if s.get("cycles_missing"):
         console.print(f"[yellow]nightly {s.get('state', 'Incomplete')}: targeted cycles not complete: "
                       f"{', '.join(s['cycles_missing'])}")

@@ -33,6 +33,8 @@ def show_plan(s: dict) -> None:
     console.print(f"cost: fuel {_money(s['fuel_cost'])} + out of service {_money(s['out_of_service_cost'])} "
                   f"({s['out_of_service_days']:.1f} days) + penalties {_money(s['penalty_cost'])} = {_money(s['total_cost'])}"
                   f" (fuel price {s['fuel_price']:g}/t; planner {s['runtime_s']:.1f} s)")
+    if s.get("stopped_by"):
+        console.print(f"search: {s['stopped_by']}")
     if s["unassigned"]:
         u = Table(title="Contracts left")
         for col in ("contract", "penalty", "why"):
@@ -66,8 +68,14 @@ def plan_fleet_cmd(contracts: Path = typer.Option(..., "--contracts", help="cont
                    fuel_price: float = typer.Option(600.0, "--fuel-price", help="Fuel price per tonne."),
                    penalty: float = typer.Option(500_000.0, "--penalty", help="Cost of leaving a contract unassigned "
                                                  "when its row gives none."),
-                   time_limit: float = typer.Option(60.0, "--time-limit", min=0.1, help="Planner time limit, seconds, from "
-                                                    "building the problem to the plan."),
+                   effort: float = typer.Option(1.0, "--effort", help="How much search the planner does, counted in "
+                                                "work, not time, so the same inputs give the same plan on any machine: "
+                                                "1 the default (about a CPU minute on 50 vessels × 200 contracts), "
+                                                "0.1 a quick plan, 10 a long search."),
+                   time_limit: Optional[float] = typer.Option(None, "--time-limit", help="Optional wall-clock safety "
+                                                              "cap, seconds, from building the problem to the plan (default "
+                                                              "none); when it stops the search the plan says so, and the "
+                                                              "plan then depends on how busy the machine was."),
                    as_json: bool = typer.Option(False, "--json", help="Print the plan as JSON."),
                    data: Optional[Path] = typer.Option(None, "--data", help="Data root (default ./data or $JITROUTE_DATA).")):
     """Assign contracts to vessels and sequence them at least cost; store the plan and its legs as planned voyages."""
@@ -76,7 +84,7 @@ def plan_fleet_cmd(contracts: Path = typer.Option(..., "--contracts", help="cont
     s = run_job("flows.planning", "plan_fleet", plan_fleet_job, contracts=str(contracts),
                 availability=str(availability) if availability else None, ports=str(ports) if ports else None,
                 as_of=as_of, data_root=str(data) if data else None, fuel_price=fuel_price, penalty=penalty,
-                time_limit_s=time_limit)
+                effort=effort, time_limit_s=time_limit)
     if as_json:
         print(json.dumps(s, default=str, indent=1))
     else:

@@ -246,10 +246,10 @@ def register(app: typer.Typer) -> None:
             from pipeline.export import bundle  # matplotlib and lxml only when a file is asked for
 
             made = bundle.export_plan(plan, weather, vessel, v, kinds=[k for k, path in wanted.items() if path])
-            for kind, data in made.files.items():
-                path = Path(wanted[kind])
-                export_store.write_file(path.parent.resolve(), path.name, data)
-                _say(as_json, f"{kind}: {path}")
+            for kind, content in made.files.items():
+                target = Path(str(wanted[kind]))
+                export_store.write_file(target.parent.resolve(), target.name, content)
+                _say(as_json, f"{kind}: {target}")
             for kind, err in made.errors.items():
                 console.print(f"[red]{kind} export failed:[/] {err}")
             if made.errors:

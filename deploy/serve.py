@@ -99,6 +99,8 @@ def draining_runner(drain_s: float = DRAIN_S):
     log = logging.getLogger("jitroute.serve")
 
     class DrainingRunner(Runner):
+        stopping: bool  # Runner's own flag, declared for the type checker (Prefect is read as untyped)
+
         def handle_sigterm(self, *args, **kwargs) -> None:
             if not self.started or self.stopping or self._loop is None:
                 sys.exit(0)

@@ -1,4 +1,4 @@
-"""Prefect flows `route-fleet` and `nightly`; the work is in flows/jobs/fleet.py."""
+"""Prefect flows `route-fleet`, `verify-plans` and `nightly`; the work is in flows/jobs/fleet.py and flows/jobs/verify.py."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from prefect import flow
 import flows.ingest  # noqa: F401  (registers the sub-flows the nightly runs)
 import flows.refit  # noqa: F401
 from flows.jobs.fleet import nightly_job, route_fleet_job
+from flows.jobs.verify import verify_plans_job
 from flows.runner import InPrefect, register_flow
 from flows.settings import refuse_served_overrides
 
@@ -21,6 +22,15 @@ def route_fleet(cycle: str | None = None, voyages: list[str] | None = None, data
     refuse_served_overrides(data_root=data_root)
     return route_fleet_job(cycle, voyages, data_root=data_root, solver=solver, seed=seed, trigger=trigger,
                            exports=exports, batch_size=batch_size, nominal_utc=nominal_utc, run=InPrefect())
+
+
+@register_flow
+@flow(name="verify-plans")
+def verify_plans(data_root: str | None = None, run_id: str | None = None) -> dict:
+    """Re-sail the stored plans and their baselines in the analysed weather of the cube's later cycles
+    (plan_verification): realised fuel and arrival against the claim."""
+    refuse_served_overrides(data_root=data_root)
+    return verify_plans_job(data_root=data_root, run_id=run_id, run=InPrefect())
 
 
 @register_flow

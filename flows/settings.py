@@ -18,7 +18,7 @@ import json
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 from pipeline.routing.options import RoutingOptions
 from storage.layout import DataLayout
@@ -236,7 +236,7 @@ def refuse_served_overrides(**given: str | None) -> None:
         if value is None or name not in pinned:
             continue
         if name == "data_root":
-            same = Path(str(value)).expanduser().resolve() == Path(pinned[name]).expanduser().resolve()
+            same = Path(str(value)).expanduser().resolve() == Path(str(pinned[name])).expanduser().resolve()
         else:
             same = str(value).rstrip("/") == str(pinned[name]).rstrip("/")
         if not same:
@@ -245,6 +245,10 @@ def refuse_served_overrides(**given: str | None) -> None:
                                 f"with it, or change the work pool's environment ({_ENV_OF[name]})")
 
 
+@overload
+def served_input_file(name: str, value: str) -> str: ...
+@overload
+def served_input_file(name: str, value: None) -> None: ...
 def served_input_file(name: str, value: str | None) -> str | None:
     """The input file a flow-run parameter names (`contracts`, a noon-report file, a fleet folder…). On a served
     deployment it must lie inside `<data root>/inbox/` (a relative name is taken from there; symbolic links are

@@ -81,7 +81,10 @@ def attrs(name: str) -> dict:
 
 def implausible(name: str, values: np.ndarray) -> str | None:
     """None when every finite value of variable `name` lies in its `valid_range`, else what is wrong (one line)."""
-    lo, hi = BY_NAME[name].valid_range
+    valid_range = BY_NAME[name].valid_range
+    if valid_range is None:  # nothing to hold the values against
+        return None
+    lo, hi = valid_range
     v = np.asarray(values)
     bad = np.isfinite(v) & ((v < lo) | (v > hi))
     n = int(np.count_nonzero(bad))

@@ -158,12 +158,15 @@ def active_fleet_plan(con) -> tuple[dict | None, pd.DataFrame, pd.DataFrame, pd.
 
 
 def runs_history(con, limit: int = 200) -> pd.DataFrame:
-    """The newest routing runs with their savings (fleet_savings), newest first."""
+    """The newest routing runs with their savings (fleet_savings: claimed, the part the forecast backs, the ensemble's
+    P10–P90, and what the analysed weather realised where verified), newest first."""
     return con.execute("""
         SELECT u.run_id, u.started_at, u.finished_at, u.cycle, u.cycle_age_h, u.nominal_utc, u.trigger, u.status,
                u.solver, u.n_voyages, u.n_ok, u.n_failed, u.reason, u.n_export_failed, u.export_errors,
                s.n_on_time, s.n_late, s.n_not_routed, s.n_compared, s.fuel_t, s.honest_baseline_fuel_t,
-               s.savings_total_pct, s.savings_speed_profile_pct, s.savings_route_pct, s.savings_vs_discrete_pct
+               s.savings_total_pct, s.savings_speed_profile_pct, s.savings_route_pct, s.savings_vs_discrete_pct,
+               s.savings_forecast_pct, s.savings_p10_pct, s.savings_p90_pct, s.n_verified, s.n_verified_compared,
+               s.verified_claimed_savings_pct, s.realised_savings_pct
         FROM route_runs u LEFT JOIN fleet_savings s USING (run_id)
         ORDER BY u.started_at DESC, u.run_id DESC LIMIT $1""", [int(limit)]).fetchdf()
 

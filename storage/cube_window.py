@@ -98,7 +98,7 @@ class ChunkCache:
                     "distinct_bytes": self.distinct_bytes}
 
 
-CHUNK_CACHE = ChunkCache(float(os.environ.get("JITROUTE_CUBE_CACHE_MB", "64")) * (1 << 20))
+CHUNK_CACHE = ChunkCache(int(float(os.environ.get("JITROUTE_CUBE_CACHE_MB", "64")) * (1 << 20)))
 
 
 class _CachedChunks(WrapperStore):

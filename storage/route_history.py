@@ -43,7 +43,7 @@ class HistoryDamagedError(WarehouseCorruptError):
     """A file of the warehouse's history is missing or differs from what was recorded when it was written."""
 
 
-def _quoted(text: str) -> str:
+def _quoted(text: str | os.PathLike) -> str:
     return "'" + str(text).replace("'", "''") + "'"
 
 

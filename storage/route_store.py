@@ -20,6 +20,7 @@ import socket
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -52,6 +53,9 @@ def _frame(rows: list[dict], table: Table, run_id: str) -> pd.DataFrame:
     for c in table.columns:
         if c.duckdb == "TIMESTAMP":
             df[c.name] = pd.to_datetime(df[c.name], utc=True).dt.floor("us")
+        elif c.duckdb.endswith("[]"):  # a list column missing from older rows is NaN there: Arrow wants null
+            df[c.name] = pd.Series([list(v) if isinstance(v, (list, tuple, np.ndarray)) else None for v in df[c.name]],
+                                   index=df.index, dtype=object)
     return df
 
 
@@ -331,7 +335,9 @@ def _run_summary(con, run_id: str) -> dict:
     savings = con.execute(
         "SELECT n_compared, honest_baseline_fuel_t, profile_fuel_t, savings_total_pct, savings_speed_profile_pct, "
         "savings_route_pct, limits_fuel_t, unlimited_fuel_t, discrete_baseline_fuel_t, savings_vs_discrete_pct, "
-        "n_beyond_horizon, n_split, savings_forecast_pct, savings_beyond_forecast_pct "
+        "n_beyond_horizon, n_split, savings_forecast_pct, savings_beyond_forecast_pct, n_ensemble, p_on_time, "
+        "savings_p10_pct, savings_p50_pct, savings_p90_pct, n_verified, n_verified_whole, n_verified_compared, "
+        "verified_claimed_savings_pct, realised_savings_pct "
         "FROM fleet_savings WHERE run_id = ?",
         [run_id],
     ).fetchdf()

@@ -48,6 +48,25 @@ _SAVINGS = {
     "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plans on the same routes without engine-change limits",
     "discrete_baseline_fuel_t": "fuel burnt in tonnes on the discrete-rpm baseline (arrives early: overstates savings)",
     "savings_vs_discrete_pct": "fuel saved against the discrete-rpm baseline, percent (arrives early: overstated)",
+    "n_ensemble": "voyages whose plan was sailed through a lagged ensemble of cycles (p_on_time is over these)",
+    "p_on_time": "mean over those voyages of the share of ensemble members in which the plan arrives on time, 0..1",
+    "savings_p10_pct": "10th percentile of each voyage's saving across the ensemble, fuel-weighted by the baseline's "
+                       "fuel (as savings_total_pct), percent",
+    "savings_p50_pct": "median of each voyage's saving across the ensemble, fuel-weighted, percent",
+    "savings_p90_pct": "90th percentile of each voyage's saving across the ensemble, fuel-weighted, percent",
+    "n_verified": "plans of the run re-sailed in the analysed weather of later cycles (plan_verification)",
+    "n_verified_whole": "of which the whole passage lies in analysed weather (coverage verified)",
+    "verified_hours_analysed": "hours of those passages in analysed weather",
+    "verified_hours_total": "hours of those passages in all",
+    "n_verified_compared": "verified plans with a realised baseline (the realised sums below are over these)",
+    "verified_claimed_fuel_t": "planned fuel of those plans, tonnes",
+    "realised_fuel_t": "their fuel re-sailed in the analysed weather, tonnes",
+    "realised_baseline_fuel_t": "their baselines' fuel re-sailed in the same weather, tonnes",
+    "verified_claimed_savings_pct": "the saving those plans claimed, fuel-weighted, percent: compare with "
+                                    "realised_savings_pct",
+    "realised_savings_pct": "the saving those plans realised against their baselines in the analysed weather, "
+                            "fuel-weighted, percent",
+    "n_realised_on_time": "verified plans arriving by the RTA (+ 0.5 h) when re-sailed",
 }
 
 

@@ -118,4 +118,10 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE port_distances ADD COLUMN canal_h DOUBLE;
         """,
     ),
+    Migration(
+        "planning_003_search_stopped_by",
+        """
+        ALTER TABLE fleet_plans ADD COLUMN stopped_by VARCHAR;  -- what ended the planner's search (effort, safety cap)
+        """,
+    ),
 ]

@@ -6,8 +6,8 @@ degrees (wind/waves coming-from).
 
 import hashlib
 
-from schemas.tables.routes import (LEG_HOURS_ADDED, ROUTE_ENSEMBLE_ADDED, ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS,
-                                   ROUTE_LEGS, ROUTES)
+from schemas.tables.routes import (LEG_HOURS_ADDED, PLAN_VERIFICATION, ROUTE_BASELINE_TRACK_ADDED, ROUTE_ENSEMBLE_ADDED,
+                                   ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS, ROUTES)
 from storage.warehouse import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -128,6 +128,47 @@ FLEET_SAVINGS_VIEW_013 = f"""
         FROM route_runs u JOIN routes r USING (run_id)
         GROUP BY ALL;
 """
+
+
+# fleet_savings with each run's spread (routes.savings_p10/p50/p90_pct fuel-weighted by the baseline's fuel, as
+# savings_total_pct is, and the mean P(on time)) and what its plans realised in the analysed weather of later cycles
+# (plan_verification): the claim over the same verified voyages beside the realised saving, like with like
+_SPREAD = "r.savings_p10_pct IS NOT NULL AND r.honest_baseline_fuel_t > 0"
+_VERIFIED = "v.realised_baseline_fuel_t > 0 AND r.honest_baseline_fuel_t > 0"
+
+
+def _weighted(col: str) -> str:
+    return (f"sum(r.{col} * r.honest_baseline_fuel_t) FILTER (WHERE {_SPREAD}) "
+            f"/ nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_SPREAD}), 0)")
+
+
+_FLEET_SAVINGS_ADDED_016 = f"""
+               count(*) FILTER (WHERE r.p_on_time IS NOT NULL) AS n_ensemble,
+               avg(r.p_on_time) AS p_on_time,
+               {_weighted('savings_p10_pct')} AS savings_p10_pct,
+               {_weighted('savings_p50_pct')} AS savings_p50_pct,
+               {_weighted('savings_p90_pct')} AS savings_p90_pct,
+               count(v.run_id) AS n_verified,
+               count(*) FILTER (WHERE v.coverage = 'verified') AS n_verified_whole,
+               sum(v.hours_analysed) AS verified_hours_analysed,
+               sum(v.hours_total) AS verified_hours_total,
+               count(*) FILTER (WHERE {_VERIFIED}) AS n_verified_compared,
+               sum(r.fuel_t) FILTER (WHERE {_VERIFIED}) AS verified_claimed_fuel_t,
+               sum(v.realised_fuel_t) FILTER (WHERE {_VERIFIED}) AS realised_fuel_t,
+               sum(v.realised_baseline_fuel_t) FILTER (WHERE {_VERIFIED}) AS realised_baseline_fuel_t,
+               100 * (1 - sum(r.fuel_t) FILTER (WHERE {_VERIFIED})
+                        / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_VERIFIED}), 0)) AS verified_claimed_savings_pct,
+               100 * (1 - sum(v.realised_fuel_t) FILTER (WHERE {_VERIFIED})
+                        / nullif(sum(v.realised_baseline_fuel_t) FILTER (WHERE {_VERIFIED}), 0)) AS realised_savings_pct,
+               count(*) FILTER (WHERE v.realised_late_h <= 0.5) AS n_realised_on_time,
+"""
+FLEET_SAVINGS_VIEW_016 = (FLEET_SAVINGS_VIEW_013
+                          .replace("               sum(r.limits_fuel_t) AS limits_fuel_t,",
+                                   _FLEET_SAVINGS_ADDED_016.strip("\n") + "\n               sum(r.limits_fuel_t) AS limits_fuel_t,")
+                          .replace("FROM route_runs u JOIN routes r USING (run_id)",
+                                   "FROM route_runs u JOIN routes r USING (run_id)\n"
+                                   "        LEFT JOIN plan_verification v USING (run_id, voyage_id)"))
+assert FLEET_SAVINGS_VIEW_016.count("plan_verification") == 1 and "n_verified_whole" in FLEET_SAVINGS_VIEW_016
 
 
 ARRIVAL_NM = 10.0  # a noon report this close to the destination is the arrival (plan against actual)
@@ -627,6 +668,11 @@ MIGRATIONS: list[Migration] = [
     Migration("routes_014_voyage_performance_like_with_like", VOYAGE_PERFORMANCE_VIEW_014),
     # each plan's spread across a lagged ensemble of cycles
     Migration("routes_015_plan_ensemble_spread", ROUTES.add_columns_sql(*ROUTE_ENSEMBLE_ADDED)),
+    # what happened: plans and their baselines re-sailed in the analysed weather of later cycles (the baseline's
+    # track kept with each plan for it), and fleet_savings with the spread and the realised saving
+    Migration("routes_016_plan_verification",
+              "\n".join([ROUTES.add_columns_sql(*ROUTE_BASELINE_TRACK_ADDED), PLAN_VERIFICATION.create_sql(),
+                         FLEET_SAVINGS_VIEW_016])),
 ]
 
 

@@ -26,13 +26,29 @@ SLOW_FILES = (
     "test_ingest.py", "test_served_parameters.py", "test_export_store.py",  # Prefect API, served flows, S3 server
     "test_readme_examples.py", "test_routing_suite.py",  # the README's commands; the bench suite's voyages
     "test_routing_twin.py",  # every search again with the JIT off, in a child process
+    "test_console_browser.py",  # a served console on a routed demo data root, driven in a real browser
 )
+
+
+def _slow_file(rel: str) -> bool:
+    return any(rel == f or (f.endswith("/") and (rel + "/").startswith(f)) for f in SLOW_FILES)
+
+
+def pytest_ignore_collect(collection_path, config):
+    """Under `-m "not slow"` (`make test-fast`) the files that are slow as a whole are not even imported: their imports
+    and assertion rewriting are a few seconds of the fast run. Any other selection collects them as usual."""
+    if config.getoption("markexpr", "").replace(" ", "") != "notslow":
+        return None
+    try:
+        rel = collection_path.resolve().relative_to(TESTS).as_posix()
+    except ValueError:
+        return None
+    return True if _slow_file(rel) else None
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        rel = item.path.resolve().relative_to(TESTS).as_posix()
-        if any(rel == f or (f.endswith("/") and rel.startswith(f)) for f in SLOW_FILES):
+        if _slow_file(item.path.resolve().relative_to(TESTS).as_posix()):
             item.add_marker(pytest.mark.slow)
 
 
@@ -69,6 +85,20 @@ def demo_mirror(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("mirror")
     write_mirror(out, "2020-12-01", "2020-12-01", cycles=(0,), seed=0)
     return out
+
+
+def route_demo_cycle(root: Path) -> None:
+    """The fleet of `root` routed on the 2020-12-01T00 cycle as the demo does (gc, no exports, as of 06 UTC), in one
+    dask worker."""
+    from flows.jobs.fleet import route_fleet_job
+
+    old = os.environ.get("JITROUTE_DASK_WORKERS")
+    os.environ["JITROUTE_DASK_WORKERS"] = "1"
+    try:
+        route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc", exports=False,
+                        nominal_utc="2020-12-01T06")
+    finally:
+        os.environ.pop("JITROUTE_DASK_WORKERS") if old is None else os.environ.__setitem__("JITROUTE_DASK_WORKERS", old)
 
 
 def mirror_urls(mirror: Path) -> dict[str, str]:

@@ -11,7 +11,12 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
+
+import httpx
 
 TAG_VAR = "JITROUTE_TEST_TAG"
 VENV_BIN = Path(sys.executable).parent
@@ -120,7 +125,71 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def prefect(*args: str, env: dict, cwd: Path | None = None, timeout_s: float = 300) -> str:
+    """What the installed `prefect --no-prompt <args>` prints; AssertionError with its output when it fails."""
+    r = subprocess.run([str(VENV_BIN / "prefect"), "--no-prompt", *args], cwd=cwd, env=env, capture_output=True, text=True,
+                       timeout=timeout_s)
+    assert r.returncode == 0, (args, r.stdout[-3000:], r.stderr[-3000:])
+    return r.stdout
+
+
 def jitroute(*args: str, env: dict, timeout_s: float = 600, cwd: Path | None = None) -> subprocess.CompletedProcess:
     """Run the installed `jitroute` command as a user would."""
     return subprocess.run([str(VENV_BIN / "jitroute"), *args], env=env, cwd=cwd, capture_output=True, text=True,
                           timeout=timeout_s)
+
+
+@dataclass
+class Served:
+    """A Prefect server and `jitroute serve` registered with it (`prefect_server_and_serve`)."""
+    api: str  # http://127.0.0.1:<port>/api
+    env: dict[str, str]  # the environment of a Prefect client of that server (the tag, PREFECT_API_URL)
+    serve: subprocess.Popen
+    logs: Path  # server.log and serve.log
+
+    def log(self, name: str) -> str:
+        """The last 3000 characters of `name`.log, for an assertion's message."""
+        return (self.logs / f"{name}.log").read_text()[-3000:]
+
+
+@contextmanager
+def prefect_server_and_serve(tmp_path: Path, serve_args: list[str], **env: str) -> Iterator[Served]:
+    """A real `prefect server start` on a free port of 127.0.0.1, once healthy `jitroute serve <serve_args>` talking to
+    it (run in `tmp_path`, Prefect's home in it, `env` added to both environments), their output in `tmp_path/logs`.
+    On leaving, both are stopped with SIGINT (as Ctrl-C would) and, when the body passed, AssertionError names any
+    process of theirs (dask workers, flow-run subprocesses) still running 30 s later; those are killed either way."""
+    tag = new_tag()
+    port = free_port()
+    api = f"http://127.0.0.1:{port}/api"
+    server_env = tagged_env(tag, PREFECT_HOME=str(tmp_path / "prefect_home"), PREFECT_LOGGING_LEVEL="INFO", **env)
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    procs: list[subprocess.Popen] = []
+    try:
+        server = start([str(VENV_BIN / "prefect"), "server", "start", "--host", "127.0.0.1", "--port", str(port)],
+                       server_env, logs / "server.log")
+        procs.append(server)
+
+        def healthy() -> bool:
+            try:
+                return httpx.get(f"{api}/health", timeout=2).status_code == 200
+            except httpx.HTTPError:
+                assert server.poll() is None, (logs / "server.log").read_text()[-3000:]
+                return False
+
+        poll("the Prefect server", healthy, 120, 0.5)
+        client_env = dict(server_env, PREFECT_API_URL=api)
+        serve = start([str(VENV_BIN / "jitroute"), "serve", *serve_args], client_env, logs / "serve.log", cwd=tmp_path)
+        procs.insert(0, serve)  # stopped first, the server after it
+        yield Served(api, client_env, serve, logs)
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=60)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+        left = wait_until_gone(tag, 30)
+        kill_tagged(tag)
+    assert not left, f"processes left running after serve and the server stopped:\n{describe(left)}"

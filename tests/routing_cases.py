@@ -9,7 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.performance.model import reference_model
+from pipeline.routing import leg_kernel as lk
 from pipeline.routing import weather_field as wf
+from pipeline.routing.baseline import shortest_route
+from pipeline.routing.problem import Instance
 from pipeline.routing.solve import BfoaParams, RoutingProblem
 
 MODEL = reference_model(14.0, 100.0, 1.5)  # STW = 0.14·rpm kn, fuel = 1.5·(rpm/100)³ t/h in calm water
@@ -23,6 +26,32 @@ def problem(dep, arr, hours, **kw) -> RoutingProblem:
     base.update(kw)
     return RoutingProblem(**base)
 
+
+
+def constant_speed(pr: RoutingProblem, space, weather) -> tuple[float, float, float]:
+    """(rpm, hours, fuel) of the space's shortest route at the one constant rpm between the extremes arriving at the RTA:
+    bisection on the hours of the route sailed at one setting (the slowest when early even at it, the fastest when
+    late even at it). Worked out here, apart from the product's baseline, so that tests can hold plans against it."""
+    inst = Instance.build(pr, space, weather)
+    nodes = shortest_route(space)
+
+    def sail(rpm):
+        v = inst.vessel._replace(rpm_options=np.array([rpm]))
+        ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
+        code, _ = lk.sail_route_nb(nodes, np.zeros(len(nodes) - 1, np.int64), 0, inst.graph, v, inst.wx,
+                                   inst.objective, ct, cf)
+        assert code == lk.OK
+        return ct[-1] - inst.t_dep_h, cf[-1]
+
+    lo, hi = min(pr.rpm_options), max(pr.rpm_options)
+    if sail(lo)[0] <= pr.t_req_h:
+        return (lo, *sail(lo))
+    if sail(hi)[0] > pr.t_req_h:
+        return (hi, *sail(hi))
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if sail(mid)[0] <= pr.t_req_h else (mid, hi)
+    return (hi, *sail(hi))
 
 def field(fn, lat=(10.0, 50.0), lon=(180.0, 250.0), step=0.5, hours=400, step_h=None) -> wf.WeatherField:
     """A field on a regular grid from fn(LAT, LON) → {var: 2-D array} (static), or, with `step_h`, from

@@ -20,30 +20,29 @@ CHROMIUM = Path("/usr/bin/chromium")
 SHOTS_VAR = "JITROUTE_CONSOLE_SHOTS"
 
 
-def _skip_without_browser() -> None:
+def _browser_or_skip() -> None:
     if not CHROMIUM.exists():
-        pytest.skip(f"BROWSER TESTS SKIPPED: {CHROMIUM} is missing; install Debian's chromium "
+        pytest.skip(f"machine capability: BROWSER TESTS SKIPPED, {CHROMIUM} is missing; install Debian's chromium "
                     "(`apt-get install -y chromium`, as .ci/run does as root) to run the console's browser tests")
     try:
         import playwright.sync_api  # noqa: F401
-    except ImportError:
-        pytest.skip("BROWSER TESTS SKIPPED: the playwright package is missing; install the test extras "
-                    "(`pip install -c constraints.txt -e '.[test]'`)")
+    except ImportError:  # a package of the test extras, not a capability of the machine: an incomplete install fails
+        pytest.fail("the playwright package is missing; install the test extras (`pip install -c constraints.txt -e "
+                    "'.[test]'`)")
 
 
 @pytest.fixture(scope="module")
 def demo_root(tmp_path_factory, demo_mirror) -> Path:
     """The demo's data root, made as `jitroute demo` makes it (cycle ingested, demo fleet with two ships at sea
     imported and refitted, demo contracts planned, the fleet routed), with the fast `gc` solver."""
-    _skip_without_browser()
+    _browser_or_skip()
     from cli.fleet import DEMO_AT_SEA, _import_fleet
-    from flows.jobs.fleet import route_fleet_job
     from flows.jobs.ingest import ingest_cycle
     from flows.jobs.planning import plan_fleet_job
     from flows.jobs.refit import refit_job
     from pipeline.synthetic.contracts import write_demo_planning
     from pipeline.synthetic.fleet import generate_fleet, write_fleet
-    from tests.conftest import mirror_urls
+    from tests.conftest import mirror_urls, route_demo_cycle
 
     base = tmp_path_factory.mktemp("console")
     root = base / "data"
@@ -55,13 +54,7 @@ def demo_root(tmp_path_factory, demo_mirror) -> Path:
     files = write_demo_planning(fleet.vessels, "2020-12-01T00", base / "planning")
     plan_fleet_job(contracts=files["contracts"], availability=files["availability"], ports=files["ports"],
                    as_of="2020-12-01T00:00Z", data_root=str(root))
-    old = os.environ.get("JITROUTE_DASK_WORKERS")
-    os.environ["JITROUTE_DASK_WORKERS"] = "1"
-    try:
-        route_fleet_job(cycle="2020-12-01T00", data_root=str(root), solver="gc", exports=False,
-                        nominal_utc="2020-12-01T06")
-    finally:
-        os.environ.pop("JITROUTE_DASK_WORKERS") if old is None else os.environ.__setitem__("JITROUTE_DASK_WORKERS", old)
+    route_demo_cycle(root)
     return root
 
 
@@ -97,7 +90,7 @@ def shots(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def browser():
-    _skip_without_browser()
+    _browser_or_skip()
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
@@ -264,5 +257,11 @@ def test_the_runs_page_lists_the_runs_and_cycles(visit, demo_root, shots):
     runs = _q(demo_root, "SELECT run_id FROM route_runs")
     assert len(visit.page.query_selector_all("#runs tbody tr")) == len(runs)
     assert runs[0][0] in visit.page.inner_text("#runs")
+    header = visit.page.eval_on_selector_all("#runs thead th", "els => els.map(e => e.innerText.trim())")
+    assert {"in forecast %", "P10–P90 %", "Verified", "claimed %", "realised %"} <= set(header)
+    verified = _q(demo_root, "SELECT count(*) FROM plan_verification")[0][0]  # one cycle: nothing to verify with
+    column = header.index("Verified")
+    cells = visit.page.eval_on_selector_all(f"#runs tbody tr td:nth-child({column + 1})", "els => els.map(e => e.innerText)")
+    assert cells == ["–"] * len(runs) if verified == 0 else any(c != "–" for c in cells)
     assert len(visit.page.query_selector_all("#cycles tbody tr")) == _q(demo_root, "SELECT count(*) FROM cycles")[0][0]
     _shot(visit, shots, "runs")

@@ -15,16 +15,14 @@ import pytest
 from global_land_mask import globe
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import shortest_route
 from pipeline.routing.base_route import base_route_for, with_base_route
 from pipeline.routing.corridor import CORRIDOR_SPACING_NM
 from pipeline.routing.job import RoutingOptions
-from pipeline.routing.problem import Instance
 from pipeline.routing.sea_route import PassageTransit, SeaRoute
 from pipeline.routing.search_space import VoyageGeometryError, build_search_space, reachable
 from pipeline.routing.solve import solve
-from routing_cases import FAST, field, problem, wavy
+from routing_cases import FAST, constant_speed, field, problem, wavy
 
 # Tampa Bay's offing round the Florida Keys to off Jacksonville: 666 NM where the great circle is 201 NM over land
 FLORIDA = [(27.6, -83.2), (25.5, -82.6), (24.3, -82.0), (24.3, -81.0), (25.0, -80.05), (26.5, -79.9), (28.5, -80.2),
@@ -70,27 +68,6 @@ def land_on_legs(waypoints, step_nm=0.1):
             if globe.is_land(p_lat, geo.wrap180(p_lon)):
                 bad.append((p_lat, p_lon))
     return bad
-
-
-def constant_speed(pr, space, weather):
-    """(rpm, hours, fuel) of the space's shortest route at the one constant rpm arriving by the RTA (bisection)."""
-    inst = Instance.build(pr, space, weather)
-    nodes = shortest_route(space)
-
-    def sail(rpm):
-        v = inst.vessel._replace(rpm_options=np.array([rpm]))
-        ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
-        code, _ = lk.sail_route_nb(nodes, np.zeros(len(nodes) - 1, np.int64), 0, inst.graph, v, inst.wx,
-                                   inst.objective, ct, cf)
-        assert code == lk.OK
-        return ct[-1] - inst.t_dep_h, cf[-1]
-
-    lo, hi = min(pr.rpm_options), max(pr.rpm_options)
-    assert sail(hi)[0] <= pr.t_req_h < sail(lo)[0]  # the cases below are on time at some constant speed
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if sail(mid)[0] <= pr.t_req_h else (mid, hi)
-    return (hi, *sail(hi))
 
 
 def test_the_great_circle_layout_has_no_route_round_florida_and_the_corridor_has():
@@ -150,7 +127,8 @@ def test_solve_routes_round_florida_clear_of_land_on_time_and_never_worse_than_c
     weather = field(wavy(5), lat=(20.0, 35.0), lon=(270.0, 290.0))
     pr = problem(FLORIDA[0], FLORIDA[-1], 666.0 / 12.0, n_lines=None, n_points=11, base_route=route)
     space = pr.search_space()
-    rpm_b, _, fuel_b = constant_speed(pr, space, weather)
+    rpm_b, hours_b, fuel_b = constant_speed(pr, space, weather)
+    assert hours_b <= pr.t_req_h and rpm_b > min(pr.rpm_options)  # on time at some constant speed, not the slowest
     opts = FAST if solver == "bfoa" else None
     plan = solve(pr, weather, solver=solver, seed=2, options=opts, savings=True)
     assert plan.status == "ok" and plan.legs, plan.reason
@@ -264,9 +242,13 @@ def test_a_canal_fairway_over_the_land_mask_is_sailed_as_given():
                                                      (space.lat[i + 1, c], space.lon[i + 1, c])], step_nm=0.5)]
     assert inland and all(space.edge_ok[i, c, c] for i in inland)
     weather = field(wavy(2), lat=(50.0, 58.0), lon=(5.0, 15.0))
-    pr = problem(dep, arr, 12.0, n_lines=None, n_points=11, base_route=route)
+    pr = problem(dep, arr, 14.0, n_lines=None, n_points=11, base_route=route)  # the canal alone takes 9 h
     plan = solve(pr, weather, solver="bfoa", seed=1, options=FAST)
     assert plan.status == "ok", plan.reason
+    # the canal's legs take its transit and waiting hours, whatever the plan's speed (canal_time.py)
+    in_canal = [g for g in plan.legs if any(haversine_nm(g["lat0"], g["lon0"], *wp) < 1e-6 for wp in KIEL[2:6])]
+    assert len(in_canal) == 4 and sum(g["hours"] for g in in_canal) == pytest.approx(8.0 + 1.0)
+    assert "through Kiel Canal (8 h transit + 1 h waiting" in plan.reason
     # the plan sails the fairway, waypoint by waypoint; outside it, it stays at sea
     assert all(min(haversine_nm(*wp, *p) for p in plan.waypoints) < 1e-6 for wp in KIEL[2:7])
     outside = [p for p in plan.waypoints if not any(haversine_nm(*p, *wp) < 1e-6 for wp in KIEL[3:6])]

@@ -123,6 +123,7 @@ def _route(store, version):
     return route_one(job, str(store))["legs"]
 
 
+@pytest.mark.slow  # a cycle written again and a voyage routed on it, end to end
 def test_a_worker_routes_on_the_new_values_after_a_re_ingest(store):
     v1 = cube.cycle_versions(store)[CYCLE]
     calm_legs = _route(store, v1)

@@ -4,13 +4,13 @@ the ones `jitroute serve` uses, and `prefect deploy --all` registers every deplo
 from __future__ import annotations
 
 import importlib
-import subprocess
 from pathlib import Path
 
 import pytest
 import yaml
 
-from tests.processes import VENV_BIN, new_tag, tagged_env
+from tests.processes import new_tag, tagged_env
+from tests.processes import prefect as run_prefect
 
 REPO = Path(__file__).resolve().parent.parent
 PREFECT_YAML = REPO / "deploy" / "prefect.yaml"
@@ -51,10 +51,7 @@ def test_prefect_deploy_all_registers_every_deployment_with_the_hosts_settings(p
     env = tagged_env(new_tag(), PREFECT_API_URL=PREFECT_API_URL.value(), **HOST_ENV)
 
     def prefect(*args: str) -> str:
-        r = subprocess.run([str(VENV_BIN / "prefect"), "--no-prompt", *args], cwd=REPO, env=env, capture_output=True,
-                           text=True, timeout=300)
-        assert r.returncode == 0, (args, r.stdout[-3000:], r.stderr[-3000:])
-        return r.stdout
+        return run_prefect(*args, env=env, cwd=REPO)
 
     prefect("work-pool", "create", "jitroute", "--type", "process", "--overwrite")
     prefect("deploy", "--all", "--prefect-file", str(PREFECT_YAML))

@@ -60,6 +60,7 @@ def _ingest(monkeypatch, root, mirror, cycle, **extra):
     return ingest.ingest_cycle(cycle, data_root=str(root), **mirror_urls(mirror))
 
 
+@pytest.mark.slow  # whole cycles written to a mirror and ingested, end to end
 def test_a_00_utc_cycle_keeps_its_long_leads_and_a_06_utc_cycle_ends_at_its_own(long_mirror, tmp_path, monkeypatch):
     from storage import cube
     from storage.layout import DataLayout
@@ -88,6 +89,7 @@ def test_a_00_utc_cycle_keeps_its_long_leads_and_a_06_utc_cycle_ends_at_its_own(
     assert wf.sample_nb(f06.kernel, 20.0, 20.0, 150.0, out)  # past the 06 cycle's 12 h: beyond, not a hole
 
 
+@pytest.mark.slow  # whole cycles written to a mirror and ingested, end to end
 def test_a_cube_made_with_shorter_leads_keeps_its_axis(long_mirror, tmp_path, monkeypatch, caplog):
     from storage import cube
     from storage.layout import DataLayout
@@ -99,6 +101,7 @@ def test_a_cube_made_with_shorter_leads_keeps_its_axis(long_mirror, tmp_path, mo
     assert "leads 24, 36 h are not kept" in caplog.text
 
 
+@pytest.mark.slow  # whole cycles written to a mirror and ingested, end to end
 def test_a_lagged_ensemble_reads_the_same_window_from_each_complete_cycle(long_mirror, tmp_path, monkeypatch):
     from flows.jobs.route_worker import lagged_members
     from pipeline.routing.problem import WeatherWindow

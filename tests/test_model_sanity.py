@@ -183,6 +183,7 @@ def _gas_nirvana_warehouse(tmp_path):
     return data, csv
 
 
+@pytest.mark.slow  # end to end through the `jitroute` command on a warehouse
 def test_the_thesis_fit_through_the_command_line_stores_the_published_coefficients(tmp_path, monkeypatch):
     """Validated on the 4 newest of the thesis's 22 rows, then fitted on all 22: the stored speed coefficients are
     the published ones. The default gate refuses it (18 training rows for 5 coefficients); with the gate relaxed
@@ -217,6 +218,7 @@ def test_the_thesis_fit_through_the_command_line_stores_the_published_coefficien
     assert res.exit_code == 2 and "not NAME=VALUE" in res.output
 
 
+@pytest.mark.slow  # end to end through the `jitroute` command on a warehouse
 def test_model_predict_from_the_command_line(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
@@ -298,6 +300,7 @@ def test_excluding_a_period_takes_it_out_of_the_refit_and_clears_the_flag(histor
         assert con.execute("SELECT count(*), any_value(reason) FROM noon_reports_history").fetchone() == (30, "excluded: speed log broken")
 
 
+@pytest.mark.slow  # end to end through the `jitroute` command on a warehouse
 def test_noon_exclude_from_the_command_line(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 

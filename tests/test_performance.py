@@ -160,6 +160,7 @@ def test_import_is_idempotent_and_conflicts_are_rejected(fleet, tmp_path):
 
 
 
+@pytest.mark.slow  # a whole generated fleet imported three ways (at once, month by month, in reverse)
 def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
     """`load_for_refit` (Arrow, ordered in numpy) gives the rows `load_reports` gives (ORDER BY imo, ts),
     and the same active models and next versions, for the whole fleet and for some vessels, whether
@@ -690,6 +691,7 @@ GAS_NIRVANA_VESSEL = pd.DataFrame([{"imo": 9140607, "name": "GAS NIRVANA", "type
                                     "mcr_kw": 3000.0, "rpm_max": 125.0, "design_fuel_tph": 1.8}])
 
 
+@pytest.mark.slow  # end to end through the `jitroute` command on a warehouse
 def test_bunker_logs_import_with_validation_from_the_command_line(tmp_path, monkeypatch):
     import logging
 

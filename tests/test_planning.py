@@ -14,6 +14,7 @@ import pytest
 
 from pipeline.planning import brute, milp, problem
 from pipeline.planning.inputs import validate_availability, validate_contracts, validate_ports
+from pipeline.planning.work_budget import WorkBudget
 from pipeline.planning.problem import Contract, PlanVessel
 from pipeline.synthetic.contracts import random_instance
 
@@ -74,7 +75,7 @@ def test_column_generation_reaches_an_lp_bound_never_above_the_optimum_and_price
                                                    horizon_days=20, n_ports=5)
         data = problem.build(_with_ends(vessels, rng), contracts, dist, fuel_price=600.0)
         best = brute.solve(data).cost
-        _, bound, converged, _ = colgen.generate(data, [], time_limit_s=30)
+        _, bound, converged, _ = colgen.generate(data, [])
         assert converged
         assert bound <= best * (1 + 1e-9) + 1e-6, f"seed {seed}"
         tight += bound >= best * (1 - 1e-9)
@@ -114,10 +115,10 @@ def test_the_exact_finish_reaches_the_optimum_where_the_lp_bound_is_below_it():
             best = brute.solve(data).cost
         else:
             every = [col for k in range(len(vessels)) for col in vessel_columns(data, k)[0]]
-            sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
+            sequences, _, finished = milp._set_partitioning(data, every, WorkBudget(), 0.0, 1.0)
             assert finished
             best = problem.assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
-        _, bound, _, _ = colgen.generate(data, [], time_limit_s=30)
+        _, bound, _, _ = colgen.generate(data, [])
         fractional += bound < best - 1.0
         plan = milp.solve(data, max_labels=3)
         assert plan.status == "optimal" and plan.gap == 0.0, f"seed {seed}"
@@ -366,6 +367,7 @@ def planned(tmp_path_factory):
     return root, files, first
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_plan_is_stored_with_its_legs_and_its_voyages(planned):
     root, files, s = planned
     assert s["solve_status"] == "optimal" and s["n_assigned"] >= 1
@@ -377,6 +379,8 @@ def test_a_plan_is_stored_with_its_legs_and_its_voyages(planned):
     both = legs.merge(voy, on="voyage_id")
     assert (both["depart_utc_x"] == both["depart_utc_y"]).all() and (both["arrive_utc"] == both["rta_utc"]).all()
     assert (both["from_port"] == both["dep_name"]).all()
+    stopped_by = con.execute("SELECT stopped_by FROM fleet_plans WHERE plan_id = ?", [s["plan_id"]]).fetchone()[0]
+    assert stopped_by == s["stopped_by"] == "proven optimal"
     n_left = con.execute("SELECT count(*) FROM fleet_plan_unassigned WHERE plan_id = ?", [s["plan_id"]]).fetchone()[0]
     assert n_left == s["n_unassigned"] and s["n_assigned"] + n_left == s["n_contracts"] == 6
     n_dist = con.execute("SELECT count(*) FROM port_distances").fetchone()[0]
@@ -386,6 +390,7 @@ def test_a_plan_is_stored_with_its_legs_and_its_voyages(planned):
     assert (root / "exports" / "plans" / f"{s['plan_id']}.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_re_planning_replaces_unsailed_voyages_of_the_old_plan_and_keeps_those_at_sea(planned):
     from flows.jobs.planning import plan_fleet_job
 
@@ -421,6 +426,7 @@ def test_re_planning_replaces_unsailed_voyages_of_the_old_plan_and_keeps_those_a
     assert first_new is None or first_new >= end
 
 
+@pytest.mark.slow  # end to end through the `jitroute` command on a warehouse
 def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(planned, monkeypatch):
     from typer.testing import CliRunner
 
@@ -432,6 +438,11 @@ def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(plann
     assert r.exit_code == 0, r.output
     out = json.loads(r.output)
     assert out["solve_status"] == "optimal" and {"vessels", "unassigned", "total_cost"} <= set(out)
+    assert out["stopped_by"] == "proven optimal"
+    shown = CliRunner().invoke(app, ["plan", "fleet", "--contracts", files["contracts"], "--as-of", "2020-12-06T00:00Z",
+                                     "--data", str(root), "--effort", "0.5", "--time-limit", "600"])
+    assert shown.exit_code == 0, shown.output
+    assert "search: proven optimal" in shown.output
     bad = CliRunner().invoke(app, ["plan", "fleet", "--contracts", files["contracts"], "--as-of", "01/12/2020",
                                    "--data", str(root)])
     assert bad.exit_code == 2
@@ -440,6 +451,7 @@ def test_plan_fleet_command_prints_json_and_refuses_a_bad_as_of_or_no_time(plann
     assert no_time.exit_code == 2 and "--time-limit" in no_time.output
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_routing_run_says_which_voyages_came_from_a_plan(planned, tmp_path):
     import shutil
 

@@ -4,14 +4,13 @@ allowed sets, and the search reaches the brute-force optimum on small instances 
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
 from pipeline.planning import branch_price, brute, colgen, local_search, milp, problem
 from pipeline.planning.master_lp import MasterLP
 from pipeline.planning.problem import assemble
+from pipeline.planning.work_budget import WorkBudget
 from pipeline.synthetic.contracts import random_instance
 
 
@@ -32,14 +31,14 @@ def _optimum_over_every_column(data) -> float:
     from pipeline.planning.routes import vessel_columns
 
     every = [col for k in range(len(data.vessels)) for col in vessel_columns(data, k)[0]]
-    sequences, _, finished = milp._set_partitioning(data, every, 60.0, 0.0, 1.0)
+    sequences, _, finished = milp._set_partitioning(data, every, WorkBudget(), 0.0, 1.0)
     assert finished
     return assemble(data, sequences, solver="t", status="", gap=0.0, runtime_s=0.0).cost
 
 
 def _root(data):
     master = MasterLP(data)
-    bound, converged = branch_price.solve_root(data, master, time.perf_counter() + 30)
+    bound, converged = branch_price.solve_root(data, master, WorkBudget())
     assert converged
     return master, bound
 
@@ -79,7 +78,7 @@ def test_pricing_under_branch_decisions_blocks_forbidden_pairs_and_finds_the_lea
                                  if seq and not any(blocked[k, j] for j in key)])
             assert least == pytest.approx(exact, rel=1e-7, abs=1e-3), f"seed {seed} vessel {k}"
             n_blocked += int(blocked[k].sum())
-        branch_price.solve_node(data, master, blocked, compulsory, np.inf, time.perf_counter() + 30)
+        branch_price.solve_node(data, master, blocked, compulsory, np.inf, WorkBudget())
         _, _, _, y = master.solve()
         for i in np.flatnonzero(y > 1e-9):
             col = master.columns[i]
@@ -117,7 +116,7 @@ def test_a_node_bound_never_exceeds_the_best_plan_that_keeps_its_decisions():
             decisions = ((*pairs[i], lifts),)
             blocked, compulsory = branch_price.node_constraints(decisions, V, n)
             bound, _, converged = branch_price.solve_node(data, master, blocked, compulsory, np.inf,
-                                                          time.perf_counter() + 30)
+                                                          WorkBudget())
             want = _brute_under(data, decisions)
             assert converged
             assert bound <= want * (1 + 1e-9) + 1e-6, f"seed {seed} {decisions}"
@@ -146,15 +145,15 @@ def test_branching_reaches_the_exact_optimum_where_the_root_lp_is_fractional():
         start = local_search.improve(data, colgen.round_lp(data, master.columns, y))
         start_plan = assemble(data, start, solver="t", status="", gap=0.0, runtime_s=0.0)
         fractional += bound < best - 1.0
-        out = branch_price.search(data, master, start_plan, time.perf_counter() + 60, root_bound=bound)
+        out = branch_price.search(data, master, start_plan, WorkBudget(), root_bound=bound)
         assert out.closed, f"seed {seed}"
         assert out.plan.cost == pytest.approx(best, rel=1e-9), f"seed {seed}"
         assert out.bound == pytest.approx(best, rel=1e-9)
     assert fractional >= 5  # the branching is exercised where the LP bound proves nothing
 
 
-def test_a_dive_past_its_deadline_still_returns_a_feasible_plan():
-    """Cut short (the deadline already passed, at a node whose decisions need new columns), the dive rounds its
+def test_a_dive_past_its_budget_still_returns_a_feasible_plan():
+    """Cut short (its work budget already spent, at a node whose decisions need new columns), the dive rounds its
     last LP: a plan whose sequences are all feasible and that keeps the node's forbidden pairs."""
     for seed in range(4):
         vessels, contracts, dist = random_instance(5, 20, seed=1500 + seed, horizon_days=25, n_ports=8, window_days=6)
@@ -164,8 +163,8 @@ def test_a_dive_past_its_deadline_still_returns_a_feasible_plan():
         x = master.lifted_by(y)
         forbid = tuple((int(k), int(j), False) for k, j in np.argwhere(x > 1e-6))  # everything the root LP lifts
         n_columns = len(master.columns)
-        plan = branch_price.dive(data, master, forbid, time.perf_counter())
-        assert len(master.columns) == n_columns  # past the deadline nothing priced is added
+        plan = branch_price.dive(data, master, forbid, WorkBudget(0))
+        assert len(master.columns) == n_columns  # past the budget nothing priced is added
         assert not any(j in plan.get(k, ()) for k, j, _ in forbid)
         assemble(data, plan, solver="t", status="", gap=0.0, runtime_s=0.0)  # raises on an infeasible sequence
 
@@ -198,7 +197,7 @@ def test_a_column_dive_ends_in_a_plan_of_priced_columns_costing_their_sum_betwee
         master, bound = _root(data)
         _, _, _, y = master.solve()
         fractional += branch_price._whole_plan(master, y) is None
-        plan = branch_price.dive(data, master, (), time.perf_counter() + 60)
+        plan = branch_price.dive(data, master, (), WorkBudget())
         pool = {(c.k, c.sequence): c.cost for c in master.columns}
         lifted = {j for seq in plan.values() for j in seq}
         by_columns = (sum(pool[(k, seq)] for k, seq in plan.items())
@@ -220,15 +219,15 @@ def test_a_restored_basis_re_solves_its_node_without_an_iteration_after_other_no
     k, j = branch_price.branching_pair(master, y)
     assert 0.1 < master.lifted_by(y)[k, j] < 0.9  # a fractional root: the two children's LPs differ
     first = branch_price.node_constraints(((k, j, True),), V, n)
-    value, _, converged = branch_price.solve_node(data, master, *first, np.inf, time.perf_counter() + 30)
+    value, _, converged = branch_price.solve_node(data, master, *first, np.inf, WorkBudget())
     assert converged
     saved = master.basis()
     other = branch_price.node_constraints(((k, j, False),), V, n)
-    branch_price.solve_node(data, master, *other, np.inf, time.perf_counter() + 30)
-    plan = branch_price.dive(data, master, (), time.perf_counter() + 30)  # more columns, the LP elsewhere
+    branch_price.solve_node(data, master, *other, np.inf, WorkBudget())
+    plan = branch_price.dive(data, master, (), WorkBudget())  # more columns, the LP elsewhere
     assert plan
     for restore, moved in ((True, False), (False, True)):
-        branch_price.solve_node(data, master, *other, np.inf, time.perf_counter() + 30)
+        branch_price.solve_node(data, master, *other, np.inf, WorkBudget())
         if restore:
             assert master.restore(saved)
         master.set_node(*first)
@@ -250,10 +249,10 @@ def test_penalty_dives_return_plans_of_the_true_problem_and_leave_the_true_penal
         penalties = [c.penalty for c in data.contracts]
         best = _optimum_over_every_column(data)
         master, _ = _root(data)
-        plain = branch_price.dive(data, master, (), time.perf_counter() + 60)
-        (same,) = branch_price.penalty_dives(data, _root(data)[0], time.perf_counter() + 60, factors=(1.0,))
+        plain = branch_price.dive(data, master, (), WorkBudget())
+        (same,) = branch_price.penalty_dives(data, _root(data)[0], WorkBudget(), factors=(1.0,))
         assert same == plain, f"seed {seed}"
-        plans = branch_price.penalty_dives(data, master, time.perf_counter() + 60, factors=(2.0, 3.0))
+        plans = branch_price.penalty_dives(data, master, WorkBudget(), factors=(2.0, 3.0))
         assert len(plans) == 2
         pool = {(c.k, c.sequence) for c in master.columns}
         for plan in plans:
@@ -268,13 +267,14 @@ def test_penalty_dives_return_plans_of_the_true_problem_and_leave_the_true_penal
     assert better >= 2
 
 
-def test_a_plan_whose_time_is_already_up_is_feasible_and_claims_no_proof():
-    """The time limit counts from `started_at`: already spent, the planner (column generation forced by a cap of 3
-    labels per vessel) prices nothing more and returns at once a feasible plan, neither optimal nor with a gap."""
+def test_a_plan_whose_work_is_already_spent_is_feasible_and_claims_no_proof():
+    """With no work left (a budget of 0 units), the planner (column generation forced by a cap of 3 labels per
+    vessel) prices nothing more and returns at once a feasible plan, neither optimal nor with a gap, and says the
+    effort stopped it."""
     data = problem.build(*random_instance(5, 20, seed=1800, horizon_days=25, n_ports=8, window_days=6), fuel_price=600.0)
-    plan = milp.solve(data, time_limit_s=1.0, max_labels=3, started_at=time.perf_counter() - 100.0)
+    plan = milp.solve(data, max_labels=3, budget=WorkBudget(0))
     assert plan.status == "feasible" and not np.isfinite(plan.gap)
-    assert plan.runtime_s >= 100.0
+    assert plan.stopped_by == f"effort: {plan.work_units:,.0f} units spent, no lower bound yet"
     assert len(plan.schedules) + len(plan.unassigned) >= 1
-    full = milp.solve(data, time_limit_s=60.0, max_labels=3)
-    assert full.status == "optimal" and full.cost <= plan.cost
+    full = milp.solve(data, max_labels=3)
+    assert full.status == "optimal" and full.cost <= plan.cost and full.stopped_by == "proven optimal"

@@ -95,6 +95,8 @@ def _plans(root) -> int:
                                                  ("--penalty", "-1", "--penalty -1: give a number ≥ 0"),
                                                  ("--penalty", "1e308", "and at most 1e+12"),
                                                  ("--time-limit", "inf", "--time-limit inf: give a number above 0"),
+                                                 ("--effort", "0", "--effort 0: give a number above 0"),
+                                                 ("--effort", "1e9", "--effort 1e+09: give a number above 0 and at most 300"),
                                                  ("--as-of", "9999-01-01T00:00Z", "timestamp out of range")])
 def test_plan_fleet_refuses_its_own_absurd_numbers_before_storing_anything(fleet_root, monkeypatch, option, value, says):
     from typer.testing import CliRunner
@@ -111,6 +113,7 @@ def test_plan_fleet_refuses_its_own_absurd_numbers_before_storing_anything(fleet
     assert _plans(root) == before
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_plan_with_no_legs_is_stored_with_every_contract_left(fleet_root, tmp_path):
     from flows.jobs.planning import plan_fleet_job
 
@@ -128,6 +131,7 @@ def test_a_plan_with_no_legs_is_stored_with_every_contract_left(fleet_root, tmp_
                            [s["plan_id"]]).fetchone() == (s["n_contracts"],)
 
 
+@pytest.mark.slow  # the planning job end to end on an imported demo fleet
 def test_a_book_larger_than_the_planner_builds_in_bounded_memory_is_refused_before_building(fleet_root, tmp_path,
                                                                                             monkeypatch):
     from typer.testing import CliRunner

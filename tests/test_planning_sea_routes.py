@@ -9,7 +9,7 @@ import pytest
 
 from pipeline.planning import brute, milp, problem
 from pipeline.planning.problem import Contract, PlanVessel
-from pipeline.planning.sea_distances import canal_map, distance_map, hours, sea_distance
+from pipeline.planning.sea_distances import avoiding, canal_map, distance_map, hours, sea_distance
 
 SHANGHAI = (31.0, 122.7)
 ROTTERDAM = (52.0, 3.7)
@@ -28,7 +28,7 @@ def test_a_distance_through_suez_carries_the_canal_time():
     c = Contract("C1", "grain", 10000, 40000, "Rotterdam", "Shanghai", 0.0, 100.0, 1e6)
     data = problem.build([v], [c], distance_map([d]), 500.0, canals=canal_map([d]))
     assert data.per_vessel[0].dur_h[0] == pytest.approx(48.0 + (d.dist_nm - d.canal_nm) / 12.0 + 26.0)
-    plan = milp.solve(data, time_limit_s=10.0)
+    plan = milp.solve(data)
     (laden,) = [leg for s in plan.schedules for leg in s.legs if leg.kind == "laden"]
     assert laden.arrive_h - laden.depart_h == pytest.approx((d.dist_nm - d.canal_nm) / 12.0 + 26.0)
     # without the canal map the same distance would be sailed at 12 kn all the way: 24 h shorter than the truth
@@ -48,16 +48,40 @@ def test_a_missing_start_distance_leaves_the_cargo_to_be_lifted_after_another():
     va = data.per_vessel[0]
     assert va.contracts == [0, 1] and ("s", 1) not in va.arcs and (0, 1) in va.arcs
     assert 1 not in data.reasons
-    for plan in (brute.solve(data), milp.solve(data, time_limit_s=10.0)):
+    for plan in (brute.solve(data), milp.solve(data)):
         assert plan.status == "optimal" and not plan.unassigned
         assert [s.sequence for s in plan.schedules] == [(0, 1)]
     # with no way into B at all (no start arc, no earlier cargo reaching it) it is left with a reason that says so
     cut = {**dist, ("D1", "L2"): math.nan}
     data = problem.build([v], [a, b], cut, 500.0)
-    plan = milp.solve(data, time_limit_s=10.0)
+    plan = milp.solve(data)
     assert list(plan.unassigned) == [1] and "no sea route from any start port" in plan.unassigned[1]
 
 
 def test_distances_are_refused_with_the_layer_s_reason():
     land = sea_distance("Singapore", SINGAPORE, "Tokyo city", (35.68, 139.76))
     assert math.isnan(land.dist_nm) and "on land" in land.reason and land.canal_h == 0.0
+
+
+def test_a_fleet_avoiding_suez_plans_with_the_cape_distance(tmp_path, monkeypatch):
+    """The fleet's avoided passages (JITROUTE_AVOID_PASSAGES, the setting its voyages are routed with) hold for the
+    planner's distances too: Singapore–Rotterdam goes round the Cape, and the stored table keeps the Suez route."""
+    from flows.jobs.planning import complete_distances
+    from flows.settings import load_settings
+    from storage import planning_store
+
+    monkeypatch.setenv("JITROUTE_AVOID_PASSAGES", "suez")
+    avoid = load_settings(data_root=tmp_path).routing.avoid_passages
+    assert avoid == ("suez",)
+    db = tmp_path / "warehouse.duckdb"
+    ports = {"Rotterdam": ROTTERDAM, "Singapore": SINGAPORE}
+    (suez,) = complete_distances(db, ports, {("Singapore", "Rotterdam")})
+    (cape,) = complete_distances(db, ports, {("Singapore", "Rotterdam")}, avoid)
+    assert "suez" in suez.passages.split(";") and suez.canal_h == 26.0
+    assert "suez" not in (cape.passages or "") and cape.canal_h == 0.0 and cape.canal_nm == 0.0
+    # searoute 1.6.0 (bench/sea_routes_searoute.json): round the Cape of Good Hope 11,839 NM, through Suez 8,351 NM
+    assert cape.dist_nm == pytest.approx(11839, rel=0.03) and suez.dist_nm == pytest.approx(8351, rel=0.03)
+    stored = planning_store.load_port_distances(db)
+    assert len(stored) == 1 and "suez" in stored["passages"][0]
+    # a pair whose route sails none of the avoided passages is the stored one
+    assert avoiding([suez], {"panama"}) == [suez]

@@ -71,6 +71,7 @@ def _assert_every_cargo_once_and_no_vessel_twice(root, codes):
         assert not overlap.any(), mine[["voyage_id", "depart_utc", "rta_utc"]]
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 def test_plan_sail_a_ballast_leg_re_plan_twice_every_cargo_is_planned_once_and_no_vessel_is_double_booked(tmp_path):
     root, files = _fleet_root(tmp_path)
     first = _plan(root, files, "2020-12-01T00:00Z", first=True)
@@ -102,6 +103,7 @@ def test_plan_sail_a_ballast_leg_re_plan_twice_every_cargo_is_planned_once_and_n
     assert pd.isna(new) or new >= end
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 def test_a_re_plan_as_of_before_the_active_plan_is_refused_and_deletes_nothing(tmp_path):
     root, files = _fleet_root(tmp_path)
     _plan(root, files, "2020-12-02T00:00Z", first=True)
@@ -112,6 +114,7 @@ def test_a_re_plan_as_of_before_the_active_plan_is_refused_and_deletes_nothing(t
     assert set(_voyages(root)["voyage_id"]) == before
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 def test_the_planner_does_not_book_a_vessel_during_its_voyages_from_the_voyages_file(tmp_path):
     root, files = _fleet_root(tmp_path)
     _plan(root, files, "2020-12-01T00:00Z", first=True)
@@ -128,6 +131,7 @@ def test_the_planner_does_not_book_a_vessel_during_its_voyages_from_the_voyages_
             assert first["dep_name"] == last_file["arr_name"]  # from where that voyage ends
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 def test_a_noon_report_since_its_departure_makes_a_plan_voyage_sailed_whatever_the_as_of(tmp_path):
     from storage import warehouse
 
@@ -145,6 +149,7 @@ def test_a_noon_report_since_its_departure_makes_a_plan_voyage_sailed_whatever_t
         assert leg["contract_code"] in {r["code"] for r in second["committed"]}
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 def test_a_voyages_file_cannot_replace_a_plan_voyage_by_reusing_its_id(tmp_path):
     import shutil
 
@@ -166,6 +171,7 @@ def test_a_voyages_file_cannot_replace_a_plan_voyage_by_reusing_its_id(tmp_path)
                                                f"{plan_voyage['plan_id']}")
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 def test_latest_routes_drops_the_plans_of_voyages_a_re_plan_replaced(tmp_path):
     from storage import warehouse
 
@@ -184,6 +190,7 @@ def test_latest_routes_drops_the_plans_of_voyages_a_re_plan_replaced(tmp_path):
     assert shown == (set(routed) & stored) | {"ad-hoc"}  # a route of no stored voyage but no plan's either stays
 
 
+@pytest.mark.slow  # end to end through the `jitroute` commands on an imported fleet
 @pytest.mark.parametrize("at, pos, why", [
     ("2020-12-01T12:00", "34.3000,140.3000", "is before its departure 2020-12-01 13:00"),
     ("2021-12-05T00:00", "13.4000,144.5000", "days after its RTA 2020-12-05 01:12"),

@@ -122,6 +122,13 @@ for n, (kind, rta, obj, waits) in enumerate(itertools.product(("static", "storm"
                                                               ("round", "wait"))):
     rpms = [(70, 85, 100), (75, 100), (60, 70, 80, 90, 100)][n % 3]
     CASES.append((kind, rta, obj, waits, rpms, n))
+# `make test-fast` runs one case of each weather that between them meet every RTA, objective and waiting rule (and two
+# and three settings); `make test` runs them all
+FAST_CASES = {("static", "loose", "jit", "round"), ("storm", "tight", "thesis", "wait"),
+              ("current", "impossible", "jit", "wait"), ("storm-limit", "tight", "jit", "round"),
+              ("storm-window", "impossible", "thesis", "round")}
+CASE_PARAMS = [pytest.param(*c, id=f"{c[0]}-{c[1]}-{c[2]}-{c[3]}-{len(c[4])}rpm",
+                            marks=() if c[:4] in FAST_CASES else pytest.mark.slow) for c in CASES]
 
 
 def _instance(kind, rta, obj, rpms, n, n_lines):
@@ -137,8 +144,7 @@ def _instance(kind, rta, obj, rpms, n, n_lines):
     return inst, base
 
 
-@pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASES,
-                         ids=[f"{c[0]}-{c[1]}-{c[2]}-{c[3]}-{len(c[4])}rpm" for c in CASES])
+@pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASE_PARAMS)
 def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)  # "wait": up to 3 slots more at a node
     n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
@@ -164,8 +170,7 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
         assert best >= (LATE_STEP_T if obj == "jit" else 9999.9)
 
 
-@pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASES,
-                         ids=[f"{c[0]}-{c[1]}-{c[2]}-{c[3]}-{len(c[4])}rpm" for c in CASES])
+@pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASE_PARAMS)
 def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optimum(kind, rta, obj, waits, rpms, n):
     """What `--solver dp` runs by default: the label DP first, then the grid DP over the grid and the departure
     times of the baseline and of the label DP's plan. Equal to enumeration of that space, never dearer than the
@@ -192,6 +197,7 @@ def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optim
         assert cost <= evaluate(inst, label.nodes, label.rpm_idx)[0] + 1e-9
 
 
+@pytest.mark.slow  # every window case solved through the product path
 def test_the_window_cases_open_and_close():
     """storm-window closes the route's first legs at the start and opens them later: leaving at once is refused
     by the limit, leaving 4 h later is not. No wait-free plan exists; the grid DP's plan waits at the departure."""

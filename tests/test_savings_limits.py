@@ -103,7 +103,7 @@ def test_best_engine_plan_on_a_route_equals_enumeration(weather, rpm_rta):
 
 
 def test_limited_plan_holds_every_setting_and_costs_fuel():
-    pr = _voyage(80.0, n_lines=8, n_points=7)
+    pr = _voyage(80.0, n_lines=6, n_points=7)
     limits = EngineLimits(min_hold_h=12.0, change_cost_t=0.05)
     space = pr.search_space()
     # over the settings alone (continuous=False), where every engine plan on a route can be enumerated

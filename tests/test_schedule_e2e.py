@@ -10,7 +10,6 @@ Then everything is stopped and no process of the test may be left behind.
 from __future__ import annotations
 
 import json
-import signal
 from datetime import datetime, timezone
 import subprocess
 
@@ -19,7 +18,7 @@ import httpx
 import pytest
 
 from tests.conftest import fleet_data_root, mirror_urls
-from tests.processes import VENV_BIN, describe, free_port, kill_tagged, new_tag, poll, tagged_env, wait_until_gone
+from tests.processes import VENV_BIN, poll, prefect_server_and_serve
 
 pytestmark = pytest.mark.slow
 
@@ -42,36 +41,13 @@ def _runs(api: str) -> list[dict]:
 
 def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_root, tmp_path):
     root, urls = scheduled_root
-    tag = new_tag()
-    port = free_port()
-    api = f"http://127.0.0.1:{port}/api"
-    home = tmp_path / "prefect_home"
-    env = tagged_env(tag, PREFECT_HOME=str(home), PREFECT_LOGGING_LEVEL="INFO",
-                     PREFECT_SERVER_SERVICES_SCHEDULER_LOOP_SECONDS="5", JITROUTE_DASK_WORKERS="1")
-    server = serve = None
-    logs = tmp_path / "logs"
-    logs.mkdir()
-    try:
-        server = subprocess.Popen([str(VENV_BIN / "prefect"), "server", "start", "--host", "127.0.0.1", "--port", str(port)],
-                                  env=env, stdout=open(logs / "server.log", "w"), stderr=subprocess.STDOUT,
-                                  start_new_session=True)
-
-        def healthy():
-            try:
-                return httpx.get(f"{api}/health", timeout=2).status_code == 200
-            except httpx.HTTPError:
-                assert server.poll() is None, (logs / "server.log").read_text()[-3000:]
-                return False
-
-        poll("the Prefect server", healthy, 120, 0.5)
-        client_env = dict(env, PREFECT_API_URL=api)
-        serve = subprocess.Popen([str(VENV_BIN / "jitroute"), "serve", "--nightly-cron", "* * * * *", "--data", str(root),
-                                  "--rish-url", urls["rish_url"], "--oscar-url", urls["oscar_url"]],
-                                 env=client_env, cwd=tmp_path, stdout=open(logs / "serve.log", "w"),
-                                 stderr=subprocess.STDOUT, start_new_session=True)
+    with prefect_server_and_serve(tmp_path, ["--nightly-cron", "* * * * *", "--data", str(root), "--rish-url",
+                                             urls["rish_url"], "--oscar-url", urls["oscar_url"]],
+                                  PREFECT_SERVER_SERVICES_SCHEDULER_LOOP_SECONDS="5", JITROUTE_DASK_WORKERS="1") as served:
+        api, client_env = served.api, served.env
 
         def refused_scheduled_nightly():
-            assert serve.poll() is None, (logs / "serve.log").read_text()[-3000:]
+            assert served.serve.poll() is None, served.log("serve")
             runs = [r for r in _runs(api) if r.get("auto_scheduled") and r.get("deployment_id")]
             ended = [r for r in runs if r["state_type"] in ("COMPLETED", "FAILED", "CRASHED")]
             assert all(r["state_type"] == "FAILED" for r in ended), json.dumps(ended, indent=1)[:3000]
@@ -123,15 +99,4 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
         assert routed and routed[0][1] == 2 and str(routed[0][2]).startswith("2020-12-01 00:00") and routed[0][3] == 0.0
         assert any(r[0] == "failed" and "weather too old" in r[4] for r in runs), runs
         assert starts == {"V20001": "noon report", "V20002": "port"}
-    finally:
-        for proc in (serve, server):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=60)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-        left = wait_until_gone(tag, 30)
-        kill_tagged(tag)
-    assert not left, f"processes left running after serve and the server stopped:\n{describe(left)}"
-    assert "Can't evaluate bulk DML" not in (logs / "server.log").read_text()
+    assert "Can't evaluate bulk DML" not in (served.logs / "server.log").read_text()

@@ -56,6 +56,7 @@ def names(route):
     return [p.name for p in route.passages]
 
 
+@pytest.mark.slow  # a bench-sized voyage over the whole ocean
 def test_shanghai_rotterdam_goes_through_suez_and_avoiding_it_goes_round_africa():
     r = sea_route(SHANGHAI, ROTTERDAM)
     check(r)
@@ -83,6 +84,7 @@ def test_new_york_los_angeles_through_panama():
     assert_clear_outside_fairways(r, NEW_YORK, LOS_ANGELES)
 
 
+@pytest.mark.slow  # bench-sized voyages over the whole ocean
 def test_singapore_shanghai_and_rotterdam_piraeus_through_gibraltar():
     r = sea_route(SINGAPORE, SHANGHAI)
     check(r)
@@ -129,6 +131,7 @@ def test_pacific_crossing_over_the_antimeridian():
     assert back.dist_nm == pytest.approx(r.dist_nm, rel=0.01)
 
 
+@pytest.mark.slow  # bench-sized voyages over the whole ocean
 def test_black_sea_through_the_turkish_straits_and_refused_when_they_are_avoided():
     r = sea_route(PIRAEUS, CONSTANTA)
     check(r)
@@ -179,3 +182,11 @@ def test_the_sea_route_command_prints_the_route_and_refuses_with_the_reason(tmp_
     assert res.exit_code == 0 and "panama" not in res.output
     res = CliRunner().invoke(app, ["sea-route", "42.0,51.0", "40.0,-40.0"])
     assert res.exit_code == 2 and "on land" in res.output
+
+
+def test_colon_balboa_is_at_least_the_canal_s_published_length():
+    """searoute gives 37.7 NM, shorter than the canal itself; the bench's reference for the pair is the Panama Canal
+    Authority's length, about 80 km (43.2 NM) from deep water to deep water (bench/sea_routes_searoute.json)."""
+    r = sea_route((9.42, -79.93), (8.85, -79.5))  # Colón and Balboa anchorages, the bench's positions
+    assert [p.name for p in r.passages] == ["panama"]
+    assert 43.2 <= r.dist_nm <= 43.2 * 1.08

@@ -10,7 +10,7 @@ import httpx
 import pytest
 
 from tests.conftest import mirror_urls
-from tests.processes import VENV_BIN, describe, free_port, kill_tagged, new_tag, poll, tagged_env, wait_until_gone
+from tests.processes import VENV_BIN, poll, prefect_server_and_serve
 
 pytestmark = pytest.mark.slow
 
@@ -26,58 +26,25 @@ def test_sigterm_lets_the_flow_run_in_flight_finish(demo_mirror, tmp_path):
 
     root = tmp_path / "data"
     urls = mirror_urls(demo_mirror)
-    tag = new_tag()
-    port = free_port()
-    api = f"http://127.0.0.1:{port}/api"
-    env = tagged_env(tag, PREFECT_HOME=str(tmp_path / "prefect_home"), PREFECT_LOGGING_LEVEL="INFO",
-                     JITROUTE_DASK_WORKERS="1")
-    logs = tmp_path / "logs"
-    logs.mkdir()
-    server = serve = None
-    try:
-        server = subprocess.Popen([str(VENV_BIN / "prefect"), "server", "start", "--host", "127.0.0.1", "--port", str(port)],
-                                  env=env, stdout=open(logs / "server.log", "w"), stderr=subprocess.STDOUT,
-                                  start_new_session=True)
-
-        def healthy():
-            try:
-                return httpx.get(f"{api}/health", timeout=2).status_code == 200
-            except httpx.HTTPError:
-                assert server.poll() is None, (logs / "server.log").read_text()[-3000:]
-                return False
-
-        poll("the Prefect server", healthy, 120, 0.5)
-        client_env = dict(env, PREFECT_API_URL=api)
-        serve = subprocess.Popen([str(VENV_BIN / "jitroute"), "serve", "--data", str(root), "--rish-url", urls["rish_url"],
-                                  "--oscar-url", urls["oscar_url"]], env=client_env, cwd=tmp_path,
-                                 stdout=open(logs / "serve.log", "w"), stderr=subprocess.STDOUT, start_new_session=True)
+    with prefect_server_and_serve(tmp_path, ["--data", str(root), "--rish-url", urls["rish_url"],
+                                             "--oscar-url", urls["oscar_url"]], JITROUTE_DASK_WORKERS="1") as served:
+        api = served.api
 
         def deployed():
-            assert serve.poll() is None, (logs / "serve.log").read_text()[-3000:]
+            assert served.serve.poll() is None, served.log("serve")
             names = {d["name"] for d in httpx.post(f"{api}/deployments/filter", json={}, timeout=10).json()}
             return "backfill" in names
 
         poll("serve's deployments", deployed, 180, 1)
         r = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "run", "backfill/backfill", "-p", "start=2020-12-01",
-                            "-p", "end=2020-12-01", "-p", "cycles=0"], env=client_env, capture_output=True, text=True,
+                            "-p", "end=2020-12-01", "-p", "cycles=0"], env=served.env, capture_output=True, text=True,
                            timeout=120)
         assert r.returncode == 0, r.stderr[-2000:]
         run_id = next(w for w in r.stdout.split() if w.count("-") == 4 and len(w) == 36)
         poll("the backfill to be running", lambda: _run(api, run_id)["state_type"] == "RUNNING", 300, 0.5)
-        serve.send_signal(signal.SIGTERM)
-        assert serve.wait(timeout=600) in (0, 143), (logs / "serve.log").read_text()[-3000:]
+        served.serve.send_signal(signal.SIGTERM)
+        assert served.serve.wait(timeout=600) in (0, 143), served.log("serve")
         state = _run(api, run_id)
-        assert state["state_type"] == "COMPLETED", (state["state"], (logs / "serve.log").read_text()[-3000:])
+        assert state["state_type"] == "COMPLETED", (state["state"], served.log("serve"))
         assert cube.complete_cycles(root / "cubes" / "weather.zarr")  # its work is stored
-        assert "waiting up to" in (logs / "serve.log").read_text()
-    finally:
-        for proc in (serve, server):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=60)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-        left = wait_until_gone(tag, 30)
-        kill_tagged(tag)
-    assert not left, f"processes left running after serve and the server stopped:\n{describe(left)}"
+        assert "waiting up to" in (served.logs / "serve.log").read_text()

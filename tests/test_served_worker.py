@@ -13,6 +13,7 @@ import pytest
 
 from tests.http_mirror import serve
 from tests.processes import VENV_BIN, describe, kill_tagged, new_tag, tagged_env, wait_until_gone
+from tests.processes import prefect as run_prefect
 
 pytestmark = pytest.mark.slow
 
@@ -51,10 +52,7 @@ def test_a_work_pool_worker_refuses_a_callers_data_root_urls_and_host_files(pref
     env.pop("JITROUTE_SERVED", None)  # a worker is no `jitroute serve`: the flows must know on their own
 
     def prefect(*args: str) -> str:
-        r = subprocess.run([str(VENV_BIN / "prefect"), "--no-prompt", *args], cwd=REPO, env=env, capture_output=True,
-                           text=True, timeout=300)
-        assert r.returncode == 0, (args, r.stdout[-3000:], r.stderr[-3000:])
-        return r.stdout
+        return run_prefect(*args, env=env, cwd=REPO)
 
     prefect("work-pool", "create", "jitroute", "--type", "process", "--overwrite")
     prefect("deploy", "--all", "--prefect-file", str(REPO / "deploy" / "prefect.yaml"))

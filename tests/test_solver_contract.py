@@ -10,16 +10,13 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
 import pytest
 
-from pipeline.routing import leg_kernel as lk
-from pipeline.routing.baseline import shortest_route
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.options import SOLVER_NAMES, RoutingOptions, UnknownSolverError
-from pipeline.routing.problem import Instance, RoutingInputError
+from pipeline.routing.problem import RoutingInputError
 from pipeline.routing.solvers import SOLVERS
-from routing_cases import FAST, field, moving_storm, problem, solve, wavy
+from routing_cases import FAST, constant_speed, field, moving_storm, problem, solve, wavy
 
 DEP, ARR = (30.0, -160.0), (33.0, -146.0)
 WAVY = field(wavy(7))
@@ -41,30 +38,8 @@ CASES = {  # name → (weather, RTA as the calm passage at this rpm)
 
 
 def _constant_speed(pr, weather, base: str = "gc") -> tuple[float, float, float]:
-    """(rpm, hours, fuel) of the base route (along the great circle, or the rhumb line) at the one constant rpm
-    between the extremes arriving at the RTA: bisection on the hours of the route sailed at one setting (the
-    slowest when early, the fastest when late)."""
-    space = replace(pr, base=base).search_space()
-    inst = Instance.build(pr, space, weather)
-    nodes = shortest_route(space)
-
-    def sail(rpm):
-        v = inst.vessel._replace(rpm_options=np.array([rpm]))
-        ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
-        code, _ = lk.sail_route_nb(nodes, np.zeros(len(nodes) - 1, np.int64), 0, inst.graph, v, inst.wx,
-                                   inst.objective, ct, cf)
-        assert code == lk.OK
-        return ct[-1] - inst.t_dep_h, cf[-1]
-
-    lo, hi = min(pr.rpm_options), max(pr.rpm_options)
-    if sail(lo)[0] <= pr.t_req_h:
-        return (lo, *sail(lo))
-    if sail(hi)[0] > pr.t_req_h:
-        return (hi, *sail(hi))
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if sail(mid)[0] <= pr.t_req_h else (mid, hi)
-    return (hi, *sail(hi))
+    """`constant_speed` along the base route (the great circle, or the rhumb line)."""
+    return constant_speed(pr, replace(pr, base=base).search_space(), weather)
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

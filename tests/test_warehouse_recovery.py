@@ -186,7 +186,8 @@ def _immutable(path: Path, on: bool) -> bool:
 def test_an_immutable_warehouse_is_named_as_unwritable_not_as_busy(fleet_root, tmp_path):
     db = DataLayout(fleet_root).warehouse
     if shutil.which("chattr") is None or not _immutable(db, True):
-        pytest.skip("chattr +i is not available on this file system")
+        pytest.skip("machine capability: `chattr +i` is missing or refused here (it needs root and a file system with "
+                    "the immutable flag, such as ext4 or xfs)")
     try:
         before = _digest(db)
         code, out = _cli("noon", "import", str(tmp_path / "fleet" / "noon_reports.csv"), "--data", str(fleet_root))

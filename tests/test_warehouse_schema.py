@@ -92,6 +92,6 @@ def test_the_snapshot_is_written_in_the_declared_storage_version_and_opens_read_
     assert not list(tmp_path.glob("*.tmp*"))
     with duckdb.connect(str(snap), read_only=True) as con:
         assert con.execute("SELECT voyage_id, fuel_t FROM latest_routes").fetchall() == [("V1", 5.0)]
-        # 4 + fleet_plans.status and fleet_plan_legs.kind
-        assert con.execute("SELECT count(*) FROM duckdb_constraints() WHERE constraint_type = 'CHECK'").fetchone()[0] == 6
+        # 4 + fleet_plans.status and fleet_plan_legs.kind + plan_verification.coverage
+        assert con.execute("SELECT count(*) FROM duckdb_constraints() WHERE constraint_type = 'CHECK'").fetchone()[0] == 7
         assert _undescribed(con) == []

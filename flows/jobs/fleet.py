@@ -431,6 +431,7 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
                                                  nominal_utc=str(np.datetime64(nominal, "m")))
             except StaleWeatherError as exc:
                 refused = str(exc)
+        summary["verification"] = verify_after_routing(run, data_root)
         if refused:
             summary.update(state="Failed", refused=refused)
     run.publish(key="nightly-summary", markdown=nightly_markdown(summary),
@@ -439,6 +440,19 @@ def nightly_job(date: str | None = None, data_root: str | None = None, rish_url:
     if refused:
         raise StaleWeatherError(refused)
     return summary
+
+
+def verify_after_routing(run, data_root: str | None) -> dict | None:
+    """The nightly's last step: the stored plans re-sailed in the analysed weather of the cycles now in the cube
+    (flows/jobs/verify.py). A failure is logged and said in the summary; it never fails the nightly's routing."""
+    from flows.jobs.verify import verify_plans_job
+
+    LOG.info("[nightly] verify: stored plans re-sailed in the analysed weather of the newest cycles")
+    try:
+        return run.subflow("verify-plans", verify_plans_job, data_root=data_root)
+    except Exception as exc:  # the plans are stored; verification can run again (`jitroute verify`)
+        LOG.error("verification failed: %s: %s; run `jitroute verify` once fixed", type(exc).__name__, exc)
+        return {"error": f"{type(exc).__name__}: {exc}"}
 
 
 def _r(x, nd=1):
@@ -463,6 +477,14 @@ def summary_table(r: dict) -> list[dict]:
             {"what": "savings % past the forecast (neutral weather, not forecast)",
              "value": _r(r.get("savings_beyond_forecast_pct"))},
             {"what": "voyages past the forecast's last step", "value": r.get("n_beyond_horizon")},
+            {"what": "P(on time) across the lagged ensemble, mean of the voyages", "value": _r(r.get("p_on_time"), 2)},
+            {"what": "saving P10 % across the ensemble (fuel-weighted)", "value": _r(r.get("savings_p10_pct"))},
+            {"what": "saving P90 % across the ensemble (fuel-weighted)", "value": _r(r.get("savings_p90_pct"))},
+            {"what": "plans verified in analysed weather (wholly)",
+             "value": f"{r.get('n_verified') or 0} ({r.get('n_verified_whole') or 0})"},
+            {"what": "… their saving % claimed / realised",
+             "value": f"{_r(r.get('verified_claimed_savings_pct'))} / {_r(r.get('realised_savings_pct'))}"
+                      if _r(r.get("realised_savings_pct")) is not None else "not known yet"},
             {"what": "constant-speed baseline fuel t", "value": _r(r.get("honest_baseline_fuel_t"))},
             {"what": "engine-change limits cost t", "value": _r(r.get("limits_fuel_t"), 2)}]
     return rows
@@ -481,7 +503,17 @@ def headline(r: dict) -> str:
     return (f"Savings {total} % against sailing the base route at the one constant speed that arrives at the RTA "
             f"({r.get('n_compared')} voyages, fuel-weighted): speed profile {_r(r.get('savings_speed_profile_pct'))} %, "
             f"route {_r(r.get('savings_route_pct'))} %. The engine-change limits cost "
-            f"{_r(r.get('limits_fuel_t'), 2)} t.{_forecast_split(r)}")
+            f"{_r(r.get('limits_fuel_t'), 2)} t.{_forecast_split(r)}{_spread(r)}")
+
+
+def _spread(r: dict) -> str:
+    """The run's spread across the lagged ensemble (ensemble.py), when its plans have it."""
+    p = _r(r.get("p_on_time"), 2)
+    if p is None:
+        return ""
+    n = r.get("n_ensemble") or 0
+    return (f" Across the lagged ensemble ({n} voyage{'s' if n != 1 else ''}): on time {100 * p:.0f} % of the time on "
+            f"average, saving P10–P90 {_r(r.get('savings_p10_pct'))} to {_r(r.get('savings_p90_pct'))} % (fuel-weighted).")
 
 
 def _forecast_split(r: dict) -> str:
@@ -529,4 +561,19 @@ def nightly_markdown(summary: dict) -> str:
                      f"{'skipped (already complete)' if i.get('skipped') else '; '.join(i.get('missing') or [])[:200]} |")
     if summary.get("routing"):
         lines += ["", run_markdown(summary["routing"])]
+    lines += ["", verification_markdown(summary.get("verification"))] if summary.get("verification") else []
+    return "\n".join(lines) + "\n"
+
+
+def verification_markdown(v: dict) -> str:
+    """What the plans realised in the analysed weather: claimed beside realised, with the coverage."""
+    from flows.jobs.verify import verification_sentence
+
+    if v.get("error"):
+        return f"## Verification\n\nVerification failed: {markdown_cell(v['error'])} (run `jitroute verify` once fixed)\n"
+    said = verification_sentence(v) or (f"No plan to verify yet with the analysed weather up to cycle {v.get('newest_cycle')}."
+                                        if v.get("newest_cycle") else "No cycle to verify with.")
+    lines = ["## Verification", "", said]
+    if v.get("skipped"):
+        lines += ["", f"Not verified: {markdown_cell('; '.join(v['skipped'])[:500])}"]
     return "\n".join(lines) + "\n"

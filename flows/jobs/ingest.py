@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import uuid
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -115,7 +116,7 @@ class Listing:
 
 
 def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[int], opts: dict[str, FetchOptions],
-                 optional: list[int] = ()) -> Listing:
+                 optional: Sequence[int] = ()) -> Listing:
     """The files each registered source has for the cycle (`base_urls`: source name → base URL) at the leads it must
     have (`steps`) and at the optional ones it lists (`optional`). Each index page is read once; the secondary
     sources are listed only when a primary one has files for the cycle."""
@@ -137,7 +138,8 @@ def list_sources(base_urls: dict[str, str], cycle: np.datetime64, steps: list[in
                 return url, []
         return url, pages[url][0]
 
-    items, gaps, n_expected, index_urls = [], {}, 0, []
+    items: list[Download] = []
+    gaps, n_expected, index_urls = {}, 0, []
     for src in sorted(SOURCES, key=lambda src: not src.primary):  # primary first, registry order kept
         if not src.primary and not items:
             break
@@ -180,6 +182,7 @@ def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opt
 
 def _decoded_or_quarantined(it: Download, decode, quarantine_dir: Path):
     """`decode(file)`, or None after marking the file corrupt and moving it to quarantine."""
+    assert it.result is not None, f"{it.url} is decoded before it is fetched"
     try:
         return decode(it.result.path)
     except DecodeError as exc:
@@ -197,16 +200,16 @@ def _decode_one(it: Download, grid: tuple, quarantine_dir: Path):
 
 
 def decode_and_assemble(items: list[Download], cycle: np.datetime64, steps: list[int], grid: tuple, quarantine_dir: Path,
-                        optional: list[int] = ()):
+                        optional: Sequence[int] = ()):
     """Files of thread-safe decoders (GRIB2) decoded DECODE_WORKERS at a time, the others (OSCAR NetCDF: HDF5 is not
     thread-safe) in this thread meanwhile; then assembled by the role of their source onto the cube's step axis
     (`steps` and then `optional`, the leads a cycle may add)."""
     usable = [it for it in items if it.status in ("ok", "skipped")]
     pooled = [it for it in usable if BY_NAME[it.source].thread_safe_decode]
     with ThreadPoolExecutor(DECODE_WORKERS, thread_name_prefix="decode") as pool:
-        decoded = pool.map(lambda it: (it, _decode_one(it, grid, quarantine_dir)), pooled)
+        in_pool = pool.map(lambda it: (it, _decode_one(it, grid, quarantine_dir)), pooled)
         serial = [(it, _decode_one(it, grid, quarantine_dir)) for it in usable if not BY_NAME[it.source].thread_safe_decode]
-        decoded = list(decoded) + serial
+        decoded = list(in_pool) + serial
     by_role: dict[str, list[xr.Dataset]] = {role: [] for role in ROLES}
     for it, ds in decoded:
         if ds is not None:

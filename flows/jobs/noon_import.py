@@ -71,7 +71,7 @@ def import_noon_file(path: str, data_root: str | None = None, replace: bool = Fa
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
     known = fleet_store.known_imos(db)
-    n_rows, reasons = 0, {}
+    n_rows, reasons = 0, {}  # type: int, dict[str, int]
 
     def validated():
         nonlocal n_rows
@@ -82,7 +82,7 @@ def import_noon_file(path: str, data_root: str | None = None, replace: bool = Fa
                 reasons[reason] = reasons.get(reason, 0) + n
             yield good, bad
 
-    counts = fleet_store.import_noon_chunks(db, validated(), replace=replace)
+    counts: dict = fleet_store.import_noon_chunks(db, validated(), replace=replace)
     across = counts.pop("duplicates_in_file")  # a (vessel, time) repeated in another chunk of the file
     if across:
         reasons["duplicate timestamp in file"] = reasons.get("duplicate timestamp in file", 0) + across

@@ -93,13 +93,15 @@ class PictureProcess:
         if child is None:
             return
         try:
-            child.stdin.close()
+            if child.stdin is not None:
+                child.stdin.close()
             child.wait(timeout=30)
         except (OSError, subprocess.TimeoutExpired):
             child.kill()
             child.wait()
         finally:
-            child.stdout.close()
+            if child.stdout is not None:
+                child.stdout.close()
 
     def __enter__(self) -> PictureProcess:
         return self
@@ -127,6 +129,7 @@ def serve(requests, replies) -> None:
             name, args = _receive(requests)
         except EOFError:
             return
+        reply: tuple[bool, bytes | str]
         try:
             reply = (True, draw_here(name, *args))
         except Exception as exc:  # the parent records it as that picture's error

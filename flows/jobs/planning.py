@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import logging
 import secrets
-import time
 from pathlib import Path
 
 import pandas as pd
@@ -16,7 +15,9 @@ from flows.settings import load_settings
 from pipeline.export.plan_gantt import plan_gantt_png
 from pipeline.planning import milp, problem
 from pipeline.planning.inputs import split_list, validate_availability, validate_contracts, validate_ports
-from pipeline.planning.sea_distances import PortDistance, canal_map, distance_map, needed_pairs, sea_distance
+from pipeline.planning.sea_distances import (PortDistance, avoiding, canal_map, distance_map, needed_pairs,
+                                             sea_distance)
+from pipeline.planning.work_budget import WorkBudget
 from pipeline.planning.voyages import (DEFAULT_PENALTY,
                                        apply_commitments, plan_contracts, plan_rows, plan_vessels, replan,
                                        vessel_drafts)
@@ -45,21 +46,28 @@ def parse_as_of(as_of: str | None) -> pd.Timestamp:
 # and no time limit can interrupt it. Past this size the plan is refused, not started.
 MAX_ARC_CHECKS = 16_000_000
 MAX_TIME_LIMIT_S = 6 * 3600.0  # as long as a fleet's routing may take; a flow run cannot hold the data root for days
+MAX_EFFORT = 300.0  # effort 1 is about a CPU minute on the bench's 50 x 200 fleet: 300, some hours
 
 
-def check_parameters(fuel_price: float, penalty: float, time_limit_s: float) -> None:
+def check_parameters(fuel_price: float, penalty: float, effort: float = 1.0, time_limit_s: float | None = None
+                     ) -> None:
     """The plan's own numbers (CLI options, flow parameters): PlanningInputError naming the bad one. A negative fuel
-    price or penalty would make the cheapest plan a nonsense one (and it would become the active plan)."""
+    price or penalty would make the cheapest plan a nonsense one (and it would become the active plan). The time
+    limit (a safety cap) may be None: none."""
     from pipeline.planning.inputs import MAX_FUEL_PRICE, MAX_MONEY
 
-    for name, value, top in (("--fuel-price", fuel_price, MAX_FUEL_PRICE), ("--penalty", penalty, MAX_MONEY),
-                             ("--time-limit", time_limit_s, MAX_TIME_LIMIT_S)):
+    checks = [("--fuel-price", fuel_price, MAX_FUEL_PRICE), ("--penalty", penalty, MAX_MONEY),
+              ("--effort", effort, MAX_EFFORT)]
+    if time_limit_s is not None:
+        checks.append(("--time-limit", time_limit_s, MAX_TIME_LIMIT_S))
+    for name, value, top in checks:
         try:
             x = float(value)
         except (TypeError, ValueError):
             raise PlanningInputError(f"{name} {str(value)[:40]!r} is not a number") from None
-        if not 0 <= x <= top or (name == "--time-limit" and x <= 0):
-            raise PlanningInputError(f"{name} {x:g}: give a number {'above 0' if name == '--time-limit' else '≥ 0'} "
+        above_0 = name in ("--time-limit", "--effort")
+        if not 0 <= x <= top or (above_0 and x <= 0):
+            raise PlanningInputError(f"{name} {x:g}: give a number {'above 0' if above_0 else '≥ 0'} "
                                      f"and at most {top:g}")
 
 
@@ -121,7 +129,7 @@ def import_planning_files(db: Path, contracts: str, availability: str | None, po
     vessels = fleet_store.load_vessels(db)
     dwt = vessels[vessels["imo"].isin(avail["imo"])]["dwt"].dropna()
     types = [split_list(x) for x in avail["cargo_types"]]
-    carried = None if any(t is None for t in types) else set().union(*types)
+    carried = None if any(t is None for t in types) else set[str]().union(*(t for t in types if t is not None))
     parts["contracts"] = validate_contracts(read_table(Path(contracts)), as_of=as_of, ports=known_ports,
                                             max_dwt_t=float(dwt.max()) if len(dwt) else None, cargo_types=carried,
                                             source=Path(contracts).name)
@@ -132,8 +140,11 @@ def import_planning_files(db: Path, contracts: str, availability: str | None, po
     return {"counts": counts, "contracts": parts["contracts"][0], "contracts_rejected": parts["contracts"][1]}
 
 
-def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: set[tuple[str, str]]) -> list[PortDistance]:
-    """Stored distances of `pairs`, computing (and storing) those missing or made for other positions."""
+def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: set[tuple[str, str]],
+                       avoid=()) -> list[PortDistance]:
+    """Stored distances of `pairs`, computing (and storing) those missing or made for other positions; with the
+    passages `avoid` closed (the fleet's routing.avoid_passages) those through them computed again without them
+    (sea_distances.avoiding; not stored)."""
     stored = planning_store.load_port_distances(db)
     known = {(r["port_a"], r["port_b"]): PortDistance(r["port_a"], r["port_b"], r["lat_a"], r["lon_a"], r["lat_b"],
                                                       r["lon_b"], float("nan") if pd.isna(r["dist_nm"]) else r["dist_nm"],
@@ -151,15 +162,19 @@ def complete_distances(db: Path, ports: dict[str, tuple[float, float]], pairs: s
             known[(r.port_a, r.port_b)] = r
             if r.reason:
                 LOG.warning("ports %s and %s: %s", r.port_a, r.port_b, r.reason)
-    return [known[tuple(sorted(p))] for p in {tuple(sorted(p)) for p in pairs if p[0] != p[1]}]
+    rows = [known[tuple(sorted(p))] for p in {tuple(sorted(p)) for p in pairs if p[0] != p[1]}]
+    return avoiding(rows, avoid) if avoid else rows
 
 
 def plan_fleet_job(contracts: str, availability: str | None = None, ports: str | None = None, as_of: str | None = None,
                    data_root: str | None = None, fuel_price: float = DEFAULT_FUEL_PRICE,
-                   penalty: float = DEFAULT_PENALTY, time_limit_s: float = 60.0, picture: bool = True, *,
-                   run=PLAIN) -> dict:
-    """Plan the fleet as of `as_of` (default now) for the contracts of `contracts`; returns the plan summary."""
-    check_parameters(fuel_price, penalty, time_limit_s)
+                   penalty: float = DEFAULT_PENALTY, effort: float = 1.0, time_limit_s: float | None = None,
+                   picture: bool = True, *, run=PLAIN) -> dict:
+    """Plan the fleet as of `as_of` (default now) for the contracts of `contracts`; returns the plan summary. The
+    planner's search gets `effort` (pipeline/planning/work_budget.py: 1 the default, counted in work, so the same
+    inputs give the same plan on any machine); `time_limit_s`, when given, is a wall-clock safety cap on building
+    the problem and the search."""
+    check_parameters(fuel_price, penalty, effort, time_limit_s)
     t_as_of = parse_as_of(as_of)
     s = load_settings(data_root=Path(data_root) if data_root else None)
     layout = s.layout.ensure()
@@ -183,10 +198,10 @@ def plan_fleet_job(contracts: str, availability: str | None = None, ports: str |
     pairs |= {(v.start_port, c.load_port) for v in vessels for c in cons}
     pairs |= {(a.discharge_port, b.load_port) for a in cons for b in cons}
     pairs |= {(c.discharge_port, v.end_port) for v in vessels for c in cons if v.end_port}
-    dists = run.step(complete_distances, db, port_pos, pairs, name="sea-distances")
-    started = time.perf_counter()  # the time limit covers building the problem too
+    dists = run.step(complete_distances, db, port_pos, pairs, tuple(s.routing.avoid_passages), name="sea-distances")
+    budget = WorkBudget.of_effort(float(effort), wall_limit_s=time_limit_s)  # the safety cap covers the build too
     data = problem.build(vessels, cons, distance_map(dists), fuel_price, canals=canal_map(dists))
-    plan = run.step(milp.solve, data, time_limit_s=time_limit_s, started_at=started, name="plan")
+    plan = run.step(milp.solve, data, budget=budget, name="plan")
     plan_id = f"plan-{t_as_of:%Y%m%dT%H%M}-{secrets.token_hex(3)}"
     row, legs, left, voyages = plan_rows(plan, data, plan_id, t_as_of, port_pos, vessel_drafts(fleet))
     stored = planning_store.save_plan(db, row, legs, left, voyages, keep.replaced)

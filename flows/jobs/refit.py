@@ -40,7 +40,7 @@ def import_fleet_folder(folder: str, data_root: str | None = None, *, run=PLAIN)
     refused rows go to `vessels_rejected` / `voyages_rejected` with their reason."""
     s = load_settings(data_root=Path(data_root) if data_root else None)
     db = s.layout.ensure().warehouse
-    out = {}
+    out: dict = {}
     for name, validate, store in (("vessels", lambda raw, src: validate_vessels(raw, src), fleet_store.import_vessels),
                                   ("voyages", lambda raw, src: validate_voyages(raw, fleet_store.known_imos(db), src,
                                                                              fleet_store.plan_voyage_ids(db)),
@@ -62,7 +62,7 @@ def import_bunker_file(path: str, data_root: str | None = None, *, run=PLAIN) ->
     vessels = fleet_store.load_vessels(db) if db.exists() else None
     dwt_t = dict(zip(vessels["imo"].astype(int), vessels["dwt"])) if vessels is not None and len(vessels) else {}
     good, bad = validate_bunker(raw, set(dwt_t) if vessels is not None else set(), source=Path(path).name, dwt_t=dwt_t)
-    counts = fleet_store.import_bunkers(db, good, bad)
+    counts: dict = fleet_store.import_bunkers(db, good, bad)
     conflicts = counts.pop("conflicts")
     counts.update(rows=len(raw), rejected=len(bad) + len(conflicts), reasons=reason_counts(bad),
                   conflicts=[f"{r.imo} {r.bill_no} {r.fuel_type}" for r in conflicts.itertuples()])
@@ -95,7 +95,7 @@ def update_hull_performance(db: Path, reports: dict[str, np.ndarray], active: di
         return 0
     rows = pd.DataFrame({c: reports[c] for c in HULL_REPORT_COLUMNS})
     rows = rows[rows["imo"].isin(imos)]
-    out = {}
+    out: dict = {}
     for imo, vessel_rows in rows.groupby("imo", sort=True):
         m = model_from_stored(active.get(int(imo)), int(imo))
         if m is not None:

@@ -66,7 +66,7 @@ def drop_code_pages_after_kernel_loads() -> bool:
         finally:
             drop_code_pages()
 
-    load_overload.drops_code_pages = True
+    load_overload.drops_code_pages = True  # type: ignore[attr-defined]  # the mark that it is installed
     caching.Cache.load_overload = load_overload
     return True
 

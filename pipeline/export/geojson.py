@@ -25,7 +25,7 @@ LEG_PROPERTIES = ("leg", "rpm", "stw_kn", "sog_kn", "course_deg", "dist_nm", "ho
 
 
 def json_value(v):
-    """A value json.dumps(allow_nan=False) accepts: numbers, str, bool, None; times as ISO UTC."""
+    """A value json.dumps(allow_nan=False) accepts: numbers, str, bool, None, lists of them; times as ISO UTC."""
     if v is None or isinstance(v, str):
         return v
     if isinstance(v, (bool, np.bool_)):
@@ -36,6 +36,8 @@ def json_value(v):
         return finite_or_none(v)
     if isinstance(v, (dt.date, np.datetime64)):
         return iso_utc(v)
+    if isinstance(v, (list, tuple, np.ndarray)):  # a list column (e.g. routes.baseline_lat_deg)
+        return [json_value(x) for x in v]
     if v != v:  # NaN-like (pandas NA, NaT)
         return None
     return str(v)

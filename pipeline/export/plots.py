@@ -28,8 +28,8 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, MaxNLocator
 from matplotlib.transforms import ScaledTranslation
 
-from pipeline.export.voyage import (centre_lon_deg, finite_or_none, iso_utc, unwrap_lon_deg, utc_datetime, vessel_label,
-                                    voyage_id, waypoint_names, waypoints_deg)
+from pipeline.export.voyage import (centre_lon_deg, finite_or_none, iso_utc, spread_text, unwrap_lon_deg, utc_datetime,
+                                    vessel_label, voyage_id, waypoint_names, waypoints_deg)
 from pipeline.routing.land_mask import MASK_RES_DEG, is_sea
 from pipeline.routing.sphere import KN_PER_MS, gc_points
 
@@ -354,6 +354,9 @@ def route_map_figure(route: dict, legs: list[dict], baseline_legs: list[dict] | 
     times = (f"ETD {iso_utc(route.get('depart_utc')) or 'n/a'} · ETA {iso_utc(route.get('eta_utc')) or 'n/a'} · "
              f"RTA {iso_utc(route.get('rta_utc')) or 'n/a'}" + (f" · LATE by {late:.1f} h" if late is not None else ""))
     lines = [head, fuel, times]
+    spread = spread_text(route)
+    if spread is not None and legs:
+        lines.append(f"uncertainty {spread} (the plan and its baseline sailed through each)")
     if field is not None:
         valid = field.get("valid_utc")
         note = f" ({field['valid_note']})" if field.get("valid_note") else ""

@@ -119,3 +119,15 @@ def finite_or_none(x: Any) -> float | None:
     except (TypeError, ValueError):
         return None
     return v if math.isfinite(v) else None
+
+
+def spread_text(route: dict) -> str | None:
+    """The plan's spread across the lagged ensemble (routes.ensemble_members, p_on_time, savings_p10/p90_pct) in one
+    phrase for maps and tables, e.g. "across 4 forecasts: on time 75 %, saving P10–P90 -0.4 to 2.1 %"; None when
+    not computed."""
+    n, p = finite_or_none(route.get("ensemble_members")), finite_or_none(route.get("p_on_time"))
+    if n is None or p is None:
+        return None
+    s10, s90 = finite_or_none(route.get("savings_p10_pct")), finite_or_none(route.get("savings_p90_pct"))
+    saving = f", saving P10–P90 {s10:.1f} to {s90:.1f} %" if s10 is not None and s90 is not None else ""
+    return f"across {int(n)} forecast{'s' if n != 1 else ''}: on time {100 * p:.0f} %{saving}"

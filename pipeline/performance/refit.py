@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.performance import features, fit, mlp, sanity, screen
+from pipeline.performance.sanity import Limits
 
 TARGETS = ("speed", "fuel")
 FORMS = tuple(features.FORM_IDS)  # the forms a refit can fit
@@ -75,7 +76,7 @@ class Gate:
     hull_flag_pct: float = 5.0  # hull performance: a month's speed loss against a clean hull above this is flagged
 
     @property
-    def limits(self) -> sanity.Limits:
+    def limits(self) -> Limits:
         return sanity.Limits(speed_tol_kn=self.speed_tol_kn, fuel_allowance_share=self.fuel_allowance_share)
 
 

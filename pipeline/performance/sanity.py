@@ -87,7 +87,8 @@ def envelopes(inp: dict[str, np.ndarray], starts, stops) -> list[Envelope]:
 def envelopes_until(inp: dict[str, np.ndarray], starts, splits, stops) -> tuple[list[Envelope], list[Envelope]]:
     """(`envelopes` of starts[g]:splits[g], `envelopes` of starts[g]:stops[g]) in one pass over the rows (e.g. of
     each vessel's training rows and of all its rows)."""
-    return tuple([part[g] for g in range(len(part))] for part in envelope_rows_until(inp, starts, splits, stops))
+    until_split, until_stop = envelope_rows_until(inp, starts, splits, stops)
+    return [until_split[g] for g in range(len(until_split))], [until_stop[g] for g in range(len(until_stop))]
 
 
 class EnvelopeRows:

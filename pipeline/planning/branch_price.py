@@ -28,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 import heapq
 import itertools
-import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -37,6 +36,7 @@ import numpy as np
 from pipeline.planning import colgen, local_search
 from pipeline.planning.master_lp import MasterLP
 from pipeline.planning.problem import FleetPlan, PlanData, assemble
+from pipeline.planning.work_budget import UNITS_PER_S, WorkBudget
 
 BLOCKED = -1e18  # a contract dual this low blocks the contract in pricing (colgen.price)
 
@@ -76,34 +76,35 @@ def node_constraints(decisions, n_vessels: int, n_contracts: int) -> tuple[np.nd
 
 
 def solve_node(data: PlanData, master: MasterLP, blocked: np.ndarray, compulsory: np.ndarray, cutoff: float,
-               deadline: float, max_new: int = 10) -> tuple[float, np.ndarray | None, bool]:
+               budget: WorkBudget, max_new: int = 10) -> tuple[float, np.ndarray | None, bool]:
     """Column generation at one node: (bound, y of its last LP, LP optimum reached). The bound is the LP value
-    when reached, else the best Lasdon bound met (at least `cutoff` when the node can be pruned)."""
+    when reached, else the best Lasdon bound met (at least `cutoff` when the node can be pruned). Every LP and pricing
+    spends from `budget` (work_budget.py); once it is exhausted the node stops (after the LP under way)."""
     master.set_node(blocked, compulsory)
     bound = -np.inf
     while True:
-        z, pi, mu, y = master.solve()
+        z, pi, mu, y = master.solve(budget)
         least, new = 0.0, []
         for k in range(master.V):
-            if time.perf_counter() > deadline:  # a round cut short proves nothing (y must stay one per pool column)
+            if budget.exhausted():  # a round cut short proves nothing (y must stay one per pool column)
                 return bound, y, False
             pik = pi.copy()
             pik[blocked[k]] = BLOCKED
-            rc, cols = colgen.price(data, k, pik, float(mu[k]), max_new=max_new)
+            rc, cols = colgen.price(data, k, pik, float(mu[k]), max_new=max_new, budget=budget)
             least += min(0.0, rc)
             new += cols
         bound = max(bound, z + least)
         if least > -colgen.EPS * max(1.0, abs(z)):
             return max(bound, z), y, True
-        if bound >= cutoff or time.perf_counter() > deadline or not master.add(new):  # y: one per pool column
+        if bound >= cutoff or budget.exhausted() or not master.add(new):  # y: one per pool column
             return bound, y, False
 
 
-def solve_root(data: PlanData, master: MasterLP, deadline: float) -> tuple[float, bool]:
-    """Column generation at the root (no decisions): (the LP bound, or Lasdon's past the deadline; LP optimum
+def solve_root(data: PlanData, master: MasterLP, budget: WorkBudget) -> tuple[float, bool]:
+    """Column generation at the root (no decisions): (the LP bound, or Lasdon's once `budget` is spent; LP optimum
     reached)."""
     blocked, compulsory = node_constraints((), len(data.vessels), len(data.contracts))
-    bound, _, converged = solve_node(data, master, blocked, compulsory, np.inf, deadline)
+    bound, _, converged = solve_node(data, master, blocked, compulsory, np.inf, budget)
     return bound, converged
 
 
@@ -128,23 +129,23 @@ def column_decisions(data: PlanData, k: int, sequence: tuple[int, ...]) -> tuple
             + tuple((k, j, False) for j in data.per_vessel[k].contracts if j not in inside))
 
 
-def dive(data: PlanData, master: MasterLP, decisions: tuple, deadline: float, *, fix_at: float = 0.6
+def dive(data: PlanData, master: MasterLP, decisions: tuple, budget: WorkBudget, *, fix_at: float = 0.6
          ) -> dict[int, tuple[int, ...]]:
     """A plan by diving from a node: fix the columns the node's LP takes at least `fix_at` (those sharing no contract
     with a column of higher value; else its largest column), each as "its vessel lifts exactly its contracts"
     (column_decisions), re-solve the LP with pricing, until it is whole. A fixed column stays in the pool and
-    allowed, so the LP can always lift every compulsory contract. Past the deadline the last LP is rounded
+    allowed, so the LP can always lift every compulsory contract. Once `budget` is spent the last LP is rounded
     (colgen.round_lp). Fixing whole columns keeps each vessel's sequence as the LP priced it; fixing single
     vessel–contract pairs instead ends further from the optimum (1.1 % against 5 % above it on a 20 × 80 fleet)."""
     n, V = len(data.contracts), len(data.vessels)
     fixed: set[int] = set()  # vessels whose column the dive fixed
     while True:
         blocked, compulsory = node_constraints(decisions, V, n)
-        _, y, _ = solve_node(data, master, blocked, compulsory, np.inf, deadline)
+        _, y, _ = solve_node(data, master, blocked, compulsory, np.inf, budget)
         whole = _whole_plan(master, y)
         if whole is not None:
             return whole
-        if time.perf_counter() > deadline or np.any(master.slack()[compulsory] > 1e-6):
+        if budget.exhausted() or np.any(master.slack()[compulsory] > 1e-6):
             return colgen.round_lp(data, master.columns, y * master.allowed(blocked))
         order = [i for i in np.argsort(-y, kind="stable") if y[i] > 1e-6 and master.columns[i].k not in fixed]
         take = [i for i in order if y[i] >= fix_at] or order[:1]
@@ -165,9 +166,10 @@ def dive(data: PlanData, master: MasterLP, decisions: tuple, deadline: float, *,
 PENALTY_FACTORS = (2.0, 3.0, 1.5)
 
 
-def penalty_dives(data: PlanData, master: MasterLP, deadline: float,
+def penalty_dives(data: PlanData, master: MasterLP, budget: WorkBudget,
                   factors: tuple[float, ...] = PENALTY_FACTORS) -> list[dict[int, tuple[int, ...]]]:
-    """Plans from dives (`dive`) on the LP with every contract's penalty raised by each factor, until the deadline.
+    """Plans from dives (`dive`) on the LP with every contract's penalty raised by each factor, until `budget` is
+    spent.
 
     The root LP lifts fractions of contracts that its dive then leaves to the spot market (on a 50 × 200 fleet it
     lifts 197.25 contracts, the dive's plan 196); with dearer penalties the dive keeps lifting them and can end in a
@@ -175,14 +177,14 @@ def penalty_dives(data: PlanData, master: MasterLP, deadline: float,
     the penalties, so each dive starts from the pool `master` holds, and the columns it prices join that pool."""
     plans = []
     for factor in factors:
-        if time.perf_counter() > deadline:
+        if budget.exhausted():
             break
         dearer = dataclasses.replace(data, contracts=[dataclasses.replace(c, penalty=c.penalty * factor)
                                                       for c in data.contracts])
         scaled = MasterLP(dearer)
         scaled.add(master.columns)
-        solve_root(dearer, scaled, deadline)
-        plans.append(dive(dearer, scaled, (), deadline))
+        solve_root(dearer, scaled, budget)
+        plans.append(dive(dearer, scaled, (), budget))
         master.add(scaled.columns)
     return plans
 
@@ -194,18 +196,18 @@ def branching_pair(master: MasterLP, y: np.ndarray) -> tuple[int, int]:
     return int(k), int(j)
 
 
-def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: float, *, root_bound: float = -np.inf,
+def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, budget: WorkBudget, *, root_bound: float = -np.inf,
            rel_gap: float = 0.0, dive_share: float = 0.3, improve: Callable[[FleetPlan, float], FleetPlan] | None = None) -> Outcome:
     """Best-bound branch-and-price from the root (whose columns `master` holds, `root_bound` proven) until the plan is proven within
-    `rel_gap` of the optimum, the tree is closed or the deadline passes. Up to `dive_share` of the time goes to
-    dives (`dive`, then local_search) from the node just solved, for better plans. `improve(best, bound)`, when
+    `rel_gap` of the optimum, the tree is closed or `budget` (work_budget.py) is spent. Up to `dive_share` of the work
+    goes to dives (`dive`, then local_search) from the node just solved, for better plans. `improve(best, bound)`, when
     given, is called after each node and may return a better plan."""
     n, V = len(data.contracts), len(data.vessels)
     best = incumbent
     counter = itertools.count()
     open_nodes = [Node(root_bound, 0, next(counter), ())]
     solved = 0
-    t0, diving_s = time.perf_counter(), 0.0
+    began, diving = budget.spent, 0.0  # work spent before the search; of it, on dives
     floor = np.inf  # the least bound of the nodes dropped only because they are within `rel_gap` of the incumbent
 
     def cutoff() -> float:
@@ -214,7 +216,7 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
     def plan_of(sequences) -> FleetPlan:
         return assemble(data, sequences, solver="milp", status="feasible", gap=np.nan, runtime_s=0.0)
 
-    while open_nodes and time.perf_counter() < deadline:
+    while open_nodes and not budget.exhausted():
         node = heapq.heappop(open_nodes)
         if node.bound >= cutoff():
             floor = min(floor, node.bound)
@@ -222,11 +224,11 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
         blocked, compulsory = node_constraints(node.decisions, V, n)
         if node.basis is not None:
             master.restore(node.basis)
-        bound, y, converged = solve_node(data, master, blocked, compulsory, cutoff(), deadline)
+        bound, y, converged = solve_node(data, master, blocked, compulsory, cutoff(), budget)
         bound = max(bound, node.bound)
         solved += 1
         if not converged:
-            if bound < cutoff():  # cut short by the deadline: still open
+            if bound < cutoff():  # cut short by the budget: still open
                 heapq.heappush(open_nodes, Node(bound, node.neg_depth, node.seq, node.decisions, node.basis))
             else:
                 floor = min(floor, bound)
@@ -241,12 +243,12 @@ def search(data: PlanData, master: MasterLP, incumbent: FleetPlan, deadline: flo
         rounded = plan_of(colgen.round_lp(data, master.columns, y * master.allowed(blocked)))
         if rounded.cost < best.cost:
             best = rounded
-        if diving_s < dive_share * (time.perf_counter() - t0):
-            t1 = time.perf_counter()
-            dived = local_search.improve(data, dive(data, master, node.decisions, deadline),
-                                         time_limit_s=min(1.0, deadline - time.perf_counter()))
+        if diving < dive_share * (budget.spent - began):
+            d0 = budget.spent
+            sequences = dive(data, master, node.decisions, budget)
+            dived = local_search.improve(data, sequences, budget=budget.phase(1.0 * UNITS_PER_S))
             best = min(best, plan_of(dived), key=lambda p: p.cost)
-            diving_s += time.perf_counter() - t1
+            diving += budget.spent - d0
         if improve is not None:
             best = min(best, improve(best, min([bound] + [o.bound for o in open_nodes])), key=lambda p: p.cost)
         if bound >= cutoff():

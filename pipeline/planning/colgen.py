@@ -14,7 +14,6 @@ vessel lifts at most one column; at the LP optimum (no negative reduced cost lef
 
 from __future__ import annotations
 
-import time
 import numba
 import numpy as np
 from scipy import sparse
@@ -22,6 +21,8 @@ from scipy.optimize import linprog
 
 from pipeline.planning.problem import HOURS_PER_DAY, SLOWEST_BALLAST_SHARE, PlanData, schedule
 from pipeline.planning.routes import Column
+from pipeline.planning.work_budget import (IPM_ITERATION_PER_NONZERO, PRICE_LABEL, SCHEDULE,
+                                            SIMPLEX_ITERATION_PER_ROW, WorkBudget)
 
 EPS = 1e-6
 
@@ -35,16 +36,22 @@ def _master(data: PlanData, columns: list[Column]):
     return c, A
 
 
-def solve_lp(data: PlanData, columns: list[Column]) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-    """(LP value including the constant Σ penalty, contract duals π ≤ 0, vessel duals μ ≤ 0, column values y)."""
+def solve_lp(data: PlanData, columns: list[Column], budget: WorkBudget | None = None
+             ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """(LP value including the constant Σ penalty, contract duals π ≤ 0, vessel duals μ ≤ 0, column values y). Its
+    iterations are spent from `budget` when given (an LP solve is bounded: it is never cut short)."""
     n, V = len(data.contracts), len(data.vessels)
     const = sum(ct.penalty for ct in data.contracts)
     if not columns:
         return const, np.zeros(n), np.zeros(V), np.zeros(0)
     c, A = _master(data, columns)
     res = linprog(c, A_ub=A, b_ub=np.ones(n + V), bounds=(0, None), method="highs-ipm")  # ~10x the simplex here
+    if budget is not None:
+        budget.spend(IPM_ITERATION_PER_NONZERO * A.nnz * int(res.nit or 0))
     if res.status == 4:  # HiGHS's interior point sometimes ends in a "solve error" (seen at 20 x 80); the simplex does not
         res = linprog(c, A_ub=A, b_ub=np.ones(n + V), bounds=(0, None), method="highs-ds")
+        if budget is not None:
+            budget.spend(SIMPLEX_ITERATION_PER_ROW * (n + V) * int(res.nit or 0))
     if res.status != 0:
         raise RuntimeError(f"the planning LP failed: {res.message}")
     duals = res.ineqlin.marginals
@@ -202,15 +209,18 @@ def _pricing_table(data: PlanData, k: int) -> tuple:
     return va.successors
 
 
-def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) -> tuple[float, list[Column]]:
+def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10, budget: WorkBudget | None = None
+          ) -> tuple[float, list[Column]]:
     """(least reduced cost of a column of vessel k — a lower bound, see the module doc —, up to `max_new` elementary
     columns of negative reduced cost, cheapest first). A contract whose dual is below -1e17 is blocked (no path
-    enters it)."""
+    enters it). The labels made and the columns scheduled are spent from `budget` when given."""
     glob, table = _pricing_table(data, k)
     if glob.size == 0:
         return 0.0, []
     prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]
     best, found, found_rc, parent, node = _price_nb(prize, float(mu), *table)
+    if budget is not None:
+        budget.spend(PRICE_LABEL * parent.size)
     out, seen = [], set()
     for lab in found[np.argsort(found_rc, kind="stable")]:
         seq = []
@@ -221,6 +231,8 @@ def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10) 
         if seq in seen or len(set(seq)) != len(seq):
             continue
         seen.add(seq)
+        if budget is not None:
+            budget.spend(SCHEDULE)
         s = schedule(data, k, seq)
         if s is not None:
             out.append(Column(k, seq, s.cost))
@@ -250,19 +262,19 @@ def round_lp(data: PlanData, columns: list[Column], y: np.ndarray) -> dict[int, 
     return out
 
 
-def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.0,
+def generate(data: PlanData, columns: list[Column], *, budget: WorkBudget | None = None,
              max_rounds: int = 200, max_new: int = 10) -> tuple[list[Column], float, bool, tuple]:
     """(columns with those priced added, the best proven lower bound on the plan cost, LP optimum reached,
-    (π, μ, y) of the last LP)."""
-    t0 = time.perf_counter()
+    (π, μ, y) of the last LP); stops between rounds once `budget` (work_budget.py; default: none) is exhausted."""
+    budget = WorkBudget() if budget is None else budget
     columns = list(columns)
     have = {(col.k, col.sequence) for col in columns}
     bound, converged = -np.inf, False
     for _ in range(max_rounds):
-        z, pi, mu, y = solve_lp(data, columns)
+        z, pi, mu, y = solve_lp(data, columns, budget)
         least, added = 0.0, 0
         for k in range(len(data.vessels)):
-            rc, new = price(data, k, pi, float(mu[k]), max_new=max_new)
+            rc, new = price(data, k, pi, float(mu[k]), max_new=max_new, budget=budget)
             least += min(0.0, rc)
             for col in new:
                 if (col.k, col.sequence) not in have:
@@ -273,8 +285,8 @@ def generate(data: PlanData, columns: list[Column], *, time_limit_s: float = 30.
         if least > -EPS * max(1.0, abs(z)) or added == 0:
             converged = least > -EPS * max(1.0, abs(z))
             break
-        if time.perf_counter() - t0 > time_limit_s:
+        if budget.exhausted():
             break
     if not converged:  # the last LP without the columns priced after it
-        z, pi, mu, y = solve_lp(data, columns)
+        z, pi, mu, y = solve_lp(data, columns, budget)
     return columns, bound, converged, (pi, mu, y)

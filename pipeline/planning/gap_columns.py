@@ -16,13 +16,12 @@ grows fast with it); `max_labels` caps the work and reports the enumeration inco
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from pipeline.planning.colgen import _ballast_fuel_t_nb, _pricing_table
 from pipeline.planning.problem import PlanData, schedule
 from pipeline.planning.routes import Column
+from pipeline.planning.work_budget import GAP_ARC, WorkBudget, unlimited
 
 
 def completion_bound(table: tuple, prize: np.ndarray, mu: float) -> np.ndarray:
@@ -49,19 +48,21 @@ def completion_bound(table: tuple, prize: np.ndarray, mu: float) -> np.ndarray:
 
 
 def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, slack: float,
-                          max_labels: int = 500_000, deadline: float = np.inf) -> tuple[list[Column], bool]:
+                          max_labels: int = 500_000, budget: WorkBudget | None = None) -> tuple[list[Column], bool]:
     """(least-cost column per set of contracts vessel k can lift whose reduced cost under (π, μ) is ≤ `slack`,
-    enumeration complete). Past `max_labels` partial sequences or the `deadline` (time.perf_counter()) it stops:
-    ([], False)."""
+    enumeration complete). Past `max_labels` partial sequences or once `budget` is exhausted (each arc tried from a
+    label, and each of the completion bound's, costs GAP_ARC) it stops: ([], False)."""
+    budget = unlimited() if budget is None else budget
     glob, table = _pricing_table(data, k)
     if glob.size == 0:
         return [], True
-    if time.perf_counter() > deadline:  # before the completion bound, which alone takes a while on a large fleet
+    if budget.exhausted():  # before the completion bound, which alone takes a while on a large fleet
         return [], False
     (start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h, early, late, dur,
      credit, laden_cost, end_travel_h, end_cost, s_to, s_arrive, s_nm, ptr, to, travel_h, nm) = table
     prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]
     rest = completion_bound(table, prize, mu)
+    budget.spend(GAP_ARC * to.size)  # its arcs' fuel, one by one (the sweeps after it are vectorised)
     gain = laden_cost - credit - prize  # what lifting each contract adds, besides its ballast leg
 
     def ballast(d, ready, load):
@@ -82,8 +83,9 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
     while level:
         nxt: dict[tuple[int, int], list[tuple[float, float, tuple[int, ...]]]] = {}
         for (members, last), labels in level.items():
-            if time.perf_counter() > deadline:  # a level alone can take seconds on a large fleet
+            if budget.exhausted():  # a level alone can take seconds on a large fleet
                 return [], False
+            budget.spend(GAP_ARC * len(labels) * (1 + ptr[last + 1] - ptr[last]))
             for ready, so_far, seq in labels:
                 end = ready + end_travel_h[last]
                 if end <= end_limit_h + 1e-9:
@@ -107,7 +109,7 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
                     kept[:] = [x for x in kept if not (lab[0] <= x[0] + 1e-9 and lab[1] <= x[1] + 1e-9)]
                     kept.append(lab)
         n_labels += sum(len(x) for x in nxt.values())
-        if n_labels > max_labels or time.perf_counter() > deadline:
+        if n_labels > max_labels or budget.exhausted():
             return [], False
         level = nxt
     columns = []

@@ -4,16 +4,17 @@ Moves, each judged exactly (problem.schedule's earliest schedule and cost of the
 - relocate: take a contract off its vessel (or off the spot market) and insert it into another vessel's sequence at
   the best position, or leave it to the spot market (its penalty);
 - exchange: a contract of one vessel and a contract of another (or a contract left) trade places.
-First improvement, repeated until no move saves anything or the time is up. Used on large fleets after each LP dive
+First improvement, repeated until no move saves anything or the work budget is spent (work_budget.py: each
+sequence costed spends SCHEDULE, each looked up again MEMO_HIT). Used on large fleets after each LP dive
 (branch_price.dive), whose plans it often improves.
 """
 
 from __future__ import annotations
 
 import math
-import time
 
 from pipeline.planning.problem import PlanData, schedule
+from pipeline.planning.work_budget import MEMO_HIT, SCHEDULE, WorkBudget
 
 TOL = 1e-6
 
@@ -21,15 +22,19 @@ TOL = 1e-6
 class _Costs:
     """Memoised cost of a vessel's sequence (inf: infeasible)."""
 
-    def __init__(self, data: PlanData):
+    def __init__(self, data: PlanData, budget: WorkBudget):
         self.data = data
+        self.budget = budget
         self.memo: dict[tuple[int, tuple[int, ...]], float] = {}
         self.arcs = [va.arcs for va in data.per_vessel]
 
     def __call__(self, k: int, seq: tuple[int, ...]) -> float:
         key = (k, seq)
         got = self.memo.get(key)
-        if got is None:
+        if got is not None:
+            self.budget.spend(MEMO_HIT)
+        else:
+            self.budget.spend(SCHEDULE)
             arcs, prev = self.arcs[k], "s"
             for j in seq:  # cheap test first: every arc must exist
                 if (prev, j) not in arcs:
@@ -52,11 +57,12 @@ def _insertions(arcs: dict, seq: tuple[int, ...], j: int):
         prev = nxt
 
 
-def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit_s: float = 10.0
+def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, budget: WorkBudget | None = None
             ) -> dict[int, tuple[int, ...]]:
-    """A plan no dearer than `sequences` (vessel index → contract indices in order) after local search."""
-    t0 = time.perf_counter()
-    cost = _Costs(data)
+    """A plan no dearer than `sequences` (vessel index → contract indices in order) after local search, within
+    `budget` (default: until no move improves it)."""
+    budget = WorkBudget() if budget is None else budget
+    cost = _Costs(data, budget)
     V, n = len(data.vessels), len(data.contracts)
     seqs = {k: tuple(sequences.get(k, ())) for k in range(V)}
     cur = {k: (cost(k, s) if s else 0.0) for k, s in seqs.items()}
@@ -87,10 +93,10 @@ def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit
                 owner[j] = k
 
     improved = True
-    while improved and time.perf_counter() - t0 < time_limit_s:
+    while improved and not budget.exhausted():
         improved = False
         for j in range(n):  # relocate j
-            if time.perf_counter() - t0 > time_limit_s:
+            if budget.exhausted():
                 break
             a = owner.get(j)
             if a is None:
@@ -113,7 +119,7 @@ def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit
             if move is not None:
                 apply({move[0]: move[1]} if a is None else {a: rest, move[0]: move[1]})
                 improved = True
-        if time.perf_counter() - t0 > time_limit_s:
+        if budget.exhausted():
             break
         for i in range(n):  # exchange i (on vessel a) with j (on another vessel, or left)
             a = owner.get(i)
@@ -121,7 +127,7 @@ def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit
                 continue
             rest_a = without(a, i)
             for j in range(n):
-                if time.perf_counter() - t0 > time_limit_s:
+                if budget.exhausted():
                     break
                 b = owner.get(j)
                 if b == a or j == i or a not in lifters[j]:
@@ -143,6 +149,6 @@ def improve(data: PlanData, sequences: dict[int, tuple[int, ...]], *, time_limit
                     apply({a: sa, b: sb})
                     improved = True
                     break
-            if time.perf_counter() - t0 > time_limit_s:
+            if budget.exhausted():
                 break
     return {k: s for k, s in seqs.items() if s}

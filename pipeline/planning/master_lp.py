@@ -21,6 +21,7 @@ from scipy.optimize._highspy import _core as highs
 
 from pipeline.planning.problem import PlanData
 from pipeline.planning.routes import Column
+from pipeline.planning.work_budget import SIMPLEX_ITERATION_PER_COLUMN, SIMPLEX_ITERATION_PER_ROW, WorkBudget
 
 
 class MasterLP:
@@ -95,15 +96,18 @@ class MasterLP:
             self.h.changeColsCost(moved.size, moved.astype(np.int32), cost[moved])
             self._slack_cost = cost
 
-    def solve(self) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    def solve(self, budget: WorkBudget | None = None) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """(LP value, contract duals as colgen.solve_lp gives them — prize of lifting j less its penalty —, vessel
-        duals μ ≤ 0, column values y in pool order)."""
+        duals μ ≤ 0, column values y in pool order). Its simplex iterations are spent from `budget` when given (an LP
+        solve is never cut short)."""
         h = self.h
         h.run()
+        self._spend(budget)
         status = h.getModelStatus()
         if status != highs.HighsModelStatus.kOptimal:
             h.clearSolver()  # a stale basis can stall the simplex: once more from scratch
             h.run()
+            self._spend(budget)
             status = h.getModelStatus()
             if status != highs.HighsModelStatus.kOptimal:
                 raise RuntimeError(f"the planning LP failed: {h.modelStatusToString(status)}")
@@ -111,6 +115,13 @@ class MasterLP:
         dual = np.asarray(sol.row_dual)
         x = np.asarray(sol.col_value)
         return float(h.getObjectiveValue()), dual[:self.n] - self.penalty, np.minimum(dual[self.n:], 0.0), x[self.n:]
+
+    def _spend(self, budget: WorkBudget | None) -> None:
+        """The last run's simplex iterations, spent from `budget` (when given)."""
+        if budget is not None:
+            per_iteration = (SIMPLEX_ITERATION_PER_ROW * (self.n + self.V)
+                             + SIMPLEX_ITERATION_PER_COLUMN * (self.n + len(self.columns)))
+            budget.spend(per_iteration * max(0, self.h.getInfo().simplex_iteration_count))
 
     def basis(self) -> tuple[list, list]:
         """The last solve's basis (HiGHS's column and row statuses), to start a later solve from (`restore`)."""

@@ -334,10 +334,12 @@ class FleetPlan:
     out_of_service_cost: float
     penalty_cost: float
     solver: str
-    status: str  # optimal | feasible (time limit: gap below) | trivial
+    status: str  # optimal | feasible (search stopped: gap below) | trivial
     gap: float  # proven relative optimality gap (0 when optimal)
-    runtime_s: float
+    runtime_s: float  # wall-clock seconds, reported only (nothing in the search reads a clock but the safety cap)
     n_columns: int = 0  # columns (vessel sequences) the MILP chose among
+    stopped_by: str = ""  # what ended the search: "proven optimal" | "effort: N units spent, gap G %" | ...
+    work_units: float = 0.0  # work spent by the search (work_budget.py)
 
     @property
     def cost(self) -> float:
@@ -345,7 +347,8 @@ class FleetPlan:
 
 
 def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: str, status: str, gap: float,
-             runtime_s: float, n_columns: int = 0, left_reason: str | None = None) -> FleetPlan:
+             runtime_s: float, n_columns: int = 0, left_reason: str | None = None, stopped_by: str = "",
+             work_units: float = 0.0) -> FleetPlan:
     """The plan of `sequences` (vessel index → contract indices in order), each scheduled earliest."""
     scheds = []
     for k, seq in sorted(sequences.items()):
@@ -363,5 +366,6 @@ def assemble(data: PlanData, sequences: dict[int, tuple[int, ...]], *, solver: s
             f"left to the spot market: lifting it costs more than its penalty "
             f"{data.contracts[j].penalty:.0f}, or its window clashes with contracts that save more")
     return FleetPlan(tuple(scheds), left, sum(s.fuel_cost for s in scheds), sum(s.out_of_service_cost for s in scheds),
-                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_columns)
+                     sum(data.contracts[j].penalty for j in left), solver, status, gap, runtime_s, n_columns,
+                     stopped_by, work_units)
 

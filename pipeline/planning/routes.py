@@ -6,17 +6,16 @@ far): one no later and no dearer makes the other useless (every later cost item 
 leaving earlier can sail slower, never dearer), so it is dropped. What is left gives, for each set of contracts a vessel can lift, its least cost and the order achieving
 it — exactly what the brute force gets by trying every order. `max_labels` caps the work per vessel; when it
 binds, the most promising partial sequences (least cost so far less the penalties they save) are kept,
-the enumeration is `complete=False` and the plan is optimal only over the sequences found. A `deadline` stops it
-too (between sequence lengths), also `complete=False`.
+the enumeration is `complete=False` and the plan is optimal only over the sequences found. A work budget
+(work_budget.py, a label made costs PYTHON_LABEL) stops it too (between sequence lengths), also `complete=False`.
 """
 
 from __future__ import annotations
 
-import math
-import time
 from dataclasses import dataclass
 
 from pipeline.planning.problem import HOURS_PER_DAY, PlanData
+from pipeline.planning.work_budget import PYTHON_LABEL, WorkBudget
 
 
 @dataclass(frozen=True)
@@ -27,7 +26,7 @@ class Column:
 
 
 def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000,
-                   among: frozenset[int] | set[int] | None = None, deadline: float = math.inf
+                   among: frozenset[int] | set[int] | None = None, budget: WorkBudget | None = None
                    ) -> tuple[list[Column], bool]:
     """(least-cost column per set of contracts vessel k can lift in a feasible order — of the contracts `among`
     only, when given —, enumeration complete)."""
@@ -46,8 +45,10 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000,
         fuel = data.leg_cost(k, ("s", j), v.start_h, t)
         level[(frozenset((j,)), j)] = [(t + va.dur_h[j], fuel, va.dur_h[j], (j,))]
     complete, n_labels = True, len(level)
+    if budget is not None:
+        budget.spend(PYTHON_LABEL * n_labels)
     while level:
-        if time.perf_counter() > deadline:  # `deadline`: a time.perf_counter() reading
+        if budget is not None and budget.exhausted():
             complete = False
             break
         for (members, last), labels in level.items():
@@ -90,5 +91,7 @@ def vessel_columns(data: PlanData, k: int, max_labels: int = 200_000,
                 nxt.setdefault(key, []).append(lab)
             size = room
         n_labels += size
+        if budget is not None:
+            budget.spend(PYTHON_LABEL * size)
         level = nxt
     return list(best.values()), complete

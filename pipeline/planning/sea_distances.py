@@ -7,6 +7,12 @@ A route through a canal carries the canal's time: `canal_nm` of its length is th
 `canal_h` hours (transit and waiting allowance, passages.py) instead of at the vessel's speed
 (`hours`). Distances are symmetric: each unordered pair is computed once. Computed pairs are kept in the
 `port_distances` table (storage.planning_store) and reused while both ports keep their positions.
+
+The table holds the shortest routes with no passage avoided. A fleet that avoids passages (the setting
+`routing.avoid_passages`, env JITROUTE_AVOID_PASSAGES, which its voyages are routed with) plans with
+`avoiding`: a stored route that sails none of them is also the shortest without them and is kept; the others are
+computed again without those passages (round the Cape instead of through Suez), so a plan's schedule and the
+routes its voyages then get agree.
 """
 
 from __future__ import annotations
@@ -52,6 +58,19 @@ def sea_distance(a: str, pos_a: tuple[float, float], b: str, pos_b: tuple[float,
             canal_h += p.transit_h + p.wait_h
     return PortDistance(a, b, *pos_a, *pos_b, route.dist_nm, gc, None,
                         ";".join(p.name for p in route.passages) or None, canal_nm, canal_h)
+
+
+def avoiding(rows: list[PortDistance], avoid) -> list[PortDistance]:
+    """`rows` (computed with no passage avoided) as they are when the passages named in `avoid` are closed: those
+    whose route sails one of them computed again without them (NaN and the reason when nothing else joins them)."""
+    avoid = frozenset(avoid or ())
+    out = []
+    for r in rows:
+        sailed = set((r.passages or "").split(";")) - {""}
+        if avoid and sailed & avoid:
+            r = sea_distance(r.port_a, (r.lat_a, r.lon_a), r.port_b, (r.lat_b, r.lon_b), avoid=avoid)
+        out.append(r)
+    return out
 
 
 def hours(dist_nm: float, speed_kn: float, canal: tuple[float, float] = (0.0, 0.0)) -> float:

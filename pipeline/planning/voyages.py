@@ -121,6 +121,7 @@ def plan_rows(plan: FleetPlan, data: PlanData, plan_id: str, as_of: pd.Timestamp
     fuel_t = float(sum(s.fuel_t for s in plan.schedules))
     row = {"plan_id": plan_id, "as_of_utc": as_of, "solver": plan.solver, "solve_status": plan.status,
            "gap": None if not np.isfinite(plan.gap) else float(plan.gap), "runtime_s": plan.runtime_s,
+           "stopped_by": plan.stopped_by or None,
            "n_contracts": len(data.contracts), "n_assigned": len(data.contracts) - len(plan.unassigned),
            "n_unassigned": len(plan.unassigned), "n_vessels_used": len(plan.schedules), "fuel_price": data.fuel_price,
            "fuel_t": fuel_t, "fuel_cost": plan.fuel_cost,

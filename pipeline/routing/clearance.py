@@ -126,6 +126,28 @@ def least_clearance_nm(waypoints: list[tuple[float, float]], rule: Clearance) ->
     return float(least_clearance_nb(land_grid(), rule, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])))
 
 
+def least_clearance_outside_nm(waypoints: list[tuple[float, float]], rule: Clearance, gate=None) -> float:
+    """`least_clearance_nm` of a route with one waypoint per line, leaving out the legs between two gate lines
+    (`gate` (L+2,) bool: a passage's fairway, whose banks a canal sails between) and the approach radius at each end
+    of a fairway, as at a port (the legs into and out of a passage need only be at sea there, corridor.py). NaN when
+    the whole route is fairway."""
+    if gate is None or not np.any(gate):
+        return least_clearance_nm(waypoints, rule)
+    pts = np.asarray(waypoints, np.float64)
+    best, start = float("nan"), 0
+    for k in range(1, len(pts)):
+        fairway = bool(gate[k - 1] and gate[k])
+        if fairway or k == len(pts) - 1:
+            end = k - 1 if fairway else k
+            if end > start:  # the stretch start..end between ports or fairway ends
+                part = rule._replace(dep_lat=float(pts[start, 0]), dep_lon=float(pts[start, 1]),
+                                     arr_lat=float(pts[end, 0]), arr_lon=float(pts[end, 1]))
+                d = least_clearance_nm([tuple(p) for p in pts[start:end + 1]], part)
+                best = d if not best <= d else best
+            start = k
+    return best
+
+
 WIDEST_BOX_DEG = 6.0  # voyages whose box is larger than this are not diagnosed (the grid would be too coarse)
 WIDEST_STEP_DEG = 0.01  # ≈ 0.6 NM: the widest corridor is known to about that
 

@@ -63,7 +63,8 @@ import numpy as np
 from pipeline.performance.features import FORM_PHYSICAL, FORM_THESIS, stw_kn_nb, fuel_tph_nb
 from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.leg_kernel import (CODE, FIX_FUEL, FIX_H, FIX_LAT0, FIX_LAT1, FIX_LON0, FIX_LON1, FIX_TOL_DEG, FUEL,
+                                         H, N_LEG_OUT, OK, sail_leg_nb)
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 from pipeline.routing.reachable_weather import WINDOW_SLACK_H, earliest_arrival_nb, reachable_ranges_nb
 
@@ -612,7 +613,9 @@ def _leg_bounds(inst, windows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
         tau, phi = np.empty((L2 * P, R)), np.empty((L2 * P, R))
         _corner_bounds(v, rng, tau, phi)
         tau, phi = tau.reshape(L2, P, R), phi.reshape(L2, P, R)
-        return np.repeat(tau[:, :, None, :], S, axis=2), np.repeat(phi[:, :, None, :], S, axis=2), tau, phi
+        tau_e, phi_e = np.repeat(tau[:, :, None, :], S, axis=2), np.repeat(phi[:, :, None, :], S, axis=2)
+        _fixed_leg_rates(inst, tau_e, phi_e, tau, phi)
+        return tau_e, phi_e, tau, phi
     rng = reachable_weather_ranges(inst, windows)
     closed = np.isnan(rng[..., WIND_LO])  # legs no plan within the windows sails
     tau_e, phi_e = np.empty((L2 * P * S, R)), np.empty((L2 * P * S, R))
@@ -623,7 +626,34 @@ def _leg_bounds(inst, windows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     tau = np.where(ok, tau_e, np.inf).min(axis=2)  # a node's legs all take at least its least
     phi = np.where(ok, phi_e, np.inf).min(axis=2)
     tau[~np.isfinite(tau)], phi[~np.isfinite(phi)] = 0.0, 0.0  # no leg leaves: any bound holds
+    _fixed_leg_rates(inst, tau_e, phi_e, tau, phi)
     return tau_e, phi_e, tau, phi
+
+
+def _fixed_leg_rates(inst, tau_e, phi_e, tau, phi) -> None:
+    """A canal's legs (leg_kernel.Vessel.fixed_legs, canal_time.py) take their fixed hours and fuel at every setting
+    and in any weather: their hours and fuel per NM are those, exactly, in place of the performance model's bounds
+    (which would price the canal as open sea and prune nothing across it). A gate's node has that one leg, so its
+    node bound is the leg's. Legs no plan within the windows sails (inf) stay closed."""
+    fx = inst.vessel.fixed_legs
+    if not fx.shape[0]:
+        return
+    sp = inst.space
+    c, ms = sp.centre, int(sp.max_shift)
+    for row in fx:
+        d = geo.gc_distance_nm(row[FIX_LAT0], row[FIX_LON0], row[FIX_LAT1], row[FIX_LON1])
+        if not d > 0.0:
+            continue
+        for i in range(sp.lat.shape[0] - 1):
+            if (abs(sp.lat[i, c] - row[FIX_LAT0]) < FIX_TOL_DEG and abs(sp.lon[i, c] - row[FIX_LON0]) < FIX_TOL_DEG
+                    and abs(sp.lat[i + 1, c] - row[FIX_LAT1]) < FIX_TOL_DEG
+                    and abs(sp.lon[i + 1, c] - row[FIX_LON1]) < FIX_TOL_DEG):
+                open_ = np.isfinite(tau_e[i, c, ms])
+                tau_e[i, c, ms][open_] = row[FIX_H] / d
+                phi_e[i, c, ms][open_] = row[FIX_FUEL] / d
+                if sp.node_ok[i].sum() == 1:  # a gate (or a port): this is its only leg
+                    tau[i, c] = np.where(open_, row[FIX_H] / d, tau[i, c])
+                    phi[i, c] = np.where(open_, row[FIX_FUEL] / d, phi[i, c])
 
 
 def fuel_windows(inst, windows, fuel_budget_t: float, lams, m_lam, t_min, tau_e, phi_e, step_h: float = 0.25):

@@ -15,6 +15,9 @@ The weather met along the leg (mean wind, Hs, directions, current, STW) is what 
 searches, which sail a leg hundreds of thousands of times a voyage, skip it (`sail_leg_nb` against
 `sail_leg_weather_nb`).
 
+A leg of the vessel's `fixed_legs` (a canal's fairway, canal_time.py) is not integrated: it takes its fixed hours and
+fuel whatever the rpm and the weather, so every solver and the constant-speed baseline sail a canal alike.
+
 The ship comes as a `Vessel` (its performance model at the voyage's draft and trim, weather limits,
 the allowed engine settings and the integration step), the weather as a `weather_field.Weather`.
 """
@@ -44,6 +47,10 @@ REASONS = {
     TOO_LONG: "voyage takes longer than the planning horizon",
 }
 N_LEG_OUT = 16
+# columns of Vessel.fixed_legs: the leg's ends (degrees, as the graph's nodes) and its fixed hours and fuel (t)
+FIX_LAT0, FIX_LON0, FIX_LAT1, FIX_LON1, FIX_H, FIX_FUEL = range(6)
+NO_FIXED_LEGS = np.zeros((0, 6))
+FIX_TOL_DEG = 1e-9
 # leg_out fields (NO_WIND_H: hours of the leg sailed where the wind is missing; FUEL_BEYOND: the part of FUEL burnt
 # after the weather's last valid time, where the leg is sailed in the neutral weather)
 (H, FUEL, CODE, BEYOND, WIND_KN, WIND_FX, WIND_FY, HS, WAVE_FX, WAVE_FY, CUR_ALONG_KN, STW_KN, SOG_KN, CUR_KN,
@@ -71,6 +78,7 @@ class Vessel(NamedTuple):
     speed_coef: np.ndarray
     fuel_coef: np.ndarray
     rpm_options: np.ndarray
+    fixed_legs: np.ndarray = NO_FIXED_LEGS
 
 
 def _limit(x: float | None) -> float:
@@ -108,10 +116,23 @@ def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
     dist = geo.gc_distance_nm(lat0, lon0, lat1, lon1)
     if dist < 1e-6:
         return
+    horizon_h = wx.times_h[wx.times_h.shape[0] - 1]
+    fx = ves.fixed_legs
+    for k in range(fx.shape[0]):
+        if (abs(lat0 - fx[k, FIX_LAT0]) < FIX_TOL_DEG and abs(lon0 - fx[k, FIX_LON0]) < FIX_TOL_DEG
+                and abs(lat1 - fx[k, FIX_LAT1]) < FIX_TOL_DEG and abs(lon1 - fx[k, FIX_LON1]) < FIX_TOL_DEG):
+            hours, fuel = fx[k, FIX_H], fx[k, FIX_FUEL]
+            out[H] = hours
+            out[FUEL] = fuel
+            out[SOG_KN] = dist / hours
+            out[STW_KN] = dist / hours  # the canal's pace: no weather or current counted inside it
+            if t0_h + hours > horizon_h:
+                out[BEYOND] = 1.0
+                out[FUEL_BEYOND] = fuel * (t0_h + hours - max(t0_h, horizon_h)) / hours
+            return
     w = np.empty(N_VARS)
     chord = geo.chord(lat0, lon0, lat1, lon1)  # the leg's trigonometry once, not at every step
     done, t, fuel = 0.0, t0_h, 0.0
-    horizon_h = wx.times_h[wx.times_h.shape[0] - 1]
     while done < dist - 1e-9:
         lat, lon = geo.chord_point(chord, done / dist)
         hdg = geo.chord_course_deg(chord, lat, lon)

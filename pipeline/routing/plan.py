@@ -22,6 +22,7 @@ SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_base
                    "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct", "fuel_beyond_forecast_t",
                    "honest_baseline_fuel_beyond_forecast_t", "savings_forecast_pct", "savings_beyond_forecast_pct")
 LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
+BASELINE_TRACK_COLUMNS = ("baseline_lat_deg", "baseline_lon_deg", "baseline_leg_rpm")
 ENSEMBLE_COLUMNS = ("ensemble_members", "p_on_time", "baseline_p_on_time", "fuel_p10_t", "fuel_p50_t", "fuel_p90_t",
                     "savings_p10_pct", "savings_p50_pct", "savings_p90_pct")
 
@@ -151,8 +152,18 @@ class Plan:
             "n_legs_beyond_forecast": self.n_beyond_forecast, "forecast_flag": self.forecast_flag,
             "hours_beyond_forecast": self.hours_beyond_forecast, "hours_before_cycle": self.hours_before_cycle,
             "min_land_clearance_nm": self.min_land_clearance_nm,
-            **self._savings_row(), **self._limits_row(), **self._ensemble_row(),
+            **self._savings_row(), **self._limits_row(), **self._ensemble_row(), **self._baseline_track_row(),
         }
+
+    def _baseline_track_row(self) -> dict:
+        """The baseline's waypoints and the rpm of each leg, so it can be sailed again in the weather that came
+        (verification.py); empty without a baseline."""
+        b = self.baseline
+        if b is None or not b.legs:
+            return dict.fromkeys(BASELINE_TRACK_COLUMNS)
+        return {"baseline_lat_deg": [float(p[0]) for p in b.waypoints],
+                "baseline_lon_deg": [float(p[1]) for p in b.waypoints],
+                "baseline_leg_rpm": [float(leg["rpm"]) for leg in b.legs]}
 
     def _ensemble_row(self) -> dict:
         s = self.spread

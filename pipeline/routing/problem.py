@@ -9,6 +9,7 @@ from typing import NamedTuple
 import numpy as np
 
 from pipeline.performance.model import PerformanceModel
+from pipeline.routing.canal_time import canal_fixed_legs
 from pipeline.routing.leg_kernel import Vessel, vessel
 from pipeline.routing.objectives import OBJECTIVES, Objective, objective
 from pipeline.routing.sea_route import SeaRoute
@@ -172,6 +173,9 @@ class Instance:
         _check_coverage(problem, space, weather)
         max_hours = problem.planning_horizon_h(space)
         ves = problem.kernel_vessel()
+        fixed = canal_fixed_legs(space, problem.model.fuel_tph(problem.rpm_options[0], problem.draft_m, problem.trim_m))
+        if fixed.shape[0]:  # a canal is sailed in its fixed hours at the lowest setting's calm-water rate
+            ves = ves._replace(fixed_legs=fixed)
         obj = objective(problem.objective, t_dep_h=weather.hours_after_ref(problem.depart_utc), max_hours=max_hours,
                         t_req_h=problem.t_req_h, window_h=problem.window_h, early_t_per_h=problem.early_t_per_h,
                         late_t_per_h=problem.late_t_per_h)

@@ -30,7 +30,8 @@ import numpy as np
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
-from pipeline.routing.clearance import least_clearance_nm, widest_corridor_nm
+from pipeline.routing.canal_time import passages_note
+from pipeline.routing.clearance import least_clearance_outside_nm, widest_corridor_nm
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.continuous_speed import as_settings, refine_rpm
 from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
@@ -68,7 +69,8 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
             if clearance_nm is not None:
                 plan.min_land_clearance_nm = clearance_nm
             elif inst.space.clearance is not None:
-                plan.min_land_clearance_nm = least_clearance_nm(plan.waypoints, inst.space.clearance)
+                plan.min_land_clearance_nm = least_clearance_outside_nm(plan.waypoints, inst.space.clearance,
+                                                                        inst.space.gate)
             if wait_h is None:
                 plan.cost, _, _, _ = evaluate(inst, nodes, rpm_idx)
             else:  # the legs as sailed after their waits, and the waits' fuel
@@ -82,6 +84,9 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                 early_h = p.t_req_h - p.window_h - plan.hours
                 plan.reason = f"arrives {early_h:.1f} h before the arrival window" if early_h > 1e-6 else None
             notes = []
+            through = passages_note(inst.space)
+            if through:
+                notes.append(through)
             if plan.wait_h > 1e-9:
                 waited = [(leg["leg"], leg["wait_h"]) for leg in plan.legs if leg["wait_h"] > 1e-9]
                 where = ", ".join(f"{h:.1f} h before leg {i}" for i, h in waited[:5]) + (", …" if len(waited) > 5 else "")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from pipeline.decode.jma import decode_gsm
@@ -9,7 +11,7 @@ from pipeline.sources import rish
 from pipeline.sources.source import Selection, Source
 
 
-def select(names: list[str], cycle: np.datetime64, steps_h: list[int], optional_h: list[int] = ()) -> Selection:
+def select(names: list[str], cycle: np.datetime64, steps_h: list[int], optional_h: Sequence[int] = ()) -> Selection:
     """The cycle's GSM files at the lead times it must have (`steps_h`, a gap when not listed) and at the optional
     ones it lists (`optional_h`: the 00/12 UTC cycles' leads past 132 h)."""
     files = [f for f in rish.prefer_resolution(rish.files_for_cycle(names, cycle)) if f.model == "GSM"]

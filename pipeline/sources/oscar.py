@@ -7,6 +7,8 @@ kinds exist for one day, final beats interim beats nrt.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import re
 from dataclasses import dataclass
 
@@ -63,7 +65,7 @@ def index_url(base_url: str, cycle: np.datetime64) -> str:
     return base_url.rstrip("/") + "/"
 
 
-def select(names: list[str], cycle: np.datetime64, steps_h: list[int], optional_h: list[int] = ()) -> Selection:
+def select(names: list[str], cycle: np.datetime64, steps_h: list[int], optional_h: Sequence[int] = ()) -> Selection:
     """The analyses covering the valid times every cycle has (latest at or before the cycle, then every later one);
     the optional leads past them (the 00/12 UTC cycles' to 264 h) get the latest of these persisted, as any lead
     past the newest analysis does."""

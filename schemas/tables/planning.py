@@ -102,7 +102,8 @@ FLEET_PLANS = Table(
     Column('solve_status', 'VARCHAR', None,
            'optimal (proven) | feasible (best found; gap says how far from optimal at most) | no plan'),
     Column('gap', 'DOUBLE', None, 'proven relative optimality gap (0 when optimal)'),
-    Column('runtime_s', 'DOUBLE', 's', 'planner run time, seconds'),
+    Column('runtime_s', 'DOUBLE', 's', 'planner run time, wall-clock seconds (reported only: the search is paced by '
+           'work, not by the clock)'),
     Column('n_contracts', 'INTEGER', None, 'contracts planned'),
     Column('n_assigned', 'INTEGER', None, 'contracts given to a vessel'),
     Column('n_unassigned', 'INTEGER', None, 'contracts left (fleet_plan_unassigned says why)'),
@@ -117,6 +118,9 @@ FLEET_PLANS = Table(
     Column('total_cost', 'DOUBLE', None,
            'fuel + out of service + penalties, in the currency of the fuel price (e.g. USD)'),
     Column('gantt_png', 'VARCHAR', None, "picture of each vessel's schedule"),
+    Column('stopped_by', 'VARCHAR', None, 'what ended the search: proven optimal | effort: N units spent, gap G % '
+           '(the same input and effort give this same plan on any machine) | time limit (safety cap): N s, gap G % '
+           '(the wall clock stopped it: may differ from run to run); NULL: planned before it was recorded'),
 ), primary_key=('plan_id',))
 
 FLEET_PLAN_LEGS = Table('fleet_plan_legs', 'legs of each fleet plan, ballast and laden, with the voyage each became', (

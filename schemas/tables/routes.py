@@ -77,8 +77,9 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('limits_fuel_t', 'DOUBLE', 't',
            'what the engine-change limits cost, tonnes (fuel_t minus unlimited_fuel_t)'),
     Column('min_land_clearance_nm', 'DOUBLE', 'NM',
-           'least distance to land along the plan outside its port approaches, nautical miles (0.1 NM sampling; '
-           '25 means at least 25)'),
+           'least distance to land along the plan outside its port approaches and outside the fairways of the '
+           'passages it sails (a canal between its banks, a strait; and the approach radius at a fairway\'s ends, '
+           'as at a port), nautical miles (0.1 NM sampling; 25 means at least 25)'),
     Column('start_kind', 'VARCHAR', None,
            'where the plan starts: port (the departure) | noon report | operator position | advanced along plan '
            '(an old report moved on along the previous plan)'),
@@ -116,6 +117,11 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
            '10th percentile over those cycles of the saving against the baseline sailed in the same cycle, percent'),
     Column('savings_p50_pct', 'DOUBLE', '%', 'median of that saving, percent'),
     Column('savings_p90_pct', 'DOUBLE', '%', '90th percentile of that saving, percent'),
+    Column('baseline_lat_deg', 'DOUBLE[]', 'degree',
+           "latitudes of the constant-speed baseline's waypoints (the base route), degrees north; empty: no baseline"),
+    Column('baseline_lon_deg', 'DOUBLE[]', 'degree', "longitudes of the baseline's waypoints, degrees east"),
+    Column('baseline_leg_rpm', 'DOUBLE[]', 'rpm',
+           "engine speed of each leg of the baseline (one constant rpm), so it can be sailed again (plan_verification)"),
 ), primary_key=('run_id', 'voyage_id'))
 
 ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met (speeds in knots, times UTC)', (
@@ -164,6 +170,45 @@ ROUTE_FORECAST_SPLIT_ADDED = ('fuel_beyond_forecast_t', 'honest_baseline_fuel_be
 ROUTE_ENSEMBLE_ADDED = ('ensemble_members', 'p_on_time', 'baseline_p_on_time', 'fuel_p10_t', 'fuel_p50_t', 'fuel_p90_t',
                         'savings_p10_pct', 'savings_p50_pct', 'savings_p90_pct')
 
+# the baseline's track, so plan and baseline can be sailed again in the weather that came (plan_verification)
+ROUTE_BASELINE_TRACK_ADDED = ('baseline_lat_deg', 'baseline_lon_deg', 'baseline_leg_rpm')
+
+# What happened: each plan and its baseline re-sailed in the analysed weather of later cycles
+# (pipeline/routing/verification.py, flows/jobs/verify.py)
+PLAN_VERIFICATION = Table('plan_verification', 'plans re-sailed in the analysed weather of later cycles, with their '
+                          'constant-speed baselines: realised fuel and arrival against the claim (one row per plan, '
+                          'replaced as newer cycles arrive)', (
+    Column('run_id', 'VARCHAR', None, 'routing run that made the plan (routes.run_id)'),
+    Column('voyage_id', 'VARCHAR', None, 'voyage (routes.voyage_id)'),
+    Column('plan_kind', 'VARCHAR', None,
+           'where the plan starts: port (the whole voyage) or re-plan at sea (the rest of it, from routes.start_kind)'),
+    Column('cycle', 'TIMESTAMP', 'UTC', 'forecast cycle the plan was made on (UTC)'),
+    Column('cycles_used', 'VARCHAR', None,
+           'cycles whose weather the plan was re-sailed in, oldest first, comma separated (YYYY-MM-DDTHH)'),
+    Column('newest_cycle', 'TIMESTAMP', 'UTC', 'the newest of them (UTC)'),
+    Column('analysis_lead_h', 'DOUBLE', 'h', "the longest lead counted as analysed weather, hours"),
+    Column('analysed_until_utc', 'TIMESTAMP', 'UTC', 'the last analysed valid time (UTC)'),
+    Column('hours_analysed', 'DOUBLE', 'h',
+           "hours of the plan's realised passage in analysed weather (between two analysed valid times)"),
+    Column('hours_total', 'DOUBLE', 'h', "hours of the plan's realised passage"),
+    Column('coverage', 'VARCHAR', None,
+           'verified (the whole passage analysed) | partly verified (the rest sailed in the newest forecast, or past it '
+           'in its neutral weather)', not_null=True, allowed=('verified', 'partly verified')),
+    Column('claimed_fuel_t', 'DOUBLE', 't', "the plan's fuel as planned (routes.fuel_t), tonnes"),
+    Column('realised_fuel_t', 'DOUBLE', 't', "the plan's fuel re-sailed, tonnes"),
+    Column('claimed_eta_utc', 'TIMESTAMP', 'UTC', 'arrival as planned (UTC)'),
+    Column('realised_eta_utc', 'TIMESTAMP', 'UTC', 'arrival re-sailed (UTC)'),
+    Column('realised_late_h', 'DOUBLE', 'h', 'hours the re-sailed arrival is after the RTA (negative: early)'),
+    Column('claimed_baseline_fuel_t', 'DOUBLE', 't',
+           "the constant-speed baseline's fuel in the plan's forecast (routes.honest_baseline_fuel_t), tonnes"),
+    Column('realised_baseline_fuel_t', 'DOUBLE', 't', "the baseline's fuel re-sailed, tonnes; empty: no baseline stored"),
+    Column('realised_baseline_eta_utc', 'TIMESTAMP', 'UTC', "the baseline's arrival re-sailed (UTC)"),
+    Column('claimed_savings_pct', 'DOUBLE', '%', 'saving against the baseline as claimed (routes.savings_total_pct), percent'),
+    Column('realised_savings_pct', 'DOUBLE', '%',
+           'saving against the baseline, both re-sailed in the same weather, percent'),
+    Column('verified_at', 'TIMESTAMP', 'UTC', 'when this row was computed (UTC)', not_null=True),
+), primary_key=('run_id', 'voyage_id'))
+
 # route_legs is kept in one Parquet file per run beside the warehouse (storage/route_history.py); this table lists
 # the files of committed runs, so a file is part of the warehouse only once its run's rows are committed
 ROUTE_LEG_PARTS = Table('route_leg_parts', 'the Parquet files holding the route_legs of each committed run, one per batch of voyages it stored', (
@@ -175,4 +220,4 @@ ROUTE_LEG_PARTS = Table('route_leg_parts', 'the Parquet files holding the route_
     Column('written_at', 'TIMESTAMP', 'UTC', 'when the file was written (UTC)', not_null=True),
 ), primary_key=('run_id', 'file'))
 
-TABLES = (ROUTE_RUNS, ROUTES, ROUTE_LEGS, ROUTE_LEG_PARTS)
+TABLES = (ROUTE_RUNS, ROUTES, ROUTE_LEGS, ROUTE_LEG_PARTS, PLAN_VERIFICATION)

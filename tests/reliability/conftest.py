@@ -56,6 +56,25 @@ def oscar_files(mirror: Path) -> list[Path]:
     return sorted((mirror / "oscar").glob("oscar_vel*.nc"))
 
 
+def mirror_file(mirror: Path, key: str) -> Path:
+    """The file of the small mirror that a damage names: gsm0, gsm6, gsm12 (GSM at that lead), gwm, oscar (the second
+    analysis)."""
+    return {"gsm0": gsm_file(mirror, 0), "gsm6": gsm_file(mirror, 6), "gsm12": gsm_file(mirror, 12), "gwm": gwm_file(mirror),
+            "oscar": oscar_files(mirror)[1]}[key]
+
+
+def ingest_log_rows(root: Path) -> dict[str, tuple[str, str | None]]:
+    """file name -> (status, error) of the latest ingest-log row, read from the analysts' snapshot."""
+    import duckdb
+
+    from storage.layout import DataLayout
+
+    with duckdb.connect(str(DataLayout(root).warehouse_snapshot), read_only=True) as con:
+        rows = con.execute("SELECT file_name, arg_max(status, finished_at), arg_max(error, finished_at) FROM ingest_log "
+                           "GROUP BY file_name").fetchall()
+    return {name: (status, error) for name, status, error in rows}
+
+
 @pytest.fixture
 def fast_settings(monkeypatch):
     """The flows read the real settings object with short timeouts/retries and 0–12 h leads on top."""

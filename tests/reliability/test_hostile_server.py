@@ -8,7 +8,6 @@ import os
 import shutil
 import time
 
-import duckdb
 import eccodes
 import netCDF4
 import numpy as np
@@ -20,19 +19,11 @@ from pipeline.sources.fetch import FetchOptions, fetch, read_text
 from storage import cube
 from storage.layout import DataLayout
 from tests.http_mirror import serve
-from tests.reliability.conftest import CYCLE, file_urls, gsm_file, gwm_file, oscar_files
+from tests.reliability.conftest import CYCLE, file_urls, gsm_file, gwm_file, ingest_log_rows, oscar_files
 from tests.reliability.ingest_child import load_settings_with
 
 C = np.datetime64(CYCLE, "ns")
 QUICK = dict(timeout_s=2.0, retries=2, backoff_s=0.01)
-
-
-def _log(root) -> dict[str, tuple[str, str | None]]:
-    con = duckdb.connect(str(DataLayout(root).warehouse_snapshot), read_only=True)
-    rows = con.execute("SELECT file_name, arg_max(status, finished_at), arg_max(error, finished_at) FROM ingest_log "
-                       "GROUP BY file_name").fetchall()
-    con.close()
-    return {name: (status, error) for name, status, error in rows}
 
 
 def _url(base: str, mirror, path) -> str:
@@ -123,7 +114,7 @@ def test_ingest_with_a_dripping_and_an_endless_file_ends_with_both_missing(mirro
         report = ingest(root, url + "rish/", url + "oscar/")
     assert time.monotonic() - t0 < 60
     assert not report["complete"] and report["n_ok"] == 3, report
-    log = _log(root)
+    log = ingest_log_rows(root)
     assert log[drip.name][0] == "missing" and "too slow" in log[drip.name][1], log[drip.name]
     assert log[endless.name][0] == "missing" and "grew past the cap of 4194304 bytes" in log[endless.name][1]
     assert not list(root.rglob("*.part"))
@@ -181,7 +172,7 @@ def test_all_fill_files_are_corrupt_with_no_valid_values(small_mirror, tmp_path,
     root = tmp_path / "data"
     report = ingest(root, *file_urls(mirror))
     assert not report["complete"] and sorted(report["corrupt"]) == sorted([gsm.name, osc.name]), report
-    log = _log(root)
+    log = ingest_log_rows(root)
     assert log[gsm.name][0] == "corrupt" and "no valid values in u10" in log[gsm.name][1], log[gsm.name]
     assert log[osc.name][0] == "corrupt" and "no valid values in u" in log[osc.name][1], log[osc.name]
     assert cube.complete_cycles(DataLayout(root).weather_cube) == []

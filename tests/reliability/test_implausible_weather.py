@@ -14,8 +14,9 @@ from pipeline.synthetic import weather
 from pipeline.synthetic.grib_writer import jma_grid, write_gsm_file, write_gwm_file
 from storage import cube
 from storage.layout import DataLayout
-from tests.reliability.conftest import CYCLE, N_FILES, assert_same_cube, file_urls, gsm_file, gwm_file, oscar_files
-from tests.reliability.test_source_faults import _log, _rewrite_grib
+from tests.reliability.conftest import (CYCLE, N_FILES, assert_same_cube, file_urls, ingest_log_rows,
+                                       mirror_file, oscar_files)
+from tests.reliability.test_source_faults import _rewrite_grib
 
 C = np.datetime64(CYCLE, "ns")
 
@@ -96,11 +97,6 @@ ROUNDS = [  # (file, damage, what the log must say)
 ]
 
 
-def _target(mirror, key):
-    return {"gsm0": gsm_file(mirror, 0), "gsm6": gsm_file(mirror, 6), "gsm12": gsm_file(mirror, 12), "gwm": gwm_file(mirror),
-            "oscar": oscar_files(mirror)[1]}[key]
-
-
 def test_implausible_and_mislabelled_files_are_corrupt_and_a_clean_rerun_loses_nothing(small_mirror, tmp_path, ingest,
                                                                                         clean_cube):
     root = tmp_path / "data"
@@ -108,11 +104,11 @@ def test_implausible_and_mislabelled_files_are_corrupt_and_a_clean_rerun_loses_n
         mirror = tmp_path / f"mirror{k}"
         shutil.copytree(small_mirror, mirror)
         for key, damage, _ in damages:
-            damage(_target(mirror, key))
+            damage(mirror_file(mirror, key))
         report = ingest(root, *file_urls(mirror))
-        names = [_target(mirror, key).name for key, _, _ in damages]
+        names = [mirror_file(mirror, key).name for key, _, _ in damages]
         assert not report["complete"] and sorted(report["corrupt"]) == sorted(names), report
-        log = _log(root)
+        log = ingest_log_rows(root)
         for (key, _, says), name in zip(damages, names):
             status, error = log[name]
             assert status == "corrupt" and error.startswith(name) and says in error, (name, error)
@@ -120,7 +116,7 @@ def test_implausible_and_mislabelled_files_are_corrupt_and_a_clean_rerun_loses_n
         assert cube.complete_cycles(DataLayout(root).weather_cube) == []
     report = ingest(root, *file_urls(small_mirror))
     assert report["complete"] and report["corrupt"] == []
-    log = _log(root)
+    log = ingest_log_rows(root)
     assert len(log) >= N_FILES and all(status in ("ok", "skipped") for status, _ in log.values()), log
     assert_same_cube(DataLayout(root).weather_cube, clean_cube)
 

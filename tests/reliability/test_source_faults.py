@@ -7,7 +7,6 @@ import logging
 import os
 import shutil
 
-import duckdb
 import eccodes
 import netCDF4
 import numpy as np
@@ -19,20 +18,11 @@ from pipeline.synthetic.grib_writer import jma_grid, write_gsm_file, write_gwm_f
 from storage import cube, ingest_log
 from storage.layout import DataLayout
 from tests.http_mirror import serve
-from tests.reliability.conftest import (CYCLE, N_FILES, assert_same_cube, day_dir, file_urls, gsm_file, gwm_file, oscar_files,
-                                       warehouse_knows_cycle)
+from tests.reliability.conftest import (CYCLE, N_FILES, assert_same_cube, day_dir, file_urls, gsm_file, gwm_file,
+                                       ingest_log_rows, mirror_file, oscar_files, warehouse_knows_cycle)
 from tests.reliability.ingest_child import load_settings_with
 
 C = np.datetime64(CYCLE, "ns")
-
-
-def _log(root) -> dict[str, tuple[str, str | None]]:
-    """file name -> (status, error) of the latest ingest-log row, read from the analysts' snapshot."""
-    con = duckdb.connect(str(DataLayout(root).warehouse_snapshot), read_only=True)
-    rows = con.execute("SELECT file_name, arg_max(status, finished_at), arg_max(error, finished_at) FROM ingest_log "
-                       "GROUP BY file_name").fetchall()
-    con.close()
-    return {name: (status, error) for name, status, error in rows}
 
 
 def _url_path(mirror, path) -> str:
@@ -52,7 +42,7 @@ def test_http_errors_timeouts_and_resets_are_retried_then_missing_and_a_rerun_co
     hits = {p.rsplit("/", 1)[-1]: n for p, n in handler.hits.items()}
     assert hits[gsm_file(mirror, 6).name] == 1  # 404: no retry
     assert hits[gsm_file(mirror, 12).name] == hits[gwm_file(mirror).name] == hits[oscar_files(mirror)[1].name] == 2  # 1 retry
-    log = _log(root)
+    log = ingest_log_rows(root)
     assert log[gsm_file(mirror, 6).name] == ("missing", f"{url}rish/2020/12/01/{gsm_file(mirror, 6).name}: not found (HTTP 404)")
     assert "HTTP 500" in log[gsm_file(mirror, 12).name][1] and "after 2 attempts" in log[gsm_file(mirror, 12).name][1]
     assert "Timeout" in log[gwm_file(mirror).name][1]
@@ -82,7 +72,7 @@ def test_transient_faults_are_retried_and_leave_no_trace(mirror, tmp_path, inges
     hits = {p.rsplit("/", 1)[-1]: n for p, n in handler.hits.items()}
     assert [hits[n] for n in faults] == [2, 2, 2]
     assert_same_cube(DataLayout(root).weather_cube, clean_cube)
-    assert {s for s, _ in _log(root).values()} == {"ok"}
+    assert {s for s, _ in ingest_log_rows(root).values()} == {"ok"}
 
 
 def test_an_unlisted_day_writes_nothing_and_says_so(mirror, tmp_path, ingest):
@@ -168,22 +158,17 @@ ROUNDS = [  # each round damages files of a fresh copy of the mirror: (file, dam
 ]
 
 
-def _target(mirror, key):
-    return {"gsm0": gsm_file(mirror, 0), "gsm6": gsm_file(mirror, 6), "gsm12": gsm_file(mirror, 12), "gwm": gwm_file(mirror),
-            "oscar": oscar_files(mirror)[1]}[key]
-
-
 def test_damaged_files_are_quarantined_named_and_replaced_by_a_rerun(small_mirror, tmp_path, ingest, clean_cube):
     root = tmp_path / "data"
     for k, damages in enumerate(ROUNDS):
         mirror = tmp_path / f"mirror{k}"
         shutil.copytree(small_mirror, mirror)
         for key, damage, _ in damages:
-            damage(_target(mirror, key))
+            damage(mirror_file(mirror, key))
         report = ingest(root, *file_urls(mirror))
-        names = [_target(mirror, key).name for key, _, _ in damages]
+        names = [mirror_file(mirror, key).name for key, _, _ in damages]
         assert not report["complete"] and sorted(report["corrupt"]) == sorted(names), report
-        log = _log(root)
+        log = ingest_log_rows(root)
         for (key, _, says), name in zip(damages, names):
             status, error = log[name]
             assert status == "corrupt" and error.startswith(name) and says in error and str(mirror) in error, (name, error)
@@ -240,7 +225,7 @@ def test_redirect_to_another_host_is_refused_unless_allowed(mirror, tmp_path, in
             root = tmp_path / "refused" / "data"
             report = ingest(root, url + "rish/", url + "oscar/")
             assert not report["complete"] and f"GSM {target.name}: error" in report["missing"]
-            status, error = _log(root)[target.name]
+            status, error = ingest_log_rows(root)[target.name]
             assert status == "error" and "redirect to another host 'localhost' refused" in error
             assert other.requests == []  # the other host was never contacted
             assert not (DataLayout(root).raw / "gsm" / "20201201" / target.name).exists()

@@ -417,7 +417,7 @@ async function planPage(main) {
   if (!d.plan) { main.replaceChildren(el("h1", { text: "Fleet plan" }), el("p", { text: "no active fleet plan: `jitroute plan fleet` makes one" })); return; }
   const p = d.plan;
   main.replaceChildren(el("h1", { text: `Fleet plan ${p.plan_id}` }),
-    el("p", { cls: "summary", id: "plan-summary" }, `${p.solve_status} (${p.solver}, gap ${num(100 * (p.gap || 0), 2)} %) · made ${utc(p.created_at)} for ${utc(p.as_of_utc)} · `,
+    el("p", { cls: "summary", id: "plan-summary" }, `${p.solve_status} (${p.solver}, gap ${num(100 * (p.gap || 0), 2)} %${p.stopped_by ? `; search: ${p.stopped_by}` : ""}) · made ${utc(p.created_at)} for ${utc(p.as_of_utc)} · `,
       `${p.n_assigned} of ${p.n_contracts} contracts given to ${p.n_vessels_used} of ${d.rows.length} vessels · ${p.n_unassigned} left · fuel ${num(p.fuel_t, 0)} t · total cost ${num(p.total_cost, 0)} (fuel ${num(p.fuel_cost, 0)} + out of service ${num(p.out_of_service_cost, 0)} + penalties ${num(p.penalty_cost, 0)})`));
   const rowH = 34, L = 170, W = 1200, R = 20, T = 28, H = T + rowH * d.rows.length + 10;
   const t0 = Date.parse(d.start_utc), t1 = Date.parse(d.end_utc);
@@ -459,12 +459,14 @@ async function runsPage(main) {
   const d = await getJSON("/api/runs");
   main.replaceChildren(el("h1", { text: "Runs" }), el("p", { cls: "summary", text: `data root ${d.data_root}` }));
   main.append(el("h2", { text: "Routing runs (newest first)" }), table(
-    ["Started (UTC)", "Run", "Trigger", "Status", "Cycle", "Cycle age h ", "Voyages ", "On time ", "Late ", "Not routed ", "Exports failed ", "Saving % ", "profile % ", "route % ", "Compared ", "Reason"],
+    ["Started (UTC)", "Run", "Trigger", "Status", "Cycle", "Cycle age h ", "Voyages ", "On time ", "Late ", "Not routed ", "Exports failed ", "Saving % ", "profile % ", "route % ", "in forecast % ", "P10–P90 % ", "Verified ", "claimed % ", "realised % ", "Compared ", "Reason"],
     d.runs.map(r => el("tr", {}, td(utc(r.started_at)), td(r.run_id), td(r.trigger), statusCell(r.status), td(utc(r.cycle)), td(num(r.cycle_age_h, 0), "num"),
       td(r.n_voyages, "num"), td(r.n_on_time, "num"), td(r.n_late, "num"), td(r.n_not_routed, "num"), td(r.n_export_failed, "num"),
-      td(num(r.savings_total_pct, 2), "num"), td(num(r.savings_speed_profile_pct, 2), "num"), td(num(r.savings_route_pct, 2), "num"), td(r.n_compared, "num"),
+      td(num(r.savings_total_pct, 2), "num"), td(num(r.savings_speed_profile_pct, 2), "num"), td(num(r.savings_route_pct, 2), "num"),
+      td(num(r.savings_forecast_pct, 2), "num"), td(r.savings_p10_pct == null ? "–" : `${num(r.savings_p10_pct, 1)} to ${num(r.savings_p90_pct, 1)}`, "num"),
+      td(r.n_verified || "–", "num"), td(num(r.verified_claimed_savings_pct, 2), "num"), td(num(r.realised_savings_pct, 2), "num"), td(r.n_compared, "num"),
       el("td", { cls: "wrap", text: [r.reason, r.export_errors].filter(Boolean).join("; ") }))), "runs"),
-    el("p", { cls: "note", text: "Saving: fuel saved against the same voyages sailed at the one constant speed that arrives at the RTA in the same weather (each run solves that baseline itself), fuel-weighted over the voyages compared; split into the speed profile on the base route and the route. What was actually burnt is on each voyage's page (plan against noon reports)." }));
+    el("p", { cls: "note", text: "Saving: fuel saved against the same voyages sailed at the one constant speed that arrives at the RTA in the same weather (each run solves that baseline itself), fuel-weighted over the voyages compared; split into the speed profile on the base route and the route; \"in forecast\": the part of the saving made before the forecast's last valid time (past it every route sails the same neutral weather); P10–P90: the saving across the lagged ensemble. Verified: plans re-sailed in the analysed weather of later cycles (jitroute verify, the nightly); claimed and realised are over those same plans. What was actually burnt is on each voyage's page (plan against noon reports)." }));
   main.append(el("h2", { text: "Weather cycles" }), table(["Cycle (UTC)", "Complete", "Files ok ", "Expected ", "Missing", "Written (UTC)"],
     d.cycles.map(c => el("tr", {}, td(utc(c.cycle)), td(c.complete ? "yes" : "NO", c.complete ? "status-ok" : "status-failed"), td(c.n_files_ok, "num"), td(c.n_files_expected, "num"),
       el("td", { cls: "wrap", text: c.missing || "" }), td(utc(c.written_at)))), "cycles"));
