@@ -89,6 +89,8 @@ def baseline_kept(plan: Plan, wins: Wins, min_share: float, members: list[Weathe
     `wins.n_members` forecasts (fewer than `min_share`). Its saving is nil (it is its own baseline); with `members`
     its spread is computed again."""
     base = plan.baseline
+    if base is None:
+        raise ValueError(f"{plan.solver} plan has no constant-speed baseline to keep in its place")
     kept = replace(base, solver=plan.solver, seed=plan.seed, baseline=base, history=plan.history,
                    n_evals=plan.n_evals, model_version=plan.model_version, cycle=plan.cycle, spread=None,
                    runtime_s=plan.runtime_s)
@@ -112,7 +114,7 @@ def legs_ahead(legs: list[dict], at_utc, lat: float, lon: float) -> list[dict]:
     """The legs of a plan still to sail for a ship at (lat, lon) at `at_utc`: the leg it is on (by the plan's
     times) from that position, then the rest. Legs need etd_utc and eta_utc; a leg not yet begun keeps its wait."""
     at = np.datetime64(at_utc, "s")
-    ahead = []
+    ahead: list[dict] = []
     for g in sorted(legs, key=lambda g: np.datetime64(g["etd_utc"], "s")):
         if np.datetime64(g["eta_utc"], "s") <= at:
             continue
