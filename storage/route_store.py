@@ -178,13 +178,14 @@ def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n
 
 
 def current_plan_legs(db_path: Path, voyage_ids: list[str]) -> dict[str, list[dict]]:
-    """voyage_id → the legs (lat0, lon0, lat1, lon1, etd_utc, eta_utc) of its current plan in `latest_routes`
-    (voyages without a plan are absent)."""
+    """voyage_id → the legs (lat0, lon0, lat1, lon1, etd_utc, eta_utc, rpm, wait_h, wait_fuel_t) of its current
+    plan in `latest_routes` (voyages without a plan are absent)."""
     if not voyage_ids:
         return {}
     with warehouse.connect(db_path, write=False) as con:
         df = con.execute(
-            "SELECT l.voyage_id, l.leg, l.lat0, l.lon0, l.lat1, l.lon1, l.etd_utc, l.eta_utc "
+            "SELECT l.voyage_id, l.leg, l.lat0, l.lon0, l.lat1, l.lon1, l.etd_utc, l.eta_utc, l.rpm, l.wait_h, "
+            "l.wait_fuel_t "
             "FROM route_legs l JOIN latest_routes r USING (run_id, voyage_id) "
             "WHERE r.status IN ('ok', 'late') AND l.voyage_id IN (SELECT unnest(?)) ORDER BY l.voyage_id, l.leg",
             [list(voyage_ids)]).fetchdf()

@@ -125,6 +125,17 @@ def voyage_start(s: Settings, db: Path, voyage_id: str, cycle: np.datetime64 | N
     return enroute.voyage_from(sel.voyage, sel.start)
 
 
+def _plan_leg(rec: dict) -> dict:
+    """A stored leg of a current plan as plain values (times numpy UTC, a missing wait 0)."""
+    out = {k: plain(x) for k, x in rec.items()}
+    for k in ("etd_utc", "eta_utc"):
+        out[k] = np.datetime64(out[k], "s")
+    for k in ("wait_h", "wait_fuel_t"):
+        x = out.get(k)
+        out[k] = float(x) if x is not None and np.isfinite(float(x)) else 0.0
+    return out
+
+
 DEFAULT_TOP_SPEED_KN = 15.0  # a vessel without a design speed: a merchant ship's usual top speed
 
 
@@ -175,6 +186,9 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
         models[imo] = m.to_json() if m is not None else None
         notes[imo] = unusable_reason(stored.get(imo), imo)
     cyc = str(np.datetime_as_string(cycle, unit="s"))
+    at_sea = [str(sel.voyage["voyage_id"]) for sel in chosen if sel.start.kind != enroute.START_PORT]
+    # the current plans a re-plan at sea is weighed against (robust decisions: routing.replan_gain_sigmas)
+    current = route_store.current_plan_legs(db, at_sea) if at_sea and options.replan_gain_sigmas > 0 else {}
     jobs = []
     for sel in chosen:
         v = enroute.voyage_from(sel.voyage, sel.start)
@@ -182,7 +196,8 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
                              model_note=notes.get(int(v["imo"])),
                              run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version,
-                             debug_plots=s.debug_plots))
+                             debug_plots=s.debug_plots,
+                             current_legs=tuple(_plan_leg(g) for g in current.get(str(v["voyage_id"]), []))))
     return jobs
 
 

@@ -100,10 +100,11 @@ def lagged_members(cube_path: str, storage_options: dict | None, cycle: str, win
 
 def planned(job: RouteJob, cube_path: str | None, storage_options: dict | None = None,
             n_members: int | None = None) -> tuple[Plan, wf.WeatherField]:
-    """`plan_voyage` in the job's cube weather; with a cube, the plan's spread across a lagged ensemble of
-    `n_members` cycles (default the job's `ensemble_members`; 0: none) in `Plan.spread`."""
+    """`plan_voyage` in the job's cube weather; with a cube, the robust decisions its options ask for
+    (job.robust_plan) and the plan's spread across a lagged ensemble of `n_members` cycles (default the job's
+    `ensemble_members`; 0: none) in `Plan.spread`."""
     from pipeline.routing.ensemble import spread
-    from pipeline.routing.job import routing_problem
+    from pipeline.routing.job import kept_or_replanned, robust_plan, routing_problem
 
     windows = []
     from_cube = cube_weather(cube_path, job, storage_options)
@@ -116,6 +117,8 @@ def planned(job: RouteJob, cube_path: str | None, storage_options: dict | None =
     n = job.options.ensemble_members if n_members is None else n_members
     if windows and n > 0 and plan.legs:
         members = lagged_members(cube_path, storage_options, job.cycle, windows[-1], n)
+        plan, weather = robust_plan(job, plan, weather, weather_for, members)
+        plan = kept_or_replanned(job, plan, weather, members)
         plan.spread = spread(plan, members, routing_problem(job).kernel_vessel())
     return plan, weather
 

@@ -8,11 +8,12 @@ science: problem → search space → its weather (only the window of the foreca
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from pipeline.performance.model import PerformanceModel
+from pipeline.routing import robust
 from pipeline.routing import weather_field as wf
 from pipeline.routing.base_route import with_base_route
 from pipeline.routing.options import RoutingOptions
@@ -38,6 +39,9 @@ class RouteJob:
     cycle_version: int | None = None  # the cycle's content version when the run started (storage.cube.cycle_versions)
     model_note: str | None = None  # why there is no usable model (None: the vessel has none)
     debug_plots: bool = False  # export the developer's diagnostics too (the BFOA convergence plot)
+    # a voyage at sea: its current plan's legs (lat0, lon0, lat1, lon1, rpm, wait_h, wait_fuel_t, etd_utc, eta_utc),
+    # which a re-plan replaces only when it gains more than its spread (options.replan_gain_sigmas; kept_or_replanned)
+    current_legs: tuple = ()
 
     @property
     def voyage_id(self) -> str:
@@ -85,3 +89,58 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
         if note:
             plan.reason = f"{plan.reason}; {note}" if plan.reason else note
     return plan, weather
+
+
+def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for: WeatherFor | None,
+                members: list[wf.WeatherField]) -> tuple[Plan, wf.WeatherField]:
+    """The plan after the robust decisions the job's options ask for (robust.py), over the lagged ensemble `members`:
+    re-planned to arrive `arrival_margin_sigmas` standard deviations of its arrival across the members before the
+    RTA (the plan keeps the voyage's RTA and says what it aims at; kept as it was when the earlier arrival cannot be
+    met), then replaced by its constant-speed baseline unless it beats it in `min_win_share` of the members. With
+    fewer than two members, or the options at 0, the plan is returned as it is."""
+    o = job.options
+    if len(members) < 2 or not plan.legs or not (o.arrival_margin_sigmas > 0 or o.min_win_share > 0):
+        return plan, weather
+    vessel = routing_problem(job).kernel_vessel()
+    margin_h = robust.arrival_margin_h(plan, members, vessel, o.arrival_margin_sigmas, o.arrival_margin_max_share)
+    if margin_h >= 1.0 / 60.0:
+        rta = np.datetime64(plan.rta_utc, "s")
+        aim = rta - np.timedelta64(int(round(margin_h * 3600.0)), "s")
+        aimed, aimed_weather = plan_voyage(replace(job, voyage={**job.voyage, "rta_utc": aim}), weather_for)
+        note = (f"aims {margin_h:.1f} h before the RTA ({o.arrival_margin_sigmas:g} × the spread of its arrival "
+                f"across {len(members)} forecasts)")
+        if aimed.legs and aimed.status == "ok":
+            for p in (aimed, aimed.baseline):
+                if p is not None:
+                    p.rta_utc = rta
+            aimed.reason = note if aimed.reason is None else f"{aimed.reason}; {note}"
+            plan, weather = aimed, aimed_weather
+        else:
+            note = f"could not aim {margin_h:.1f} h before the RTA ({aimed.status}): planned for the RTA itself"
+            plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+    if o.min_win_share > 0:
+        wins = robust.wins_across(plan, members, vessel)
+        if not wins.preferred(o.min_win_share) and plan.baseline is not None and plan.baseline.legs:
+            plan = robust.baseline_kept(plan, wins, o.min_win_share)
+    return plan, weather
+
+
+def kept_or_replanned(job: RouteJob, plan: Plan, weather: wf.WeatherField, members: list[wf.WeatherField]) -> Plan:
+    """For a voyage re-planned at sea with a current plan (`job.current_legs`) and `replan_gain_sigmas` > 0: the new
+    plan when it is on time in more members of the lagged ensemble than the current plan's legs ahead of the ship,
+    or gains more fuel than that many standard deviations of its gain across them (robust.replan_decision); else
+    the current plan's route ahead, re-timed to the RTA in this cycle's weather (robust.retimed), saying why.
+    Otherwise the plan as it is."""
+    k = job.options.replan_gain_sigmas
+    if k <= 0 or not job.current_legs or job.voyage.get("start_kind") in (None, "port") or not plan.legs \
+            or len(members) < 2:
+        return plan
+    vessel = routing_problem(job).kernel_vessel()
+    ahead = robust.legs_ahead(list(job.current_legs), plan.depart_utc, plan.legs[0]["lat0"], plan.legs[0]["lon0"])
+    ahead = robust.retimed(ahead, plan.depart_utc, plan.rta_utc, weather, vessel)  # its route, re-timed to the RTA
+    decision = robust.replan_decision(ahead, plan, members, vessel, k)
+    if decision.take_new:
+        plan.reason = decision.reason if plan.reason is None else f"{plan.reason}; {decision.reason}"
+        return plan
+    kept = robust.current_plan_kept(plan, ahead, weather, vessel, decision.reason) if ahead else None
+    return kept if kept is not None else plan

@@ -47,6 +47,16 @@ class RoutingOptions:
     # a lagged ensemble of this many cycles (the one routed on and the complete ones before it) sails each plan and
     # its baseline (ensemble.py): P(on time), fuel and saving P10/P50/P90 stored with the plan; 0: none
     ensemble_members: int = 4
+    # robust decisions over that ensemble (robust.py; none acts with fewer than two members): aim this many standard
+    # deviations of the plan's arrival across the members before the RTA (at most arrival_margin_max_share of the
+    # passage; 0: aim at the RTA) ...
+    arrival_margin_sigmas: float = 0.0
+    arrival_margin_max_share: float = 0.05
+    # ... keep the constant-speed baseline unless the plan beats it in at least this share of the members (0: off) ...
+    min_win_share: float = 0.0
+    # ... and at sea keep the current plan unless the new one gains more than this many standard deviations of its
+    # gain across the members, or is on time in more of them (0: always take the new plan)
+    replan_gain_sigmas: float = 0.0
     # passages (pipeline.routing.passages names, e.g. ("suez",)) the base route keeps out of: round the Cape instead
     # of Suez. Per fleet in the settings (JITROUTE_AVOID_PASSAGES=suez,panama), per voyage with `route --avoid`
     avoid_passages: tuple = ()

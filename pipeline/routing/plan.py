@@ -228,8 +228,6 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarr
     `etd_utc` is after the wait, its `wait_h` and `wait_fuel_t` say what the wait took."""
     lat, lon = inst.space.lat, inst.space.lon
     t = inst.t_dep_h
-    horizon_h = float(inst.weather.times_h[-1])  # hours after t_ref of the last valid time
-    cycle_h = inst.weather.hours_after_ref(inst.weather.cycle) if inst.weather.cycle is not None else 0.0
     legs = []
     for i in range(len(nodes) - 1):
         a, b = int(nodes[i]), int(nodes[i + 1])
@@ -241,26 +239,36 @@ def legs_of_route(inst, nodes: np.ndarray, rpm_idx: np.ndarray, wait_h: np.ndarr
         o = lk.sail_leg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], t, rpm, inst.vessel, inst.weather)
         if o[lk.CODE] != lk.OK:
             return legs, int(o[lk.CODE]), i
-        wait_beyond_h = max(0.0, t - max(t - wait, horizon_h))  # the part of the wait past the last valid time
-        etd = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
+        legs.append(leg_record(i, (lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]), rpm, o, t, wait,
+                               float(wait_tph), inst.weather))
         t += o[lk.H]
-        eta = inst.weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
-        legs.append({
-            "leg": i, "lat0": float(lat[i, a]), "lon0": float(lon[i, a]), "lat1": float(lat[i + 1, b]),
-            "lon1": float(lon[i + 1, b]),
-            "course_deg": float(geo.gc_bearing_deg(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
-            "dist_nm": float(geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])),
-            "rpm": rpm, "stw_kn": float(o[lk.STW_KN]), "sog_kn": float(o[lk.SOG_KN]), "hours": float(o[lk.H]),
-            "fuel_t": float(o[lk.FUEL]), "etd_utc": _utc(etd), "eta_utc": _utc(eta),
-            "wait_h": wait, "wait_fuel_t": wait * float(wait_tph),
-            "wind_kn": float(o[lk.WIND_KN]),
-            "wind_dir_deg": float(np.degrees(np.arctan2(o[lk.WIND_FX], o[lk.WIND_FY])) % 360.0),
-            "hs_m": float(o[lk.HS]),
-            "wave_dir_deg": float(np.degrees(np.arctan2(o[lk.WAVE_FX], o[lk.WAVE_FY])) % 360.0),
-            "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
-            "hours_beyond_forecast": max(0.0, t - max(t - o[lk.H], horizon_h)),
-            "fuel_beyond_forecast_t": float(o[lk.FUEL_BEYOND]) + wait_beyond_h * float(wait_tph),
-            "hours_before_cycle": max(0.0, min(t, cycle_h) - (t - o[lk.H])),
-            "hours_without_wind": float(o[lk.NO_WIND_H]),  # a hole in the cube's wind (sailed as calm): in the reason
-        })
     return legs, lk.OK, -1
+
+
+def leg_record(i: int, ends, rpm: float, o: np.ndarray, t_h: float, wait_h: float, wait_tph: float, weather) -> dict:
+    """A plan's leg: the leg `ends` = (lat0, lon0, lat1, lon1) sailed at `rpm` from t_h (hours after the weather's
+    t_ref, after a wait of wait_h hove to burning wait_tph t/h) with the leg kernel's output `o`."""
+    lat0, lon0, lat1, lon1 = (float(x) for x in ends)
+    horizon_h = float(weather.times_h[-1])  # hours after t_ref of the last valid time
+    cycle_h = weather.hours_after_ref(weather.cycle) if weather.cycle is not None else 0.0
+    wait_beyond_h = max(0.0, t_h - max(t_h - wait_h, horizon_h))  # the part of the wait past the last valid time
+    etd = weather.t_ref + np.timedelta64(int(round(t_h * 3600)), "s")
+    t = t_h + o[lk.H]
+    eta = weather.t_ref + np.timedelta64(int(round(t * 3600)), "s")
+    return {
+        "leg": i, "lat0": lat0, "lon0": lon0, "lat1": lat1, "lon1": lon1,
+        "course_deg": float(geo.gc_bearing_deg(lat0, lon0, lat1, lon1)),
+        "dist_nm": float(geo.gc_distance_nm(lat0, lon0, lat1, lon1)),
+        "rpm": rpm, "stw_kn": float(o[lk.STW_KN]), "sog_kn": float(o[lk.SOG_KN]), "hours": float(o[lk.H]),
+        "fuel_t": float(o[lk.FUEL]), "etd_utc": _utc(etd), "eta_utc": _utc(eta),
+        "wait_h": wait_h, "wait_fuel_t": wait_h * wait_tph,
+        "wind_kn": float(o[lk.WIND_KN]),
+        "wind_dir_deg": float(np.degrees(np.arctan2(o[lk.WIND_FX], o[lk.WIND_FY])) % 360.0),
+        "hs_m": float(o[lk.HS]),
+        "wave_dir_deg": float(np.degrees(np.arctan2(o[lk.WAVE_FX], o[lk.WAVE_FY])) % 360.0),
+        "current_kn": float(o[lk.CUR_KN]), "beyond_forecast": bool(o[lk.BEYOND] > 0),
+        "hours_beyond_forecast": max(0.0, t - max(t - o[lk.H], horizon_h)),
+        "fuel_beyond_forecast_t": float(o[lk.FUEL_BEYOND]) + wait_beyond_h * wait_tph,
+        "hours_before_cycle": max(0.0, min(t, cycle_h) - (t - o[lk.H])),
+        "hours_without_wind": float(o[lk.NO_WIND_H]),  # a hole in the cube's wind (sailed as calm): in the reason
+    }
