@@ -38,8 +38,7 @@ from pipeline.performance.model import reference_model  # noqa: E402
 from pipeline.routing.options import RoutingOptions  # noqa: E402
 from pipeline.routing.sea_route import PassageTransit, SeaRoute  # noqa: E402
 from pipeline.routing.solve import EngineLimits, RoutingProblem, solve, solver_spec  # noqa: E402
-from pipeline.routing import weather_field as wf  # noqa: E402
-from pipeline.synthetic import weather as synth  # noqa: E402
+from pipeline.synthetic.routing_suite import voyage_weather  # noqa: E402
 from routing import DEPART_UTC, RPM, pin_one_core, verdict  # noqa: E402
 
 TARGET_BFOA_S = 3.0
@@ -82,21 +81,6 @@ PASSAGES = (  # waypoint index ranges (inclusive) sailed as fixed gates; the can
 )
 
 
-def route_weather(space, depart_utc, hours: float, seed: int = 3, step_h: int = 6) -> wf.WeatherField:
-    """bench/routing.py's analytic weather on a 1° grid over the usable nodes (longitudes as they are: the route
-    does not cross 180°), every `step_h` hours (the whole ocean hourly would take gigabytes)."""
-    ok = space.node_ok
-    lat = np.arange(np.floor(space.lat[ok].min()) - 2.0, np.ceil(space.lat[ok].max()) + 2.5, 1.0)
-    lon = np.arange(np.floor(space.lon[ok].min()) - 2.0, np.ceil(space.lon[ok].max()) + 2.5, 1.0)
-    times = depart_utc - np.timedelta64(step_h, "h") + np.arange(0, int(np.ceil(hours)) + 2 * step_h, step_h).astype("timedelta64[h]")
-    t_h = synth.hours_since_epoch(times)[:, None, None]
-    la, lo = np.meshgrid(lat, lon, indexing="ij")
-    u10, v10 = synth.wind_uv(t_h, la[None], lo[None], seed)
-    swh, mwd, _ = synth.waves(t_h, la[None], lo[None], seed)
-    uo, vo = synth.currents_uv(t_h, la[None], lo[None])
-    return wf.from_arrays(lat, lon, times, u10=u10, v10=v10, swh=swh, mwd_deg=mwd,
-                          uo=np.broadcast_to(uo, u10.shape), vo=np.broadcast_to(vo, u10.shape))
-
 
 def sea_route() -> SeaRoute:
     from pipeline.routing.corridor import route_arrays
@@ -121,7 +105,8 @@ def voyage():
     space = loose.search_space()
     layout_s = time.thread_time() - t0
     slow_kn = float(MODEL.stw_kn(RPM[0], loose.draft_m, loose.trim_m))
-    weather = route_weather(space, DEPART_UTC, 1.6 * space.base_distance_nm / slow_kn + 24.0)
+    # every 6 h: the whole route hourly would take gigabytes
+    weather = voyage_weather(space, DEPART_UTC, 1.6 * space.base_distance_nm / slow_kn + 24.0, step_h=6)
     # the route at 70 rpm in calm water, its canal in the canal's transit and waiting hours (canal_time.py)
     s_nm = route_arrays(route)[2]
     canals = [p for p in route.passages if p.transit_h is not None]

@@ -150,13 +150,19 @@ def solve_optimum(spec: SuiteInstance, problem, space, weather, gap: float = DP_
     return rec, plan
 
 
-def voyage_weather(space, depart_utc, hours: float, seed: int = 3) -> wf.WeatherField:
-    """Hourly analytic weather on a 1° grid covering every usable node, from 1 h before departure."""
+def voyage_weather(space, depart_utc, hours: float, seed: int = 3, step_h: int = 1) -> wf.WeatherField:
+    """Analytic weather every `step_h` hours (hourly by default) on a 1° grid covering every usable node, from one
+    step before departure. Longitudes run 0..360 east, which keeps a box across the dateline in one piece, unless
+    the nodes' own longitudes (−180..180) give a narrower box: a voyage across the Greenwich meridian."""
     ok = space.node_ok
     lat = np.arange(np.floor(space.lat[ok].min()) - 2.0, np.ceil(space.lat[ok].max()) + 2.5, 1.0)
-    lon360 = space.lon[ok] % 360.0  # the voyage crosses the dateline: 0..360 east keeps the box in one piece
-    lon = np.arange(np.floor(lon360.min()) - 2.0, np.ceil(lon360.max()) + 2.5, 1.0)
-    times = depart_utc - np.timedelta64(1, "h") + np.arange(int(np.ceil(hours)) + 2).astype("timedelta64[h]")
+    lon_box = space.lon[ok] % 360.0
+    as_given = space.lon[ok]
+    if np.ptp(as_given) < np.ptp(lon_box):
+        lon_box = as_given
+    lon = np.arange(np.floor(lon_box.min()) - 2.0, np.ceil(lon_box.max()) + 2.5, 1.0)
+    times = depart_utc - np.timedelta64(step_h, "h") + np.arange(
+        0, int(np.ceil(hours)) + 2 * step_h, step_h).astype("timedelta64[h]")
     t_h = synth.hours_since_epoch(times)[:, None, None]
     la, lo = np.meshgrid(lat, lon, indexing="ij")
     u10, v10 = synth.wind_uv(t_h, la[None], lo[None], seed)
