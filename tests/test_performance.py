@@ -822,17 +822,22 @@ def test_bunker_import_is_as_strict_as_noon_import_and_keeps_every_refused_row(t
         assert con.execute("SELECT count(*) FROM bunker_logs_rejected").fetchone()[0] == 7
 
 
+def _hai_phong_to_sai_gon(db) -> None:
+    """GAS NIRVANA and its voyage voy20200001, Hai Phong 2020-12-06 00:00 to Sai Gon, RTA 2020-12-10 12:00."""
+    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
+    fleet_store.import_voyages(db, pd.DataFrame([dict(
+        voyage_id="voy20200001", imo=9140607, dep_name="Hai Phong", arr_name="Sai Gon", dep_lat=20.8, dep_lon=106.8,
+        arr_lat=10.7, arr_lon=106.8, depart_utc="2020-12-06T00:00Z", rta_utc="2020-12-10T12:00Z", draft_m=6.0, trim_m=2.0,
+        rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)]))
+
+
 def test_plan_against_actual_ends_a_late_voyage_at_its_arrival_not_at_rta_plus_3_days(tmp_path):
     """A voyage arriving four days late is measured to its arrival report (within 10 NM of the destination), and a
     shifting-to-berth report after arrival is not sea time."""
     from storage import warehouse
 
     db = tmp_path / "w.duckdb"
-    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
-    fleet_store.import_voyages(db, pd.DataFrame([dict(
-        voyage_id="voy20200001", imo=9140607, dep_name="Hai Phong", arr_name="Sai Gon", dep_lat=20.8, dep_lon=106.8,
-        arr_lat=10.7, arr_lon=106.8, depart_utc="2020-12-06T00:00Z", rta_utc="2020-12-10T12:00Z", draft_m=6.0, trim_m=2.0,
-        rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)]))
+    _hai_phong_to_sai_gon(db)
     days = pd.date_range("2020-12-06T12:00", "2020-12-14T12:00", freq="D")  # 9 reports, the last at the destination
     lat = np.linspace(19.6, 10.72, len(days))
     sea = pd.DataFrame({"imo": "9140607", "ts_utc": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "lat": lat.round(3).astype(str),
@@ -863,11 +868,7 @@ def test_plan_against_actual_compares_a_replan_from_its_start_and_a_ship_at_sea_
     from storage import warehouse
 
     db = tmp_path / "w.duckdb"
-    fleet_store.import_vessels(db, GAS_NIRVANA_VESSEL)
-    fleet_store.import_voyages(db, pd.DataFrame([dict(
-        voyage_id="voy20200001", imo=9140607, dep_name="Hai Phong", arr_name="Sai Gon", dep_lat=20.8, dep_lon=106.8,
-        arr_lat=10.7, arr_lon=106.8, depart_utc="2020-12-06T00:00Z", rta_utc="2020-12-10T12:00Z", draft_m=6.0, trim_m=2.0,
-        rpm_options="[110, 120]", max_hs_m=6.0, max_wind_kn=50.0)]))
+    _hai_phong_to_sai_gon(db)
 
     def reports(days, lats):
         return pd.DataFrame({"imo": "9140607", "ts_utc": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "lat": lats, "lon": "106.8",
