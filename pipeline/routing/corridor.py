@@ -29,7 +29,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.clearance import Clearance, clearance, leg_is_clear_nb, point_is_clear_nb
+from pipeline.routing.clearance import Clearance, clearance, point_is_clear_nb
 from pipeline.routing.land import land_grid
 from pipeline.routing.sea_route import SeaRoute
 
@@ -241,6 +241,8 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
 def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, lat_limits, edge_ok) -> None:
     """Legs touching a passage's gate: along the fairway (gate to gate) as given; into and out of it at sea within
     the approach radius of the gate (the nearer port keeps its own approach), the clearance beyond."""
+    from pipeline.routing.search_space import line_edges_clear  # search_space imports this module
+
     L2, P = lat.shape
     c = P // 2
     for i in range(L2 - 1):
@@ -254,13 +256,7 @@ def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, lat_limits, 
             geo.gc_distance_nm(g_lat, g_lon, rule.arr_lat, rule.arr_lon)
         port = (rule.dep_lat, rule.dep_lon) if near_dep else (rule.arr_lat, rule.arr_lon)
         at_gate = Clearance(rule.clearance_nm, rule.approach_nm, float(g_lat), float(g_lon), float(port[0]), float(port[1]))
-        for a in range(P):
-            if not node_ok[i, a]:
-                continue
-            for b in range(max(0, a - ms), min(P, a + ms + 1)):
-                if node_ok[i + 1, b]:
-                    edge_ok[i, a, b] = leg_is_clear_nb(grid, at_gate, lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b],
-                                                       lat_limits[0], lat_limits[1])
+        line_edges_clear(grid, at_gate, lat, lon, node_ok, i, ms, lat_limits[0], lat_limits[1], edge_ok)
 
 
 __all__ = ["lay_out_corridor", "line_positions", "route_arrays", "default_corridor_lines", "default_half_width_nm",

@@ -109,16 +109,23 @@ def _nodes_clear(grid, rule, lat, lon, out):
 
 
 @numba.njit(cache=True)
+def line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out):
+    """Whether each leg from a usable node of line i to a usable node of line i + 1 (at most `max_shift` nodes
+    aside) is clear of land under `rule`, into out[i]."""
+    P = lat.shape[1]
+    for a in range(P):
+        if not node_ok[i, a]:
+            continue
+        for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+            if node_ok[i + 1, b]:
+                out[i, a, b] = leg_is_clear_nb(grid, rule, lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b],
+                                               lat_lo, lat_hi)
+
+
+@numba.njit(cache=True)
 def _edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
-    L2, P = lat.shape
-    for i in range(L2 - 1):
-        for a in range(P):
-            if not node_ok[i, a]:
-                continue
-            for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
-                if node_ok[i + 1, b]:
-                    out[i, a, b] = leg_is_clear_nb(grid, rule, lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b],
-                                                   lat_lo, lat_hi)
+    for i in range(lat.shape[0] - 1):
+        line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out)
 
 
 # when the default layout leaves no route at sea: (lines, nodes per line) this many times as many, in turn. More
