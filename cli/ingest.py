@@ -60,7 +60,7 @@ def register(app: typer.Typer) -> None:
         route: bool = typer.Option(False, "--route", help="Also re-route the fleet for every complete cycle."),
     ):
         """Ingest a range of past cycles, skipping those already complete; optionally re-route."""
-        from flows.jobs.ingest import backfill_range
+        from flows.jobs.backfill import backfill_range
         from pipeline.sources.cycles import cycles_between, parse_hours
 
         todo = cycles_between(start, end, parse_hours(cycles))  # bad dates are refused before anything starts

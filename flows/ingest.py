@@ -1,10 +1,12 @@
-"""Prefect flows `ingest-weather` (one cycle) and `backfill` (a range of cycles); the work is in flows/jobs/ingest.py."""
+"""Prefect flows `ingest-weather` (one cycle) and `backfill` (a range of cycles); the work is in flows/jobs/ingest.py and
+flows/jobs/backfill.py."""
 
 from __future__ import annotations
 
 from prefect import flow
 
-from flows.jobs.ingest import backfill_range, ingest_cycle
+from flows.jobs.backfill import backfill_range
+from flows.jobs.ingest import ingest_cycle
 from flows.runner import InPrefect, register_flow
 from flows.settings import refuse_served_overrides
 

@@ -160,7 +160,8 @@ def test_a_nightly_whose_cycles_are_missing_refuses_the_old_cycle_and_says_which
 
 
 def test_an_unreachable_rish_listing_records_the_cycle_incomplete_and_files_missing(tmp_path):
-    from flows.jobs.ingest import backfill_range, ingest_cycle
+    from flows.jobs.backfill import backfill_range
+    from flows.jobs.ingest import ingest_cycle
     from tests.processes import free_port
 
     root = tmp_path / "data"

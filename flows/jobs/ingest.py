@@ -1,4 +1,4 @@
-"""The ingest job (one cycle) and the backfill job (a range of cycles).
+"""The ingest job: one cycle (the backfill job over a range of cycles is flows/jobs/backfill.py).
 
 Four steps: list → download → decode → write. Downloads run a few at a time and GRIB2 files are
 decoded in two threads; the write step writes the cube, then the file log, then the cycle status. A file that
@@ -26,7 +26,7 @@ from flows.runner import PLAIN
 from flows.settings import Settings, load_settings
 from pipeline.decode.errors import DecodeError
 from pipeline.sources import rish
-from pipeline.sources.cycles import (check_cycle_hour, cycles_between, label as cycle_label, newest_published_cycles,
+from pipeline.sources.cycles import (check_cycle_hour, label as cycle_label, newest_published_cycles,
                                      parse_cycle, utcnow_h)
 from pipeline.sources.fetch import FetchOptions, FetchResult, fetch, read_text, token_may_go_to
 from pipeline.sources.registry import BY_NAME, SOURCES
@@ -337,38 +337,3 @@ def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: boo
                      s.cube_retention_days, ", ".join(cycle_label(r) for r in retired))
     return CycleReport(label, complete, len(items), n_ok, missing=problems,
                        corrupt=[it.name for it in items if it.status == "corrupt"]).__dict__
-
-
-def backfill_range(start: str, end: str, cycles: str | int | list[int] = "00,12", data_root: str | None = None, rish_url: str | None = None,
-                   oscar_url: str | None = None, route: bool = False, *, run=PLAIN,
-                   progress=None) -> list[dict]:
-    """Ingest every cycle from start to end (inclusive days), skipping complete ones; optionally re-route.
-
-    `progress(done, total, label)` is called after each cycle (the CLI draws a bar with it).
-    """
-    from pipeline.sources.cycles import parse_hours
-
-    todo = cycles_between(start, end, parse_hours(cycles))
-    s = load_settings(data_root=Path(data_root) if data_root else None)
-    reports = []
-    with job_lock(s.layout.ensure().locks, f"backfill {start}..{end}", say=LOG.info):
-        for c in todo:
-            label = cycle_label(c)
-            try:
-                reports.append(run.subflow("ingest-weather", ingest_cycle, cycle=label, data_root=data_root,
-                                           rish_url=rish_url, oscar_url=oscar_url))
-            except Exception as exc:  # one cycle failing is reported; the backfill goes on with the next
-                LOG.error("backfill: cycle %s failed: %s: %s", label, type(exc).__name__, exc)
-                reports.append(CycleReport(label, False, 0, 0, missing=[f"ingest failed: {type(exc).__name__}: {exc}"]).__dict__)
-            LOG.info("backfill: %d/%d cycles done (%s)", len(reports), len(todo), label)
-            if progress is not None:
-                progress(len(reports), len(todo), label)
-        if route:
-            from flows.jobs.fleet import route_fleet_job
-
-            for r in reports:
-                if r["complete"]:
-                    summary = run.subflow("route-fleet", route_fleet_job, cycle=r["cycle"], data_root=data_root,
-                                          trigger="backfill")
-                    r["route_run"] = summary.get("run_id")
-    return reports
