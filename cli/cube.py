@@ -37,7 +37,7 @@ def register(app: typer.Typer) -> None:
     def check(data: Optional[Path] = DataOpt):
         """Read every metadata file and every chunk of the cube; list what is missing or corrupt (exit 1 if any)."""
         from flows.settings import load_settings
-        from storage import cube
+        from storage import cube, cube_damage
 
         layout = load_settings(data_root=data).layout
         require_data_root(layout)
@@ -45,7 +45,7 @@ def register(app: typer.Typer) -> None:
         if not store.exists():
             console.print(f"no weather cube at {store}: nothing to check")
             return
-        meta, chunks = cube.check_store(store)
+        meta, chunks = cube_damage.check_store(store)
         leftover = store.with_name(store.name + ".creating")
         for m in meta:
             console.print(f"[red]damaged:[/] {m}")
@@ -67,7 +67,7 @@ def register(app: typer.Typer) -> None:
                oscar_url: Optional[str] = typer.Option(None, "--oscar-url", help="OSCAR base URL for the re-ingest.")):
         """Damaged metadata: move the store aside (kept) and rebuild it; corrupt chunks: hide those cycles and re-ingest them."""
         from flows.settings import load_settings
-        from storage import cube
+        from storage import cube, cube_damage
 
         s = load_settings(data_root=data)
         require_data_root(s.layout)
@@ -75,7 +75,7 @@ def register(app: typer.Typer) -> None:
         if not store.exists():
             console.print(f"no weather cube at {store}: nothing to repair")
             return
-        meta, chunks = cube.check_store(store)
+        meta, chunks = cube_damage.check_store(store)
         if meta:
             aside = cube.move_aside(store)
             cycles = _recorded_cycles(s.layout.warehouse)

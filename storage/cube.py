@@ -76,7 +76,8 @@ from zarr.codecs import BloscCodec
 
 from schemas import cube_variables as cv
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, STATE_INCOMPLETE
-from storage.cube_location import DECODE_ERRORS, CorruptChunkError, CubeError, Location, fs_options, locate
+from storage.cube_location import DECODE_ERRORS, CubeError, Location, fs_options, locate
+from storage.cube_damage import corrupt_chunk_error, cycles_in_store, metadata_problems, require_store
 from storage.cube_window import cycle_times
 from storage.cube_window import cycle_versions  # noqa: F401  (zarr alone; flows ask the cube module for it)
 
@@ -101,7 +102,6 @@ CYCLE_INDEX_ARRAYS = ("cycle", "cycle_state")
 CYCLE_INDEX_MOVING = "cycle_index_moving"  # root attribute: the index values while _rechunk_cycle_index moves them
 
 
-METADATA_NODES = ("", *DATA_VARS, "cycle", "step", "lat", "lon", "cycle_state", "current_age_h")  # "" is the group
 
 
 @contextlib.contextmanager
@@ -174,11 +174,6 @@ def _repair(loc: Location) -> None:
         for name, arr in group.arrays():
             if name in lengths and arr.shape[0] > n:
                 arr.resize((n, *arr.shape[1:]))
-
-
-def _cycles_in_store(loc: Location) -> np.ndarray:
-    with xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False) as ds:
-        return ds["cycle"].values.astype("datetime64[ns]")
 
 
 def _check_grid(loc: Location, cycle_ds: xr.Dataset) -> None:
@@ -268,7 +263,7 @@ def _write_cycle(loc: Location, cycle_ds: xr.Dataset, *, complete: bool, lock_di
             _upgrade(loc)
             _rechunk_cycle_index(loc)
             _check_grid(loc, cycle_ds)
-            cycles = _cycles_in_store(loc)
+            cycles = cycles_in_store(loc)
             hits = np.flatnonzero(cycles == cycle)
             if hits.size:
                 index = int(hits[0])
@@ -375,7 +370,7 @@ def _publish(loc: Location, cycle: np.datetime64) -> None:
 def _cycle_rows(loc: Location, versions: dict) -> dict:
     """ISO cycle → its row along `cycle`, for the cycles that have a content version (published, not retired):
     readers find a cycle's row from the root metadata without reading the `cycle` coordinate."""
-    labels = [_version_label(c) for c in _cycles_in_store(loc)]
+    labels = [_version_label(c) for c in cycles_in_store(loc)]
     return {lab: row for row, lab in enumerate(labels) if lab in versions}
 
 
@@ -399,15 +394,6 @@ def _open_consistent(loc: Location, lock_dir: Path | None) -> xr.Dataset:
     with writer_lock(lock_dir, loc):
         _repair(loc)
     return xr.open_zarr(loc.zarr_store(read_only=True), consolidated=False, chunks={})
-
-
-def require_store(loc: Location) -> None:
-    has_meta = loc.has("zarr.json")
-    if loc.local is not None and loc.local.exists() and not has_meta:
-        raise CubeError(f"{loc.url}: the store is damaged ({'; '.join(metadata_problems(loc))}): run `jitroute cube check`, "
-                        "then `jitroute cube repair`")
-    if not has_meta:
-        raise FileNotFoundError(f"no weather cube at {loc.url}: run `jitroute ingest` (or `jitroute demo`) first")
 
 
 def open_cube(path, *, include_incomplete: bool = True, lock_dir: Path | None = None,
@@ -459,14 +445,6 @@ def latest_complete_cycle(path, at_or_before=None, storage_options: dict | None 
     return cycles[-1] if cycles else None
 
 
-def corrupt_chunk_error(loc: Location, c: np.datetime64, exc: Exception) -> CorruptChunkError:
-    bad = [p for p in corrupt_chunks(loc, cycles=[c])] or None
-    label = np.datetime_as_string(np.datetime64(c, "h"), unit="h")
-    where = ", ".join(str(p.chunk) for p in bad[:3]) if bad else f"(reading failed: {exc})"
-    return CorruptChunkError(f"cube chunk {where} of cycle {label} is corrupt ({type(exc).__name__}: {exc}): "
-                             f"run `jitroute ingest --cycle {label} --force`")
-
-
 def load_cycle(path, cycle, lat_range_deg: tuple[float, float] | None = None,
                storage_options: dict | None = None) -> xr.Dataset:
     """One visible cycle, eager, dims (step, lat, lon); only the latitude band `lat_range_deg` if given.
@@ -488,70 +466,7 @@ def load_cycle(path, cycle, lat_range_deg: tuple[float, float] | None = None,
         raise corrupt_chunk_error(loc, c, exc) from exc
 
 
-# --- checking and repairing a store damaged on disk ---------------------------------------------------------------
-
-
-def metadata_problems(path) -> list[str]:
-    """What is missing or unreadable among the store's metadata files (`zarr.json` of the group and arrays)."""
-    import json
-
-    loc = locate(path)
-    out = []
-    for node in METADATA_NODES:
-        key = f"{node}/zarr.json" if node else "zarr.json"
-        if not loc.has(key):
-            out.append(f"{loc.name}/{key} is missing")
-            continue
-        try:
-            json.loads(loc.read_text(key))
-        except (OSError, ValueError) as exc:
-            out.append(f"{loc.name}/{key} is unreadable ({exc})")
-    return out
-
-
-class BadChunk:
-    """One chunk that does not decode: `chunk` is its file, `variable` and `cycle` what it holds."""
-
-    def __init__(self, chunk: Path | str, variable: str, cycle: np.datetime64, error: str):
-        self.chunk, self.variable, self.cycle, self.error = chunk, variable, cycle, error
-
-    def __repr__(self) -> str:
-        return f"BadChunk({self.chunk}, {self.variable}, {self.cycle})"
-
-
-def corrupt_chunks(path, cycles: list | None = None, storage_options: dict | None = None) -> list[BadChunk]:
-    """Decode every chunk of the data variables (of `cycles`, default all) and list those that fail."""
-    loc = locate(path, storage_options)
-    group = zarr.open_group(loc.zarr_store(read_only=True), mode="r", use_consolidated=False)
-    times = _cycles_in_store(loc)
-    wanted = range(len(times)) if cycles is None else [int(i) for c in cycles for i in np.flatnonzero(times == np.datetime64(c, "ns"))]
-    bad = []
-    for v in DATA_VARS:
-        arr = group[v]
-        _, _, clat, clon = arr.chunks
-        nlat, nlon = arr.shape[2], arr.shape[3]
-        for i in wanted:
-            for j in range(-(-nlat // clat)):
-                for k in range(-(-nlon // clon)):
-                    try:
-                        arr[i, :, j * clat:(j + 1) * clat, k * clon:(k + 1) * clon]
-                    except DECODE_ERRORS as exc:
-                        key = f"{v}/c/{i}/0/{j}/{k}"
-                        bad.append(BadChunk(loc.local / key if loc.local is not None else f"{loc.url}/{key}", v, times[i],
-                                            f"{type(exc).__name__}: {exc}"))
-    return bad
-
-
-def check_store(path: Path) -> tuple[list[str], list[BadChunk]]:
-    """(metadata problems, corrupt chunks) of the store; chunks are only read when the metadata is whole."""
-    path = Path(path)
-    meta = metadata_problems(path)
-    if meta:
-        return meta, []
-    try:
-        return [], corrupt_chunks(path)
-    except DECODE_ERRORS as exc:  # e.g. the cycle axis itself does not decode
-        return [f"{path.name}: the store cannot be read ({type(exc).__name__}: {exc})"], []
+# --- repairing a store damaged on disk (what is damaged: storage/cube_damage.py) -------------------------------
 
 
 def move_aside(path: Path, lock_dir: Path | None = None) -> Path:
@@ -569,7 +484,7 @@ def hide_cycles(path: Path, cycles: list, lock_dir: Path | None = None) -> None:
     """Set the cycles back to hidden (readers stop seeing them) until a re-ingest writes them again."""
     loc = locate(path)
     with writer_lock(lock_dir, loc):
-        times = _cycles_in_store(loc)
+        times = cycles_in_store(loc)
         for c in cycles:
             for i in np.flatnonzero(times == np.datetime64(c, "ns")):
                 _set_state(loc, int(i), STATE_HIDDEN)
@@ -598,7 +513,7 @@ def retire_cycles(path, keep_days: float, lock_dir: Path | None = None, storage_
     with writer_lock(lock_dir, loc):
         _repair(loc)
         group = zarr.open_group(loc.zarr_store(), mode="r+", use_consolidated=False)
-        cycles = _cycles_in_store(loc)
+        cycles = cycles_in_store(loc)
         state = np.asarray(group["cycle_state"][:])
         versions = dict(group.attrs.get("cycle_versions", {}))
         if not cycles.size:

@@ -30,6 +30,7 @@ import zarr
 from zarr.storage import WrapperStore
 
 from schemas.cube_variables import DATA_VARS, STATE_COMPLETE, STATE_HIDDEN, step_hours
+from storage.cube_damage import corrupt_chunk_error, require_store
 from storage.cube_location import DECODE_ERRORS, CubeError, Location, locate
 
 _UNITS = {"days": "D", "hours": "h", "minutes": "m", "seconds": "s"}
@@ -167,8 +168,6 @@ def open_published(path, storage_options: dict | None = None, cache_chunks: bool
     chunks bypass CHUNK_CACHE (a read of the whole grid, e.g. a weather map, would fill a routing worker's cache)."""
     loc = locate(path, storage_options)
     if loc.local is not None and not loc.has("zarr.json"):
-        from storage.cube import require_store  # names what is damaged, or says the store is missing
-
         require_store(loc)
     by_row: dict = {}
     store = _CachedChunks(_store_object(loc), loc.url, by_row)
@@ -302,11 +301,7 @@ def read_window(path, cycle, *, valid_utc: tuple, lat_deg: tuple[float, float], 
         data = {v: np.concatenate([pub.group[v][ci, steps, lats, part] for part in lon_parts], axis=-1)
                 for v in variables}
     except DECODE_ERRORS as exc:
-        raise _corrupt_chunk_error(loc, c, exc) from exc
+        raise corrupt_chunk_error(loc, c, exc) from exc
     return Window(c, pub.step_h[steps], pub.lat[lats], lon_out, data)
 
 
-def _corrupt_chunk_error(loc: Location, c: np.datetime64, exc: Exception):
-    from storage.cube import corrupt_chunk_error  # finding the damaged chunk needs the full store code
-
-    return corrupt_chunk_error(loc, c, exc)

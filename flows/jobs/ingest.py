@@ -34,7 +34,7 @@ from pipeline.sources.source import ROLES
 from pipeline.weather.assemble import assemble_cycle
 from pipeline.weather.grid import routing_grid
 from pipeline.weather.regrid import regrid
-from storage import cube, ingest_log, raw_store
+from storage import cube, cube_damage, ingest_log, raw_store
 from storage.run_lock import job_lock
 
 LOG = logging.getLogger("jitroute.ingest")
@@ -292,7 +292,7 @@ def _optional_leads(s: Settings, layout, label: str) -> list[int]:
 
 def _ingest_locked(s: Settings, layout, c: np.datetime64, label: str, force: bool, run) -> dict:
     if not force and c in cube.complete_cycles(layout.cube_store) and _recorded_complete(layout.warehouse, c):
-        bad = cube.corrupt_chunks(layout.cube_store, [c])  # "complete" must also mean readable
+        bad = cube_damage.corrupt_chunks(layout.cube_store, [c])  # "complete" must also mean readable
         if not bad:
             LOG.info("cycle %s is already complete; skipping", label)
             return CycleReport(label, True, 0, 0, skipped=True).__dict__
