@@ -11,7 +11,7 @@ it runs again and every comment matches this module. A column without a descript
 import hashlib
 
 from schemas.tables import TABLES as DEFINED
-from storage.warehouse import Migration
+from storage.migration import Migration
 
 UTC = "(UTC)"
 

@@ -4,7 +4,7 @@ Units: knots, nautical miles, metres, hours, tonnes; times UTC. Relative directi
 (`*_dir_rel_deg`) are where wind/waves come FROM relative to the bow: 0 head, 180 following.
 """
 
-from storage.warehouse import Migration
+from storage.migration import Migration
 
 NOON_COLUMNS = """
     imo BIGINT NOT NULL,

@@ -1,6 +1,6 @@
 """Warehouse schema for weather ingest: the per-file log and per-cycle status."""
 
-from storage.warehouse import Migration
+from storage.migration import Migration
 
 MIGRATIONS: list[Migration] = [
     Migration(

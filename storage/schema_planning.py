@@ -4,7 +4,7 @@ sea distances between ports, fleet plans and their legs, and the plan that made 
 Units: nautical miles, tonnes, hours; costs in the currency of the fuel price (e.g. USD); times UTC.
 """
 
-from storage.warehouse import Migration
+from storage.migration import Migration
 
 MIGRATIONS: list[Migration] = [
     Migration(

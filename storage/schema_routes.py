@@ -8,7 +8,7 @@ import hashlib
 
 from schemas.tables.routes import (LEG_HOURS_ADDED, PLAN_VERIFICATION, ROUTE_BASELINE_TRACK_ADDED, ROUTE_ENSEMBLE_ADDED,
                                    ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS, ROUTES)
-from storage.warehouse import Migration
+from storage.migration import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
 # (storage.fleet_store.voyage_fingerprints) and latest_routes compares it with the voyage of today, so a plan made

@@ -30,11 +30,12 @@ import os
 import shutil
 import struct
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import duckdb
+
+from storage.migration import Migration
 
 
 # The oldest DuckDB release whose readers open the analysts' snapshot (its storage format number is
@@ -50,11 +51,6 @@ SNAPSHOT_MIN_AGE_S = 600.0
 # without a limit a check would keep up to the whole file in memory
 CHECK_MEMORY_LIMIT = "32MB"
 
-
-@dataclass(frozen=True)
-class Migration:
-    name: str  # unique, e.g. "ingest_001_log"
-    sql: str
 
 
 class WarehouseBusyError(RuntimeError):
@@ -266,18 +262,19 @@ def newest_good_snapshot(path: Path) -> Path | None:
     return next((snap for snap in snapshot_generations(path) if snap.exists() and check_file(snap) is None), None)
 
 
-def check_before_writing(path: Path, wait_s: float = 60.0) -> None:
+def check_before_writing(path: Path, wait_s: float = 60.0, also: Callable[[duckdb.DuckDBPyConnection], None] | None = None) -> None:
     """Raise WarehouseCorruptError (naming the newest good snapshot) when the warehouse `path` exists and is
-    damaged, so a command stops before it writes anything (cube, exports or rows). A missing warehouse passes."""
+    damaged, so a command stops before it writes anything (cube, exports or rows). A missing warehouse passes.
+    `also(con)`: a further check on the open file that raises what it finds (the data layout passes the route-legs
+    files' size check, storage/route_history.py, which builds on this module)."""
     path = Path(path)
     if not path.exists():
         return
     con = _open(path, read_only=True, wait_s=wait_s)
     try:
         verify(con)
-        from storage import route_history  # here: it builds on this module
-
-        route_history.check_sizes(con)
+        if also is not None:
+            also(con)
     except duckdb.Error as exc:
         if _is_corrupt(exc):
             raise _corrupt(path, exc) from exc

@@ -11,6 +11,7 @@ import duckdb
 import pytest
 
 from storage import route_history, route_store, warehouse
+from storage.layout import DataLayout
 from tests.test_route_store import _leg, _route
 
 
@@ -103,7 +104,7 @@ def test_an_older_snapshot_shows_the_legs_of_its_own_runs_only(tmp_path):
 
 @pytest.mark.parametrize("damage", ["deleted", "truncated"])
 def test_a_missing_or_truncated_legs_file_stops_every_writer_naming_it(tmp_path, damage):
-    db = tmp_path / "w.duckdb"
+    db = tmp_path / "warehouse.duckdb"  # the data layout's name: its check runs below
     _write_run(db, "r1")
     _write_run(db, "r2")
     part = route_history.history_dir(db) / "run_id=r1" / "part-0.parquet"
@@ -116,7 +117,7 @@ def test_a_missing_or_truncated_legs_file_stops_every_writer_naming_it(tmp_path,
         with warehouse.connect(db) as con:
             con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('x', now(), 'ok')")
     with pytest.raises(warehouse.WarehouseCorruptError, match="nothing was written"):
-        warehouse.check_before_writing(db)  # what every job calls before it writes anything
+        DataLayout(tmp_path).ensure()  # what every job calls before it writes anything
     assert _sha(warehouse.snapshot_path(db)) == snap_before
     assert _read(db, "SELECT count(*) FROM route_runs WHERE run_id = 'x'")[0][0] == 0
 
