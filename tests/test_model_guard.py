@@ -48,7 +48,7 @@ def test_a_network_follows_its_physical_form_at_higher_rpm_and_in_heavier_seas_t
     assert far[1] - edge[1] == pytest.approx(_linear(phys_f, "fuel", 1.2 * rpm_hi, 8.0) - _linear(phys_f, "fuel", rpm_hi, hs_hi),
                                              rel=1e-9)
     # a clamp would answer as at the edge: 8 m head seas as fast as the largest seas seen, 1.2 × rpm for the same fuel
-    clamped = mlp.forward(p, mlp.inputs(1.2 * rpm_hi, 10.0, 0.5, 0.0, 0.0, 8.0, 0.0))[0]
+    clamped = mlp.forward(p, features.mlp_inputs(1.2 * rpm_hi, 10.0, 0.5, 0.0, 0.0, 8.0, 0.0))[0]
     np.testing.assert_allclose(clamped, edge, rtol=1e-9)
     assert at(1.2 * rpm_hi, 8.0)[0] < at(1.2 * rpm_hi, hs_hi)[0] - 0.5  # heavier head seas cost speed
     assert far[1] > at(rpm_hi, 8.0)[1] * 1.3  # more rpm costs fuel (rpm³: 1.2³ = 1.73)

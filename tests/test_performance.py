@@ -590,7 +590,7 @@ def _nonlinear_reports(n=400, seed=8):
     rng = np.random.default_rng(seed)
     rpm, draft, trim = rng.uniform(50, 110, n), rng.uniform(6, 12, n), rng.normal(0.5, 0.5, n)
     wind, wrel, hs, srel = rng.gamma(3, 5, n), rng.uniform(0, 180, n), rng.gamma(2, 0.8, n), rng.uniform(0, 180, n)
-    X = mlp.inputs(rpm, draft, trim, wind, wrel, hs, srel)
+    X = features.mlp_inputs(rpm, draft, trim, wind, wrel, hs, srel)
     speed = 16 * np.tanh(rpm / 70) - 0.1 * draft - 0.0012 * X[:, 3] ** 2 - 0.15 * X[:, 4] ** 2
     fuel = 1.6 * (rpm / 100) ** 3 * (1 + 0.02 * draft) + 0.0004 * X[:, 3] ** 2
     Y = np.column_stack([speed + rng.normal(0, 0.15, n), fuel * rng.normal(1, 0.02, n)])
@@ -648,7 +648,7 @@ def test_mlp_form_refits_routes_and_has_no_heading_in_calm_water():
     assert np.array_equal(coef, list(json.loads(rows[1]["coefficients"]).values()))  # one network, two outputs
     m = PerformanceModel("mlp", coef, coef)
     np.testing.assert_allclose(m.stw_kn(80.0, 9.0, 0.5, 20.0, 30.0, 2.0, 40.0),
-                               mlp.forward(coef, mlp.inputs(80.0, 9.0, 0.5, 20.0, 30.0, 2.0, 40.0))[0, 0], rtol=1e-12)
+                               mlp.forward(coef, features.mlp_inputs(80.0, 9.0, 0.5, 20.0, 30.0, 2.0, 40.0))[0, 0], rtol=1e-12)
     rel = np.array([-180.0, -0.0, 0.0, 90.0, 180.0, 270.0])
     assert np.ptp(m.stw_kn(90.0, 9.0, 0.5, 0.0, rel, 0.0, rel)) == 0.0 and np.ptp(m.fuel_tph(90.0, 9.0, 0.5, 0.0, rel, 0.0, rel)) == 0.0
     with pytest.raises(ValueError, match="no design matrix"):

@@ -102,6 +102,15 @@ def direction_weight_array(rel_deg) -> np.ndarray:
     return DIR_A + DIR_B * c + DIR_C * c * c
 
 
+def mlp_inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> np.ndarray:
+    """The MLP form's input matrix (n × 5) from broadcastable model inputs (see the `mlp` module docstring)."""
+    cols = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m,
+                                                                            wave_rel_deg)))
+    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg = (c.ravel() for c in cols)
+    return np.column_stack([rpm, draft_m, trim_m, wind_kn * direction_weight_array(wind_rel_deg),
+                            hs_m * direction_weight_array(wave_rel_deg)])
+
+
 @numba.njit(cache=True, inline="always")
 def calm_dir_deg(amount, rel_deg):
     """The folded relative direction (0..180) of wind or waves, 0 when there are none (amount ≤ 0).
@@ -334,7 +343,7 @@ def design_matrices(form: int, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m
 
 def _linear(form: int) -> None:
     if form == FORM_MLP:
-        raise ValueError("the MLP form has no design matrix: its inputs are mlp.inputs(...)")
+        raise ValueError("the MLP form has no design matrix: its inputs are mlp_inputs(...)")
 
 
 def _columns(*arrays) -> list[np.ndarray]:

@@ -101,17 +101,6 @@ def edge_nb(p, x0, x1, x2, x3, x4):
     return outside, e
 
 
-def inputs(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg) -> np.ndarray:
-    """The network's input matrix (n × 5) from broadcastable model inputs (see the module docstring)."""
-    from pipeline.performance.features import direction_weight_array
-
-    cols = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m,
-                                                                            wave_rel_deg)))
-    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg = (c.ravel() for c in cols)
-    return np.column_stack([rpm, draft_m, trim_m, wind_kn * direction_weight_array(wind_rel_deg),
-                            hs_m * direction_weight_array(wave_rel_deg)])
-
-
 def forward(p: np.ndarray, X: np.ndarray) -> np.ndarray:
     """(n × 2) outputs — speed (kn), fuel rate (t/h) — of the network p at the rows of X (n × 5)."""
     p = np.asarray(p, dtype=np.float64)

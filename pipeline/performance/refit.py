@@ -416,7 +416,7 @@ def _designs(form: str, inp, built: dict | None = None) -> dict[str, np.ndarray]
     "physical" the physical form's regressors: the network carries that form fitted on the same rows). `built`:
     form → designs made already."""
     if form == "mlp":
-        X = mlp.inputs(*(inp[c] for c in features.MODEL_INPUTS[:-1]))
+        X = features.mlp_inputs(*(inp[c] for c in features.MODEL_INPUTS[:-1]))
         return {**{t: X for t in TARGETS}, "physical": (built or {}).get("physical") or fit.designs("physical", inp)}
     return fit.designs(form, inp)
 
