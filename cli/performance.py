@@ -215,7 +215,7 @@ def register(app: typer.Typer) -> None:
                  "run `jitroute refit` (perf_models lists the versions)")
         m = model_from_stored(stored, imo)
         if m is None:
-            fail(unusable_reason(stored, imo))
+            fail(unusable_reason(stored, imo) or f"vessel {imo}'s stored model cannot be used; run `jitroute refit`")
         env = m.envelope or {}
         draft = draft_m if draft_m is not None else (sum(env["draft_m"]) / 2 if env.get("draft_m") else 10.0)
         trim = trim_m if trim_m is not None else float(env.get("trim_m", 0.0))

@@ -173,6 +173,7 @@ def register(app: typer.Typer) -> None:
             missing = [n for n, x in (("--from", from_), ("--to", to), ("--depart", depart), ("--rta", rta), ("--imo", imo)) if x is None]
             if missing:
                 fail(f"give {', '.join(missing)} (or --voyage ID)")
+            assert dep is not None and arr is not None  # both given: `missing` is empty
             (la0, lo0), (la1, lo1) = dep, arr
             v = {"voyage_id": "adhoc", "imo": imo, "dep_lat": la0, "dep_lon": lo0, "arr_lat": la1, "arr_lon": lo1,
                  "depart_utc": t_dep, "rta_utc": t_rta, "rpm_options": None}
@@ -235,7 +236,7 @@ def register(app: typer.Typer) -> None:
             console.print(f"status [bold]{plan.status}[/]{' — ' + plan.reason if plan.reason else ''}; "
                           f"savings {sav}; engine changes {plan.n_engine_changes}"
                           f"{'' if lim != lim else f' (limits cost {lim:.2f} t)'}; runtime {plan.runtime_s:.2f} s; "
-                          f"weather {'calm water' if calm else 'cycle ' + c}"
+                          f"weather {'calm water' if calm else f'cycle {c}'}"
                           f"{'' if land_nm != land_nm else f'; least distance to land {land_nm:.1f} NM (outside the port approaches)'}")
             if cube_path is not None and ensemble > 0:
                 from pipeline.routing.ensemble import describe

@@ -84,7 +84,7 @@ from storage.cube_window import cycle_versions  # noqa: F401  (zarr alone; flows
 CYCLE_ENCODING = {"units": "hours since 2000-01-01 00:00:00", "calendar": "proleptic_gregorian", "dtype": "int64"}
 TIME_EPOCH = np.datetime64("2000-01-01T00", "ns")  # of CYCLE_ENCODING
 STEP_ENCODING = {"units": "hours", "dtype": "int32"}
-NO_FILL = {"_FillValue": None}  # CF: coordinates have no missing values
+NO_FILL: dict[str, object] = {"_FillValue": None}  # CF: coordinates have no missing values
 WRITE_WORKERS = 2
 # Chunks per spatial axis: (1, all steps, ≈ nlat/8, ≈ nlon/8), e.g. 41 × 90 (20.5° × 45°) on the 0.5° grid.
 # Chosen by bench/cube_chunks.py on the demo fleet's 200 voyage windows: against 3 splits (107 × 240) a voyage's
@@ -109,9 +109,11 @@ def writer_lock(lock_dir: Path | None, store) -> Iterator[None]:
     """Exclusive lock per store (file `<lock_dir or store's folder>/<store name>.lock`). A store at a URL has no
     folder to lock in: its lock lives in `lock_dir` (the data root's `locks/`), on the one host that writes."""
     loc = locate(store)
-    if lock_dir is None and loc.local is None:
-        raise CubeError(f"{loc.url}: a cube at a URL is written under a local lock; give its lock_dir")
-    lock_dir = Path(lock_dir) if lock_dir is not None else loc.local.parent
+    if lock_dir is None:
+        if loc.local is None:
+            raise CubeError(f"{loc.url}: a cube at a URL is written under a local lock; give its lock_dir")
+        lock_dir = loc.local.parent
+    lock_dir = Path(lock_dir)
     lock_dir.mkdir(parents=True, exist_ok=True)
     with open(lock_dir / (loc.name + ".lock"), "w") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
@@ -133,7 +135,7 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64, chunks: tuple[int, int
     nstep, nlat, nlon = cycle_ds.sizes["step"], cycle_ds.sizes["lat"], cycle_ds.sizes["lon"]
     nan = dask.array.full((1, nstep, nlat, nlon), np.nan, dtype=np.float32,
                           chunks=(1, *(chunks or (nstep, *spatial_chunks(nlat, nlon)))))
-    data = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
+    data: dict[str, tuple] = {v: (cv.DIMS, nan.astype(cv.BY_NAME[v].dtype), cv.attrs(v)) for v in DATA_VARS}
     age, state = cv.CURRENT_AGE, cv.CYCLE_STATE
     data[age.name] = (age.dims, np.full((1, nstep), np.nan, age.dtype), cv.attrs(age.name))
     data[state.name] = (state.dims, np.array([STATE_HIDDEN], state.dtype), cv.attrs(state.name))
@@ -155,7 +157,7 @@ def _template(cycle_ds: xr.Dataset, cycle: np.datetime64, chunks: tuple[int, int
 def _encoding(ds: xr.Dataset) -> dict:
     nstep = ds.sizes["step"]
     chunks = tuple(ds[DATA_VARS[0]].data.chunksize)  # the template's: (1, steps, lat, lon)
-    enc = {v: {"chunks": chunks, "compressors": (DATA_CODEC,)} for v in DATA_VARS}
+    enc: dict[str, dict] = {v: {"chunks": chunks, "compressors": (DATA_CODEC,)} for v in DATA_VARS}
     enc["cycle"] = CYCLE_ENCODING | NO_FILL | {"chunks": (CYCLE_INDEX_ROWS,)}
     enc["step"] = STEP_ENCODING | NO_FILL
     enc["valid_time"] = CYCLE_ENCODING | NO_FILL | {"chunks": (1, nstep)}

@@ -182,12 +182,13 @@ def download_all(items: list[Download], raw_dir: Path, cycle: np.datetime64, opt
 
 def _decoded_or_quarantined(it: Download, decode, quarantine_dir: Path):
     """`decode(file)`, or None after marking the file corrupt and moving it to quarantine."""
-    assert it.result is not None, f"{it.url} is decoded before it is fetched"
+    path = it.result.path if it.result is not None else None
+    assert path is not None, f"{it.url} is decoded before it is fetched"
     try:
-        return decode(it.result.path)
+        return decode(path)
     except DecodeError as exc:
         it.status, it.error = "corrupt", f"{exc} (from {it.url})"
-        raw_store.quarantine(quarantine_dir, it.source, it.result.path)
+        raw_store.quarantine(quarantine_dir, it.source, path)
         return None
 
 
