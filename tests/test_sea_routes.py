@@ -250,3 +250,35 @@ def test_a_traffic_separation_scheme_cannot_be_avoided():
     with pytest.raises(ValueError, match="compulsory"):
         RoutingOptions(avoid_passages=("finisterre_s",))
     assert RoutingOptions(avoid_passages=(" Suez",)).avoid_passages == ("suez",)
+
+
+@pytest.mark.slow  # a child process that loads the routing kernels
+def test_the_bench_s_stated_rules_correct_the_reference_only_where_it_is_provably_off():
+    """bench/sea_routes.py's `by_the_rules`: searoute's unsailed ends are added to its length (not to a published
+    figure); a pair counts by the great-circle bound only when the route is clear, within 1 % of the great circle and
+    shorter than searoute."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    def row(pair, product, ref, ends, gc, clear=2.0, reference="searoute"):
+        return dict(pair=pair, product_nm=product, searoute_nm=ref, searoute_unsailed_ends_nm=ends, gc_nm=gc,
+                    clearance_nm=clear, reference=reference)
+
+    rows = [row("ends", 1025.0, 1000.0, 30.0, 800.0),  # +2.5 % plain, -0.5 % with the ends
+            row("ends against", 985.0, 1000.0, 30.0, 800.0),  # -1.5 % plain, -4.4 % with the ends
+            row("bound", 960.0, 1000.0, 0.0, 955.0),  # -4 %, within 1 % of the great circle
+            row("bound, not clear", 960.0, 1000.0, 0.0, 955.0, clear=1.0),
+            row("off the circle", 950.0, 1000.0, 0.0, 700.0),
+            row("published", 46.0, 43.2, 16.0, 42.6, reference="Panama Canal Authority")]
+    root = Path(__file__).resolve().parents[1]
+    code = ("import json, sys; sys.path.insert(0, 'bench'); from sea_routes import by_the_rules; "
+            "print(json.dumps({x['pair']: [x['rule'], round(x['diff_ends'], 4)] for x in by_the_rules(json.loads(sys.argv[1]))}))")
+    r = subprocess.run([sys.executable, "-c", code, json.dumps(rows)], cwd=root, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got == {"ends": ["within", -0.0049], "ends against": ["off", -0.0437], "bound": ["gc bound", -0.04],
+                   "bound, not clear": ["off", -0.04], "off the circle": ["off", -0.05],
+                   "published": ["off", 0.0648]}
