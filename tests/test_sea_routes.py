@@ -29,6 +29,12 @@ GDANSK = (54.5, 18.8)
 YOKOHAMA = (35.2, 139.8)  # Uraga channel approach
 ISTANBUL = (40.96, 28.9)  # Ahırkapı anchorage, Sea of Marmara
 CONSTANTA = (44.1, 28.8)
+LISBON = (38.6, -9.3)
+ALGECIRAS = (36.1, -5.35)
+USHANT = (48.46, -5.13)  # Créac'h light
+FINISTERRE = (42.88, -9.27)  # the cape
+# from the Strait of Dover to Gibraltar: the traffic separation schemes' lanes for southbound traffic
+WEST_EUROPE_SOUTHBOUND = ["dover", "casquets_w", "ushant_sw", "finisterre_s", "sao_vicente_se"]
 
 
 def assert_clear_outside_fairways(route: SeaRoute, dep, arr, clearance_nm=2.0, approach_nm=10.0):
@@ -49,7 +55,9 @@ def check(route: SeaRoute):
         fw = next(q for q in PASSAGES if q.name == p.name).fairway
         run = list(zip(route.lat[p.start_index:p.end_index + 1], route.lon[p.start_index:p.end_index + 1]))
         k = fw.index(run[0])  # a run of consecutive fairway vertices (all of them unless a port lies inside it)
-        assert run in (list(fw[k:k + len(run)]), list(fw[k - len(run) + 1:k + 1])[::-1])
+        one_way = next(q for q in PASSAGES if q.name == p.name).one_way  # a traffic lane: in its direction only
+        assert run in ((list(fw[k:k + len(run)]),) if one_way else
+                       (list(fw[k:k + len(run)]), list(fw[k - len(run) + 1:k + 1])[::-1]))
 
 
 def names(route):
@@ -60,7 +68,8 @@ def names(route):
 def test_shanghai_rotterdam_goes_through_suez_and_avoiding_it_goes_round_africa():
     r = sea_route(SHANGHAI, ROTTERDAM)
     check(r)
-    assert names(r) == ["singapore", "bab_el_mandeb", "suez", "gibraltar", "dover"]
+    assert names(r) == ["singapore", "bab_el_mandeb", "suez", "gibraltar", "sao_vicente_nw", "finisterre_n", "ushant_ne",
+                        "casquets_e", "dover"]
     assert r.dist_nm == pytest.approx(10489, rel=0.03)  # searoute 10,489 NM
     assert_clear_outside_fairways(r, SHANGHAI, ROTTERDAM)
     suez = next(p for p in r.passages if p.name == "suez")
@@ -92,12 +101,13 @@ def test_singapore_shanghai_and_rotterdam_piraeus_through_gibraltar():
     assert_clear_outside_fairways(r, SINGAPORE, SHANGHAI)
     r = sea_route(ROTTERDAM, PIRAEUS)
     check(r)
-    assert names(r) == ["dover", "gibraltar", "messina", "rion", "corinth"]  # the small ship's way, by Corinth
+    # the small ship's way, by Corinth
+    assert names(r) == [*WEST_EUROPE_SOUTHBOUND, "gibraltar", "messina", "rion", "corinth"]
     assert r.dist_nm == pytest.approx(2814, rel=0.03)  # searoute 2,814 NM (its network has the Corinth Canal too)
     assert_clear_outside_fairways(r, ROTTERDAM, PIRAEUS)
     r = sea_route(ROTTERDAM, PIRAEUS, avoid={"corinth"})  # round the Peloponnese
     check(r)
-    assert names(r) == ["dover", "gibraltar"] and 2814 < r.dist_nm < 2814 * 1.08
+    assert names(r) == [*WEST_EUROPE_SOUTHBOUND, "gibraltar"] and 2814 < r.dist_nm < 2814 * 1.08
     assert_clear_outside_fairways(r, ROTTERDAM, PIRAEUS)
 
 
@@ -190,3 +200,85 @@ def test_colon_balboa_is_at_least_the_canal_s_published_length():
     r = sea_route((9.42, -79.93), (8.85, -79.5))  # Colón and Balboa anchorages, the bench's positions
     assert [p.name for p in r.passages] == ["panama"]
     assert 43.2 <= r.dist_nm <= 43.2 * 1.08
+
+
+def _least_nm_from(route: SeaRoute, point) -> float:
+    """The route's least distance (NM) from `point`, sampled every 0.5 NM or so."""
+    best = np.inf
+    for k in range(route.lat.size - 1):
+        n = int(geo.gc_distance_nm(route.lat[k], route.lon[k], route.lat[k + 1], route.lon[k + 1]) / 0.5) + 2
+        lat, lon = gc_points(route.lat[k], route.lon[k], route.lat[k + 1], route.lon[k + 1], np.linspace(0, 1, n))
+        best = min(best, min(geo.gc_distance_nm(point[0], point[1], float(a), float(b)) for a, b in zip(lat, lon)))
+    return best
+
+
+def test_rounding_ushant_and_finisterre_keeps_to_the_traffic_separation_schemes_lanes():
+    """Through traffic keeps out of the inshore traffic zones: northbound in the inner lanes, southbound in the outer
+    ones (each lane one way), 20+ NM off both headlands; within ±3 % of searoute's 1,089 and 1,384 NM, whose lanes
+    follow the schemes too (before the schemes the route rounded both 2 NM off, 3.3-3.6 % shorter)."""
+    north = sea_route(LISBON, ROTTERDAM)
+    south = sea_route(ROTTERDAM, LISBON)
+    for r, dep, arr in ((north, LISBON, ROTTERDAM), (south, ROTTERDAM, LISBON)):
+        check(r)
+        assert_clear_outside_fairways(r, dep, arr)
+        assert r.dist_nm == pytest.approx(1089.3, rel=0.03)
+        assert _least_nm_from(r, USHANT) > 20.0 and _least_nm_from(r, FINISTERRE) > 20.0
+    assert names(north) == ["finisterre_n", "ushant_ne", "casquets_e", "dover"]
+    assert names(south) == ["dover", "casquets_w", "ushant_sw", "finisterre_s"]
+    # the outer lanes lie further off than the inner ones
+    assert _least_nm_from(south, USHANT) > _least_nm_from(north, USHANT) + 5.0
+    r = sea_route(ROTTERDAM, ALGECIRAS)
+    check(r)
+    assert names(r) == ["dover", "casquets_w", "ushant_sw", "finisterre_s", "sao_vicente_se", "gibraltar"]
+    assert r.dist_nm == pytest.approx(1383.7, rel=0.03)
+
+
+def test_a_leg_across_a_scheme_off_its_lanes_is_not_taken():
+    """A voyage from the Iroise Sea (south of Ushant) to the western Channel may not cut through the inshore zone or
+    across the lanes: it sails the north-east-bound lane. The way back sails the south-west-bound one."""
+    iroise, channel = (48.1, -5.2), (49.4, -4.4)
+    there, back = sea_route(iroise, channel), sea_route(channel, iroise)
+    assert names(there) == ["ushant_ne"] and names(back) == ["ushant_sw"]
+    assert _least_nm_from(there, USHANT) > 20.0
+
+
+def test_a_traffic_separation_scheme_cannot_be_avoided():
+    from pipeline.routing.options import RoutingOptions
+
+    with pytest.raises(ValueError, match="compulsory"):
+        sea_route(LISBON, ROTTERDAM, avoid={"ushant_ne"})
+    with pytest.raises(ValueError, match="compulsory"):
+        RoutingOptions(avoid_passages=("finisterre_s",))
+    assert RoutingOptions(avoid_passages=(" Suez",)).avoid_passages == ("suez",)
+
+
+@pytest.mark.slow  # a child process that loads the routing kernels
+def test_the_bench_s_stated_rules_correct_the_reference_only_where_it_is_provably_off():
+    """bench/sea_routes.py's `by_the_rules`: searoute's unsailed ends are added to its length (not to a published
+    figure); a pair counts by the great-circle bound only when the route is clear, within 1 % of the great circle and
+    shorter than searoute."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    def row(pair, product, ref, ends, gc, clear=2.0, reference="searoute"):
+        return dict(pair=pair, product_nm=product, searoute_nm=ref, searoute_unsailed_ends_nm=ends, gc_nm=gc,
+                    clearance_nm=clear, reference=reference)
+
+    rows = [row("ends", 1025.0, 1000.0, 30.0, 800.0),  # +2.5 % plain, -0.5 % with the ends
+            row("ends against", 985.0, 1000.0, 30.0, 800.0),  # -1.5 % plain, -4.4 % with the ends
+            row("bound", 960.0, 1000.0, 0.0, 955.0),  # -4 %, within 1 % of the great circle
+            row("bound, not clear", 960.0, 1000.0, 0.0, 955.0, clear=1.0),
+            row("off the circle", 950.0, 1000.0, 0.0, 700.0),
+            row("published", 46.0, 43.2, 16.0, 42.6, reference="Panama Canal Authority")]
+    root = Path(__file__).resolve().parents[1]
+    code = ("import json, sys; sys.path.insert(0, 'bench'); from sea_routes import by_the_rules; "
+            "print(json.dumps({x['pair']: [x['rule'], round(x['diff_ends'], 4)] for x in by_the_rules(json.loads(sys.argv[1]))}))")
+    r = subprocess.run([sys.executable, "-c", code, json.dumps(rows)], cwd=root, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got == {"ends": ["within", -0.0049], "ends against": ["off", -0.0437], "bound": ["gc bound", -0.04],
+                   "bound, not clear": ["off", -0.04], "off the circle": ["off", -0.05],
+                   "published": ["off", 0.0648]}

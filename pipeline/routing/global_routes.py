@@ -33,7 +33,7 @@ import numpy as np
 from pipeline.routing import geodesy as geo
 from pipeline.routing.clearance import DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, clearance, leg_is_clear_nb
 from pipeline.routing.land import distance_to_land_nm, is_sea, land_grid
-from pipeline.routing.passages import PASSAGES, Passage
+from pipeline.routing.passages import PASSAGES, Passage, check_avoid
 from pipeline.routing.sea_graph import (LAT_LIMITS_DEG, MOVES, N_COLS, N_ROWS, OPPOSITE, RES_DEG, cell_lat, cell_lon,
                                         sea_graph)
 from pipeline.routing.sea_route import NoSeaRoute, PassageTransit, SeaRoute
@@ -259,11 +259,14 @@ def _build_layer(clearance_nm: float) -> _Layer:
     xlat, xlon, vpass = [], [], []
     adj: dict[int, list[tuple[int, float, int]]] = {}
 
-    def add(a: int, b: int, cost: float, pid: int) -> None:
-        adj.setdefault(a, []).append((b, cost, pid))
-        adj.setdefault(b, []).append((a, cost, pid))
+    def add(a: int, b: int, cost: float, pid: int, forward: bool = True, backward: bool = True) -> None:
+        if forward:
+            adj.setdefault(a, []).append((b, cost, pid))
+        if backward:
+            adj.setdefault(b, []).append((a, cost, pid))
 
     ends = []
+    entry_only, exit_only = set(), set()  # a one-way lane is entered only at its first vertex, left at its last
     for pid, p in enumerate(PASSAGES):
         first = N_GRID + len(xlat)
         for la, lo in p.fairway:
@@ -272,8 +275,11 @@ def _build_layer(clearance_nm: float) -> _Layer:
             vpass.append(pid)
         for k in range(len(p.fairway) - 1):
             (la0, lo0), (la1, lo1) = p.fairway[k], p.fairway[k + 1]
-            add(first + k, first + k + 1, float(geo.gc_distance_nm(la0, lo0, la1, lo1)), pid)
+            add(first + k, first + k + 1, float(geo.gc_distance_nm(la0, lo0, la1, lo1)), pid, backward=not p.one_way)
         ends += [first, first + len(p.fairway) - 1]
+        if p.one_way:
+            entry_only.add(first)
+            exit_only.add(first + len(p.fairway) - 1)
     joined: set[tuple[int, int]] = set()
     layer = _Layer(edges, np.array(xlat), np.array(xlon), np.zeros(1, np.int32), np.zeros(0, np.int64), np.zeros(0),
                    np.zeros(0, np.int64), gates, np.array(vpass, np.int64))
@@ -285,8 +291,10 @@ def _build_layer(clearance_nm: float) -> _Layer:
         own = vpass[e - N_GRID]
         for nd, c in zip(nodes, costs):
             if nd < N_GRID or (vpass[nd - N_GRID] != own and (int(nd), e) not in joined):
-                add(e, int(nd), float(c), -1)
-                joined.add((e, int(nd)))
+                nd = int(nd)
+                add(e, nd, float(c), -1, forward=e not in entry_only and nd not in exit_only,
+                    backward=nd not in entry_only and e not in exit_only)
+                joined.add((e, nd))
     n_all = N_GRID + len(xlat)
     counts = np.zeros(n_all + 1, np.int32)
     for a, lst in adj.items():
@@ -564,11 +572,9 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
               clearance_nm: float = DEFAULT_CLEARANCE_NM, approach_nm: float = DEFAULT_APPROACH_NM,
               dep_name: str = "departure", arr_name: str = "arrival") -> SeaRoute:
     """The shortest sea route from `dep` to `arr` ((lat, lon) degrees), avoiding the passages named in `avoid`
-    (passages.PASSAGES names, e.g. {"suez"}); NoSeaRoute (naming what blocks it) when there is none."""
-    avoid = frozenset(a.lower() for a in avoid)
-    unknown = avoid - set(passage_names())
-    if unknown:
-        raise ValueError(f"unknown passage(s) to avoid: {', '.join(sorted(unknown))}; known: {', '.join(passage_names())}")
+    (passages.PASSAGES names, e.g. {"suez"}; a traffic separation scheme's lanes cannot be avoided: ValueError);
+    NoSeaRoute (naming what blocks it) when there is none."""
+    avoid = check_avoid(avoid)
     for name, (la, lo) in ((dep_name, dep), (arr_name, arr)):
         if not (-90.0 <= la <= 90.0) or not math.isfinite(lo):
             raise NoSeaRoute(f"{name} {la},{lo} is not a valid position")

@@ -65,14 +65,9 @@ class RoutingOptions:
         if self.solver not in SOLVER_NAMES:
             raise UnknownSolverError(f"unknown solver {self.solver!r}; use one of {', '.join(SOLVER_NAMES)}")
         object.__setattr__(self, "solver_options", tuple((str(k), v) for k, v in dict(self.solver_options).items()))
-        avoid = tuple(sorted({str(a).strip().lower() for a in self.avoid_passages if str(a).strip()}))
-        from pipeline.routing.passages import PASSAGES  # plain data, no compiled code
+        from pipeline.routing.passages import check_avoid  # plain data, no compiled code
 
-        unknown = sorted(set(avoid) - {p.name for p in PASSAGES})
-        if unknown:
-            raise ValueError(f"unknown passage(s) to avoid: {', '.join(unknown)}; known: "
-                             f"{', '.join(p.name for p in PASSAGES)}")
-        object.__setattr__(self, "avoid_passages", avoid)
+        object.__setattr__(self, "avoid_passages", tuple(sorted(check_avoid(self.avoid_passages))))
 
     def solver_overrides(self) -> dict:
         """The solver's option values of this run: the product defaults, then `solver_options`."""

@@ -24,6 +24,16 @@ mask) from Eurostat's marine network (as the `searoute` package ships it), the I
 mask; the straits' fairways are the
 shortest path at their clearance on the product's land mask (fine-grid search, then string-pulled), which lies along
 the traffic separation schemes within a mile or two.
+
+Traffic separation schemes (kind "tss") off a headland where the open-water graph would round it 2 NM off, inside the
+scheme's inshore traffic zone, which through traffic must leave alone (COLREG rule 10(d)): each scheme is two
+one-way lanes (`one_way`: sailed only in the fairway's order, the lane's direction of traffic) and a gate from the
+land out across the inshore zone and both lanes, so a route round the headland either sails the lane for its
+direction or passes outside the whole scheme. A scheme is compulsory: `avoid` refuses its names (`check_avoid`).
+The lanes' positions are approximate, taken from the schemes' charts as adopted by IMO (Off Ushant 2003, Off
+Casquets, Off Finisterre 2004, Off Cabo de São Vicente 2005) and stated in round figures: the centre of each lane within about
+3 NM, the distance off the headland (what sets the route's length) within about 2 NM. They are not for navigation.
+The Strait of Dover's scheme is the `dover` strait's fairway and gate above.
 """
 
 from __future__ import annotations
@@ -31,16 +41,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
+def _chain(*points: tuple[float, float]) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
+    """The gate lines along a polyline of (lat, lon) points: a closed outline of a traffic separation scheme."""
+    return tuple(zip(points[:-1], points[1:]))
+
+
 @dataclass(frozen=True)
 class Passage:
     name: str  # the `avoid` name, lower case
-    kind: str  # "canal" | "strait"
+    kind: str  # "canal" | "strait" | "tss" (a traffic separation scheme's lane: compulsory, one way)
     fairway: tuple[tuple[float, float], ...]  # (lat, lon) degrees, in either direction of travel
     clearance_nm: float | None  # clearance inside the fairway; None: closed on the mask, drawn from charts
     transit_h: float | None = None  # canals: time to sail the fairway
     wait_h: float = 0.0  # canals: waiting allowance before the transit
     gates: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = ()  # coast-to-coast lines, (lat, lon) ends
     title: str = ""
+    one_way: bool = False  # a traffic lane: sailed only from the fairway's first vertex to its last
 
 
 PASSAGES: tuple[Passage, ...] = (
@@ -164,7 +180,72 @@ PASSAGES: tuple[Passage, ...] = (
         (-9.2, 144.0), (-10.49, 142.68), (-10.5, 141.2),
     ), 0.5, gates=(((-10.68, 142.55), (-9.15, 142.55)),),
             title="Torres Strait (Great North East and Prince of Wales channels)"),
+    # Off Ushant: the scheme lies west and north-west of Ushant (Créac'h light 48.46 N 5.13 W), its lanes running
+    # north past the island and bending north-east towards the Channel: the north-east-bound lane inside, about
+    # 23 NM off at its nearest, the south-west-bound lane outside, about 32 NM off, the inshore traffic zone between
+    # the island and the scheme. The gates run from the Breton mainland due west (across the Chenal du Four and the
+    # island) past the south-west-bound lane, round the scheme's seaward side and back to the mainland.
+    Passage("ushant_ne", "tss", (
+        (48.25, -5.7), (48.72, -5.7), (49.07, -4.68),
+    ), 2.0, gates=_chain((48.47, -4.55), (48.46, -6.02), (48.9, -6.02), (49.22, -4.9), (48.55, -4.5)), one_way=True,
+            title="Off Ushant traffic separation scheme, north-east-bound lane"),
+    Passage("ushant_sw", "tss", (
+        (49.2, -4.7), (48.84, -5.93), (48.25, -5.93),
+    ), 2.0, one_way=True,
+            title="Off Ushant traffic separation scheme, south-west-bound lane"),
+    # Off Casquets: the lanes run east-north-east and west-south-west north of the Casquets (49.72 N 2.38 W) and
+    # Cap de la Hague: the eastbound lane on the south side, about 8 NM north of the Casquets, the westbound lane
+    # on the north side, about 16 NM north (traffic keeps to starboard, as in the Strait of Dover). The gates close
+    # the scheme and its inshore zone: north from the Cotentin, round the lanes, back by the Casquets and Alderney.
+    Passage("casquets_e", "tss", (
+        (49.8, -3.1), (49.91, -1.8),
+    ), 2.0, gates=_chain((49.62, -1.85), (50.1, -1.87), (50.03, -3.05), (49.74, -3.05), (49.72, -2.38),
+                         (49.62, -1.85)), one_way=True,
+            title="Off Casquets traffic separation scheme, eastbound lane"),
+    Passage("casquets_w", "tss", (
+        (50.04, -1.8), (49.96, -3.1),
+    ), 2.0, one_way=True,
+            title="Off Casquets traffic separation scheme, westbound lane"),
+    # Off Finisterre: the lanes run north-south 25-33 NM west of the cape (42.88 N 9.27 W) and bend north-east
+    # towards the Bay of Biscay north of 43.2 N: the northbound lane inside, the southbound lane outside (the lanes
+    # for ships carrying dangerous goods in bulk, further out, are left out). The gates run from Galicia due west
+    # past the southbound lane, round the scheme's seaward side and back to the coast south of A Coruña.
+    Passage("finisterre_n", "tss", (
+        (42.6, -9.84), (43.2, -9.84), (43.66, -9.28),
+    ), 2.0, gates=_chain((42.93, -9.0), (42.93, -10.15), (43.38, -10.2), (43.78, -9.6), (43.2, -8.8)), one_way=True,
+            title="Off Finisterre traffic separation scheme, northbound lane"),
+    Passage("finisterre_s", "tss", (
+        (43.84, -9.45), (43.3, -10.02), (42.6, -10.02),
+    ), 2.0, one_way=True,
+            title="Off Finisterre traffic separation scheme, southbound lane"),
+    # Off Cabo de São Vicente: the lanes wrap round the cape (37.02 N 8.99 W) from its south-east to its north-west,
+    # the lane for traffic bound west and north inside, about 15-16 NM off, the lane bound south and east outside,
+    # about 23-24 NM off. The gates run from the Algarve south past the outer lane, round the scheme's seaward side
+    # 30 NM off the cape, and back to the Alentejo coast.
+    Passage("sao_vicente_nw", "tss", (
+        (36.83, -8.62), (36.75, -8.99), (36.83, -9.23), (37.02, -9.32), (37.21, -9.23), (37.45, -9.2),
+    ), 2.0, gates=_chain((37.15, -8.7), (36.5, -8.7), (36.67, -9.43), (37.4, -9.58), (37.4, -8.75)), one_way=True,
+            title="Off Cabo de São Vicente traffic separation scheme, lane bound west and north"),
+    Passage("sao_vicente_se", "tss", (
+        (37.45, -9.42), (37.02, -9.49), (36.74, -9.34), (36.62, -8.99), (36.7, -8.62),
+    ), 2.0, one_way=True,
+            title="Off Cabo de São Vicente traffic separation scheme, lane bound south and east"),
 )
+
+
+def check_avoid(names) -> frozenset[str]:
+    """`names` as a set of passages a route may keep out of (lower case); ValueError for a name that is no passage,
+    or that of a traffic separation scheme's lane (compulsory: a route sails its lane or passes outside the scheme)."""
+    avoid = frozenset(str(a).strip().lower() for a in names if str(a).strip())
+    unknown = sorted(avoid - {p.name for p in PASSAGES})
+    if unknown:
+        raise ValueError(f"unknown passage(s) to avoid: {', '.join(unknown)}; known: "
+                         f"{', '.join(p.name for p in PASSAGES if p.kind != 'tss')}")
+    compulsory = sorted(p.name for p in PASSAGES if p.name in avoid and p.kind == "tss")
+    if compulsory:
+        raise ValueError(f"cannot avoid {', '.join(compulsory)}: a traffic separation scheme's lanes are compulsory for "
+                         f"through traffic (COLREG rule 10); the route sails the lane or passes outside the scheme")
+    return avoid
 
 
 def passage(name: str) -> Passage:
@@ -174,4 +255,4 @@ def passage(name: str) -> Passage:
     raise KeyError(f"no passage {name!r}; known: {', '.join(p.name for p in PASSAGES)}")
 
 
-__all__ = ["PASSAGES", "Passage", "passage"]
+__all__ = ["PASSAGES", "Passage", "check_avoid", "passage"]
