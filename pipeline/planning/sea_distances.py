@@ -5,7 +5,9 @@ straits and canals of routing/passages.py), so a planned leg is as long as the b
 corridor along. A pair without a sea route (a port on land or enclosed, an unconnected sea) gets NaN and the reason.
 A route through a canal carries the canal's time: `canal_nm` of its length is the canals' fairways, sailed in
 `canal_h` hours (transit and waiting allowance, passages.py) instead of at the vessel's speed
-(`hours`). Distances are symmetric: each unordered pair is computed once. Computed pairs are kept in the
+(`hours`). Distances are taken as symmetric: each unordered pair is computed once, from the port first in name
+order. Only the one-way lanes of a traffic separation scheme (passages.py) make the two directions differ, by
+the lanes' offset (Lisbon–Rotterdam 1,081 NM, back 1,094 NM). Computed pairs are kept in the
 `port_distances` table (storage.planning_store) and reused while both ports keep their positions.
 
 The table holds the shortest routes with no passage avoided. A fleet that avoids passages (the setting
