@@ -60,3 +60,30 @@ def test_same_plan_as_the_dp_that_sails_every_change_in_steady_weather(limits, m
         assert (ref.cost, ref.fuel_t, ref.n_changes) == (mine.cost, mine.fuel_t, mine.n_changes)
         assert mine.legs_sailed < ref.legs_sailed
     assert kept.n_changes > 0  # a plan that changes setting: the runs left out were real alternatives
+
+
+def test_a_route_planned_under_the_limits_once_is_not_planned_again():
+    from pipeline.routing.savings import held_plan, profile_plan
+    from pipeline.routing.solve import solver_instance
+
+    pr = problem((30.0, -160.0), (33.0, -146.0), 110.0, n_lines=8, n_points=5)
+    space = pr.search_space()
+    inst, base = solver_instance(pr, space, field(wavy(7)))
+    limits = EngineLimits(12.0, 0.05)
+    known: dict = {}
+    rpm, cost = profile_plan(inst, base, limits, True, known)
+    (held, refined), = known.values()
+    got = held_plan(inst, base, limits, True, known)
+    assert got[0] is held and got[1] is refined  # the same objects: not planned again
+    again, again_refined = held_plan(inst, base, limits, True)  # planned afresh: the same answer
+    assert again.rpm_idx.tolist() == held.rpm_idx.tolist() and again.cost == held.cost
+    assert (again_refined is None) == (refined is None)
+    best = refined if refined is not None and refined.cost < held.cost else None
+    assert cost == (best.cost if best else held.cost)
+    assert rpm.tolist() == (best.rpm if best else inst.rpm_options[held.rpm_idx]).tolist()
+    # another route, or the same one without continuous speed, is another entry
+    other = base.copy()
+    other[1:-1] = np.clip(other[1:-1] + 1, 0, space.lat.shape[1] - 1)
+    held_plan(inst, other, limits, True, known)
+    held_plan(inst, base, limits, False, known)
+    assert len(known) == 3
