@@ -113,6 +113,31 @@ def _sail_run_nb(lat, lon, nodes, v, w, rpm, i0, t0, f0, min_hold_h, to_end, out
 
 
 @numba.njit(cache=True)
+def _runs_to_sail_nb(kt, kf, kn, kr, lo, hi, R, change_cost_t, e):
+    """Per kept label lo..hi of one line and setting r: whether its change to r is worth sailing (False for its own
+    setting). A change of label B to r is dominated when an earlier label A of the line (t_A ≤ t_B) reaches r free
+    at no greater cost: g_A + c·[A's setting ≠ r] ≤ g_B + c (g = f + c·n − e·t). A then sails on at r, or changes
+    to it, and meets every line B's run meets no later and, in weather that does not change with time, dearer by
+    no more, both free to change at its end: the DP's own dominance (module docstring) applied before the run is
+    sailed instead of after, so the run's candidate, which the DP would drop, is not made."""
+    m = hi - lo
+    sail = np.zeros((m, R), np.bool_)
+    order = np.argsort(kt[lo:hi], kind="mergesort")
+    least = np.full(R, np.inf)  # the least g + c·[setting ≠ r] of the labels so far in time order, per setting r
+    for q in range(m):
+        j = lo + order[q]
+        g = kf[j] + change_cost_t * kn[j] - e * kt[j]
+        for r in range(R):
+            if r == kr[j]:
+                least[r] = min(least[r], g)
+                continue
+            gc = g + change_cost_t
+            sail[order[q], r] = gc < least[r]
+            least[r] = min(least[r], gc)
+    return sail
+
+
+@numba.njit(cache=True)
 def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, prune, upper, lams, m_route, t_min, eps,
                     buckets, lam_t):
     """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
@@ -236,10 +261,14 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                 if qc < best:
                     best, best_j, best_single = qc, j, -1
             break
-        # expand: one more leg at the label's setting, or a change and a run that holds the new setting
+        # expand: one more leg at the label's setting, or a change and a run that holds the new setting (not sailed
+        # when an earlier label of the line reaches that setting free at no greater cost: _runs_to_sail_nb)
+        sail = _runs_to_sail_nb(kt, kf, kn, kr, line_lo, n_kept, R, change_cost_t, e)
         for j in range(line_lo, n_kept):
             for r in range(R):
                 change = r != kr[j]
+                if change and not sail[j - line_lo, r]:
+                    continue
                 hold = min_hold_h if change else 0.0  # a held setting goes on one leg at a time
                 i1, t1, f1, nl, ok = _sail_run_nb(lat, lon, nodes, v, w, rpm_options[r], i, kt[j], kf[j], hold, False,
                                                   out)

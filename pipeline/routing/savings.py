@@ -34,8 +34,9 @@ import numpy as np
 
 from pipeline.routing import leg_kernel as lk
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
-from pipeline.routing.continuous_speed import as_settings, refine_rpm
-from pipeline.routing.engine_limits import PLAN_BUCKETS, PLAN_GAP, EngineLimits, best_engine_plan, limited_plan
+from pipeline.routing.continuous_speed import Refined, as_settings, refine_rpm
+from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, EngineLimits, LimitedPlan, best_engine_plan,
+                                            limited_plan)
 from pipeline.routing.problem import Instance
 
 if TYPE_CHECKING:
@@ -58,23 +59,40 @@ class SavingsSplit:
     beyond_forecast_pct: float = math.nan  # the part burnt past them (total_pct − forecast_pct)
 
 
+def held_plan(inst: Instance, nodes: np.ndarray, limits: EngineLimits, continuous: bool = True,
+              known: dict | None = None) -> tuple[LimitedPlan, Refined | None]:
+    """(the best engine plan on the route `nodes` under the active `limits`, within 0.1 % of the best over the
+    settings and never dearer than a setting held throughout (engine_limits.limited_plan); with `continuous` its
+    speeds refined under the limits (continuous_speed.refine_rpm; None: nothing cheaper found, or no plan)).
+    `known` (a dict, one per instance) keeps each route's answer: the base route's profile and a solver's plan on the
+    same route are then planned once."""
+    key = (np.ascontiguousarray(nodes, np.int64).tobytes(), limits, bool(continuous))
+    if known is not None and key in known:
+        return known[key]
+    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
+    refined = None
+    if continuous and math.isfinite(held.cost):
+        refined = refine_rpm(inst, nodes, inst.rpm_options[held.rpm_idx], min_hold_h=limits.min_hold_h,
+                             change_cost_t=limits.change_cost_t, barred_rpm=inst.problem.barred_rpm)
+    if known is not None:
+        known[key] = (held, refined)
+    return held, refined
+
+
 def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | None = None,
-                 continuous: bool = True) -> tuple[np.ndarray, float]:
+                 continuous: bool = True, known: dict | None = None) -> tuple[np.ndarray, float]:
     """(rpm per leg, cost) of the best engine plan on the base route, under `limits` when they are active
-    (within 0.1 % of the best over the settings, never dearer than a setting held throughout), its speeds refined
-    continuously with `continuous` (continuous_speed.refine_rpm); cost includes the change costs; inf: none can be
-    sailed."""
-    hold, change = 0.0, 0.0
+    (`held_plan`, which keeps it in `known`), its speeds refined continuously with `continuous`
+    (continuous_speed.refine_rpm); cost includes the change costs; inf: none can be sailed."""
     if limits is not None and limits.active:
-        best = limited_plan(inst, base_nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
-        rpm_idx, cost = best.rpm_idx, best.cost
-        hold, change = limits.min_hold_h, limits.change_cost_t
-    else:
-        rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
+        held, refined = held_plan(inst, base_nodes, limits, continuous, known)
+        if refined is not None and refined.cost < held.cost:
+            return refined.rpm, float(refined.cost)
+        return inst.rpm_options[held.rpm_idx], float(held.cost)
+    rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
     rpm = inst.rpm_options[rpm_idx]
     if continuous and math.isfinite(cost):
-        refined = refine_rpm(inst, base_nodes, rpm, min_hold_h=hold, change_cost_t=change,
-                             barred_rpm=inst.problem.barred_rpm)
+        refined = refine_rpm(inst, base_nodes, rpm, barred_rpm=inst.problem.barred_rpm)
         if refined is not None and refined.cost < cost:
             rpm, cost = refined.rpm, refined.cost
     return rpm, float(cost)

@@ -34,13 +34,13 @@ from pipeline.routing.canal_time import passages_note
 from pipeline.routing.clearance import least_clearance_outside_nm, widest_corridor_nm
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.continuous_speed import as_settings, refine_rpm
-from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
-                                            limited_plan, settings_held_h)
+from pipeline.routing.engine_limits import (PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
+                                            settings_held_h)
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
-from pipeline.routing.savings import profile_plan, solver_instance, split_of
+from pipeline.routing.savings import held_plan, profile_plan, solver_instance, split_of
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
 from pipeline.routing.solvers import SOLVERS as REGISTRY
 from pipeline.routing.weather_field import WeatherField
@@ -186,17 +186,19 @@ def _refined(inst: Instance, nodes, rpm_idx, cost: float, limits: EngineLimits |
     return inst2, idx, refined.cost
 
 
-def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, continuous: bool = True) -> Plan:
-    """The plan re-planned on its own route so each engine setting is held (engine_limits.limited_plan, within
-    0.1 % of the best such plan over the settings and never dearer than a setting held throughout), its speeds then
-    refined continuously (`continuous`). For what the limits cost, `unlimited_fuel_t` is the best engine plan on the
-    route without limits, so the limits never seem to save fuel and are not blamed for what the solver left on its
-    route."""
-    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
+def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, continuous: bool = True,
+                 known: dict | None = None) -> Plan:
+    """The plan re-planned on its own route so each engine setting is held (savings.held_plan: within 0.1 % of the
+    best such plan over the settings and never dearer than a setting held throughout; `known` as there), its speeds
+    then refined continuously (`continuous`). For what the limits cost, `unlimited_fuel_t` is the best engine plan on
+    the route without limits, so the limits never seem to save fuel and are not blamed for what the solver left on
+    its route."""
+    held, refined = held_plan(inst, nodes, limits, continuous, known)
     if not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
-    at, rpm_idx, cost = _refined(inst, nodes, held.rpm_idx, held.cost, limits) if continuous else \
-        (inst, held.rpm_idx, held.cost)
+    at, rpm_idx, cost = inst, held.rpm_idx, held.cost
+    if refined is not None and refined.cost < cost:
+        (at, rpm_idx), cost = as_settings(inst, refined.rpm), refined.cost
     limited = _plan(at, plan.solver, nodes, rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
     limited.cost = cost
@@ -328,7 +330,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)
     why_not = _infeasible_reason(base, space)  # what a plan that cannot be sailed says
     baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=why_not)
-    profile = profile_plan(inst, base.nodes, limits, continuous) if savings and base.ok else None
+    known: dict = {}  # the routes planned under the limits (savings.held_plan): the base route's once
+    profile = profile_plan(inst, base.nodes, limits, continuous, known) if savings and base.ok else None
     if spec.is_baseline:  # the constant-speed voyage itself: the plan just made, compared with nothing
         plan = baseline
         plan.solver = solver
@@ -343,7 +346,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         if waits and plan.legs:
             plan = _waiting_plan_limits(inst, plan, found.nodes, limits, continuous)
         elif limits is not None and limits.active and plan.legs:
-            plan = _with_limits(inst, plan, found.nodes, limits, continuous)
+            plan = _with_limits(inst, plan, found.nodes, limits, continuous, known)
         elif continuous and plan.legs:
             at, rpm_idx, cost = _refined(inst, found.nodes, found.rpm_idx, plan.cost, None)
             if cost < plan.cost:
