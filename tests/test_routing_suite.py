@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pipeline.synthetic import routing_suite as suite
@@ -52,3 +53,34 @@ def test_dp_solved_again_agrees_within_its_gap(stored):
     assert plan.status == "ok"
     gap = max(rec["gap"], again["gap"])
     assert rec["cost"] / (1.0 + gap) <= again["cost"] <= rec["cost"] * (1.0 + gap)
+
+
+STALLED = ("storm-head-on", "southern-indian")  # added where the default BFOA used to stall
+
+
+@pytest.mark.parametrize("name", STALLED)
+def test_storm_instances_stored_plan_costs_what_was_stored(name):
+    spec = suite.BY_NAME[name]
+    problem, space, weather = suite.build(spec)
+    rec = suite.stored_optimum(spec, suite.instance_hash(spec, problem, space, weather), suite.read_optima(OPTIMA))
+    assert rec is not None, f"run .venv/bin/python bench/routing_suite.py --only {name} --no-bfoa"
+    assert rec["status"] == "ok" and rec["gap"] == suite.DP_GAP
+    cost = suite.plan_cost(problem, space, weather, rec["nodes"], rec["rpm_idx"])
+    assert cost == pytest.approx(rec["cost"], rel=1e-9)
+
+
+def test_southern_storm_turns_clockwise_and_the_northern_one_is_unchanged():
+    from pipeline.synthetic import weather as synth
+
+    t = 9000.0
+    for track, turn in (("north-pacific", -1.0), ("south-indian", 1.0)):
+        clat, clon = synth.storm_centre(t, 3, track)
+        assert (clat > 0) == (track == "north-pacific")
+        u_n, _ = synth.wind_uv(t, clat + 2.0, clon, 3, track)  # 120 NM poleward or equatorward of the centre
+        u_n0, _ = synth.wind_uv(t, clat + 2.0, clon + 180.0, 3, track)  # the background there, far from the storm
+        assert np.sign(u_n - u_n0) == turn  # north of the centre: westward (counter-clockwise) or eastward (clockwise)
+    # the default track is the one the stored optima were computed in: the same numbers as before it had a name
+    rng = np.random.default_rng(3)
+    lon0, lat0 = 140.0 + 5.0 * rng.random(), 38.0 + 4.0 * rng.random()
+    phase = np.mod(t, 24.0 * 12.0)
+    assert synth.storm_centre(t, 3) == (lat0 + 4.0 * np.sin(phase / 48.0), (lon0 + 0.6 * phase) % 360.0)
