@@ -14,6 +14,10 @@ with continuous speed and the engine-change limits): its honest savings split an
 thread's). Writes bench/out/routing_suite.json; always exits 0.
 
     .venv/bin/python bench/routing_suite.py [--seeds 10] [--only NAME ...] [--recompute-dp] [--no-bfoa]
+                                            [--bfoa FIELD=VALUE ...]
+
+--bfoa sets BfoaParams fields for every BFOA solve (e.g. `--bfoa branch_routes=False polish_fuel=0.003`, the
+search as it was before it started bacteria on branch routes), to compare settings in one sitting.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import numpy as np  # noqa: E402
 import routing_instances as suite  # noqa: E402
 from pipeline.routing.solve import BfoaParams, EngineLimits  # noqa: E402
 from routing import TARGET_GAP_PCT, TARGET_SOLVE_S, pin_one_core, timed_solve, verdict, warm_up  # noqa: E402
+from dataclasses import fields, replace  # noqa: E402
 
 TARGET_SHARE_WITHIN = 0.9  # of all BFOA runs within TARGET_GAP_PCT
 
@@ -52,19 +57,40 @@ def dp_reference(spec, problem, space, weather, recompute: bool) -> dict:
     return {**rec, "stored": False}
 
 
+def bfoa_params(settings: list[str]) -> BfoaParams:
+    """BfoaParams with FIELD=VALUE settings (bool, int, float or None, by the field's default) applied."""
+    kinds = {f.name: type(f.default) for f in fields(BfoaParams)}
+    changes = {}
+    for item in settings:
+        name, _, text = item.partition("=")
+        if name not in kinds:
+            raise SystemExit(f"--bfoa {item}: BfoaParams has no field {name!r} (fields: {', '.join(kinds)})")
+        kind = kinds[name]
+        if text == "None":
+            changes[name] = None
+        elif kind is bool:
+            changes[name] = text.lower() in ("1", "true", "yes")
+        else:
+            changes[name] = (float if kind is type(None) else kind)(text)
+    return replace(BfoaParams(), **changes)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10, help="BFOA solves per instance, seeds 1..N (default 10)")
     ap.add_argument("--only", nargs="+", choices=sorted(suite.BY_NAME), help="these instances only")
     ap.add_argument("--recompute-dp", action="store_true", help="recompute and store every DP optimum")
     ap.add_argument("--no-bfoa", action="store_true", help="only make sure the stored optima are current")
+    ap.add_argument("--bfoa", nargs="+", default=[], metavar="FIELD=VALUE", help="BfoaParams settings (default: its defaults)")
     a = ap.parse_args()
     pinned = pin_one_core()
     specs = [suite.BY_NAME[n] for n in a.only] if a.only else list(suite.INSTANCES)
     out_dir = ROOT / "bench" / "out"
     out_dir.mkdir(parents=True, exist_ok=True)
     print(f"routing suite: {len(specs)} instances, {a.seeds} BFOA seeds each; {pinned}, NUMBA_NUM_THREADS=1")
-    params = BfoaParams()
+    params = bfoa_params(a.bfoa)
+    if a.bfoa:
+        print(f"BFOA settings: {' '.join(a.bfoa)}")
     report, all_gaps = [], []
     warmed = False
     for spec in specs:

@@ -46,6 +46,11 @@ Added beyond the thesis's moves (the structure above is kept):
            in time; a random walk with no spread, see random_route): an optimum that hugs one side of the graph is
            met from the start, and when the baseline breaks a weather limit (bacterium 0 infeasible) the routes
            round the obstacle on either side give feasible starts. One that cannot be sailed starts at random.
+  branch routes  the last bacteria (after the offset ones, when there is room) start on the fastest routes at the
+           baseline's constant rpm through either side of the graph (branch_routes.py, `branch_routes`): round a
+           storm across the voyage the swarm starts on both branches, and on a detour the weather shapes rather than
+           on the offset routes' straight ones. Without them the swarm stalled +0.5 to +3.6 % above the optimum on
+           such voyages (bench/routing_suite.py: `storm-head-on`, `southern-indian`); they cost ~3·P·L legs.
   block shift  with probability `p_block` a route tumble is +1 or −1 on a whole block of lines: the plateau (lines
            on one node) around a random line, or 4..L/2 lines from it when that plateau is shorter than 4. It moves
            a detour sideways as one piece, which the thesis's 1..3-line vectors can only do through dearer,
@@ -57,7 +62,8 @@ Added beyond the thesis's moves (the structure above is kept):
   polish   after the last cycle the best plan is polished by a local search of a window: the DP
            (dp.dp_exact_nb) over the corridor of ±`polish_width` nodes around its route, every engine setting
            per leg, keeping partial plans within `polish_window_h` hours and `polish_fuel` × cost of fuel of
-           the plan's own at each line, with ε-trimmed labels (`polish_gap` of the cost) and at most
+           the plan's own at each line (2 %: a detour one node wider or earlier than the plan's burns more early
+           on and gains it back later; at 0.3 % the window cut it out), with ε-trimmed labels (`polish_gap` of the cost) and at most
            `polish_buckets` labels per node (the line's arrival times cut into that many spans, a span keeping
            its label of least fuel plus the plan's price of time: its cost grows with the lines, not with the
            lines times the spread of their arrival times, so a 5,000 NM voyage costs ~2.5× a 2,000 NM one,
@@ -87,6 +93,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from pipeline.routing.branch_routes import branch_routes
 from pipeline.routing.dp import dp_exact_nb
 from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb,
                                             sail_span_nb, scratch, time_price_nb)
@@ -155,11 +162,12 @@ class BfoaParams:
     polish_width: int = 1  # the best plan is polished by the DP in a corridor of ± this many nodes (−1: not)
     polish_gap: float = 0.002  # the polish's ε-trimming of its labels, as a share of the plan's cost
     polish_window_h: float = 4.0  # the polish keeps partial plans within this many hours of the plan's
-    polish_fuel: float = 0.003  # and within this share of its cost in fuel so far
+    polish_fuel: float = 0.02  # and within this share of its cost in fuel so far
     polish_rounds: int = 6  # polish the polished plan again while a round gains more than stall_tol × cost
-    polish_buckets: int = 16  # > 0: the polish keeps at most this many labels per node (time spans of the line)
+    polish_buckets: int = 16  # > 0: the polish keeps at most this many labels per node (time spans of the line; ×4 thesis)
     p_block: float = 0.15  # chance a route tumble shifts a whole block of lines (a plateau of the route)
     offset_routes: int = 8  # bacteria that start on offset routes spread evenly over the graph's width
+    branch_routes: bool = True  # the last bacteria start on the fastest routes round either side (branch_routes.py)
     stall_cycles: int = 2  # stop after this many cycles without a gain of stall_tol × cost (0: never)
     stall_tol: float = 1e-4
 
@@ -371,15 +379,21 @@ def _adopt(sw, i, cand, cand_r, ct, cf, q):
 
 
 @numba.njit(cache=True)
-def init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk, rng):
+def init_swarm_nb(sw, base_nodes, base_rpm, branches, g, v, w, o, s, k, wk, rng):
     """Initial bacteria: bacterium 0 (and any whose walk fails) starts on the baseline route, with its constant rpm
-    or engine settings aimed at the RTA, whichever is cheaper; bacteria 1..n_offset on the offset routes; the
-    rest random. Returns the best one's index."""
+    or engine settings aimed at the RTA, whichever is cheaper; bacteria 1..n_offset on the offset routes; the last
+    ones on the routes in `branches` (one per row, engine settings aimed at the RTA); the rest random. Returns the
+    best one's index."""
     cand, cand_r = wk.cand, wk.cand_r
     q = np.inf
+    n_branch = min(branches.shape[0], k.n_bacteria - 1 - k.n_offset)
     for i in range(k.n_bacteria):
         placed = False
-        if 0 < i <= k.n_offset:
+        if i >= k.n_bacteria - n_branch:
+            cand[:] = branches[k.n_bacteria - 1 - i]
+            q = aim_engine_nb(cand, cand_r, g, v, w, o, s, rng)
+            placed = q < np.inf
+        elif 0 < i <= k.n_offset:
             placed, q = _offset_bacterium(i - 1, cand, cand_r, g, v, w, o, s, k, rng)
         elif i > 0:
             placed, q = _new_bacterium(cand, cand_r, g, v, w, o, s, k, rng)
@@ -565,11 +579,12 @@ def disperse_nb(sw, best_i, g, v, w, o, s, k, wk, rng):
 
 
 @numba.njit(cache=True)
-def bfoa_nb(rng, k, base_nodes, base_rpm, g, v, w, o, sw, s, wk, history):
-    """Run the improved BFOA drawing from the generator `rng`; the best plan ends in sw.best_pos / best_rpm /
-    best_cost, the best cost after each cycle in `history`. Stops early after `stall` cycles that lower the
-    best cost by no more than `stall_tol` of it. Returns (routes or route tails sailed, cycles run)."""
-    best_i = init_swarm_nb(sw, base_nodes, base_rpm, g, v, w, o, s, k, wk, rng)
+def bfoa_nb(rng, k, base_nodes, base_rpm, branches, g, v, w, o, sw, s, wk, history):
+    """Run the improved BFOA drawing from the generator `rng`, some bacteria starting on the routes in `branches`;
+    the best plan ends in sw.best_pos / best_rpm / best_cost, the best cost after each cycle in `history`. Stops
+    early after `stall` cycles that lower the best cost by no more than `stall_tol` of it. Returns (routes or route
+    tails sailed, cycles run)."""
+    best_i = init_swarm_nb(sw, base_nodes, base_rpm, branches, g, v, w, o, s, k, wk, rng)
     # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
     lam = (time_price_nb(sw.rpm[best_i], sw.cum_t[best_i], sw.cum_f[best_i], v.rpm_options)
            if sw.best_cost[0] < np.inf else 0.0)
@@ -599,8 +614,13 @@ def run_bfoa(seed: int, params: BfoaParams, base_nodes, base_rpm, g, v, w, o):
     sw, s, wk = swarm(k.n_bacteria, n), scratch(n), work(n)
     history = np.empty(k.n_cycles)
     rng = np.random.default_rng(int(seed))
-    n_evals, n_run = bfoa_nb(rng, k, np.asarray(base_nodes, np.int64), np.asarray(base_rpm, np.int64), g, v, w, o,
-                             sw, s, wk, history)
+    base_rpm = np.asarray(base_rpm, np.int64)
+    branches, n_legs = np.empty((0, n), np.int64), 0
+    if params.branch_routes and base_rpm.shape[0] > 0 and k.n_bacteria - 1 - k.n_offset > 0:  # room for them
+        branches, n_legs = branch_routes(g, v, w, o, int(base_rpm[0]))  # at the baseline's constant rpm
+    n_evals, n_run = bfoa_nb(rng, k, np.asarray(base_nodes, np.int64), base_rpm, branches, g, v, w, o, sw, s, wk,
+                             history)
+    n_evals += n_legs // max(n - 1, 1)  # legs sailed, counted as whole routes
     history = history[:n_run]
     nodes, rpm_idx, cost = sw.best_pos, sw.best_rpm, float(sw.best_cost[0])
     for _round in range(params.polish_rounds if params.polish_width >= 0 and np.isfinite(cost) else 0):
@@ -637,9 +657,12 @@ def polish(nodes, rpm_idx, cost: float, params: BfoaParams, g, v, w, o):
     eps = params.polish_gap * cost / (L2 - 1) * (1.0 if o.kind == OBJ_JIT else o.f_target / 3.0)
     lam_t = (time_price_nb(np.asarray(rpm_idx, np.int64), cum_t, cum_f, v.rpm_options)
              if params.polish_buckets > 0 and o.kind == OBJ_JIT else 0.0)
+    # thesis: a span keeps its label of least fuel, time unpriced, so it needs spans four times finer to keep the
+    # label that wins on T/T_req (with 16 the suite's storm-limit stalled 0.58 % above the optimum, with 64 at it)
+    buckets = params.polish_buckets * (1 if o.kind == OBJ_JIT else 4)
     new_nodes, new_rpm, new_cost, n_legs, _ = dp_exact_nb(corridor, v, w, o, cost, np.zeros(1), m_lam,
                                                           np.zeros((L2, P)), no_rate, no_rate, latest, eps,
-                                                          int(params.polish_buckets), float(lam_t))
+                                                          int(buckets), float(lam_t))
     if np.isfinite(new_cost) and new_cost < cost:
         return new_nodes, new_rpm, float(new_cost), int(n_legs)
     return nodes, rpm_idx, cost, int(n_legs)
