@@ -107,7 +107,8 @@ def register(app: typer.Typer) -> None:
         solver_option: Optional[list[str]] = typer.Option(
             None, "--solver-option", help="NAME=VALUE of the solver's own options, repeatable. dp by default: "
                                           "certified within 0.1 % over plans that may heave to at a node while the "
-                                          "weather changes (departures on a 1 h grid and at the wait-free DP's "
+                                          "weather changes (departures on a 1 h grid, RTA / 240 in whole hours "
+                                          "on longer voyages, and at the wait-free DP's "
                                           "times, waits up to 6 h more: slot_h=1 max_wait_h=6); gap=0 keeps every "
                                           "label; slot_h=none is the wait-free DP alone (exact in weather that holds "
                                           "still)."),

@@ -1,7 +1,8 @@
 """The grid DP (dp_grid.py) against exhaustive enumeration of its own decision space on small graphs.
 
 The space: a node per line, an engine setting per leg, and at each node a departure at one of its line's times
-(the grid t_dep + k·slot_h and the departures of the wait-free plans the DP was given): the first after arriving,
+(the grid t_dep + k·slot_h and the departures of the wait-free plans the DP knows: the baseline, and when that is
+not on time the fastest plan, `_known`): the first after arriving,
 or one up to `max_wait_h` later (waiting at `wait_tph`). The
 enumeration below walks every route × setting × wait depth first with the legs' kernel and the objective; it
 shares nothing with the DP but those. The DP keeping every state must equal it to rounding, and the DP with a
@@ -26,7 +27,8 @@ from pipeline.export.rtz import route_to_rtz, validate_rtz
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.dp_grid import line_times
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
-from pipeline.routing.objectives import LATE_STEP_T, route_cost_nb
+from pipeline.routing.fastest_plan import fastest_plan
+from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 from pipeline.routing.savings import solver_instance
 from pipeline.routing.solvers import SOLVERS
 
@@ -144,13 +146,25 @@ def _instance(kind, rta, obj, rpms, n, n_lines):
     return inst, base
 
 
+def _known(inst, base) -> list:
+    """The wait-free plans dp.search knows without an incumbent solver: the baseline, and when no plan known is on
+    time the fastest plan (fastest_plan.py) when it costs less; their departure times are in the grid's space."""
+    plans = [(base.nodes, base.rpm_idx)] if base.ok else []
+    upper = evaluate(inst, base.nodes, base.rpm_idx)[0] if base.ok else math.inf
+    if not upper < (LATE_STEP_T if inst.objective.kind == OBJ_JIT else 9999.9):
+        nodes, rpm_idx, _, _ = fastest_plan(inst)
+        if nodes is not None and evaluate(inst, nodes, rpm_idx)[0] < upper:
+            plans.append((nodes, rpm_idx))
+    return plans
+
+
 @pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASE_PARAMS)
 def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)  # "wait": up to 3 slots more at a node
     n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
     inst, base = _instance(kind, rta, obj, rpms, n, n_lines)
     wait_tph = 0.3
-    times = line_times(inst, [(base.nodes, base.rpm_idx)] if base.ok else [], slot_h)  # the grid + the baseline's
+    times = line_times(inst, _known(inst, base), slot_h)  # the grid + the baseline's (and the fastest plan's)
     best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, times, max_wait_h, wait_tph)
     dp = SOLVERS["dp"]
     exact = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
@@ -181,7 +195,7 @@ def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optim
     wait_tph = 0.3
     dp = SOLVERS["dp"]
     label = dp.search(inst, base, seed=1, options=DpOptions(incumbent=None))
-    plans = [(base.nodes, base.rpm_idx)] if base.ok else []
+    plans = _known(inst, base)
     if label.nodes is not None:
         plans.append((label.nodes, label.rpm_idx))
     best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, plans, slot_h),

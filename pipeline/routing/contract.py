@@ -34,6 +34,7 @@ class Found:
     history: np.ndarray | None = None
     wait_h: np.ndarray | None = None
     wait_tph: float = 0.0
+    note: str | None = None  # what the plan's reason should add about the solver's space (e.g. its waits' grid)
 
     @property
     def waits(self) -> bool:

@@ -29,6 +29,11 @@ Bounds (certified: they never drop a label of an optimal plan):
               BFOA plan's (`DpOptions.incumbent`); the answer does not depend on it, only the time taken.
   deadline    when U is on time (jit: below the 1000 t late step; thesis: below 9999.9), a plan arriving after
               the RTA cannot win, so a label must still be able to arrive by the RTA.
+  lateness    when no plan known is on time, a label is priced with the lateness of the earliest arrival it can
+              still make (its time plus the least hours to finish, t_min below; `cost_lb_nb`), and the fastest
+              wait-free plan (fastest_plan.py) joins the incumbents: on a voyage whose RTA cannot be met the
+              optimum is the least-late plan (10 t per minute late under jit), and every label that cannot arrive
+              within minutes of the fastest is dropped. Without it such a voyage kept every label to the horizon.
   fuel        for each leg and engine setting r: the least hours per NM τ (best STW in the weather the leg can
               meet, plus the strongest current along its course there) and the least fuel per NM φ. For any λ ≥ 0
               a backward pass gives M_λ = the least Σ d·(φ + λ·τ) to the arrival, and a completion sailed within
@@ -164,12 +169,30 @@ def fuel_to_finish_lb(m_lam, lams, t_min, hours):
 
 
 @numba.njit(cache=True)
-def _priced_out(o, fuel_lb, upper, tol, on_time):
-    """Whether every plan burning at least fuel_lb (t) costs more than `upper` under the objective `o`."""
+def cost_lb_nb(o, fuel_lb, hours_lb):
+    """A lower bound on the cost under the objective `o` of every plan burning at least fuel_lb (t) and taking at
+    least hours_lb (h, the passage): jit prices a plan at least at its fuel plus, when even hours_lb is after the
+    RTA, the lateness of that earliest arrival (the penalty grows with the hours late); the thesis function prices a
+    plan arriving by T_req at least 0.85 + 3·F/F_target and a later one at least T/T_req + 9999.9."""
+    if fuel_lb == np.inf or hours_lb == np.inf:
+        return np.inf
     if o.kind == OBJ_JIT:
-        return fuel_lb > upper + tol  # jit prices a plan at least at its fuel
-    # nor does the thesis function price an on-time plan below 0.85 + 3·F/F_target
-    return on_time and (fuel_lb == np.inf or 0.85 + 3.0 * fuel_lb / o.f_target > upper + tol)
+        if hours_lb > o.t_req_h + 1e-9:
+            return fuel_lb + LATE_STEP_T + o.late_t_per_h * (hours_lb - o.t_req_h)
+        return fuel_lb
+    late = max(hours_lb, o.t_req_h) / o.t_req_h + 9999.9
+    if hours_lb >= o.t_req_h:
+        return late
+    return min(0.85 + 3.0 * fuel_lb / o.f_target, late)
+
+
+@numba.njit(cache=True)
+def _priced_out(o, fuel_lb, hours_lb, upper, tol, on_time):
+    """Whether every plan burning at least fuel_lb (t) and taking at least hours_lb (h) costs more than `upper` under
+    the objective `o` (`cost_lb_nb`). With an on-time `upper` every plan kept arrives by the RTA (the deadline)."""
+    if o.kind != OBJ_JIT and on_time:  # the thesis function prices an on-time plan at least 0.85 + 3·F/F_target
+        return fuel_lb == np.inf or 0.85 + 3.0 * fuel_lb / o.f_target > upper + tol
+    return cost_lb_nb(o, fuel_lb, hours_lb) > upper + tol
 
 
 @numba.njit(cache=True)
@@ -270,9 +293,10 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                 s = a2 - a + max_shift
                 d_nm = leg_nm[a, s]
                 # every setting at once first: at their least hours and fuel (the bound only grows as hours shrink)
+                t1 = t0 + d_nm * leg_tau[a, s]
                 lb = f0 + d_nm * leg_phi[a, s] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
-                                                                  deadline - (t0 + d_nm * leg_tau[a, s]))
-                if _priced_out(o, lb, upper, tol, on_time):
+                                                                  deadline - t1)
+                if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], upper, tol, on_time):
                     continue
                 for r in range(R):
                     # the leg at its least hours and fuel first: no sailing when even that prices the label out
@@ -281,7 +305,7 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                         continue
                     lb = f0 + d_nm * phi[i, a, s, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
                                                                       deadline - t1)
-                    if _priced_out(o, lb, upper, tol, on_time):
+                    if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], upper, tol, on_time):
                         continue
                     if skip and tau[i, a, s, r] > 0.0 and phi[i, a, s, r] >= e * tau[i, a, s, r]:
                         g_lb = f0 - e * t0 + d_nm * (phi[i, a, s, r] - e * tau[i, a, s, r])
@@ -299,7 +323,7 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                         continue  # cannot reach the arrival by the RTA any more, even at full speed
                     f1 = f0 + out[FUEL]
                     lb = f1 + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - t1)
-                    if _priced_out(o, lb, upper, tol, on_time):
+                    if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], upper, tol, on_time):
                         continue
                     if n_c >= ct.shape[0]:
                         ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
@@ -588,7 +612,8 @@ def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: 
     m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
     _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
     if wide is not None:
-        wide[:] = [lams, m_lam.copy(), t_min.copy(), tau, phi]
+        wide[:] = [lams, m_lam.copy(), t_min.copy(), tau_e, phi_e] if per_leg else [lams, m_lam.copy(), t_min.copy(),
+                                                                                     tau, phi]
     if windows is not None and math.isfinite(fuel_budget_t):
         windows = fuel_windows(inst, windows, fuel_budget_t, lams, m_lam, t_min, tau_e, phi_e)
         tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
@@ -806,6 +831,7 @@ class DpOptions:
     max_wait_h: float = 0.0  # grid: a ship may wait this long beyond the first slot after arriving at a node
     wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
     wait_free_first: bool = False  # grid: first the label DP (same gap); its plan's times join the grid
+    slots_per_rta: float | None = None  # grid: a step of at least the RTA's passage hours / this, in whole hours
 
 
 def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None):
@@ -820,58 +846,115 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
         upper = min(upper, float(options.upper_bound))
     if baseline.ok:
         upper = min(upper, evaluate(inst, baseline.nodes, baseline.rpm_idx)[0])
-    if options.slot_h is not None:
-        return _grid_search(inst, baseline, options, upper, incumbent)
-    if options.bucket_h is not None:
+    if options.bucket_h is not None and options.slot_h is None:
         nodes, rpm_idx, cost, n_legs = dp_bucket_nb(float(options.bucket_h), inst.graph, inst.vessel, inst.wx,
                                                     inst.objective)
-    else:
-        nodes, rpm_idx, cost, n_legs = _label_search(inst, options.gap, upper, latest_departures(inst))
-    if not math.isfinite(cost):
-        return Found(None, None, n_legs)
-    return Found(nodes, rpm_idx, n_legs)
+        return Found(None, None, n_legs) if not math.isfinite(cost) else Found(nodes, rpm_idx, n_legs)
+    known = [incumbent] if incumbent is not None else []
+    n_fast = 0
+    if not _on_time(inst.objective, upper):  # no plan known on time: maybe none is; the fastest prices lateness
+        upper, n_fast = _with_fastest_plan(inst, upper, known)
+    if options.slot_h is not None:
+        found = _grid_search(inst, baseline, options, upper, known)
+        found.n_evals += n_fast
+        return found
+    nodes, rpm_idx, cost, n_legs = _label_search(inst, options.gap, upper, latest_departures(inst))
+    if not math.isfinite(cost):  # nothing below the incumbents (where the dominance's assumption fails): the best
+        nodes, rpm_idx = _cheapest(inst, known)  # plan known, never the baseline while a dearer plan... is known
+    if nodes is None:
+        return Found(None, None, n_fast + n_legs)
+    return Found(nodes, rpm_idx, n_fast + n_legs)
 
 
-def _label_search(inst, gap: float, upper: float, ld: np.ndarray, wide=None):
+def _cheapest(inst, plans) -> tuple:
+    """(nodes, rpm_idx) of the cheapest of `plans` that can be sailed; (None, None) when none can."""
+    from pipeline.routing.baseline import evaluate
+
+    best, pick = math.inf, (None, None)
+    for nodes, rpm_idx in plans:
+        cost = evaluate(inst, nodes, rpm_idx)[0]
+        if cost < best:
+            best, pick = cost, (nodes, rpm_idx)
+    return pick
+
+
+def _with_fastest_plan(inst, upper: float, known: list) -> tuple[float, int]:
+    """(upper, legs sailed): `upper` lowered to the cost of the fastest wait-free plan (fastest_plan.py) when that is
+    cheaper, the plan appended to `known`. Worth its few legs only when no plan known is on time: then either none
+    is (and the optimum is within minutes of the fastest, which the lateness in the DP's bound then shows) or the
+    fastest is, and it is an on-time incumbent."""
+    from pipeline.routing.baseline import evaluate
+    from pipeline.routing.fastest_plan import fastest_plan
+
+    nodes, rpm_idx, _, n_legs = fastest_plan(inst)
+    if nodes is not None:
+        cost = evaluate(inst, nodes, rpm_idx)[0]
+        if cost < upper:
+            upper = cost
+            known.append((nodes, rpm_idx))
+    return upper, n_legs
+
+
+def _label_search(inst, gap: float, upper: float, ld: np.ndarray, wide=None, narrow=None):
     """(nodes, rpm_idx, cost, legs sailed) of dp_exact_nb, pruned by `upper` and trimmed to `gap`; `wide` as in
-    finish_bounds."""
+    finish_bounds (per leg); `narrow` (a list) receives the per-leg bound tables the DP ran with."""
     # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
     # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
     on_time = _on_time(inst.objective, upper)
     lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
                                                  _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf,
                                                  per_leg=True, wide=wide)
+    if narrow is not None:
+        narrow[:] = [lams, m_lam, t_min, tau, phi]
     eps = trim_eps(inst, gap, upper, lams, m_lam, t_min)
     nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
                                                   m_lam, t_min, tau, phi, ld, eps)
     return nodes, rpm_idx, cost, n_legs
 
 
-def _grid_search(inst, baseline, options: DpOptions, upper: float, incumbent) -> Found:
-    """The grid DP (dp_grid.py) over the grid and the wait-free plans known (see `search`)."""
+def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) -> Found:
+    """The grid DP (dp_grid.py) over the grid and the wait-free plans known (see `search`; `known`: (nodes, rpm_idx)
+    of the incumbent solver's plan and the fastest plan, when found)."""
     from pipeline.routing.dp_grid import search_grid, wait_hours, wait_rate_tph
 
     if not options.slot_h > 0.0 or not options.max_wait_h >= 0.0 or not (options.wait_tph or 0.0) >= 0.0:
         raise ValueError(f"dp options slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0, got {options.slot_h}, "
                          f"{options.max_wait_h} and {options.wait_tph}")
-    plans = [(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []
-    if incumbent is not None:
-        plans.append(incumbent)
+    plans = ([(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []) + list(known)
     ld = latest_departures(inst)
-    n_first, wide = 0, []
+    n_first, bounds = 0, None
     if options.wait_free_first:
-        nodes, rpm_idx, cost, n_first = _label_search(inst, options.gap, upper, ld, wide)
+        wide, narrow = [], []
+        nodes, rpm_idx, cost, n_first = _label_search(inst, options.gap, upper, ld, wide, narrow)
         if math.isfinite(cost):
             plans.append((nodes, rpm_idx))
-        # its windows (before the fuel narrowing) hold for the grid's plans when they reach to the horizon, or when
-        # its plan, a plan of the grid, is on time (then so is the grid's incumbent, and both end at the RTA); an
-        # `upper_bound` on time with no plan known on time is neither: the grid builds its own
-        if _on_time(inst.objective, upper) and not (math.isfinite(cost) and _on_time(inst.objective, cost)):
-            wide = []
+        # which of its bound tables hold for the grid's plans: with its plan on time (a plan of the grid, so the
+        # grid's incumbent is on time and costs no more) the tables it ran with, whose windows are narrowed to the
+        # times a plan within its incumbent's cost and the gap can be at each node: a plan that waits is at a node
+        # from its arrival to its departure, and both bounds (fuel to get there, fuel to finish) only tighten while
+        # it waits, so it is inside them too. With no plan known on time, its windows before the fuel narrowing when
+        # they reach to the horizon; an `upper_bound` on time with no plan known on time: the grid builds its own
+        if math.isfinite(cost) and _on_time(inst.objective, cost):
+            bounds = tuple(narrow)
+        elif not _on_time(inst.objective, upper):
+            bounds = tuple(wide)
+    slot_h = grid_step_h(inst, options)
     nodes, rpm_idx, slots, cost, n_legs, times = search_grid(
-        inst, plans, slot_h=float(options.slot_h), max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
-        gap=float(options.gap), ld=ld, bounds=tuple(wide) or None)
+        inst, plans, slot_h=slot_h, max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,
+        gap=float(options.gap), ld=ld, bounds=bounds)
     if nodes is None:
         return Found(None, None, n_first + n_legs)
-    return Found(nodes, rpm_idx, n_first + n_legs, wait_h=wait_hours(inst, nodes, rpm_idx, slots, times),
-                 wait_tph=wait_rate_tph(inst, options.wait_tph))
+    waits = wait_hours(inst, nodes, rpm_idx, slots, times)
+    note = f"waits on a {slot_h:g} h grid" if np.any(waits > 1.0 / 3600.0) and slot_h > options.slot_h else None
+    return Found(nodes, rpm_idx, n_first + n_legs, wait_h=waits, wait_tph=wait_rate_tph(inst, options.wait_tph),
+                 note=note)
+
+
+def grid_step_h(inst, options: DpOptions) -> float:
+    """The grid DP's time step (h): `slot_h`, or with `slots_per_rta` the RTA's passage hours over that many slots
+    rounded up to whole hours when that is longer: the grid DP's work grows with the slots a node can be left at,
+    so a 40-day voyage gets a coarser grid than a 10-day one (its plan's reason then says which)."""
+    step = float(options.slot_h)
+    if options.slots_per_rta:
+        step = max(step, float(math.ceil(inst.objective.t_req_h / float(options.slots_per_rta) - 1e-9)))
+    return step

@@ -30,8 +30,16 @@ Bounds (certified; they never drop a label of an optimal plan, as in dp.py):
   deadline    with an on-time incumbent, a label must be able to leave its node by the node's latest departure
               that still makes the RTA (dp.latest_departures; waiting only delays).
   fuel        dp.finish_bounds: fuel so far + the least fuel to finish in the hours left (the hours left start at
-              the departure slot; waiting burns ≥ 0), priced in the weather of the times a plan can be at each
-              node (from the earliest arrival to the latest departure: waiting keeps a plan inside them).
+              the departure slot; waiting burns ≥ 0), priced leg by leg in the weather of the times a plan can be
+              at each node (from the earliest arrival to the latest departure: waiting keeps a plan inside them).
+              After the label DP found a plan on time, its own tables: its windows narrowed to the times a plan
+              within the incumbent's cost can be at a node (dp.fuel_windows), which hold for a plan that waits too
+              (while it waits, the fuel it needed to get there and the fuel it needs to finish only grow).
+  lateness    with no plan on time, the lateness of the earliest arrival a label can still make (dp.cost_lb_nb).
+
+The grid's step (dp.grid_step_h): `slot_h`, or with `DpOptions.slots_per_rta` (the product's: 240) the RTA's
+passage hours over that many slots in whole hours when that is longer: a 40-day voyage waits on a 5 h grid, whose
+plan's reason then says "waits on a 5 h grid". The work grows with the slots a node can be left at.
 """
 
 from __future__ import annotations
@@ -117,7 +125,8 @@ def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, times, wait_tph):
 def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, times, max_wait_h, wait_tph):
     """(nodes, rpm indexes, departure slots, cost, legs sailed, labels kept) of the best plan of the grid space
     costing less than `upper` (cost inf when there is none); labels whose lower bound is above `prune_at`
-    (≤ upper; upper / (1 + gap) for a certified gap) are dropped. Bound tables as in dp.dp_exact_nb."""
+    (≤ upper; upper / (1 + gap) for a certified gap) are dropped. Bound tables as in dp.dp_exact_nb (tau, phi per
+    leg)."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
@@ -155,13 +164,14 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, ti
                 if not edge_ok[i, a, a2]:
                     continue
                 d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
+                s = a2 - a + max_shift
                 for r in range(R):
-                    t1 = t0 + d_nm * tau[i, a, r]  # the leg at its least hours and fuel first
+                    t1 = t0 + d_nm * tau[i, a, s, r]  # the leg at its least hours and fuel first
                     if on_time and t1 > ld[i + 1, a2]:
                         continue
-                    lb = f0 + d_nm * phi[i, a, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
+                    lb = f0 + d_nm * phi[i, a, s, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
                                                                       deadline - t1)
-                    if _priced_out(o, lb, prune_at, tol, on_time):
+                    if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], prune_at, tol, on_time):
                         continue
                     sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
                     n_legs += 1
@@ -184,7 +194,7 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, ti
                             break
                         fw = f1 + wait_tph * (td - t1)
                         lb = fw + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - td)
-                        if _priced_out(o, lb, prune_at, tol, on_time):
+                        if _priced_out(o, lb, td - t_dep_h + t_min[i + 1, a2], prune_at, tol, on_time):
                             break  # a later slot burns no less and has fewer hours left
                         if n_c >= ck.shape[0]:
                             ck, cf = _grow(ck, n_c + 1), _grow(cf, n_c + 1)
@@ -304,8 +314,9 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
     (`line_times`, returned as `times`; a plan's slots index its rows), so each is a plan of the space as it is,
     and each, its settings one step faster and every setting held throughout are sailed with the rounding waits
     as the incumbent; `ld` = dp.latest_departures(inst). The fuel-to-finish bound is dp.finish_bounds in the
-    weather of the times a plan can be at each node (reachable_windows): waits keep a plan within them; `bounds`,
-    when given, are such tables for windows at least as wide (the label DP's before its fuel narrowing)."""
+    weather of the times a plan can be at each node (reachable_windows), per leg: waits keep a plan within them;
+    `bounds`, when given, are such tables that hold for every plan the grid must keep (dp._grid_search: the label
+    DP's, narrowed to the times a plan within its incumbent's cost can be at each node, when its plan is on time)."""
     rate = wait_rate_tph(inst, wait_tph)
     times = line_times(inst, plans, slot_h)
     inc_cost, inc = math.inf, None
@@ -315,7 +326,7 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
             inc_cost, inc = q, (np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s)
     on_time = math.isfinite(inc_cost) and _on_time(inst.objective, inc_cost)
     if bounds is None:
-        bounds = finish_bounds(inst, reachable_windows(inst, ld, on_time))
+        bounds = finish_bounds(inst, reachable_windows(inst, ld, on_time), per_leg=True)
     lams, m_lam, t_min, tau, phi = bounds
     upper = inc_cost * (1.0 + 1e-12) + 1e-12 if math.isfinite(inc_cost) else math.inf
     prune_at = upper / (1.0 + gap) if gap > 0.0 else upper

@@ -17,8 +17,10 @@ SOLVER_NAMES = ("bfoa", "dp", "astar", "gc", "rhumb")
 # the product's defaults for a solver's own options, where they differ from the library's: `dp` certifies its plan
 # within 0.1 % of the optimum instead of keeping every label, and its optimum is over plans that may wait (heave to)
 # at a node under weather that changes in time: the label DP's wait-free plan first, then the grid DP over the
-# departure times of a 1 h grid and of that plan, waiting up to 6 h beyond the next grid time (dp_grid.py)
-DEFAULT_SOLVER_OPTIONS = {"dp": {"gap": 1e-3, "slot_h": 1.0, "max_wait_h": 6.0, "wait_free_first": True}}
+# departure times of a 1 h grid (coarser on voyages over 240 h: RTA / 240 in whole hours) and of that plan, waiting
+# up to 6 h beyond the next grid time (dp_grid.py)
+DEFAULT_SOLVER_OPTIONS = {"dp": {"gap": 1e-3, "slot_h": 1.0, "max_wait_h": 6.0, "wait_free_first": True,
+                                 "slots_per_rta": 240}}
 
 
 @dataclass(frozen=True)

@@ -343,6 +343,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not,
                      wait_h=found.wait_h if waits else None, wait_tph=found.wait_tph)
+        if waits and plan.legs and found.note:  # what the solver's space is, e.g. the grid its waits are on
+            plan.reason = found.note if plan.reason is None else f"{plan.reason}; {found.note}"
         if waits and plan.legs:
             plan = _waiting_plan_limits(inst, plan, found.nodes, limits, continuous)
         elif limits is not None and limits.active and plan.legs:

@@ -1,0 +1,145 @@
+"""`--solver dp` on late and long voyages: the fastest plan, the lateness in the DP's cost bound, the grid step scaled
+with the voyage and stated in the plan's reason.
+
+Checked against exhaustive enumeration on small graphs (every route × setting per leg, sailed with the legs' kernel):
+the fastest plan arrives first, the bound on a plan's cost is never above the cost of a plan that burns and takes at
+least as much, and a late voyage's DP (the fastest plan as its incumbent, its bound pricing the lateness) returns the
+enumerated optimum; the grid DP on a coarser grid equals the enumeration of that grid and says it waits on it."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from routing_cases import field, moving_storm, problem, solve, wavy
+from pipeline.routing import leg_kernel as lk
+from pipeline.routing.baseline import baseline as find_baseline, evaluate
+from pipeline.routing.dp import DpOptions, cost_lb_nb, grid_step_h
+from pipeline.routing.dp_grid import line_times
+from pipeline.routing.fastest_plan import fastest_plan
+from pipeline.routing.objectives import objective, route_cost_nb
+from pipeline.routing.solve import solver_instance
+from pipeline.routing.solvers import SOLVERS
+from test_routing_grid_exact import _enumerate_nb, _weather as grid_weather, _window_problem
+
+DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 100 rpm ≈ 40 h in calm water
+
+
+def _weather(kind: str, seed: int):
+    if kind == "static":
+        return field(wavy(seed))
+    if kind == "storm":  # drifting west across the route while the ship sails east: time matters
+        return field(moving_storm(seed, 31.5, 206.0, drift_kn=(-12.0, 2.0), hs_peak=7.0), step_h=3, hours=200)
+    return field(lambda LA, LO: dict(uo=1.2 * np.sin(np.radians(40 * (LA - 30))), vo=0.8 * np.cos(np.radians(30 * LO)),
+                                     swh=2.0 + np.cos(np.radians(20 * LO)), mwd_deg=np.full(LA.shape, 250.0)))
+
+
+def _every_plan(inst):
+    """(hours, fuel) of every route × setting per leg that can be sailed."""
+    g, v, w, o = inst.graph, inst.vessel, inst.wx, inst.objective
+    L2, P = g.lat.shape
+    ct, cf = np.empty(L2), np.empty(L2)
+    for mid in itertools.product(range(P), repeat=L2 - 2):
+        nodes = np.array((P // 2, *mid, P // 2), np.int64)
+        if not all(g.edge_ok[i, nodes[i], nodes[i + 1]] for i in range(L2 - 1)):
+            continue
+        for rpm in itertools.product(range(len(v.rpm_options)), repeat=L2 - 1):
+            code, _ = lk.sail_route_nb(nodes, np.array(rpm, np.int64), 0, g, v, w, o, ct, cf)
+            if code == lk.OK:
+                yield ct[-1] - o.t_dep_h, cf[-1]
+
+
+def _instance(kind, calm_h, rpms, n, obj="jit", n_lines=3):
+    pr = problem(DEP, ARR, calm_h, rpm_options=rpms, objective=obj, n_lines=n_lines, n_points=5, max_shift=2,
+                 d_point_nm=25.0)
+    space = pr.search_space()
+    inst, base_nodes = solver_instance(pr, space, _weather(kind, n))
+    base = find_baseline(inst, base_nodes)
+    if base.ok:
+        inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)  # as solve() sets it
+    return inst, base
+
+
+@pytest.mark.parametrize("kind, rpms, n", [("static", (70, 85, 100), 0), ("storm", (75, 100), 1),
+                                           ("current", (60, 80, 100), 2), ("storm", (70, 85, 100), 3)])
+def test_the_fastest_plan_arrives_first(kind, rpms, n):
+    inst, _ = _instance(kind, 30.0, rpms, n)
+    nodes, rpm_idx, hours, n_legs = fastest_plan(inst)
+    first = min(h for h, _ in _every_plan(inst))
+    assert nodes is not None and n_legs > 0
+    assert hours == pytest.approx(first, rel=1e-12)
+    assert evaluate(inst, nodes, rpm_idx)[1] == pytest.approx(first, rel=1e-12)  # the plan returned takes those hours
+
+
+@pytest.mark.parametrize("kind", ["jit", "thesis"])
+def test_the_cost_bound_is_never_above_a_plan_that_burns_and_takes_at_least_as_much(kind):
+    o = objective(kind, t_dep_h=0.0, max_hours=200.0, t_req_h=50.0, window_h=6.0, f_target=40.0)
+    hours = np.array([0.0, 20.0, 42.0, 44.0, 49.9, 50.0, 50.0 + 1e-10, 50.5, 51.0, 80.0])
+    fuel = np.array([0.0, 10.0, 39.0, 40.0, 55.0])
+    for h_lb, f_lb in itertools.product(hours, fuel):
+        lb = cost_lb_nb(o, f_lb, h_lb)
+        for h, f in itertools.product(hours[hours >= h_lb], fuel[fuel >= f_lb]):
+            assert lb <= route_cost_nb(o, h, f) + 1e-12, (h_lb, f_lb, h, f)
+    if kind == "jit":  # the lateness is in it: an hour late is 1000 t plus 10,000 t per hour
+        assert cost_lb_nb(o, 40.0, 51.0) == pytest.approx(40.0 + 1000.0 + 1.0e4)
+    assert cost_lb_nb(o, math.inf, 10.0) == math.inf and cost_lb_nb(o, 10.0, math.inf) == math.inf
+
+
+@pytest.mark.parametrize("kind, obj, rpms, n", [("static", "jit", (70, 85, 100), 0), ("storm", "jit", (75, 100), 1),
+                                                ("current", "thesis", (60, 80, 100), 2),
+                                                ("storm", "thesis", (70, 85, 100), 3)])
+def test_a_late_voyage_gets_the_enumerated_optimum_with_the_fastest_plan_as_incumbent(kind, obj, rpms, n):
+    """An RTA 25 % under the calm full-speed passage: every plan is late. Without a BFOA incumbent the DP's only
+    on-hand plan is the (late) baseline; it sails the fastest plan, prunes on lateness, and still returns the
+    enumerated optimum (exact labels) or a plan within the gap."""
+    inst, base = _instance(kind, 30.0, rpms, n, obj=obj)
+    best = min(route_cost_nb(inst.objective, h, f) for h, f in _every_plan(inst))
+    assert best > 1000.0  # late under both objectives
+    exact = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
+    trimmed = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(gap=0.01, incumbent=None))
+    assert evaluate(inst, exact.nodes, exact.rpm_idx)[0] == pytest.approx(best, rel=1e-12)
+    assert best - 1e-9 <= evaluate(inst, trimmed.nodes, trimmed.rpm_idx)[0] <= best * 1.01 + 1e-9
+
+
+def test_late_pricing_sails_fewer_legs_than_fuel_alone_on_a_longer_graph():
+    """On 8 lines × 9 nodes with an impossible RTA the lateness bound and the fastest incumbent cut the legs the
+    label DP sails (same plan as with the baseline's incumbent alone priced on fuel, which the exact labels give)."""
+    pr = problem(DEP, (34.0, -146.0), 40.0, rpm_options=(70, 80, 90, 100), n_lines=8, n_points=9, max_shift=2,
+                 d_point_nm=20.0)
+    space = pr.search_space()
+    inst, base_nodes = solver_instance(pr, space, _weather("storm", 4))
+    base = find_baseline(inst, base_nodes)
+    found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
+    plan_hours = evaluate(inst, found.nodes, found.rpm_idx)[1]
+    assert plan_hours > inst.objective.t_req_h  # late
+    assert plan_hours == pytest.approx(fastest_plan(inst)[2], abs=0.05)  # the least late, to a few minutes
+    # the same search with no upper bound at all (pricing cannot prune): it must sail more and find the same cost
+    from pipeline.routing.dp import _label_search, latest_departures
+
+    _, _, cost_free, legs_free = _label_search(inst, 0.0, math.inf, latest_departures(inst))
+    assert cost_free == pytest.approx(evaluate(inst, found.nodes, found.rpm_idx)[0], rel=1e-12)
+    assert found.n_evals < legs_free / 3
+
+
+def test_the_grid_step_grows_with_the_rta_and_the_reason_says_so():
+    """slots_per_rta: the step is the RTA's hours over that many slots in whole hours when that is longer than
+    slot_h. On storm-window (no wait-free plan: the ship must wait for the storm to move off) with a 75 h RTA and
+    25 slots, the grid is 3 h: the plan is the enumerated optimum of the 3 h grid and its reason says so."""
+    pr, fld = _window_problem(), grid_weather("storm-window", 0)
+    inst, _ = solver_instance(pr, pr.search_space(), fld)
+    assert grid_step_h(inst, DpOptions(slot_h=1.0)) == 1.0
+    assert grid_step_h(inst, DpOptions(slot_h=1.0, slots_per_rta=240)) == 1.0  # 75 h: the 1 h grid
+    assert grid_step_h(inst, DpOptions(slot_h=1.0, slots_per_rta=25)) == 3.0
+    assert grid_step_h(inst, DpOptions(slot_h=1.0, slots_per_rta=20)) == 4.0  # 3.75 h rounded up
+    assert grid_step_h(inst, DpOptions(slot_h=5.0, slots_per_rta=25)) == 5.0
+    opts = DpOptions(slot_h=1.0, slots_per_rta=25, max_wait_h=12.0, wait_tph=0.3, incumbent=None)
+    plan = solve(pr, fld, solver="dp", options=opts)
+    assert plan.status == "ok" and plan.legs[0]["wait_h"] >= 3.0 - 1e-9
+    assert "waits on a 3 h grid" in plan.reason
+    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 3.0), 12.0, 0.3)
+    assert plan.cost == pytest.approx(best, rel=1e-9)
+    on_1h = solve(pr, fld, solver="dp", options=DpOptions(slot_h=1.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None))
+    assert on_1h.status == "ok" and "grid" not in (on_1h.reason or "")  # the step asked for: nothing to say
