@@ -26,6 +26,16 @@ strategies   each sailed on the TRUTH with the product's leg kernel (leg_kernel.
                       (as route-fleet re-plans a ship at sea: the voyage from its position and time, same RTA,
                       pipeline/enroute.voyage_from), until less than 12 h or 60 NM are left;
              perfect  `solve()` on the truth itself, sailed as made.
+             once/replan calibrated   the same with the arrival margin of the product's forecast-error model
+                      (pipeline/routing/calibration.py): aim bias + k·σ_eta(hours ahead) before the RTA (k =
+                      `--margin-sigmas` 1.65, at most `--margin-max-share` 0.15 of the hours ahead; re-planned at sea
+                      each cycle, so it shrinks as the voyage nears its end), claiming the saving the model expects
+                      the plan to realise (its P50: the claim × the calibrated skill). The model is fitted first on
+                      TRAINING voyages of their own seed (`--train-seed`, default --seed + 1000: another truth, other
+                      storms, other forecasts and voyages; `--train-voyages` 12, 8 with --quick): each re-planned every
+                      cycle, every plan made (at departure and at sea) re-sailed as made on that truth with the
+                      product's verification.verify, as `jitroute verify` fills plan_verification; never on the voyages
+                      it is scored on. `--margin-sigmas 0` leaves them out.
              `--robust` adds the robust decisions (pipeline/routing/robust.py) over a lagged ensemble of the newest
              4 cycles: (a) margin and (b) win share alone to `once`; each alone and all three to `replan`.
 measures     fleet fuel saving vs the master: Σ(F_master − F) / Σ F_master; arrival-corrected: each voyage's fuel
@@ -40,6 +50,7 @@ Searches are paced by work only (the solvers' iteration counts), so results do n
 numba single-threaded. Prints the table and the targets; writes bench/out/hindcast.json; always exits 0.
 
     .venv/bin/python bench/hindcast.py [--quick] [--voyages 24] [--seed 41] [--max-lead 264] [--robust]
+        [--train-seed 1041] [--train-voyages 12] [--margin-sigmas 1.65] [--margin-max-share 0.15]
 """
 
 from __future__ import annotations
@@ -64,7 +75,8 @@ import numpy as np  # noqa: E402
 
 from pipeline.performance.model import reference_model  # noqa: E402
 from pipeline.routing import leg_kernel as lk  # noqa: E402
-from pipeline.routing import robust  # noqa: E402
+from pipeline.routing import calibration, robust  # noqa: E402
+from pipeline.routing import verification as ver  # noqa: E402
 from pipeline.routing import weather_field as wf  # noqa: E402
 from pipeline.routing.ensemble import ON_TIME_TOL_H  # noqa: E402
 from pipeline.routing.geodesy import gc_distance_nm, gc_interpolate  # noqa: E402
@@ -387,10 +399,14 @@ class Rules:
     margin_sigmas: float = 0.0
     min_win_share: float = 0.0
     replan_gain_sigmas: float = 0.0
+    # with a model: the margin is margin_sigmas × its σ of the arrival error by the hours ahead (plus its bias), and
+    # the claim is the saving it expects the plan to realise (the product's calibration.py); None: the lagged spread
+    model: calibration.ErrorModel | None = None
+    margin_max_share: float = 0.05
 
     @property
     def any(self) -> bool:
-        return bool(self.margin_sigmas or self.min_win_share or self.replan_gain_sigmas)
+        return bool((self.margin_sigmas or self.min_win_share or self.replan_gain_sigmas) and self.model is None)
 
 
 def plan_at(v: Voyage, ship: Ship, field: wf.WeatherField, members, rules: Rules):
@@ -400,7 +416,12 @@ def plan_at(v: Voyage, ship: Ship, field: wf.WeatherField, members, rules: Rules
         prob = problem(v, (ship.lat, ship.lon), ship.t_h)
         plan = solve(prob, field)
         margin = 0.0
-        if plan.legs and rules.margin_sigmas > 0:
+        if plan.legs and rules.margin_sigmas > 0 and rules.model is not None:
+            margin = calibration.arrival_margin_h(rules.model, v.rta_h - ship.t_h, rules.margin_sigmas,
+                                                  rules.margin_max_share)
+            if margin > 0.05:
+                plan = solve(problem(v, (ship.lat, ship.lon), ship.t_h, v.rta_h - margin), field)
+        elif plan.legs and rules.margin_sigmas > 0:
             margin = robust.arrival_margin_h(plan, members, VESSEL, rules.margin_sigmas)
             if margin > 0.05:
                 plan = solve(problem(v, (ship.lat, ship.lon), ship.t_h, v.rta_h - margin), field)
@@ -414,8 +435,14 @@ def plan_at(v: Voyage, ship: Ship, field: wf.WeatherField, members, rules: Rules
     return (plan if plan.legs else None), margin, kept
 
 
-def claimed(plan) -> float:
-    return plan.savings.total_pct if plan is not None and plan.savings is not None else 0.0
+def claimed(plan, rules: Rules = Rules()) -> float:
+    """The plan's claimed saving; with a calibrated model, the saving it expects the plan to realise (P50)."""
+    c = plan.savings.total_pct if plan is not None and plan.savings is not None else 0.0
+    if rules.model is None or plan is None or not plan.legs:
+        return c
+    planned_h = float((np.datetime64(plan.legs[-1]["eta_utc"], "s") - np.datetime64(plan.depart_utc, "s"))
+                      / np.timedelta64(1, "s")) / 3600.0
+    return calibration.expected_saving_pct(rules.model, c, planned_h)[1]
 
 
 def sail_once(v: Voyage, fc: Forecasts, rules: Rules = Rules(), field=None) -> Outcome:
@@ -424,15 +451,19 @@ def sail_once(v: Voyage, fc: Forecasts, rules: Rules = Rules(), field=None) -> O
     plan, margin, kept = plan_at(v, ship, field, fc.members(ship.t_h) if rules.any else [], rules)
     legs = plan.legs if plan is not None else gc_legs(v.dep, v.arr, master_rpm(ship, v, field))
     sail_until(ship, legs, fc.truth)
-    return outcome(ship, v, claimed_pct=claimed(plan), n_plans=1, n_kept=int(kept), margin_h=margin)
+    return outcome(ship, v, claimed_pct=claimed(plan, rules), n_plans=1, n_kept=int(kept), margin_h=margin)
 
 
-def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules()) -> Outcome:
+def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules(), made: list | None = None) -> Outcome:
+    """The voyage re-planned every cycle; each plan made is appended to `made` (when given) as (plan, the ship's
+    position and time when it was made)."""
     ship = Ship(*v.dep, v.depart_h)
     field = fc.cycle(fc.newest_at(ship.t_h))
     plan, margin, kept = plan_at(v, ship, field, fc.members(ship.t_h) if rules.any else [], rules)
+    if made is not None and plan is not None:
+        made.append(plan)
     legs = plan.legs if plan is not None else gc_legs(v.dep, v.arr, master_rpm(ship, v, field))
-    first_claim, n_plans, n_kept, margins = claimed(plan), 1, int(kept), [margin]
+    first_claim, n_plans, n_kept, margins = claimed(plan, rules), 1, int(kept), [margin]
     while legs:
         legs = sail_until(ship, legs, fc.truth, ship.t_h + CYCLE_H)
         if not legs or v.rta_h - ship.t_h < CYCLE_H or gc_distance_nm(ship.lat, ship.lon, *v.arr) < 60.0:
@@ -441,6 +472,8 @@ def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules()) -> Outcome:
         new, margin, kept = plan_at(v, ship, fc.cycle(fc.newest_at(ship.t_h)), members, rules)
         if new is None:
             continue
+        if made is not None:
+            made.append(new)
         n_plans += 1
         n_kept += int(kept)
         if rules.replan_gain_sigmas > 0:
@@ -454,6 +487,54 @@ def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules()) -> Outcome:
         legs = new.legs
         margins.append(margin)
     return outcome(ship, v, claimed_pct=first_claim, n_plans=n_plans, n_kept=n_kept, margin_h=float(np.mean(margins)))
+
+
+# ------------------------------------------------------------------------------------------- calibration (training)
+def verification_row(plan, truth_weather: ver.VerificationWeather) -> dict | None:
+    """The plan and its baseline re-sailed as made on the truth (verification.verify, as `jitroute verify` re-sails a
+    stored plan in the analysed weather): a row with plan_verification's columns that calibration reads."""
+    base = plan.baseline.legs if plan.baseline is not None else None
+    claim = plan.savings.total_pct if plan.savings is not None else math.nan
+    r = ver.verify(plan.legs, base, plan.depart_utc, truth_weather, VESSEL, claim)
+    if r is None:
+        return None
+    return {"coverage": r.coverage, "hours_total": r.hours_total, "claimed_eta_utc": plan.legs[-1]["eta_utc"],
+            "realised_eta_utc": r.plan_eta_utc, "claimed_fuel_t": plan.fuel_t, "realised_fuel_t": r.plan_fuel_t,
+            "claimed_savings_pct": claim, "realised_savings_pct": r.realised_savings_pct}
+
+
+def calibrate(seed: int, n: int, max_lead_h: int) -> tuple[calibration.ErrorModel, list[dict]]:
+    """The error model fitted on `n` training voyages of their own truth, forecasts and voyages (`seed`): each
+    re-planned every cycle, every plan made (at departure and at sea) verified on the truth."""
+    fc = Forecasts(seed, max_lead_h)
+    truth = ver.VerificationWeather(fc.truth, (), np.ones(fc.truth.times_h.size, bool))
+    rows = []
+    for v in voyages(n, seed):
+        made: list = []
+        sail_replan(v, fc, made=made)
+        rows += [r for r in (verification_row(p, truth) for p in made if p.legs) if r is not None]
+    return calibration.fit_error_model(calibration.verification_errors(rows)), rows
+
+
+def claim_errors(m: calibration.ErrorModel, rows: list[dict]) -> dict:
+    """On the training plans (in-sample), as `plan_verification` measures it (realised against the plan's own baseline,
+    both re-sailed): mean |claimed − realised| of the raw claims and of the expected realisations (calibration P50)."""
+    pairs = [(r["claimed_savings_pct"], r["realised_savings_pct"], r["hours_total"]) for r in rows
+             if math.isfinite(r["claimed_savings_pct"]) and math.isfinite(r["realised_savings_pct"])]
+    if not pairs:
+        return {}
+    raw = float(np.mean([abs(c - x) for c, x, _ in pairs]))
+    honest = float(np.mean([abs(calibration.expected_saving_pct(m, c, h)[1] - x) for c, x, h in pairs]))
+    return {"train_mean_claimed_pct": round(float(np.mean([c for c, _, _ in pairs])), 3),
+            "train_mean_realised_pct": round(float(np.mean([x for _, x, _ in pairs])), 3),
+            "train_claim_error_pts": round(raw, 3), "train_expected_claim_error_pts": round(honest, 3)}
+
+
+def model_json(m: calibration.ErrorModel) -> dict:
+    return {"n_plans": m.n_plans, "source": m.source, "eta_bias_share": round(m.eta_bias_share, 5),
+            "eta_sd_h": [round(m.eta_sd_h.a, 5), round(m.eta_sd_h.b, 3)], "fuel_bias_share": round(m.fuel_bias_share, 5),
+            "fuel_sd_share": [round(m.fuel_sd_share.a, 6), round(m.fuel_sd_share.b, 3)], "skill": round(m.skill, 3),
+            "saving_sd_pts": [round(m.saving_sd_pts.a, 5), round(m.saving_sd_pts.b, 3)]}
 
 
 # --------------------------------------------------------------------------------------------------------- report
@@ -493,17 +574,19 @@ def table(rows: list[dict]) -> str:
 
 
 def targets(rows: dict) -> list[str]:
-    rp, pf = rows["replan"], rows["perfect"]
-    half = 0.5 * pf["saving_corrected_pct"]
+    pf = rows.get("perfect")
+    half = 0.5 * pf["saving_corrected_pct"] if pf is not None else math.nan
     out = []
-    ok = rp["saving_corrected_pct"] >= half
-    out.append(f"replan realises ≥ half of perfect (corrected): {rp['saving_corrected_pct']:.2f} % vs half of "
-               f"{pf['saving_corrected_pct']:.2f} % = {half:.2f} %: " + ("met" if ok else
-               f"MISSED by {half - rp['saving_corrected_pct']:.2f} points"))
-    out.append(f"no replan voyage > {WORSE_PCT:g} % worse than the master (corrected): {rp['n_worse']} worse, worst "
-               f"{rp['worst_pct']:.2f} %: " + ("met" if rp["n_worse"] == 0 else
-               f"MISSED by {-WORSE_PCT - rp['worst_pct']:.2f} points on the worst"))
-    for name in ("once", "replan"):
+    for name in [k for k in ("replan", "replan calibrated") if k in rows and pf is not None]:
+        rp = rows[name]
+        ok = rp["saving_corrected_pct"] >= half
+        out.append(f"{name} realises ≥ half of perfect (corrected): {rp['saving_corrected_pct']:.2f} % vs half of "
+                   f"{pf['saving_corrected_pct']:.2f} % = {half:.2f} %: " + ("met" if ok else
+                   f"MISSED by {half - rp['saving_corrected_pct']:.2f} points"))
+        out.append(f"no {name} voyage > {WORSE_PCT:g} % worse than the master (corrected): {rp['n_worse']} worse, "
+                   f"worst {rp['worst_pct']:.2f} %: " + ("met" if rp["n_worse"] == 0 else
+                   f"MISSED by {-WORSE_PCT - rp['worst_pct']:.2f} points on the worst"))
+    for name in [k for k in ("once", "replan", "once calibrated", "replan calibrated") if k in rows]:
         r = rows[name]
         share = r["on_time"] / r["n"]
         out.append(f"{name}: on time {r['on_time']}/{r['n']} = {100 * share:.0f} % (target ≥ {100 * TARGET_ON_TIME:.0f} %): "
@@ -526,6 +609,9 @@ def write(a, n: int, runs: dict, per_voyage: list, t_start: float) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"conditions": {"voyages": n, "sailed": len(per_voyage), "seed": a.seed,
                                               "max_lead_h": a.max_lead, "cycle_h": CYCLE_H,
+                                              "margin_sigmas": a.margin_sigmas,
+                                              "margin_max_share": a.margin_max_share, "train_seed": a.train_seed,
+                                              "train_voyages": a.train_voyages, "error_model": a.model,
                                               "cpu_s": round(time.process_time() - t_start, 1)},
                                "summary": rows, "targets": targets(rows), "table": table(list(rows.values())),
                                "voyages": per_voyage}, indent=1))
@@ -539,19 +625,49 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=41)
     ap.add_argument("--max-lead", type=int, default=264, choices=(132, 264))
     ap.add_argument("--robust", action="store_true", help="also each robust decision and all three")
+    ap.add_argument("--train-seed", type=int, default=None,
+                    help="seed of the calibration's training voyages, truth and forecasts (default: --seed + 1000)")
+    ap.add_argument("--train-voyages", type=int, default=None, help="training voyages (default 12; 8 with --quick)")
+    ap.add_argument("--margin-sigmas", type=float, default=1.65,
+                    help="k of the calibrated margin: k × σ of the arrival error by the hours ahead (0: no calibration)")
+    ap.add_argument("--margin-max-share", type=float, default=0.15,
+                    help="the calibrated margin is at most this share of the hours ahead")
+    ap.add_argument("--only", default=None,
+                    help="comma-separated strategies to run (e.g. 'replan calibrated'); default: all")
     ap.add_argument("--out", default=str(ROOT / "bench" / "out" / "hindcast.json"))
     a = ap.parse_args(argv)
     n = 8 if a.quick else a.voyages
     t_start = time.process_time()
+    a.train_seed = a.seed + 1000 if a.train_seed is None else a.train_seed
+    if a.train_seed == a.seed:
+        ap.error("--train-seed must differ from --seed: the model is never calibrated on the voyages it is scored on")
+    a.train_voyages = (8 if a.quick else 12) if a.train_voyages is None else a.train_voyages
+    a.model = None
+    if a.margin_sigmas > 0:
+        model, train_rows = calibrate(a.train_seed, a.train_voyages, a.max_lead)
+        a.model = model_json(model) | {"training_voyages": a.train_voyages, "training_seed": a.train_seed,
+                                       "plans": len(train_rows)} | claim_errors(model, train_rows)
+        print(f"calibrated on {len(train_rows)} plans of {a.train_voyages} training voyages (seed {a.train_seed}): "
+              f"{json.dumps(a.model)}  [CPU {time.process_time() - t_start:.0f} s]", flush=True)
     fc = Forecasts(a.seed, a.max_lead)
     vs = voyages(n, a.seed)
     strategies = {"once": lambda v: sail_once(v, fc), "replan": lambda v: sail_replan(v, fc),
                   "perfect": lambda v: sail_once(v, fc, field=fc.truth)}
+    if a.margin_sigmas > 0:
+        cal = Rules(margin_sigmas=a.margin_sigmas, model=model, margin_max_share=a.margin_max_share)
+        strategies["once calibrated"] = functools.partial(sail_once, fc=fc, rules=cal)
+        strategies["replan calibrated"] = functools.partial(sail_replan, fc=fc, rules=cal)
     if a.robust:
         for label, rules in ROBUST.items():
             if (rules.margin_sigmas > 0) != (rules.min_win_share > 0):  # each alone (c acts only at sea)
                 strategies[f"once {label}"] = functools.partial(sail_once, fc=fc, rules=rules)
             strategies[f"replan {label}"] = functools.partial(sail_replan, fc=fc, rules=rules)
+    if a.only:
+        keep = [x.strip() for x in a.only.split(",")]
+        unknown = sorted(set(keep) - set(strategies))
+        if unknown:
+            ap.error(f"unknown strategies {unknown}; known: {sorted(strategies)}")
+        strategies = {k: f for k, f in strategies.items() if k in keep}
     runs = {k: [] for k in strategies}
     per_voyage = []
     for v in vs:
@@ -569,10 +685,10 @@ def main(argv=None) -> int:
         per_voyage.append(row)
         print(f"{v.vid} {v.kind:<13} {v.dist_nm:6.0f} NM  master {m.fuel_t:7.1f} t (late {m.late_h:+5.1f} h)  " +
               "  ".join(f"{k} {row[k]['saving_corrected_pct']:+5.1f}%/{row[k]['late_h']:+.1f}h"
-                        for k in ("once", "replan", "perfect")), flush=True)
+                        for k in ("once", "replan", "perfect", "replan calibrated") if k in row), flush=True)
         write(a, n, runs, per_voyage, t_start)  # after every voyage: a run stopped early keeps what it measured
     rows = write(a, n, runs, per_voyage, t_start)
-    master_on_time = sum(r[1].late_h <= ON_TIME_TOL_H for r in runs["once"])
+    master_on_time = sum(r[1].late_h <= ON_TIME_TOL_H for r in next(iter(runs.values())))
     print()
     print(f"hindcast: {n} voyages, seed {a.seed}, leads to {a.max_lead} h, cycles every {CYCLE_H} h; master on time "
           f"{master_on_time}/{n}; savings vs the master (corr.: fuel × (passage h / RTA h)²)")

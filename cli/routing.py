@@ -218,7 +218,7 @@ def register(app: typer.Typer) -> None:
                                                             solver_options=tuple(pairs) or None,
                                                             avoid_passages=(*s.routing.avoid_passages, *(avoid or ()))
                                                             or None),
-                       cycle_version=version)
+                       cycle_version=version, error_model=None if calm else _error_model(lay.warehouse))
         try:
             with console.status(f"routing {v['voyage_id']} with {solver}…", spinner="dots") if not as_json else _null():
                 plan, weather = planned(job, cube_path, lay.storage_options, n_members=max(0, ensemble))
@@ -285,3 +285,10 @@ class _null:
 
     def __exit__(self, *a):
         return False
+
+
+def _error_model(db):
+    """The forecast-error model of the warehouse's verified plans (flows.jobs.fleet.error_model), as route-fleet uses."""
+    from flows.jobs.fleet import error_model
+
+    return error_model(db)

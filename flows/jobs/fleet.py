@@ -37,7 +37,7 @@ from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.job import RouteJob, RoutingOptions
 from pipeline.routing.problem import MAX_VOYAGE_H
 from pipeline.sources.cycles import label as cycle_label, newest_published_cycles, parse_cycle, parse_day, parse_hours, utcnow_h
-from storage import cube, export_store, fleet_store, route_store, warehouse
+from storage import cube, export_store, fleet_store, route_store, verification_store, warehouse
 from storage.run_lock import job_lock
 
 LOG = logging.getLogger("jitroute.fleet")
@@ -154,6 +154,15 @@ def position_refused(db: Path, voyage_id: str, at_utc, lat: float, lon: float) -
     return enroute.position_problem(v, at, lat, lon, at_sea=bool(is_sea(lat, lon)), reports=near, top_speed_kn=top_kn)
 
 
+def error_model(db: Path):
+    """The forecast-error model fitted on the warehouse's verified plans (pipeline/routing/calibration.py; the stated
+    default, saying so, with too few of them)."""
+    from pipeline.routing import calibration
+
+    rows = verification_store.verifications(db).to_dict("records")
+    return calibration.fit_error_model(calibration.verification_errors(rows))
+
+
 def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_ids: list[str] | None,
                options: RoutingOptions, exports: bool, cycle_version: int | None = None,
                ref_utc: np.datetime64 | None = None, unrouted: list[dict] | None = None) -> list[RouteJob]:
@@ -189,6 +198,7 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     at_sea = [str(sel.voyage["voyage_id"]) for sel in chosen if sel.start.kind != enroute.START_PORT]
     # the current plans a re-plan at sea is weighed against (robust decisions: routing.replan_gain_sigmas)
     current = route_store.current_plan_legs(db, at_sea) if at_sea and options.replan_gain_sigmas > 0 else {}
+    errors = error_model(db) if chosen else None  # how far verified plans realised from their claims
     jobs = []
     for sel in chosen:
         v = enroute.voyage_from(sel.voyage, sel.start)
@@ -196,7 +206,7 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
         jobs.append(RouteJob(voyage=v, vessel=vessels.get(int(v["imo"]), {}), model=models.get(int(v["imo"])),
                              model_note=notes.get(int(v["imo"])),
                              run_id=run_id, cycle=cyc, exports=exports, options=options, cycle_version=cycle_version,
-                             debug_plots=s.debug_plots,
+                             debug_plots=s.debug_plots, error_model=errors,
                              current_legs=tuple(_plan_leg(g) for g in current.get(str(v["voyage_id"]), []))))
     return jobs
 

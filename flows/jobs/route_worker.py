@@ -102,9 +102,8 @@ def planned(job: RouteJob, cube_path: str | None, storage_options: dict | None =
             n_members: int | None = None) -> tuple[Plan, wf.WeatherField]:
     """`plan_voyage` in the job's cube weather; with a cube, the robust decisions its options ask for
     (job.robust_plan) and the plan's spread across a lagged ensemble of `n_members` cycles (default the job's
-    `ensemble_members`; 0: none) in `Plan.spread`."""
-    from pipeline.routing.ensemble import spread
-    from pipeline.routing.job import kept_or_replanned, robust_plan, routing_problem
+    `ensemble_members`; 0: none), or from the job's calibrated error model (job.plan_spread), in `Plan.spread`."""
+    from pipeline.routing.job import kept_or_replanned, plan_spread, robust_plan
 
     windows = []
     from_cube = cube_weather(cube_path, job, storage_options)
@@ -119,7 +118,7 @@ def planned(job: RouteJob, cube_path: str | None, storage_options: dict | None =
         members = lagged_members(cube_path, storage_options, job.cycle, windows[-1], n)
         plan, weather = robust_plan(job, plan, weather, weather_for, members)
         plan = kept_or_replanned(job, plan, weather, members)
-        plan.spread = spread(plan, members, routing_problem(job).kernel_vessel())
+        plan.spread = plan_spread(job, plan, members)  # from the job's error model where it applies
     return plan, weather
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pipeline.performance.model import PerformanceModel
-from pipeline.routing import robust
+from pipeline.routing import calibration, robust
 from pipeline.routing import weather_field as wf
 from pipeline.routing.base_route import with_base_route
 from pipeline.routing.options import RoutingOptions
@@ -42,6 +42,9 @@ class RouteJob:
     # a voyage at sea: its current plan's legs (lat0, lon0, lat1, lon1, rpm, wait_h, wait_fuel_t, etd_utc, eta_utc),
     # which a re-plan replaces only when it gains more than its spread (options.replan_gain_sigmas; kept_or_replanned)
     current_legs: tuple = ()
+    # how far plans realised from their claims (calibration.fit_error_model over plan_verification; None: not read):
+    # sizes the arrival margin by the hours ahead and the plan's spread (calibration.in_effect says when it applies)
+    error_model: calibration.ErrorModel | None = None
 
     @property
     def voyage_id(self) -> str:
@@ -94,21 +97,32 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
 def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for: WeatherFor | None,
                 members: list[wf.WeatherField]) -> tuple[Plan, wf.WeatherField]:
     """The plan after the robust decisions the job's options ask for (robust.py), over the lagged ensemble `members`:
-    re-planned to arrive `arrival_margin_sigmas` standard deviations of its arrival across the members before the
-    RTA (the plan keeps the voyage's RTA and says what it aims at; kept as it was when the earlier arrival cannot be
-    met), then replaced by its constant-speed baseline unless it beats it in `min_win_share` of the members. With
-    fewer than two members, or the options at 0, the plan is returned as it is."""
+    re-planned to arrive `arrival_margin_sigmas` standard deviations before the RTA (the plan keeps the voyage's RTA and
+    says what it aims at; kept as it was when the earlier arrival cannot be met), then replaced by its constant-speed
+    baseline unless it beats it in `min_win_share` of the members. σ is that of the arrival error by the hours ahead
+    (calibration.py: `job.error_model` where calibration.in_effect allows it, saying which model in the reason), else
+    that of the plan's arrival across the members. With fewer than two members and no error model calibrated from
+    verified plans, or the options at 0, the plan is returned as it is."""
     o = job.options
-    if len(members) < 2 or not plan.legs or not (o.arrival_margin_sigmas > 0 or o.min_win_share > 0):
+    model = calibration.in_effect(job.error_model, len(members))
+    if not plan.legs or not (o.arrival_margin_sigmas > 0 or o.min_win_share > 0) or (len(members) < 2 and model is None):
         return plan, weather
     vessel = routing_problem(job).kernel_vessel()
-    margin_h = robust.arrival_margin_h(plan, members, vessel, o.arrival_margin_sigmas, o.arrival_margin_max_share)
+    rta = np.datetime64(plan.rta_utc, "s")
+    ahead_h = float((rta - np.datetime64(plan.depart_utc, "s")) / np.timedelta64(1, "s")) / 3600.0
+    if model is not None:
+        margin_h = calibration.arrival_margin_h(model, ahead_h, o.arrival_margin_sigmas, o.arrival_margin_max_share)
+        bias_h = max(model.eta_bias_h(ahead_h), 0.0)
+        why = ((f"its mean lateness {bias_h:.1f} h + " if bias_h >= 0.05 else "")
+               + f"{o.arrival_margin_sigmas:g} × σ {model.eta_sd_h.at(ahead_h):.1f} h of the arrival error "
+               f"{ahead_h:.0f} h ahead; {model.note()}")
+    else:
+        margin_h = robust.arrival_margin_h(plan, members, vessel, o.arrival_margin_sigmas, o.arrival_margin_max_share)
+        why = f"{o.arrival_margin_sigmas:g} × the spread of its arrival across {len(members)} forecasts"
     if margin_h >= 1.0 / 60.0:
-        rta = np.datetime64(plan.rta_utc, "s")
         aim = rta - np.timedelta64(int(round(margin_h * 3600.0)), "s")
         aimed, aimed_weather = plan_voyage(replace(job, voyage={**job.voyage, "rta_utc": aim}), weather_for)
-        note = (f"aims {margin_h:.1f} h before the RTA ({o.arrival_margin_sigmas:g} × the spread of its arrival "
-                f"across {len(members)} forecasts)")
+        note = f"aims {margin_h:.1f} h before the RTA ({why})"
         if aimed.legs and aimed.status == "ok":
             for p in (aimed, aimed.baseline):
                 if p is not None:
@@ -118,11 +132,29 @@ def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for
         else:
             note = f"could not aim {margin_h:.1f} h before the RTA ({aimed.status}): planned for the RTA itself"
             plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
-    if o.min_win_share > 0:
+    if o.min_win_share > 0 and len(members) >= 2:
         wins = robust.wins_across(plan, members, vessel)
         if not wins.preferred(o.min_win_share) and plan.baseline is not None and plan.baseline.legs:
             plan = robust.baseline_kept(plan, wins, o.min_win_share)
     return plan, weather
+
+
+def plan_spread(job: RouteJob, plan: Plan, members: list[wf.WeatherField]):
+    """The plan's spread (ensemble.Spread): across the members, or, where the job's error model is in effect
+    (calibration.in_effect), from that model around what it expects the plan to realise (calibration.calibrated_spread;
+    the plan's reason then says which model and the expected saving). None without either."""
+    from pipeline.routing.ensemble import spread  # noqa: PLC0415
+
+    ens = spread(plan, members, routing_problem(job).kernel_vessel()) if members else None
+    model = calibration.in_effect(job.error_model, len(members))
+    if model is None or not plan.legs:
+        return ens
+    s = calibration.calibrated_spread(plan, ens, model)
+    note = (f"expected to realise a saving of {s.savings_p50_pct:.1f} % (P10–P90 {s.savings_p10_pct:.1f} to "
+            f"{s.savings_p90_pct:.1f} %; {model.note()})")
+    if note not in (plan.reason or ""):
+        plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+    return s
 
 
 def kept_or_replanned(job: RouteJob, plan: Plan, weather: wf.WeatherField, members: list[wf.WeatherField]) -> Plan:
