@@ -48,7 +48,7 @@ def test_gsm_without_wind_names_the_file(tmp_path):
 
 @pytest.mark.parametrize("land_as", ["bitmap", "fill"])
 def test_gwm_land_becomes_nan(tmp_path, land_as):
-    from global_land_mask import globe
+    from tests import land_reference as globe
 
     L, O = _grid()
     land = globe.is_land(L, ((O + 180) % 360) - 180)
