@@ -155,7 +155,7 @@ def _from_template(path: Path) -> None:
             finally:
                 con.close()
             os.replace(building, template)
-    copy = path.with_name(path.name + f".tmp{os.getpid()}")
+    copy = path.with_name(path.name + f".tmp{os.getpid()}-{threading.get_ident()}")  # threads may race to create it
     shutil.copyfile(template, copy)
     try:
         os.link(copy, path)  # fails if `path` exists by now: that warehouse is kept

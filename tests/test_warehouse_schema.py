@@ -171,3 +171,18 @@ def test_an_existing_warehouse_is_never_replaced_by_the_template(tmp_path, monke
     warehouse._from_template(db)  # as if another process had created it between the check and the copy
     with warehouse.connect(db, write=False) as con:
         assert con.execute("SELECT run_id FROM route_runs").fetchall() == [("r1",)]
+
+
+def test_threads_creating_the_same_new_warehouse_leave_one_whole_copy(tmp_path, monkeypatch):
+    """Each thread copies the template to its own temporary file and links it in place: the first link wins, no
+    thread's copy is written over while another thread links it."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    warehouse.use_templates(tmp_path / "templates")
+    db = tmp_path / "w.duckdb"
+    with ThreadPoolExecutor(4) as pool:
+        list(pool.map(lambda _: warehouse._from_template(db), range(16)))
+    [template] = (tmp_path / "templates").glob("migrated-*.duckdb")
+    assert db.read_bytes() == template.read_bytes() and warehouse.check_file(db) is None
+    assert not list(tmp_path.glob("*.tmp*"))
