@@ -114,8 +114,9 @@ def _view_is_current(con, folder: Path) -> bool:
     every file's footer)."""
     row = con.execute("SELECT sql FROM duckdb_views() WHERE view_name = ? AND database_name = current_database()",
                       [VIEW]).fetchone()
-    return (row is not None and f"'{folder}/run_id=*/*.parquet'" in row[0] and "filename IN" in row[0]
-            and _columns_file(folder).exists())
+    # DuckDB stores the file filter `filename IN (SELECT …)` as `filename = ANY(SELECT …)`
+    return (row is not None and f"'{folder}/run_id=*/*.parquet'" in row[0]
+            and ("filename IN" in row[0] or "filename = ANY" in row[0]) and _columns_file(folder).exists())
 
 
 def keep_legs_in_parquet(con: duckdb.DuckDBPyConnection) -> None:

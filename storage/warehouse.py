@@ -26,9 +26,11 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import hashlib
 import os
 import shutil
 import struct
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -112,6 +114,53 @@ def _all_migrations() -> list[Migration]:
     return [*schema, schema_docs.comments_migration(after=[m.name for m in schema])]
 
 
+# A folder of migrated, empty warehouses that `connect` copies for a new warehouse instead of running every migration
+# on it (about 0.3 s CPU a warehouse); None (the default): each new warehouse is migrated from scratch. The tests set
+# one per session (tests/conftest.py), so the hundreds of warehouses they create pay the migrations once.
+_TEMPLATES: dict[str, Path] = {}
+_TEMPLATES_LOCK = threading.Lock()
+
+
+def use_templates(folder: Path | None) -> None:
+    """New warehouses are copies of `folder/migrated-<digest of the migrations>.duckdb`, made there on first need by
+    migrating an empty file; a different list of migrations (names or SQL) gets its own template, so a copy always
+    holds exactly what migrating from scratch gives. None: migrate every new warehouse from scratch."""
+    with _TEMPLATES_LOCK:
+        _TEMPLATES.clear()
+        if folder is not None:
+            _TEMPLATES["folder"] = Path(folder)
+
+
+def _from_template(path: Path) -> None:
+    """Create the new warehouse `path` as a copy of the template of the current migrations (see `use_templates`);
+    nothing when no template folder is set. Never replaces a warehouse another process created meanwhile."""
+    folder = _TEMPLATES.get("folder")
+    if folder is None:
+        return
+    migrations = _all_migrations()
+    digest = hashlib.sha1("\0".join(f"{m.name}\0{m.sql}" for m in migrations).encode()).hexdigest()[:16]
+    template = folder / f"migrated-{digest}.duckdb"
+    with _TEMPLATES_LOCK:
+        if not template.exists():
+            folder.mkdir(parents=True, exist_ok=True)
+            building = template.with_name(template.name + f".tmp{os.getpid()}")
+            con = _open(building, read_only=False, wait_s=0.0)
+            try:
+                migrate(con)
+                con.execute("CHECKPOINT")
+            finally:
+                con.close()
+            os.replace(building, template)
+    copy = path.with_name(path.name + f".tmp{os.getpid()}-{threading.get_ident()}")  # threads may race to create it
+    shutil.copyfile(template, copy)
+    try:
+        os.link(copy, path)  # fails if `path` exists by now: that warehouse is kept
+    except OSError:
+        pass
+    finally:
+        copy.unlink(missing_ok=True)
+
+
 def _open(path: Path, read_only: bool, wait_s: float) -> duckdb.DuckDBPyConnection:
     deadline = time.monotonic() + wait_s
     delay = 0.05
@@ -192,6 +241,8 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0,
         return
     if write:
         path.parent.mkdir(parents=True, exist_ok=True)
+        if not path.exists():
+            _from_template(path)
     elif not path.exists():
         raise FileNotFoundError(f"warehouse {path} does not exist yet: run `jitroute demo` or an ingest first")
     con = _open(path, read_only=not write, wait_s=wait_s)
@@ -238,8 +289,9 @@ def verify(con: duckdb.DuckDBPyConnection) -> None:
     duckdb.Error on a damaged block. A cheap pass: one hash over each table, nothing kept."""
     tables = con.execute("SELECT schema_name, table_name FROM duckdb_tables() "
                          "WHERE database_name = current_database() AND NOT temporary").fetchall()
-    for schema, table in tables:
-        con.execute(f'SELECT count(*), sum(hash(t)) FROM "{schema}"."{table}" AS t').fetchall()
+    if tables:  # one query for all of them: a third of the CPU of one query a table
+        con.execute(" UNION ALL ".join(f'SELECT count(*), sum(hash(t)) FROM "{schema}"."{table}" AS t'
+                                       for schema, table in tables)).fetchall()
 
 
 def check_file(path: Path) -> str | None:

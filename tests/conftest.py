@@ -52,6 +52,28 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.slow)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def warehouse_templates(tmp_path_factory):
+    """Every new warehouse of the session is a copy of one migrated once (storage.warehouse.use_templates) rather than
+    migrated again (about 0.3 s CPU each); `migrated_from_scratch` turns it off for a test of the migrations."""
+    from storage import warehouse
+
+    warehouse.use_templates(tmp_path_factory.mktemp("warehouse_templates"))
+    yield
+    warehouse.use_templates(None)
+
+
+@pytest.fixture
+def migrated_from_scratch():
+    """New warehouses in this test run every migration (no template copy)."""
+    from storage import warehouse
+
+    folder = warehouse._TEMPLATES.get("folder")
+    warehouse.use_templates(None)
+    yield
+    warehouse.use_templates(folder)
+
+
 @pytest.fixture(scope="session")
 def jma_fixtures() -> Path:
     """Real JMA GRIB2 files written by others (tests/fixtures/jma/README.md)."""

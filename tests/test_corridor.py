@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import pytest
-from global_land_mask import globe
 
 from pipeline.routing import geodesy as geo
 from pipeline.routing.baseline import shortest_route
@@ -23,6 +22,7 @@ from pipeline.routing.sea_route import PassageTransit, SeaRoute
 from pipeline.routing.search_space import VoyageGeometryError, build_search_space, reachable
 from pipeline.routing.solve import solve
 from routing_cases import FAST, constant_speed, field, problem, wavy
+from tests import land_reference as globe
 
 # Tampa Bay's offing round the Florida Keys to off Jacksonville: 666 NM where the great circle is 201 NM over land
 FLORIDA = [(27.6, -83.2), (25.5, -82.6), (24.3, -82.0), (24.3, -81.0), (25.0, -80.05), (26.5, -79.9), (28.5, -80.2),

@@ -42,6 +42,14 @@ def store(tmp_path):
     return path
 
 
+@pytest.fixture(scope="module")
+def read_only_store(tmp_path_factory):
+    """`store` written once for the tests that only read it."""
+    path = tmp_path_factory.mktemp("cube") / "cubes" / "weather.zarr"
+    cube.write_cycle(path, cycle_ds(), complete=True)
+    return path
+
+
 def window(store, box_lat, box_lon, t_from="2020-12-01T13", t_to="2020-12-02T05", **kw) -> wf.WeatherField:
     win = cube_window.read_window(store, CYCLE, valid_utc=(np.datetime64(t_from), np.datetime64(t_to)),
                                   lat_deg=box_lat, lon_deg=box_lon, variables=wf.CUBE_VARIABLES, **kw)
@@ -51,9 +59,9 @@ def window(store, box_lat, box_lon, t_from="2020-12-01T13", t_to="2020-12-02T05"
 @pytest.mark.parametrize("box_lat, box_lon", [((10, 30), (140, 160)),  # open ocean
                                                ((20, 50), (170, 200)),  # across 180°
                                                ((-10, 10), (350, 375))])  # across 0°, the grid's seam
-def test_a_window_samples_like_the_whole_cycle_inside_its_box(store, box_lat, box_lon):
-    whole = wf.from_cycle(cube.load_cycle(store, CYCLE), CYCLE)
-    part = window(store, box_lat, box_lon)
+def test_a_window_samples_like_the_whole_cycle_inside_its_box(read_only_store, box_lat, box_lon):
+    whole = wf.from_cycle(cube.load_cycle(read_only_store, CYCLE), CYCLE)
+    part = window(read_only_store, box_lat, box_lon)
     assert part.values.size < whole.values.size / 10 and not part.grid.wraps
     assert part.t_ref == whole.t_ref  # times count from the cycle in both
     rng = np.random.default_rng(1)
@@ -65,16 +73,16 @@ def test_a_window_samples_like_the_whole_cycle_inside_its_box(store, box_lat, bo
         np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6, err_msg=f"at {lat:.2f}, {lon:.2f}, {t_h:.1f} h")
 
 
-def test_a_window_holds_the_steps_bracketing_its_times_clipped_to_the_cycle(store):
-    assert list(window(store, (0, 10), (0, 10)).times_h) == [12, 18, 24, 30]  # 13 h .. 29 h
-    late = window(store, (0, 10), (0, 10), t_from="2020-12-02T10", t_to="2020-12-09T00")
+def test_a_window_holds_the_steps_bracketing_its_times_clipped_to_the_cycle(read_only_store):
+    assert list(window(read_only_store, (0, 10), (0, 10)).times_h) == [12, 18, 24, 30]  # 13 h .. 29 h
+    late = window(read_only_store, (0, 10), (0, 10), t_from="2020-12-02T10", t_to="2020-12-09T00")
     assert list(late.times_h) == [30, 36, 42, 48]  # the cycle's last step stays the horizon
-    after = window(store, (0, 10), (0, 10), t_from="2020-12-05T00", t_to="2020-12-09T00")
+    after = window(read_only_store, (0, 10), (0, 10), t_from="2020-12-05T00", t_to="2020-12-09T00")
     assert list(after.times_h) == [48]
 
 
-def test_a_window_across_the_seam_has_continuous_longitudes(store):
-    part = window(store, (-10, 10), (350, 375))
+def test_a_window_across_the_seam_has_continuous_longitudes(read_only_store):
+    part = window(read_only_store, (-10, 10), (350, 375))
     g = part.grid
     assert g.lon0 < 350 and g.lon0 + g.dlon * (g.nlon - 1) > 375
     lon = g.lon0 + g.dlon * np.arange(g.nlon)

@@ -48,7 +48,7 @@ def test_gsm_without_wind_names_the_file(tmp_path):
 
 @pytest.mark.parametrize("land_as", ["bitmap", "fill"])
 def test_gwm_land_becomes_nan(tmp_path, land_as):
-    from global_land_mask import globe
+    from tests import land_reference as globe
 
     L, O = _grid()
     land = globe.is_land(L, ((O + 180) % 360) - 180)
@@ -138,12 +138,16 @@ def test_oscar_with_unexpected_dims_is_a_decode_error(tmp_path):
         decode_oscar(p)
 
 
-def test_grib_files_decoded_in_threads_equal_a_serial_decode(demo_mirror, jma_fixtures):
+def test_grib_files_decoded_in_threads_equal_a_serial_decode(tmp_path, jma_fixtures):
     """The ingest decodes GRIB2 files in worker threads: eccodes (built thread-safe, multi-field support on)
     must give every thread exactly what a serial decode gives, including JMA's multi-field messages."""
     from concurrent.futures import ThreadPoolExecutor
 
-    files = sorted(demo_mirror.rglob("*_grib2.bin"))[:12]
+    from pipeline.synthetic.mirror import write_mirror
+
+    write_mirror(tmp_path, "2020-12-01", "2020-12-01", cycles=(0,), max_lead_h=12, seed=0)  # 3 GSM leads, 1 GWM file
+    files = sorted(tmp_path.rglob("*_grib2.bin"))
+    assert [p.name.split("_")[5] for p in files] == ["GSM"] * 3 + ["GWM"]
     jobs = [(decode_gwm if "GWM" in p.name else decode_gsm, p) for p in files]
     jobs += [(list_fields, p) for p in sorted(jma_fixtures.glob("*grib2.bin*"))]
     serial = [fn(p) for fn, p in jobs]

@@ -26,14 +26,20 @@ def _as_text(df):
     return pd.read_csv(io.StringIO(df.to_csv(index=False)), dtype=str, keep_default_na=False, na_values=[""])
 
 
+@pytest.fixture(scope="module")
+def fleet_checked(fleet):
+    """`fleet`'s noon reports as a CSV file gives them, validated: (good, rejected), made once; tests take copies."""
+    return validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+
+
 def test_demo_fleet_has_valid_imos_and_voyages(fleet):
     assert all(is_valid_imo(i) for i in fleet.vessels.imo)
     assert not is_valid_imo(9140608)
     assert (fleet.voyages.rta_utc > fleet.voyages.depart_utc).all()
 
 
-def test_physical_coefficients_are_recovered(fleet):
-    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+def test_physical_coefficients_are_recovered(fleet, fleet_checked):
+    good = fleet_checked[0].copy()
     imo = int(fleet.vessels.imo[1])
     rows, summary = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1)
     truth = fleet.true_models[imo]
@@ -186,10 +192,10 @@ def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
             assert active == fleet_store.active_models(db) and imo in active
             assert versions == fleet_store.next_versions(db) == {imo: 2}
 
-def test_refit_read_of_a_table_larger_than_a_row_group_matches_the_ordered_table_read(fleet, tmp_path):
+def test_refit_read_of_a_table_larger_than_a_row_group_matches_the_ordered_table_read(fleet, fleet_checked, tmp_path):
     """Past one DuckDB row group (122,880 rows) the refit read still gives every row once, in vessel and time order:
     a year of four vessels repeated 90 times, 400 days apart (131,400 rows), imported newest first."""
-    good, bad = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    good, bad = (part.copy() for part in fleet_checked)
     ts = pd.to_datetime(good["ts_utc"])
     years = [good.assign(ts_utc=(ts + pd.Timedelta(days=400 * k)).dt.strftime("%Y-%m-%dT%H:%M:%S")) for k in range(90)]
     db = tmp_path / "w.duckdb"
@@ -202,11 +208,11 @@ def test_refit_read_of_a_table_larger_than_a_row_group_matches_the_ordered_table
         np.testing.assert_array_equal(arrays[c], df[c].to_numpy(), err_msg=c)
 
 
-def test_stored_data_hashes_do_not_change_with_how_the_reports_are_held(fleet):
+def test_stored_data_hashes_do_not_change_with_how_the_reports_are_held(fleet, fleet_checked):
     """A model's data_hash (its rows, form and fit settings) is what a refit with nothing new compares with the stored
     models: it must stay the value stored before (pinned), whether the reports come as a DataFrame or as the read-only
     arrays the warehouse read shares with Arrow; else every vessel would get a new model version after an upgrade."""
-    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    good = fleet_checked[0].copy()
     imo = int(fleet.vessels.imo[0])
     rows_df = good[good.imo == imo].sort_values("ts_utc")
     arrays = {c: rows_df[c].to_numpy(dtype="datetime64[us]" if c == "ts_utc" else float) for c in REPORT_COLUMNS if c != "imo"}
@@ -390,11 +396,11 @@ def test_huber_median_equals_numpy_median_whatever_the_guess():
         for guess, width in ((np.nan, np.nan), (true, 0.05), (true + 0.3, 0.1), (0.0, 10.0), (5.0, 0.01)):
             assert huber.median_near(a, m, guess, width, np.empty((3, m))) == true, (trial, m, guess, width)
 
-def test_batched_robust_fit_equals_each_vessel_fitted_alone(fleet):
+def test_batched_robust_fit_equals_each_vessel_fitted_alone(fleet_checked):
     """A fleet fit gives every vessel what a fit of that vessel alone gives, and that is the plain
     IRLS + CV written out above: each vessel stops re-weighting when its own coefficients settle,
     whatever the other vessels in the batch do."""
-    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    good = fleet_checked[0].copy()
     good = good.sort_values(["imo", "ts_utc"])
     parts = [g for _, g in good.groupby("imo")]
     parts[1] = parts[1].head(150).copy()
@@ -495,13 +501,13 @@ def test_calm_water_speed_and_fuel_do_not_depend_on_heading():
         assert north[lk.H] == pytest.approx(south[lk.H], rel=1e-12) and north[lk.FUEL] == pytest.approx(south[lk.FUEL], rel=1e-12)
 
 
-def test_physical_weather_loss_is_largest_head_on_always_a_loss_and_bounded(fleet):
+def test_physical_weather_loss_is_largest_head_on_always_a_loss_and_bounded(fleet, fleet_checked):
     """A fitted physical model: at 30 kn wind and 4 m seas the speed loss falls from head to beam to
     following and is never a gain; it never takes more than half the calm speed; fuel never drops
     below the calm-water rate at the same rpm (50 kn following wind and 8 m seas included)."""
     from pipeline.performance.model import PerformanceModel
 
-    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    good = fleet_checked[0].copy()
     imo = int(fleet.vessels.imo[0])
     rows, _ = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1)
     coef = {r["target"]: np.array(list(json.loads(r["coefficients"]).values())) for r in rows}
@@ -552,7 +558,7 @@ def test_physical_fit_never_learns_a_weather_gain():
         assert features.fuel_tph_nb(1, m.fuel_coef, 80.0, 9.0, 0.5, 40.0, a, 3.0, a, 0.0) == m.fuel_tph(80.0, 9.0, 0.5, 40.0, a, 3.0, a)
 
 
-def test_storage_returns_plain_rows_and_the_pipeline_builds_models(fleet, tmp_path):
+def test_storage_returns_plain_rows_and_the_pipeline_builds_models(fleet, fleet_checked, tmp_path):
     """storage imports nothing from pipeline; a stored active model comes back as plain values and
     `model_from_stored` builds the model routing uses (None for coefficients of an older form definition)."""
     import ast
@@ -570,7 +576,7 @@ def test_storage_returns_plain_rows_and_the_pipeline_builds_models(fleet, tmp_pa
 
     db = tmp_path / "w.duckdb"
     fleet_store.import_vessels(db, fleet.vessels)
-    good, _ = validate_noon(_as_text(fleet.noon), set(fleet.vessels.imo))
+    good = fleet_checked[0].copy()
     imo = int(fleet.vessels.imo[1])
     rows, s = refit_vessel(imo, good[good.imo == imo].sort_values("ts_utc"), None, 1, form="physical")
     fleet_store.save_fits(db, rows)

@@ -197,6 +197,7 @@ def two_cycle_root(tmp_path_factory):
     return root, mirror
 
 
+@pytest.mark.slow  # the nightly run twice end to end (ingest, route the fleet, verify), then `jitroute verify`
 def test_the_nightly_verifies_the_plans_of_the_cycle_before_in_the_analysed_weather(two_cycle_root, monkeypatch):
     import duckdb
 

@@ -147,6 +147,23 @@ def test_a_moved_data_root_gets_its_view_at_the_new_place_on_the_next_write(tmp_
     assert str(tmp_path / "b" / "w.history") in _read(db, "SELECT sql FROM duckdb_views() WHERE view_name = 'route_legs'")[0][0]
 
 
+def test_a_write_leaves_a_current_view_and_its_columns_file_alone(tmp_path):
+    """The view is made again only when its folder or columns changed, not on every write (each remake rewrites the
+    columns file and changes the catalog the snapshot copies)."""
+    db = tmp_path / "w.duckdb"
+    _write_run(db, "r1")
+    columns = route_history._columns_file(route_history.history_dir(db))
+    view = _read(db, "SELECT sql FROM duckdb_views() WHERE view_name = 'route_legs'")
+    with warehouse.connect(db) as con:
+        assert route_history._view_is_current(con, route_history.history_dir(db))
+    stamp = columns.stat().st_mtime_ns
+    with warehouse.connect(db):
+        pass
+    assert columns.stat().st_mtime_ns == stamp and list(columns.parent.iterdir()) == [columns]
+    assert _read(db, "SELECT sql FROM duckdb_views() WHERE view_name = 'route_legs'") == view
+    assert _read(db, "SELECT count(*) FROM route_legs")[0][0] == 6
+
+
 def test_warehouse_check_reads_every_legs_file_and_names_the_changed_one(tmp_path):
     from typer.testing import CliRunner
 

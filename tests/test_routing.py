@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import pytest
-from global_land_mask import globe
 
 from pipeline.performance.model import reference_model
 from pipeline.routing import geodesy as geo
@@ -24,6 +23,7 @@ from pipeline.routing.search_space import build_search_space
 from pipeline.routing.sphere import gc_points
 from pipeline.routing.solve import BfoaParams, RoutingProblem, _evaluate, solver_instance
 from routing_cases import solve, wavy
+from tests import land_reference as globe
 
 MODEL = reference_model(14.0, 100.0, 1.5)  # STW = 0.14·rpm kn, fuel = 1.5·(rpm/100)³ t/h in calm water
 FAST = BfoaParams(n_bacteria=8, n_chemo=6, n_cycles=8)

@@ -8,6 +8,7 @@ two to five engine settings."""
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -26,6 +27,7 @@ GAP = 0.02  # ε-trimming coarse enough to trim labels on graphs this small
 DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm (9.8 kn) ≈ 57 h, 100 rpm (14 kn) ≈ 40 h in calm water
 
 
+@functools.cache  # made once per module: a field is only read (the solvers and kernels never write it)
 def _weather(kind: str, seed: int):
     if kind == "static":
         return field(wavy(seed))

@@ -12,6 +12,7 @@ RTAs (least late); both objectives; two to five settings."""
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -100,6 +101,7 @@ def _sail_with_waits(inst, nodes, rpm_idx, wait_h, wait_tph) -> float:
     return float(route_cost_nb(o, t - o.t_dep_h, fuel))
 
 
+@functools.cache  # made once per module: a field is only read (the solvers and kernels never write it)
 def _weather(kind: str, seed: int):
     if kind == "static":
         return field(wavy(seed))

@@ -1,7 +1,7 @@
 """Safe water: the land structure, distance to land, and routes kept clear of small islands, straits and coasts.
 
 Distances are checked against an independent computation on the package's own full-resolution mask
-(`global_land_mask.globe`, loaded here in the test only): great-circle distance from a point to the nearest
+(`global_land_mask`'s grid, read by tests/land_reference.py): great-circle distance from a point to the nearest
 land cell taken as a latitude/longitude box. Routes are re-sampled here every 0.05 NM.
 """
 
@@ -13,7 +13,6 @@ import sys
 
 import numpy as np
 import pytest
-from global_land_mask import globe
 
 from pipeline.routing import land
 from pipeline.routing.search_space import build_search_space, reachable
@@ -21,6 +20,7 @@ from pipeline.routing import weather_field as wf
 from pipeline.routing.voyage import problem_from_voyage
 from pipeline.synthetic.fleet import PORTS, ROUTES
 from routing_cases import FAST, MODEL, problem, solve
+from tests import land_reference as globe
 
 R_NM = 3440.065
 MARCUS = (24.286, 153.979)  # Minami-Tori-shima, ~1 NM across, 500 NM from other land
@@ -40,7 +40,7 @@ def raw_distance_nm(lat, lon, radius_nm=3.0):
     n = int(radius_nm / 0.5) + 2
     m = int(n / math.cos(math.radians(lat))) + 2
     rows, cols = np.arange(i0 - n, i0 + n + 1), np.arange(j0 - m, j0 + m + 1)
-    r, c = np.nonzero(~globe._mask[np.ix_(rows, cols % 43200)])
+    r, c = np.nonzero(~globe.ocean_cells(rows, cols % 43200))
     if not len(r):
         return radius_nm
     top, west = 90.0 - rows[r] / 120.0, -180.0 + cols[c] / 120.0

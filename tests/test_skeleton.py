@@ -28,7 +28,7 @@ def test_reference_model_speed_and_fuel():
     assert np.allclose(back.speed_coef, m.speed_coef)
 
 
-def test_warehouse_migrates_and_snapshots(tmp_path: Path):
+def test_warehouse_migrates_and_snapshots(tmp_path: Path, migrated_from_scratch):
     db = tmp_path / "w.duckdb"
     with warehouse.connect(db) as con:
         names = {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()}

@@ -1,10 +1,13 @@
 """The warehouse as analysts and BI tools meet it: described columns, constrained statuses, a snapshot older
 DuckDB readers open, and an existing warehouse upgraded to all of it."""
 
+import re
+
 import duckdb
 import pytest
 
 from storage import warehouse
+from storage.route_history import history_dir
 
 CHECKED_MIGRATIONS = {"ingest_002_status_checks", "fleet_005_status_checks", "routes_006_status_checks"}
 
@@ -95,3 +98,91 @@ def test_the_snapshot_is_written_in_the_declared_storage_version_and_opens_read_
         # 4 + fleet_plans.status and fleet_plan_legs.kind + plan_verification.coverage
         assert con.execute("SELECT count(*) FROM duckdb_constraints() WHERE constraint_type = 'CHECK'").fetchone()[0] == 7
         assert _undescribed(con) == []
+
+
+def _same_sql(sql: str, db) -> str:
+    """A view's SQL as DuckDB prints it, made comparable between warehouses: the folder of the warehouse's own legs
+    files named alike, and each EXCLUDE list (a set, printed in no fixed order) sorted."""
+    sql = sql.replace(str(history_dir(db)), "<legs folder>")
+    return re.sub(r"EXCLUDE \(([^()]*)\)", lambda m: "EXCLUDE (" + ", ".join(sorted(m[1].split(", "))) + ")", sql)
+
+
+def _schema(db) -> dict:
+    """Everything the migrations make in the warehouse `db`: tables, columns (type, default, comment), views (the
+    folder of its own legs files named alike), constraints, indexes, the recorded migration names and the rows of
+    every table."""
+    with duckdb.connect(str(db), read_only=True) as con:
+        q = lambda sql: sorted(con.execute(sql).fetchall(), key=repr)  # noqa: E731
+        tables = [t for (t,) in q("SELECT table_name FROM duckdb_tables() WHERE database_name = current_database()")]
+        return {
+            "tables": q("SELECT table_name, comment FROM duckdb_tables() WHERE database_name = current_database()"),
+            "columns": q("SELECT table_name, column_name, column_index, data_type, column_default, is_nullable, comment "
+                         "FROM duckdb_columns() WHERE database_name = current_database()"),
+            "views": [(name, _same_sql(sql, db), comment) for name, sql, comment in
+                      q("SELECT view_name, sql, comment FROM duckdb_views() WHERE database_name = current_database() "
+                        "AND NOT internal")],
+            "constraints": q("SELECT table_name, constraint_type, constraint_text FROM duckdb_constraints() "
+                             "WHERE database_name = current_database()"),
+            "indexes": q("SELECT table_name, index_name, sql FROM duckdb_indexes() WHERE database_name = current_database()"),
+            "migrations": q("SELECT name FROM schema_migrations"),
+            "rows": {t: q(f'SELECT * EXCLUDE (applied_at) FROM "{t}"') if t == "schema_migrations"
+                     else q(f'SELECT * FROM "{t}"') for t in tables},
+        }
+
+
+def test_a_new_warehouse_copied_from_the_template_is_the_one_migrated_from_scratch(tmp_path, monkeypatch):
+    """The tests' new warehouses are copies of one migrated once (warehouse.use_templates, tests/conftest.py): the copy
+    holds what every migration run on an empty file gives, in the snapshot's storage format, and a list of migrations
+    that differs gets its own template rather than a copy of another's."""
+    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    warehouse.use_templates(tmp_path / "templates")
+    with warehouse.connect(tmp_path / "copied.duckdb"):
+        pass
+    [template] = (tmp_path / "templates").glob("migrated-*.duckdb")
+    with warehouse.connect(tmp_path / "copied_again.duckdb"):
+        pass
+    assert list((tmp_path / "templates").glob("migrated-*.duckdb")) == [template]  # made once, copied since
+    warehouse.use_templates(None)
+    with warehouse.connect(tmp_path / "scratch.duckdb"):
+        pass
+    scratch = _schema(tmp_path / "scratch.duckdb")
+    assert len(scratch["migrations"]) == len(warehouse._all_migrations()) and len(scratch["tables"]) > 10
+    assert _schema(tmp_path / "copied.duckdb") == scratch == _schema(tmp_path / "copied_again.duckdb")
+    assert warehouse.storage_version_number(tmp_path / "copied.duckdb") == warehouse.SNAPSHOT_STORAGE_NUMBER
+    assert warehouse.snapshot_path(tmp_path / "copied.duckdb").exists()
+
+    warehouse.use_templates(tmp_path / "templates")
+    fewer = warehouse._all_migrations()[:3]
+    monkeypatch.setattr(warehouse, "_all_migrations", lambda: fewer)
+    with warehouse.connect(tmp_path / "fewer.duckdb") as con:
+        assert {r[0] for r in con.execute("SELECT name FROM schema_migrations").fetchall()} == {m.name for m in fewer}
+    assert len(list((tmp_path / "templates").glob("migrated-*.duckdb"))) == 2
+    assert not list(tmp_path.rglob("*.tmp*"))
+
+
+def test_an_existing_warehouse_is_never_replaced_by_the_template(tmp_path, monkeypatch):
+    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    warehouse.use_templates(tmp_path / "templates")
+    db = tmp_path / "w.duckdb"
+    with warehouse.connect(db) as con:
+        con.execute("INSERT INTO route_runs (run_id, started_at, status) VALUES ('r1', now(), 'ok')")
+    with warehouse.connect(db) as con:
+        assert con.execute("SELECT run_id FROM route_runs").fetchall() == [("r1",)]
+    warehouse._from_template(db)  # as if another process had created it between the check and the copy
+    with warehouse.connect(db, write=False) as con:
+        assert con.execute("SELECT run_id FROM route_runs").fetchall() == [("r1",)]
+
+
+def test_threads_creating_the_same_new_warehouse_leave_one_whole_copy(tmp_path, monkeypatch):
+    """Each thread copies the template to its own temporary file and links it in place: the first link wins, no
+    thread's copy is written over while another thread links it."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    warehouse.use_templates(tmp_path / "templates")
+    db = tmp_path / "w.duckdb"
+    with ThreadPoolExecutor(4) as pool:
+        list(pool.map(lambda _: warehouse._from_template(db), range(16)))
+    [template] = (tmp_path / "templates").glob("migrated-*.duckdb")
+    assert db.read_bytes() == template.read_bytes() and warehouse.check_file(db) is None
+    assert not list(tmp_path.glob("*.tmp*"))
