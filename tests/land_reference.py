@@ -1,8 +1,8 @@
 """The tests' independent land reference: the grid of the `global-land-mask` package (21600 × 43200 cells, True =
 ocean), read without importing the package. Its import decompresses the whole grid (933 MB, about 4 s CPU) in every
-test process; here the first use in a machine writes the grid once as packed bits (117 MB) in the user's cache
-folder (`$XDG_CACHE_HOME/jitroute/test-land-mask`, else `~/.cache/…`), named by the package's version and file
-size, and every later use memory-maps it and reads only the cells it asks for.
+test process; here the first use in a machine writes the grid once as packed bits (117 MB) in the temporary folder
+(`$TMPDIR/jitroute-test-land-mask`, beside the sea graph's cache), named by the package's version and file size,
+and every later use memory-maps it and reads only the cells it asks for.
 
 `is_ocean`, `is_land` and `ocean_cells` answer exactly as `globe.is_ocean`, `globe.is_land` and
 `globe._mask[np.ix_(rows, cols)]` do (tests/test_land_reference.py holds them to it): the same index arithmetic on
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,8 @@ _STATE: dict = {}
 
 
 def _cache_file(mask: Path) -> Path:
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     version = importlib.metadata.version("global-land-mask")
-    return base / "jitroute" / "test-land-mask" / f"globe-{version}-{mask.stat().st_size}-packed.npy"
+    return Path(tempfile.gettempdir()) / "jitroute-test-land-mask" / f"globe-{version}-{mask.stat().st_size}-packed.npy"
 
 
 def _grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
