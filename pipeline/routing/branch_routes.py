@@ -64,10 +64,12 @@ def fastest_route_nb(g, v, w, o, r, lo, hi, max_shift, nodes):
 
 def branch_routes(g, v, w, o, r: int, max_shift: int = 1) -> tuple[np.ndarray, int]:
     """((k, L+2) int64 routes, legs sailed): the distinct fastest routes at rpm index `r` through the nodes on one
-    side of the centre line (the base route) and through those on the other, legs shifting at most `max_shift` nodes (k ≤ 2; 0 when none arrives)."""
+    side of the centre line (the base route) and through those on the other, legs shifting at most `max_shift`
+    nodes (k ≤ 2; 0 when none arrives)."""
     L2, P = g.lat.shape
     c = P // 2
-    found, n_legs = [], 0
+    found: list[np.ndarray] = []
+    n_legs = 0
     for lo, hi in ((0, c), (c, P - 1)):
         nodes = np.empty(L2, np.int64)
         n_legs += fastest_route_nb(g, v, w, o, int(r), lo, hi, int(max_shift), nodes)
