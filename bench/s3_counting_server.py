@@ -36,6 +36,11 @@ def counting(app):
         return served(f"{method} {part(path)}", app(environ, start_response))
 
     def served(key: str, body):
+        # the request is counted as it arrives, before its body is sent: a client that has its answer is sure to find
+        # it counted (counted after the body, a reset just after the answer could come before the count, and the
+        # request would be counted in the next interval)
+        with lock:
+            counts[key]["requests"] += 1
         n = 0
         try:
             for chunk in body:
@@ -45,7 +50,6 @@ def counting(app):
             if hasattr(body, "close"):
                 body.close()
             with lock:
-                counts[key]["requests"] += 1
                 counts[key]["bytes"] += n
 
     return wrapped

@@ -20,6 +20,7 @@ from cli.main import app
 from schemas.tables.routes import ROUTES
 from storage import cube, route_store
 from storage.layout import DataLayout
+from storage.cube_location import CorruptChunkError
 from tests.reliability.conftest import CYCLE, REPO, assert_same_cube, child_env, file_urls
 
 C = np.datetime64(CYCLE, "ns")
@@ -89,7 +90,7 @@ def _chunk_key(store, var, *, lat, lon, cycle_index=0):
 def test_a_corrupt_chunk_is_named_with_its_cycle_and_the_re_ingest_that_fixes_it(root, small_mirror, ingest, clean_cube):
     store = DataLayout(root).weather_cube
     chunk = _spoil_chunk(store)
-    with pytest.raises(cube.CorruptChunkError) as exc:
+    with pytest.raises(CorruptChunkError) as exc:
         cube.load_cycle(store, C)
     msg = str(exc.value)
     assert msg.startswith(f"cube chunk {chunk} of cycle {CYCLE} is corrupt"), msg
