@@ -74,7 +74,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from pipeline.performance.model import reference_model  # noqa: E402
-from pipeline.routing import leg_kernel as lk  # noqa: E402
+from pipeline.routing.engine import leg as lk  # noqa: E402
 from pipeline.routing import calibration, robust  # noqa: E402
 from pipeline.routing import verification as ver  # noqa: E402
 from pipeline.routing import weather_field as wf  # noqa: E402

@@ -661,7 +661,7 @@ MIGRATIONS: list[Migration] = [
         ALTER TABLE route_leg_parts_new RENAME TO route_leg_parts;
         """),
     # each plan's saving split into what the forecast covers and what it does not (past the last valid time plans
-    # sail in neutral weather, leg_kernel), and fleet_savings with the split
+    # sail in neutral weather, engine.leg), and fleet_savings with the split
     Migration("routes_013_savings_forecast_split",
               ROUTES.add_columns_sql(*ROUTE_FORECAST_SPLIT_ADDED) + "\n" + FLEET_SAVINGS_VIEW_013),
     # plan against actual like with like: a re-plan from its start, a ship at sea without an arrival

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.performance.model import reference_model
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing import weather_field as wf
 from pipeline.routing.baseline import shortest_route
 from pipeline.routing.problem import Instance

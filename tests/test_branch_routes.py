@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.branch_routes import branch_routes, fastest_route_nb
 from pipeline.routing.problem import Instance
 from routing_cases import field, problem

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pipeline.performance.features import DIR_A, DIR_B, DIR_C
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing import weather_field as wf
 from pipeline.routing.savings import savings_split
 from pipeline.routing.solve import solve

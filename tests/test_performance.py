@@ -478,7 +478,7 @@ def test_calm_water_speed_and_fuel_do_not_depend_on_heading():
     relative direction, including the −180° routing gets from atan2(−0, −0); and a leg sailed north
     takes as long as the same leg sailed south."""
     from pipeline.performance.model import PerformanceModel, reference_model
-    from pipeline.routing import leg_kernel as lk
+    from pipeline.routing.engine import leg as lk
     from pipeline.routing import weather_field as wf
 
     gn = gas_nirvana()

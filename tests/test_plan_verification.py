@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing import weather_field as wf
 from pipeline.routing.ensemble import sail_plan
 from pipeline.routing.geodesy import gc_distance_nm

@@ -15,7 +15,7 @@ import pytest
 
 from pipeline.performance.model import reference_model
 from pipeline.routing import geodesy as geo
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing import weather_field as wf
 from pipeline.routing.objectives import LATE_STEP_T, objective, route_cost_nb
 from pipeline.routing.problem import Instance

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from routing_cases import field, moving_storm, problem, solve, wavy
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
-from pipeline.routing.dp import DpOptions, cost_lb_nb, grid_step_h
+from pipeline.routing.dp import DpOptions, grid_step_h
+from pipeline.routing.engine.bounds import cost_lb_nb
 from pipeline.routing.dp_grid import line_times
 from pipeline.routing.fastest_plan import fastest_plan
 from pipeline.routing.objectives import objective, route_cost_nb
@@ -119,7 +120,7 @@ def test_late_pricing_sails_fewer_legs_than_fuel_alone_on_a_longer_graph():
     # the same search with no upper bound at all (pricing cannot prune): it must sail more and find the same cost
     from pipeline.routing.dp import _label_search, latest_departures
 
-    _, _, cost_free, legs_free = _label_search(inst, 0.0, math.inf, latest_departures(inst))
+    _, _, cost_free, legs_free, _ = _label_search(inst, 0.0, math.inf, latest_departures(inst))
     assert cost_free == pytest.approx(evaluate(inst, found.nodes, found.rpm_idx)[0], rel=1e-12)
     assert found.n_evals < legs_free / 3
 

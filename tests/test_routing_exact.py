@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from routing_cases import MODEL, field, moving_storm, problem, solve, wavy
-from pipeline.routing import leg_kernel as lk
-from pipeline.routing.dp import (DpOptions, _fuel_budget_t, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures,
+from pipeline.routing.engine import leg as lk
+from pipeline.routing.dp import (DpOptions, _fuel_budget_t, dp_exact_nb, finish_bounds, label_bounds, latest_departures,
                                  reachable_windows, trim_eps)
+from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solver_instance
@@ -105,11 +106,10 @@ def test_skipping_legs_whose_label_would_be_dropped_keeps_the_same_labels(kind, 
     upper = base.cost if base.status == "ok" else math.inf
     ld = latest_departures(inst)
     on_time = upper < math.inf
-    lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
-                                                 _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf,
-                                                 per_leg=True)
-    eps = trim_eps(inst, gap, upper, lams, m_lam, t_min)
-    args = (inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams, m_lam, t_min, tau, phi, ld, eps, 0, 0.0)
+    fb = label_bounds(inst, ld, reachable_windows(inst, ld, on_time),
+                      _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf)
+    eps = trim_eps(inst, gap, upper, fb.lams, fb.m_lam, fb.t_min)
+    args = (inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps, 0, 0.0)
     *skipping, legs_skipping, kept_skipping = dp_exact_nb(*args, True)
     *every, legs_every, kept_every = dp_exact_nb(*args, False)
     assert np.isfinite(every[2]) and kept_every > 20

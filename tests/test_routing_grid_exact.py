@@ -22,7 +22,7 @@ import pytest
 from lxml import etree
 
 from tests.routing_cases import field, moving_storm, problem, wavy
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
 from pipeline.export.rtz import route_to_rtz, validate_rtz
 from pipeline.routing.dp import DpOptions

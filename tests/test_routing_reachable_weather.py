@@ -16,7 +16,8 @@ from routing_cases import field, moving_storm, problem
 from pipeline.performance.features import direction_weight
 from pipeline.routing import dp
 from pipeline.routing import geodesy as geo
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
+from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.problem import Instance
 from pipeline.routing.reachable_weather import _box_ranges, _cos_range, _course_range_nb, _edge_box
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, Grid, Weather, sample_nb
@@ -181,7 +182,7 @@ def test_windowed_bounds_hold_for_every_plan_within_the_windows(kind, rta_h, n):
                 d = geo.gc_distance_nm(sp.lat[i, a], sp.lon[i, a], sp.lat[i + 1, b], sp.lon[i + 1, b])
                 assert ct[i + 1] - ct[i] >= d * tau[i, a, rpm[i]] * (1.0 - 1e-9)
                 assert cf[i + 1] - cf[i] >= d * phi[i, a, rpm[i]] * (1.0 - 1e-9)
-                assert cf[-1] - cf[i] >= dp.fuel_to_finish_lb(m_lam[:, i, a], lams, t_min[i, a], ct[-1] - ct[i]) - 1e-9
+                assert cf[-1] - cf[i] >= fuel_to_finish_lb(m_lam[:, i, a], lams, t_min[i, a], ct[-1] - ct[i]) - 1e-9
             n_checked += 1
         assert n_checked > (10 if on_time else 1000)
         best = min(cf[-1] for _, _, ct, cf in plans if not on_time or ct[-1] <= o.t_dep_h + o.t_req_h)
@@ -216,7 +217,7 @@ def test_fuel_windowed_leg_bounds_hold_for_every_plan_within_the_budget(kind, rt
             d = geo.gc_distance_nm(sp.lat[i, a], sp.lon[i, a], sp.lat[i + 1, b], sp.lon[i + 1, b])
             assert ct[i + 1] - ct[i] >= d * tau[i, a, b - a + 2, rpm[i]] * (1.0 - 1e-9)
             assert cf[i + 1] - cf[i] >= d * phi[i, a, b - a + 2, rpm[i]] * (1.0 - 1e-9)
-            assert cf[-1] - cf[i] >= dp.fuel_to_finish_lb(m_lam[:, i, a], lams, t_min[i, a], ct[-1] - ct[i]) - 1e-9
+            assert cf[-1] - cf[i] >= fuel_to_finish_lb(m_lam[:, i, a], lams, t_min[i, a], ct[-1] - ct[i]) - 1e-9
         n_checked += 1
     assert n_checked >= 1
     narrowed = dp.fuel_windows(inst, windows, budget, *_tables(inst, windows))

@@ -11,7 +11,7 @@ import itertools
 import numpy as np
 import pytest
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import shortest_route
 from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
                                             incumbent_cost, limited_plan, settings_held_h)

@@ -27,7 +27,7 @@ import numpy as np
 from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
 from pipeline.routing.engine_limits import best_engine_plan
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 
 ALPHAS = (0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
 

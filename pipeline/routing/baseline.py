@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.geodesy import gc_distance_nm
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.search_space import SearchSpace
@@ -24,7 +24,7 @@ from pipeline.routing.search_space import SearchSpace
 @dataclass(frozen=True)
 class Baseline:
     """The shortest sea route (None: there is none) and its constant engine setting per leg; `code` is the
-    leg_kernel code of sailing it (OK, or why it cannot be sailed)."""
+    engine.leg code of sailing it (OK, or why it cannot be sailed)."""
 
     nodes: np.ndarray | None
     rpm_idx: np.ndarray | None

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import CODE, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine.leg import CODE, H, N_LEG_OUT, OK, sail_leg_nb
 
 
 @numba.njit(cache=True)

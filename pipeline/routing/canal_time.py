@@ -4,7 +4,7 @@ fixed hours and fuel.
 A route through a canal (sea_route.PassageTransit with a `transit_h`) has one gate line per fairway waypoint
 (corridor.py). The legs between consecutive gates of one canal take the canal's `transit_h`, shared in proportion to
 their length, and the first of them also the canal's waiting allowance `wait_h` (the ship waits for its convoy or
-slot before entering). Those hours and their fuel are fixed: the leg kernel (leg_kernel.Vessel.fixed_legs) gives
+slot before entering). Those hours and their fuel are fixed: the leg kernel (engine.leg.Vessel.fixed_legs) gives
 them whatever rpm a solver picks and whatever the weather, so every solver and the constant-speed baseline spend
 them alike and savings compare like with like. Weather routing applies outside the canal.
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.leg_kernel import NO_FIXED_LEGS
+from pipeline.routing.engine.leg import NO_FIXED_LEGS
 
 MATCH_NM = 0.01  # a gate line's node is a fairway waypoint when it lies this close to it
 
@@ -62,7 +62,7 @@ def canal_lines(space) -> list[tuple[str, float, float, list[int]]]:
 
 
 def canal_fixed_legs(space, fuel_tph: float) -> np.ndarray:
-    """(n, 6) legs of the space sailed in fixed hours and fuel (leg_kernel FIX_* columns), burning `fuel_tph`
+    """(n, 6) legs of the space sailed in fixed hours and fuel (engine.leg FIX_* columns), burning `fuel_tph`
     (t/h) in the canal and while waiting for it; none when the space crosses no canal."""
     rows = []
     c = space.centre

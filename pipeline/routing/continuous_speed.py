@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import route_cost_nb
 
 _ITERATIONS = 12  # descent steps at most
@@ -59,7 +59,7 @@ def runs_of(rpm_per_leg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 @numba.njit(cache=True)
 def sail_from_nb(lat, lon, nodes, rpm, v, w, i0, cum_t, cum_f):
     """Sail the route from line i0 (cum_t[i0], cum_f[i0] given) at rpm[i] on leg i, filling cum_t/cum_f after it.
-    Returns the leg_kernel code."""
+    Returns the engine.leg code."""
     out = np.empty(N_LEG_OUT)
     for i in range(i0, nodes.shape[0] - 1):
         a, b = nodes[i], nodes[i + 1]

@@ -30,7 +30,7 @@ Bounds (certified: they never drop a label of an optimal plan):
   deadline    when U is on time (jit: below the 1000 t late step; thesis: below 9999.9), a plan arriving after
               the RTA cannot win, so a label must still be able to arrive by the RTA.
   lateness    when no plan known is on time, a label is priced with the lateness of the earliest arrival it can
-              still make (its time plus the least hours to finish, t_min below; `cost_lb_nb`), and the fastest
+              still make (its time plus the least hours to finish, t_min below; `engine.bounds.cost_lb_nb`), and the fastest
               wait-free plan (fastest_plan.py) joins the incumbents: on a voyage whose RTA cannot be met the
               optimum is the least-late plan (10 t per minute late under jit), and every label that cannot arrive
               within minutes of the fastest is dropped. Without it such a voyage kept every label to the horizon.
@@ -53,6 +53,10 @@ anyway). Without windows (the engine-limits DP, the grid DP) the range is the no
 near it at any valid time, every direction, the strongest current. For the 5,000 NM bench voyages the windowed bound
 is 0.87 (east) and 0.95 (west) of the optimum, against 0.80 and 0.75 for the node's range.
 
+The compiled primitives these searches share (sailing a leg, the label stores, the bound structure `FinishBounds`
+and the pruning rule `label_priced_out`) are in pipeline/routing/engine/; the tables are built here
+(`label_bounds`).
+
 `dp_bucket_nb` keeps the older, faster approximation (labels merged per arrival-time bucket of
 `bucket_h` hours; optimal only up to that merging), selected by `DpOptions(bucket_h=...)`.
 """
@@ -68,8 +72,10 @@ import numpy as np
 from pipeline.performance.features import FORM_PHYSICAL, FORM_THESIS, stw_kn_nb, fuel_tph_nb
 from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
-from pipeline.routing.leg_kernel import (CODE, FIX_FUEL, FIX_H, FIX_LAT0, FIX_LAT1, FIX_LON0, FIX_LON1, FIX_TOL_DEG, FUEL,
-                                         H, N_LEG_OUT, OK, sail_leg_nb)
+from pipeline.routing.engine.bounds import FinishBounds, fuel_to_finish_lb, is_on_time, label_priced_out
+from pipeline.routing.engine.labels import grow, prefix_min, put_min, time_span_nb
+from pipeline.routing.engine.leg import (CODE, FIX_FUEL, FIX_H, FIX_LAT0, FIX_LAT1, FIX_LON0, FIX_LON1, FIX_TOL_DEG, FUEL,
+                                        H, N_LEG_OUT, OK, sail_leg_nb)
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 from pipeline.routing.reachable_weather import WINDOW_SLACK_H, earliest_arrival_nb, reachable_ranges_nb
 
@@ -147,87 +153,13 @@ def dp_bucket_nb(bucket_h, g, v, w, o):
 
 
 @numba.njit(cache=True)
-def _grow(a, n):
-    """`a` with room for at least n entries (doubling), its contents kept."""
-    if n <= a.shape[0]:
-        return a
-    b = np.empty(max(n, 2 * a.shape[0]), a.dtype)
-    b[: a.shape[0]] = a
-    return b
-
-
-@numba.njit(cache=True)
-def fuel_to_finish_lb(m_lam, lams, t_min, hours):
-    """Least fuel (t) to finish within `hours` from a node whose bound tables are m_lam[k] (least Σ d·(φ + λ_k·τ))
-    and t_min (least Σ d·τ): max over k of m_lam[k] − λ_k·hours; inf when even t_min does not fit."""
-    if hours < t_min:
-        return np.inf
-    best = 0.0
-    for k in range(lams.shape[0]):
-        best = max(best, m_lam[k] - lams[k] * hours)
-    return best
-
-
-@numba.njit(cache=True)
-def cost_lb_nb(o, fuel_lb, hours_lb):
-    """A lower bound on the cost under the objective `o` of every plan burning at least fuel_lb (t) and taking at
-    least hours_lb (h, the passage): jit prices a plan at least at its fuel plus, when even hours_lb is after the
-    RTA, the lateness of that earliest arrival (the penalty grows with the hours late); the thesis function prices a
-    plan arriving by T_req at least 0.85 + 3·F/F_target and a later one at least T/T_req + 9999.9."""
-    if fuel_lb == np.inf or hours_lb == np.inf:
-        return np.inf
-    if o.kind == OBJ_JIT:
-        if hours_lb > o.t_req_h + 1e-9:
-            return fuel_lb + LATE_STEP_T + o.late_t_per_h * (hours_lb - o.t_req_h)
-        return fuel_lb
-    late = max(hours_lb, o.t_req_h) / o.t_req_h + 9999.9
-    if hours_lb >= o.t_req_h:
-        return late
-    return min(0.85 + 3.0 * fuel_lb / o.f_target, late)
-
-
-@numba.njit(cache=True)
-def _priced_out(o, fuel_lb, hours_lb, upper, tol, on_time):
-    """Whether every plan burning at least fuel_lb (t) and taking at least hours_lb (h) costs more than `upper` under
-    the objective `o` (`cost_lb_nb`). With an on-time `upper` every plan kept arrives by the RTA (the deadline)."""
-    if o.kind != OBJ_JIT and on_time:  # the thesis function prices an on-time plan at least 0.85 + 3·F/F_target
-        return fuel_lb == np.inf or 0.85 + 3.0 * fuel_lb / o.f_target > upper + tol
-    return cost_lb_nb(o, fuel_lb, hours_lb) > upper + tol
-
-
-@numba.njit(cache=True)
-def _prefix_min(tree, row, n):
-    """The least value put at positions 1..n of the prefix-minimum (Fenwick) tree tree[row]."""
-    best = np.inf
-    while n > 0:
-        best = min(best, tree[row, n])
-        n -= n & -n
-    return best
-
-
-@numba.njit(cache=True)
-def _put_min(tree, row, n, val):
-    """Put val at position n (1-based) of the prefix-minimum tree tree[row]."""
-    while n < tree.shape[1]:
-        tree[row, n] = min(tree[row, n], val)
-        n += n & -n
-
-
-@numba.njit(cache=True)
-def time_span_nb(t, t_lo, t_span, buckets):
-    """Which of `buckets` equal spans of [t_lo, t_lo + t_span] the time t falls in (the bucketed DPs' labels)."""
-    return min(int((t - t_lo) / t_span * buckets), buckets - 1) if t_span > 0.0 else 0
-
-
-@numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, buckets=0, lam_t=0.0, skip_dropped=True):
+def dp_exact_nb(g, v, w, o, upper, fb, eps, buckets=0, lam_t=0.0, skip_dropped=True):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
-    `upper` bounds the optimum from above (inf: none); m_lam (K, L+2, P) and t_min (L+2, P) are the fuel bound
-    tables of `finish_bounds` for the prices lams (K,), tau and phi (L+2, P, 2·max_shift + 1, R) its least hours and
-    fuel per NM on each leg (i, a) → (i + 1, a + s − max_shift) (`per_leg=True`; a leg is priced at them before it is sailed, and not sailed when even that
-    cannot beat `upper` or make the RTA); ld (L+2, P) the latest departures that can still make the
-    RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
+    `upper` bounds the optimum from above (inf: none); `fb` is a FinishBounds (`label_bounds`): the fuel bound
+    tables m_lam, t_min for the prices lams, the least hours and fuel per NM tau, phi on each leg (a leg is priced at
+    them before it is sailed, and not sailed when even that cannot beat `upper` or make the RTA) and the latest
+    departures ld that can still make the RTA (`latest_departure_nb`), used when `upper` is on time. With eps > 0 (t) a label is also dropped when an
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
     the optimum (see `trim_eps`; the incumbent bound is widened by as much, so that plan is not cut).
 
@@ -245,6 +177,7 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
     deadline), counting only bins wholly before t0 + d·τ; the line's labels are expanded in time order, so that the
     earlier candidates, the ones that can drop others, are mostly made first."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
+    tau, phi, ld = fb.tau, fb.phi, fb.ld
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
     R = rpm_options.shape[0]
@@ -294,23 +227,20 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                 d_nm = leg_nm[a, s]
                 # every setting at once first: at their least hours and fuel (the bound only grows as hours shrink)
                 t1 = t0 + d_nm * leg_tau[a, s]
-                lb = f0 + d_nm * leg_phi[a, s] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
-                                                                  deadline - t1)
-                if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], upper, tol, on_time):
+                if label_priced_out(o, fb, i + 1, a2, t1, f0 + d_nm * leg_phi[a, s], upper, tol, on_time):
                     continue
                 for r in range(R):
                     # the leg at its least hours and fuel first: no sailing when even that prices the label out
                     t1 = t0 + d_nm * tau[i, a, s, r]
                     if on_time and t1 > ld[i + 1, a2]:
                         continue
-                    lb = f0 + d_nm * phi[i, a, s, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
-                                                                      deadline - t1)
-                    if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], upper, tol, on_time):
+                    if label_priced_out(o, fb, i + 1, a2, t1, f0 + d_nm * phi[i, a, s, r], upper, tol,
+                                        on_time):
                         continue
                     if skip and tau[i, a, s, r] > 0.0 and phi[i, a, s, r] >= e * tau[i, a, s, r]:
                         g_lb = f0 - e * t0 + d_nm * (phi[i, a, s, r] - e * tau[i, a, s, r])
                         q = min(int((t1 - t_dep_h) / bin_h), PRUNE_BINS)  # bins 0..q − 1 end before t1
-                        if q > 0 and _prefix_min(made, a2, q) <= g_lb - 1e-12 * abs(g_lb):
+                        if q > 0 and prefix_min(made, a2, q) <= g_lb - 1e-12 * abs(g_lb):
                             continue  # a candidate made already will drop the one this leg makes
                     sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
                     n_legs += 1
@@ -322,17 +252,16 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                     if on_time and t1 > ld[i + 1, a2]:
                         continue  # cannot reach the arrival by the RTA any more, even at full speed
                     f1 = f0 + out[FUEL]
-                    lb = f1 + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - t1)
-                    if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], upper, tol, on_time):
+                    if label_priced_out(o, fb, i + 1, a2, t1, f1, upper, tol, on_time):
                         continue
                     if n_c >= ct.shape[0]:
-                        ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
-                        cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
+                        ct, cf = grow(ct, n_c + 1), grow(cf, n_c + 1)
+                        cpar, cnode, cr = grow(cpar, n_c + 1), grow(cnode, n_c + 1), grow(cr, n_c + 1)
                     ct[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = t1, f1, j, a2, r
                     n_c += 1
                     q = int((t1 - t_dep_h) / bin_h)
                     if skip and 0 <= q < PRUNE_BINS:
-                        _put_min(made, a2, q + 1, f1 - e * t1)
+                        put_min(made, a2, q + 1, f1 - e * t1)
         # per node, by arrival time: keep a label only when it beats every earlier one on f − e·t
         order = np.argsort(ct[:n_c], kind="mergesort")
         by_node = np.argsort(cnode[:n_c][order], kind="mergesort")  # stable: time order kept inside each node
@@ -362,8 +291,8 @@ def dp_exact_nb(g, v, w, o, upper, lams, m_lam, t_min, tau, phi, ld, eps, bucket
                         continue
                     last_b, last_val = b, val
                 if n_kept >= kt.shape[0]:
-                    kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
-                    kpar, knode, kr = _grow(kpar, n_kept + 1), _grow(knode, n_kept + 1), _grow(kr, n_kept + 1)
+                    kt, kf = grow(kt, n_kept + 1), grow(kf, n_kept + 1)
+                    kpar, knode, kr = grow(kpar, n_kept + 1), grow(knode, n_kept + 1), grow(kr, n_kept + 1)
                 kt[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = ct[k], cf[k], cpar[k], cnode[k], cr[k]
                 n_kept += 1
         line_hi = n_kept
@@ -656,7 +585,7 @@ def _leg_bounds(inst, windows) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
 
 
 def _fixed_leg_rates(inst, tau_e, phi_e, tau, phi) -> None:
-    """A canal's legs (leg_kernel.Vessel.fixed_legs, canal_time.py) take their fixed hours and fuel at every setting
+    """A canal's legs (engine.leg.Vessel.fixed_legs, canal_time.py) take their fixed hours and fuel at every setting
     and in any weather: their hours and fuel per NM are those, exactly, in place of the performance model's bounds
     (which would price the canal as open sea and prune nothing across it). A gate's node has that one leg, so its
     node bound is the leg's. Legs no plan within the windows sails (inf) stay closed."""
@@ -775,11 +704,6 @@ def latest_departures(inst) -> np.ndarray:
     return ld
 
 
-def _on_time(o, upper: float) -> bool:
-    """Whether a plan costing `upper` is on time under the objective `o` (then late plans cannot beat it)."""
-    return upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
-
-
 def _fuel_budget_t(o, upper: float, gap: float) -> float:
     """The most fuel (t) a plan can burn that the DP, pruning with the on-time incumbent cost `upper` and trimming
     within `gap`, must keep: its cost is at most upper + gap·upper (the DP's tolerance is gap·LB ≤ gap·optimum)."""
@@ -791,7 +715,7 @@ def cost_lower_bound(inst, upper: float, lams, m_lam, t_min) -> float:
     """A certified lower bound on the optimum's cost: the least fuel to sail the whole voyage within the hours it
     may take (the RTA when `upper` is on time, else the planning horizon), priced by the objective."""
     o, sp = inst.objective, inst.space
-    on_time = _on_time(o, upper)
+    on_time = is_on_time(o, upper)
     hours = o.t_req_h if on_time else o.max_hours
     c = sp.lat.shape[1] // 2
     fuel_lb = float(fuel_to_finish_lb(m_lam[:, 0, c], lams, t_min[0, c], hours))
@@ -852,13 +776,13 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
         return Found(None, None, n_legs) if not math.isfinite(cost) else Found(nodes, rpm_idx, n_legs)
     known = [incumbent] if incumbent is not None else []
     n_fast = 0
-    if not _on_time(inst.objective, upper):  # no plan known on time: maybe none is; the fastest prices lateness
+    if not is_on_time(inst.objective, upper):  # no plan known on time: maybe none is; the fastest prices lateness
         upper, n_fast = _with_fastest_plan(inst, upper, known)
     if options.slot_h is not None:
         found = _grid_search(inst, baseline, options, upper, known)
         found.n_evals += n_fast
         return found
-    nodes, rpm_idx, cost, n_legs = _label_search(inst, options.gap, upper, latest_departures(inst))
+    nodes, rpm_idx, cost, n_legs, _ = _label_search(inst, options.gap, upper, latest_departures(inst))
     if not math.isfinite(cost):  # nothing below the incumbents (where the dominance's assumption fails): the best
         nodes, rpm_idx = _cheapest(inst, known)  # plan known, never the baseline while a dearer plan... is known
     if nodes is None:
@@ -895,21 +819,24 @@ def _with_fastest_plan(inst, upper: float, known: list) -> tuple[float, int]:
     return upper, n_legs
 
 
-def _label_search(inst, gap: float, upper: float, ld: np.ndarray, wide=None, narrow=None):
-    """(nodes, rpm_idx, cost, legs sailed) of dp_exact_nb, pruned by `upper` and trimmed to `gap`; `wide` as in
-    finish_bounds (per leg); `narrow` (a list) receives the per-leg bound tables the DP ran with."""
+def label_bounds(inst, ld: np.ndarray, windows=None, fuel_budget_t: float = math.inf, wide=None) -> FinishBounds:
+    """The FinishBounds of the label searches on `inst`'s graph: `finish_bounds` per leg (within `windows`, for the
+    plans burning at most `fuel_budget_t`; `wide` as there) and the latest departures `ld` (`latest_departures`)."""
+    lams, m_lam, t_min, tau, phi = finish_bounds(inst, windows, fuel_budget_t, per_leg=True, wide=wide)
+    return FinishBounds(lams, m_lam, t_min, tau, phi, ld)
+
+
+def _label_search(inst, gap: float, upper: float, ld: np.ndarray, wide=None):
+    """(nodes, rpm_idx, cost, legs sailed, bounds) of dp_exact_nb, pruned by `upper` and trimmed to `gap`; `wide`
+    as in finish_bounds (per leg); `bounds` the FinishBounds the DP ran with."""
     # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
     # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
-    on_time = _on_time(inst.objective, upper)
-    lams, m_lam, t_min, tau, phi = finish_bounds(inst, reachable_windows(inst, ld, on_time),
-                                                 _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf,
-                                                 per_leg=True, wide=wide)
-    if narrow is not None:
-        narrow[:] = [lams, m_lam, t_min, tau, phi]
-    eps = trim_eps(inst, gap, upper, lams, m_lam, t_min)
-    nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, lams,
-                                                  m_lam, t_min, tau, phi, ld, eps)
-    return nodes, rpm_idx, cost, n_legs
+    on_time = is_on_time(inst.objective, upper)
+    fb = label_bounds(inst, ld, reachable_windows(inst, ld, on_time),
+                      _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf, wide=wide)
+    eps = trim_eps(inst, gap, upper, fb.lams, fb.m_lam, fb.t_min)
+    nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps)
+    return nodes, rpm_idx, cost, n_legs, fb
 
 
 def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) -> Found:
@@ -924,8 +851,8 @@ def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) 
     ld = latest_departures(inst)
     n_first, bounds = 0, None
     if options.wait_free_first:
-        wide, narrow = [], []
-        nodes, rpm_idx, cost, n_first = _label_search(inst, options.gap, upper, ld, wide, narrow)
+        wide: list = []
+        nodes, rpm_idx, cost, n_first, narrow = _label_search(inst, options.gap, upper, ld, wide)
         if math.isfinite(cost):
             plans.append((nodes, rpm_idx))
         # which of its bound tables hold for the grid's plans: with its plan on time (a plan of the grid, so the
@@ -934,10 +861,10 @@ def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) 
         # from its arrival to its departure, and both bounds (fuel to get there, fuel to finish) only tighten while
         # it waits, so it is inside them too. With no plan known on time, its windows before the fuel narrowing when
         # they reach to the horizon; an `upper_bound` on time with no plan known on time: the grid builds its own
-        if math.isfinite(cost) and _on_time(inst.objective, cost):
-            bounds = tuple(narrow)
-        elif not _on_time(inst.objective, upper):
-            bounds = tuple(wide)
+        if math.isfinite(cost) and is_on_time(inst.objective, cost):
+            bounds = narrow
+        elif not is_on_time(inst.objective, upper):
+            bounds = FinishBounds(*wide, ld)
     slot_h = grid_step_h(inst, options)
     nodes, rpm_idx, slots, cost, n_legs, times = search_grid(
         inst, plans, slot_h=slot_h, max_wait_h=float(options.max_wait_h), wait_tph=options.wait_tph,

@@ -35,7 +35,7 @@ Bounds (certified; they never drop a label of an optimal plan, as in dp.py):
               After the label DP found a plan on time, its own tables: its windows narrowed to the times a plan
               within the incumbent's cost can be at a node (dp.fuel_windows), which hold for a plan that waits too
               (while it waits, the fuel it needed to get there and the fuel it needs to finish only grow).
-  lateness    with no plan on time, the lateness of the earliest arrival a label can still make (dp.cost_lb_nb).
+  lateness    with no plan on time, the lateness of the earliest arrival a label can still make (engine.bounds.cost_lb_nb).
 
 The grid's step (dp.grid_step_h): `slot_h`, or with `DpOptions.slots_per_rta` (the product's: 240) the RTA's
 passage hours over that many slots in whole hours when that is longer: a 40-day voyage waits on a 5 h grid, whose
@@ -50,8 +50,10 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.dp import _grow, _on_time, _priced_out, finish_bounds, fuel_to_finish_lb, reachable_windows
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb, sail_route_nb
+from pipeline.routing.dp import label_bounds, reachable_windows
+from pipeline.routing.engine.bounds import is_on_time, label_priced_out
+from pipeline.routing.engine.labels import grow
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb, sail_route_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 EARLY_SLOT = -1  # grid_sail_nb: a departure slot before the ship reaches the node
@@ -92,7 +94,7 @@ def line_times(inst, plans, slot_h: float) -> np.ndarray:
 @numba.njit(cache=True)
 def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, times, wait_tph):
     """(code, hours, fuel) of a plan of the grid space: leave line i's node at times[i, slots[i]] and sail its leg
-    at rpm_idx[i]; code is a leg_kernel code, or EARLY_SLOT when a slot is before the ship is there. slots[i] < 0:
+    at rpm_idx[i]; code is an engine.leg code, or EARLY_SLOT when a slot is before the ship is there. slots[i] < 0:
     the first slot after arriving (no extra wait). `slots` is filled with the slots used."""
     lat, lon = g.lat, g.lon
     out = np.empty(N_LEG_OUT)
@@ -122,18 +124,17 @@ def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, times, wait_tph):
 
 
 @numba.njit(cache=True)
-def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, times, max_wait_h, wait_tph):
+def dp_grid_nb(g, v, w, o, upper, prune_at, fb, times, max_wait_h, wait_tph):
     """(nodes, rpm indexes, departure slots, cost, legs sailed, labels kept) of the best plan of the grid space
     costing less than `upper` (cost inf when there is none); labels whose lower bound is above `prune_at`
-    (≤ upper; upper / (1 + gap) for a certified gap) are dropped. Bound tables as in dp.dp_exact_nb (tau, phi per
-    leg)."""
+    (≤ upper; upper / (1 + gap) for a certified gap) are dropped. `fb`: the FinishBounds, as dp.dp_exact_nb's."""
     lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
+    tau, phi, ld = fb.tau, fb.phi, fb.ld
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
     R = rpm_options.shape[0]
     c = P // 2
     on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
-    deadline = t_dep_h + (o.t_req_h if on_time else max_hours)
     tol = 1e-9 * max(1.0, abs(prune_at))
     # kept labels of every line: node, departure slot, fuel at departure, parent label, setting of the leg to it
     cap = 1024
@@ -169,9 +170,8 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, ti
                     t1 = t0 + d_nm * tau[i, a, s, r]  # the leg at its least hours and fuel first
                     if on_time and t1 > ld[i + 1, a2]:
                         continue
-                    lb = f0 + d_nm * phi[i, a, s, r] + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2],
-                                                                      deadline - t1)
-                    if _priced_out(o, lb, t1 - t_dep_h + t_min[i + 1, a2], prune_at, tol, on_time):
+                    if label_priced_out(o, fb, i + 1, a2, t1, f0 + d_nm * phi[i, a, s, r], prune_at, tol,
+                                        on_time):
                         continue
                     sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
                     n_legs += 1
@@ -193,12 +193,11 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, ti
                                 on_time and td > ld[i + 1, a2]):
                             break
                         fw = f1 + wait_tph * (td - t1)
-                        lb = fw + fuel_to_finish_lb(m_lam[:, i + 1, a2], lams, t_min[i + 1, a2], deadline - td)
-                        if _priced_out(o, lb, td - t_dep_h + t_min[i + 1, a2], prune_at, tol, on_time):
+                        if label_priced_out(o, fb, i + 1, a2, td, fw, prune_at, tol, on_time):
                             break  # a later slot burns no less and has fewer hours left
                         if n_c >= ck.shape[0]:
-                            ck, cf = _grow(ck, n_c + 1), _grow(cf, n_c + 1)
-                            cpar, cnode, cr = _grow(cpar, n_c + 1), _grow(cnode, n_c + 1), _grow(cr, n_c + 1)
+                            ck, cf = grow(ck, n_c + 1), grow(cf, n_c + 1)
+                            cpar, cnode, cr = grow(cpar, n_c + 1), grow(cnode, n_c + 1), grow(cr, n_c + 1)
                         ck[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = k, fw, j, a2, r
                         n_c += 1
         if last or n_c == 0:
@@ -217,8 +216,8 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, lams, m_lam, t_min, tau, phi, ld, ti
             if q < 0:
                 continue
             if n_kept >= kk.shape[0]:
-                kk, kf = _grow(kk, n_kept + 1), _grow(kf, n_kept + 1)
-                kpar, knode, kr = _grow(kpar, n_kept + 1), _grow(knode, n_kept + 1), _grow(kr, n_kept + 1)
+                kk, kf = grow(kk, n_kept + 1), grow(kf, n_kept + 1)
+                kpar, knode, kr = grow(kpar, n_kept + 1), grow(knode, n_kept + 1), grow(kr, n_kept + 1)
             kk[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = ck[q], cf[q], cpar[q], cnode[q], cr[q]
             n_kept += 1
         line_hi = n_kept
@@ -315,7 +314,7 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
     and each, its settings one step faster and every setting held throughout are sailed with the rounding waits
     as the incumbent; `ld` = dp.latest_departures(inst). The fuel-to-finish bound is dp.finish_bounds in the
     weather of the times a plan can be at each node (reachable_windows), per leg: waits keep a plan within them;
-    `bounds`, when given, are such tables that hold for every plan the grid must keep (dp._grid_search: the label
+    `bounds`, when given, is a FinishBounds that holds for every plan the grid must keep (dp._grid_search: the label
     DP's, narrowed to the times a plan within its incumbent's cost can be at each node, when its plan is on time)."""
     rate = wait_rate_tph(inst, wait_tph)
     times = line_times(inst, plans, slot_h)
@@ -324,15 +323,13 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
         q, s = grid_plan_cost(inst, nodes, rpm_idx, times, rate)
         if q < inc_cost:
             inc_cost, inc = q, (np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s)
-    on_time = math.isfinite(inc_cost) and _on_time(inst.objective, inc_cost)
+    on_time = math.isfinite(inc_cost) and is_on_time(inst.objective, inc_cost)
     if bounds is None:
-        bounds = finish_bounds(inst, reachable_windows(inst, ld, on_time), per_leg=True)
-    lams, m_lam, t_min, tau, phi = bounds
+        bounds = label_bounds(inst, ld, reachable_windows(inst, ld, on_time))
     upper = inc_cost * (1.0 + 1e-12) + 1e-12 if math.isfinite(inc_cost) else math.inf
     prune_at = upper / (1.0 + gap) if gap > 0.0 else upper
     nodes, rpm_idx, slots, cost, n_legs, _ = dp_grid_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper,
-                                                        prune_at, lams, m_lam, t_min, tau, phi, ld, times,
-                                                        float(max_wait_h), rate)
+                                                        prune_at, bounds, times, float(max_wait_h), rate)
     if math.isfinite(cost) and cost < inc_cost:
         return nodes, rpm_idx, slots, float(cost), n_legs, times
     if inc is None:

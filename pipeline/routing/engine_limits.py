@@ -2,7 +2,7 @@
 
 The solvers choose an rpm per leg freely, so their plans may switch setting every few hours. `limited_plan` is
 an exact post-pass on a fixed route (the solver's): a dynamic programme over the route's legs choosing one rpm
-setting per leg, each leg sailed with the same time-dependent kernel (`leg_kernel.sail_leg_nb`) from the
+setting per leg, each leg sailed with the same time-dependent kernel (`engine.leg.sail_leg_nb`) from the
 label's exact time. A label is a partial plan at line i: its setting r, arrival time t, fuel f, number of
 changes n and hours held since its last change (or since departure). The rules:
 
@@ -33,10 +33,11 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
-from pipeline.routing.dp import (_grow, dp_exact_nb, finish_bounds, fuel_to_finish_lb, latest_departures,
-                                 time_span_nb, trim_eps)
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine import leg as lk
+from pipeline.routing.dp import dp_exact_nb, finish_bounds, label_bounds, latest_departures, trim_eps
+from pipeline.routing.engine.bounds import fuel_to_finish_lb
+from pipeline.routing.engine.labels import grow, time_span_nb
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 
@@ -142,7 +143,7 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                     buckets, lam_t):
     """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route under the limits
     (cost inf: no plan can be sailed). `ld` (per line) prunes labels that cannot make the RTA when `prune`;
-    under `jit`, labels whose fuel and change costs so far plus the least fuel to finish (dp.fuel_to_finish_lb
+    under `jit`, labels whose fuel and change costs so far plus the least fuel to finish (engine.bounds.fuel_to_finish_lb
     with the route's tables m_route (K, lines), t_min (lines)) exceed `upper`, a known plan's cost, too. With
     eps > 0 (t) a label is also dropped when an earlier one comes within eps of dominating it.
 
@@ -201,9 +202,9 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
         if jit_bound and f1 + fuel_to_finish_lb(m_route[:, i1], lams, t_min[i1], deadline - t1) > upper + tol:
             continue
         if n_c >= ct.shape[0]:
-            ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
-            cn, cr, cpar, cstart, cnext = (_grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1),
-                                           _grow(cstart, n_c + 1), _grow(cnext, n_c + 1))
+            ct, cf = grow(ct, n_c + 1), grow(cf, n_c + 1)
+            cn, cr, cpar, cstart, cnext = (grow(cn, n_c + 1), grow(cr, n_c + 1), grow(cpar, n_c + 1),
+                                           grow(cstart, n_c + 1), grow(cnext, n_c + 1))
         ct[n_c], cf[n_c], cn[n_c], cr[n_c], cpar[n_c], cstart[n_c] = t1, f1, 0, r, -1, 0
         cnext[n_c] = head[i1]
         head[i1] = n_c
@@ -249,9 +250,9 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                     continue
                 last_bucket[r], last_slot[r], last_val[r] = b, n_kept, val
             if n_kept >= kt.shape[0]:
-                kt, kf = _grow(kt, n_kept + 1), _grow(kf, n_kept + 1)
-                kn, kr, kpar, kstart, kline = (_grow(kn, n_kept + 1), _grow(kr, n_kept + 1), _grow(kpar, n_kept + 1),
-                                               _grow(kstart, n_kept + 1), _grow(kline, n_kept + 1))
+                kt, kf = grow(kt, n_kept + 1), grow(kf, n_kept + 1)
+                kn, kr, kpar, kstart, kline = (grow(kn, n_kept + 1), grow(kr, n_kept + 1), grow(kpar, n_kept + 1),
+                                               grow(kstart, n_kept + 1), grow(kline, n_kept + 1))
             kt[n_kept], kf[n_kept], kn[n_kept], kr[n_kept] = ct[k], cf[k], cn[k], r
             kpar[n_kept], kstart[n_kept], kline[n_kept] = cpar[k], cstart[k], i
             n_kept += 1
@@ -282,9 +283,9 @@ def limited_plan_nb(lat, lon, nodes, v, w, o, min_hold_h, change_cost_t, ld, pru
                                   + fuel_to_finish_lb(m_route[:, i1], lams, t_min[i1], deadline - t1)) > upper + tol:
                     continue
                 if n_c >= ct.shape[0]:
-                    ct, cf = _grow(ct, n_c + 1), _grow(cf, n_c + 1)
-                    cn, cr, cpar, cstart, cnext = (_grow(cn, n_c + 1), _grow(cr, n_c + 1), _grow(cpar, n_c + 1),
-                                                   _grow(cstart, n_c + 1), _grow(cnext, n_c + 1))
+                    ct, cf = grow(ct, n_c + 1), grow(cf, n_c + 1)
+                    cn, cr, cpar, cstart, cnext = (grow(cn, n_c + 1), grow(cr, n_c + 1), grow(cpar, n_c + 1),
+                                                   grow(cstart, n_c + 1), grow(cnext, n_c + 1))
                 ct[n_c], cf[n_c], cn[n_c], cr[n_c], cpar[n_c], cstart[n_c] = t1, f1, n1, r, j, i
                 cnext[n_c] = head[i1]
                 head[i1] = n_c
@@ -412,12 +413,11 @@ def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: f
         upper = incumbent_cost(inst, nodes, EngineLimits(0.0, 0.0), one_change=buckets == 0)
         upper = upper * (1.0 + 1e-9) + 1e-12 if math.isfinite(upper) else math.inf  # that plan itself is kept
     sub = _route_instance(inst, nodes)
-    lams, m_lam, t_min, tau, phi = finish_bounds(sub, per_leg=True)
-    ld = latest_departures(sub)
-    eps = trim_eps(sub, gap, upper, lams, m_lam, t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
+    fb = label_bounds(sub, latest_departures(sub))
+    eps = trim_eps(sub, gap, upper, fb.lams, fb.m_lam, fb.t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
     lam_t = time_price(inst, nodes) if buckets > 0 else 0.0
-    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, lams, m_lam, t_min,
-                                              tau, phi, ld, eps, int(buckets), float(lam_t))
+    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, fb, eps, int(buckets),
+                                              float(lam_t))
     return rpm_idx, float(cost), int(n_legs)
 
 

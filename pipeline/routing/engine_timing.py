@@ -10,7 +10,7 @@ aim_engine_nb   a new route's settings: of the constant settings, the two whose 
                 mixed over random legs in the share that should arrive just in time, then re-timed
 
 Kernels take the voyage as named structures: `g` the graph (search_space.Graph), `v` the vessel
-(leg_kernel.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective),
+(engine.leg.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective),
 `s` a `Scratch` of work arrays, and `rng` the random generator (a numpy Generator; numba draws from it the
 same numbers numpy would, so the interpreted kernels reproduce the compiled ones).
 """
@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb, sail_route_nb
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb, sail_route_nb
 from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
 
 

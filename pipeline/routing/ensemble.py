@@ -5,7 +5,7 @@ is the cheapest honest view of how far that forecast can be trusted: the plan as
 waypoints, the rpm of each leg and its waits, leaving at its departure) and its baseline (`Plan.baseline`, the base
 route at constant speed) are sailed through every member with the same leg kernel, and the spread of their arrival
 and fuel is the plan's uncertainty: P(on time) (arrival by the RTA plus `ON_TIME_TOL_H`), fuel P10/P50/P90 and the
-saving's P10/P50/P90. Past a member's last step its neutral weather applies (leg_kernel), as in planning.
+saving's P10/P50/P90. Past a member's last step its neutral weather applies (engine.leg), as in planning.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.plan import Plan
 from pipeline.routing.weather_field import WeatherField
 

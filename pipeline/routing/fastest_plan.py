@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from pipeline.routing.leg_kernel import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 
 
 @numba.njit(cache=True)

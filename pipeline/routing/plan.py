@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 
 if TYPE_CHECKING:
     from pipeline.routing.engine_limits import EngineLimits
@@ -96,7 +96,7 @@ class Plan:
     @property
     def fuel_beyond_forecast_t(self) -> float:
         """Fuel (t) burnt after the weather's last valid time (sailing and waiting), where the plan meets the neutral
-        weather of leg_kernel, not a forecast."""
+        weather of engine.leg, not a forecast."""
         return float(sum(leg.get("fuel_beyond_forecast_t", 0.0) for leg in self.legs)) if self.legs else math.nan
 
     @property

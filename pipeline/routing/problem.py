@@ -10,7 +10,7 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing.canal_time import canal_fixed_legs
-from pipeline.routing.leg_kernel import Vessel, vessel
+from pipeline.routing.engine.leg import Vessel, vessel
 from pipeline.routing.objectives import OBJECTIVES, Objective, objective
 from pipeline.routing.sea_route import SeaRoute
 from pipeline.routing.search_space import Graph, SearchSpace, build_search_space

@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.leg_kernel import BEYOND_REL_DEG, N_LEG_OUT, sail_leg_nb
+from pipeline.routing.engine.leg import BEYOND_REL_DEG, N_LEG_OUT, sail_leg_nb
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y
 
 WINDOW_SLACK_H = 1.0  # widening of every window (h): covers rounding in the kernels' time sums
@@ -49,8 +49,8 @@ def _fastest_arrival(lat0, lon0, lat1, lon1, t, v, w, rpms, out):
     best = np.inf
     for r in range(rpms.shape[0]):
         sail_leg_nb(lat0, lon0, lat1, lon1, t, rpms[r], v, w, out)
-        if out[2] == 0:  # leg_kernel.CODE == OK
-            best = min(best, t + out[0])  # leg_kernel.H
+        if out[2] == 0:  # engine.leg.CODE == OK
+            best = min(best, t + out[0])  # engine.leg.H
     return best if best < np.inf else t
 
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.ensemble import ON_TIME_TOL_H, sail_plan, spread
 from pipeline.routing.plan import Plan
 from pipeline.routing.weather_field import WeatherField

@@ -15,7 +15,7 @@ the plan's `baseline` too. Against its fuel F_b:
     total          (F_b − F) / F_b     = speed profile + route
 
 and, by when the fuel is burnt, into what the forecast covers and what it does not (F' and F_b': the fuel each
-burns after the weather's last valid time, where they sail in the neutral weather of leg_kernel, not a forecast):
+burns after the weather's last valid time, where they sail in the neutral weather of engine.leg, not a forecast):
 
     forecast       ((F_b − F_b') − (F − F')) / F_b    burnt within the forecast's valid times: backed by it
     beyond         (F_b' − F') / F_b                  burnt past them: an assumption, not a forecast
@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
 from pipeline.routing.continuous_speed import Refined, as_settings, refine_rpm
 from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, EngineLimits, LimitedPlan, best_engine_plan,

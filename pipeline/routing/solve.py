@@ -27,7 +27,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.canal_time import passages_note

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.ensemble import sail_plan
 from pipeline.routing.weather_field import WeatherField
 

@@ -81,7 +81,7 @@ class WeatherField:
     @cached_property
     def neutral_beyond(self) -> tuple[float, float]:
         """(wind speed m/s, Hs m) a ship meets past the last valid time: the means over the field's whole area and
-        every valid time (missing values left out), met at leg_kernel.BEYOND_REL_DEG off the bow on any course (where
+        every valid time (missing values left out), met at engine.leg.BEYOND_REL_DEG off the bow on any course (where
         the physical form's added resistance is its mean over all headings) and without current.
 
         Nobody forecast the weather there, and persisting the last step (a storm frozen in place) lets a plan route
