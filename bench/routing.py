@@ -11,8 +11,7 @@ BFOA         `solve(solver="bfoa")` with the default BfoaParams, one solve per s
              its runtime is the whole solve (instance, baseline, search, plan) after compilation.
 reference    `solve(solver="dp")` on the same search space (built once, passed to all) and cost model: the
              DP over non-dominated time/fuel labels, ε-trimmed so its plan is certified within 0.1 % of the
-             optimum (see pipeline/routing/dp.py for the proof and its one assumption), or with --dp-bucket H
-             the older DP that merges labels per H-hour arrival bucket (approximate).
+             optimum (see pipeline/routing/dp.py for the proof and its one assumption).
 A*           `solve(solver="astar")`: the α sweep, each route with its best engine plan for the RTA (within 0.1 %).
 baseline     the constant-speed voyage every plan carries and never burns more than: the shortest sea route at
              the one rpm between the lowest and highest setting that arrives at the RTA (the solvers choose
@@ -28,7 +27,6 @@ within 1 % of DP; one BFOA solve ≤ 2 s. `--sweep` adds a gap-vs-runtime table 
 Prints the figures and ratios, writes bench/out/routing.json; always exits 0.
 
     .venv/bin/python bench/routing.py [--seeds 10] [--lines 60] [--points 41] [--quick] [--sweep] [--reuse-dp]
-                                      [--dp-bucket H]
 
 --reuse-dp takes the DP result (cost, route, rpm per leg) stored in bench/out/routing.json by an earlier
 run when its instance description is the same, to iterate on the BFOA without the DP's minutes.
@@ -114,7 +112,6 @@ def warm_up(problem: RoutingProblem, weather) -> float:
     solve(tiny, weather, solver="bfoa", seed=1, params=BfoaParams(n_bacteria=4, n_chemo=2, n_cycles=2), space=space,
           **bare)
     solve(tiny, weather, solver="dp", space=space, options=DpOptions(), **bare)
-    solve(tiny, weather, solver="dp", space=space, bucket_h=0.5, **bare)
     solve(tiny, weather, solver="astar", space=space, **bare)
     solve(tiny, weather, solver="bfoa", seed=1, params=BfoaParams(n_bacteria=4, n_chemo=2, n_cycles=2), space=space,
           limits=EngineLimits(), savings=True)
@@ -141,15 +138,15 @@ def bfoa_runs(problem, weather, space, seeds, params: BfoaParams, dp_cost: float
     return runs
 
 
-def stored_dp(path: Path, instance: dict, bucket_h: float | None) -> dict | None:
-    """The DP result of an earlier run on the same instance (same description and DP bucket, None: exact)."""
+def stored_dp(path: Path, instance: dict) -> dict | None:
+    """The DP result of an earlier run on the same instance (same description)."""
     try:
         old = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
     same = json.loads(json.dumps(instance, default=float)) == old.get("instance")
     dp = old.get("dp", {})
-    if not same or dp.get("bucket_h") != bucket_h or "cost" not in dp:
+    if not same or "cost" not in dp:
         return None
     return {**dp, "reused": True}
 
@@ -184,8 +181,6 @@ def main() -> int:
     ap.add_argument("--sweep", action="store_true", help="also print gap vs runtime over BfoaParams variants")
     ap.add_argument("--reuse-dp", action="store_true",
                     help="reuse the DP result in bench/out/routing.json when its instance matches this one")
-    ap.add_argument("--dp-bucket", type=float, default=None,
-                    help="reference: the approximate DP merging labels per this many hours (default: the DP certified within 0.1 %%)")
     a = ap.parse_args()
     if a.quick:
         a.lines, a.points, a.seeds = 16, 11, min(a.seeds, 3)
@@ -210,27 +205,24 @@ def main() -> int:
     instance = {"dep": DEP, "arr": ARR, "distance_nm": space.base_distance_nm, "n_lines": space.n_lines,
                 "n_points": P, "d_point_nm": space.d_point_nm, "rpm": list(problem.rpm_options),
                 "weather_steps": int(weather.values.shape[1]), "t_req_h": problem.t_req_h}
-    dp_name = f"DP (within {100 * DP_GAP:g} % of the optimum, certified)" if a.dp_bucket is None else \
-        f"DP (time bucket {a.dp_bucket:g} h, approximate)"
-    dp = stored_dp(out_dir / "routing.json", instance, a.dp_bucket) if a.reuse_dp else None
+    dp_name = f"DP (within {100 * DP_GAP:g} % of the optimum, certified)"
+    dp = stored_dp(out_dir / "routing.json", instance) if a.reuse_dp else None
     if dp is not None:
         print(f"{dp_name}: reused from bench/out/routing.json (same instance): cost {dp['cost']:.2f}, fuel "
               f"{dp['fuel_t']:.2f} t, {dp['hours']:.2f} h, CPU time then {dp['runtime_s']:.1f} s")
     else:
-        dp_options = DpOptions(gap=DP_GAP) if a.dp_bucket is None else DpOptions(bucket_h=a.dp_bucket)
-        plan = timed_solve(problem, weather, solver="dp", space=space, options=dp_options, continuous=False)
+        plan = timed_solve(problem, weather, solver="dp", space=space, options=DpOptions(gap=DP_GAP), continuous=False)
         print(f"{dp_name}: status {plan.status}, cost {plan.cost:.2f}, fuel {plan.fuel_t:.2f} t, {plan.hours:.2f} h, "
               f"CPU time {plan.runtime_s:.1f} s, {plan.n_evals:,} legs sailed")
         if plan.status != "ok":
             print(f"DP did not find an on-time plan ({plan.reason}); no gap to report")
             return 0
         dp = {"cost": plan.cost, "fuel_t": plan.fuel_t, "hours": plan.hours, "runtime_s": plan.runtime_s,
-              "bucket_h": a.dp_bucket, "legs_sailed": plan.n_evals, "reused": False,
+              "legs_sailed": plan.n_evals, "reused": False,
               "nodes": [int(n) for n in route_nodes(space, plan)], "rpm": [float(leg["rpm"]) for leg in plan.legs],
               "baseline_cost": plan.baseline.cost, "baseline_fuel_t": plan.baseline.fuel_t,
               "baseline_hours": plan.baseline.hours}
-    if a.dp_bucket is None:
-        print(f"target DP ≤ {TARGET_DP_S:g} s: {dp['runtime_s']:.1f} s → {verdict(dp['runtime_s'] <= TARGET_DP_S)}")
+    print(f"target DP ≤ {TARGET_DP_S:g} s: {dp['runtime_s']:.1f} s → {verdict(dp['runtime_s'] <= TARGET_DP_S)}")
     if "baseline_cost" in dp:
         print(f"baseline (great circle, the constant rpm that meets the RTA): cost {dp['baseline_cost']:.2f}, fuel {dp['baseline_fuel_t']:.2f} t, "
               f"{dp['baseline_hours']:.2f} h; gap to DP {100 * (dp['baseline_cost'] / dp['cost'] - 1):.2f} %")

@@ -105,7 +105,7 @@ def moving_storm(seed, lat0, lon0, drift_kn=(20.0, 5.0), radius_nm=150.0, hs_pea
 
 
 def solve(problem: RoutingProblem, weather: wf.WeatherField, *, solver: str = "bfoa", options=None, params=None,
-          bucket_h=None, limits=None, savings: bool = False, **kw):
+          limits=None, savings: bool = False, **kw):
     """pipeline.routing.solve.solve as the routing tests pin the solvers: the bare search (the defaults of the
     solver's options class, no engine-change limits, no savings split) unless a test passes them. The product's
     defaults, which solve() itself takes, are tested in test_solver_contract (API and CLI give the same plan)."""
@@ -113,9 +113,8 @@ def solve(problem: RoutingProblem, weather: wf.WeatherField, *, solver: str = "b
     from pipeline.routing.solvers import SOLVERS
 
     spec = SOLVERS.get(solver)  # an unknown name: solve() refuses it
-    shorthand = spec is None or isinstance(params, spec.options) or (
-        bucket_h is not None and "bucket_h" in getattr(spec.options, "__dataclass_fields__", {}))
+    shorthand = spec is None or isinstance(params, spec.options)
     if options is None and not shorthand:
         options = spec.options()
-    return product_solve(problem, weather, solver=solver, options=options, params=params, bucket_h=bucket_h,
+    return product_solve(problem, weather, solver=solver, options=options, params=params,
                          limits=limits, savings=savings, **kw)

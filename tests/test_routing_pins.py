@@ -3,7 +3,7 @@
 The values were recorded with the code before the solver interfaces were restructured (named kernel
 structures, solver registry) and held through it; the BFOA pins were re-recorded once when its random stream
 moved from numba's global generator to an explicit numpy Generator. The DP pins were recorded with the
-time-bucket DP, which is now `bucket_h=0.5` (the `-bucket` pins). The A* pins were re-recorded when A* started giving each route of
+time-bucket DP, later kept as `bucket_h=0.5` (two `-bucket` pins) and deleted with them when nothing used it any more. The A* pins were re-recorded when A* started giving each route of
 its sweep the best engine plan for the RTA (before, it arrived early at high rpm). All were re-recorded once more
 when the physical performance form changed (weather is a loss in every direction, Kwon's shape): since then the
 bucketed DP finds a slightly dearer plan than the exact DP on the storm case. The exact DP's work counts fell
@@ -52,13 +52,11 @@ PINS = {
     "wavy-dp": ('ok', '0x1.fb3adc92200e8p+5', 7884, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
     "wavy-astar": ('ok', '0x1.fb3adc92200e8p+5', 2355, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
     "wavy-gc": ('ok', '0x1.fc77d7d0372bcp+5', 0, [0, 0, 0, 0, 0, 0, 0, 0], [81.92, 81.92, 81.92, 81.92, 81.92, 81.92, 81.92, 81.92, 81.92]),
-    "wavy-dp-bucket": ('ok', '0x1.fb3adc92200e8p+5', 20848, [0, 0, 0, 0, 0, 0, 0, 0], [79.019, 79.019, 79.412, 79.412, 81.932, 83.804, 83.804, 84.79, 84.693]),
     "wavy-rhumb": ('ok', '0x1.f81b1b05b7d7dp+5', 0, None, [81.613, 81.613, 81.613, 81.613, 81.613, 81.613, 81.613, 81.613, 81.613]),
     "thesis-bfoa-3": ('ok', '0x1.ff5c6329c7382p+1', 391, [0, 0, 0, 0, 0, 0], [84.784, 84.784, 89.143, 89.143, 90.2, 90.2, 88.783]),
     "storm-gc": ('ok', '0x1.100fd89f06a5bp+7', 0, [0, 0, 0, 0, 0, 0, 0, 0, 0, 0], [82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168, 82.168]),
     "storm-bfoa-4": ('ok', '0x1.cc493afcf2c94p+6', 1115, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.748, 81.436, 77.604, 75.522, 73.629, 73.253, 74.388, 77.889, 77.889, 80.013, 82.229]),
     "storm-dp": ('ok', '0x1.cc39f7306677ap+6', 21869, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.771, 81.405, 77.663, 75.594, 73.636, 73.257, 74.394, 76.616, 78.935, 80.031, 82.109]),
-    "storm-dp-bucket": ('ok', '0x1.cc493afcf2c94p+6', 70252, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.748, 81.436, 77.604, 75.522, 73.629, 73.253, 74.388, 77.889, 77.889, 80.013, 82.229]),
     "storm-astar": ('ok', '0x1.cc39f7306677ap+6', 7015, [1, 2, 2, 3, 3, 3, 3, 3, 2, 1], [77.771, 81.405, 77.663, 75.594, 73.636, 73.257, 74.394, 76.616, 78.935, 80.031, 82.109]),
 }
 
@@ -81,7 +79,6 @@ def _plans():
     yield "wavy-bfoa-2", solve(pr, fld, solver="bfoa", seed=2, params=FAST, space=sp), sp
     for name in ("dp", "astar", "gc"):
         yield f"wavy-{name}", solve(pr, fld, solver=name, space=sp), sp
-    yield "wavy-dp-bucket", solve(pr, fld, solver="dp", bucket_h=0.5, space=sp), sp
     yield "wavy-rhumb", solve(pr, fld, solver="rhumb"), None
     prt = problem((35.0, -140.0), (28.0, -132.0), 52, rpm_options=(80, 100), objective="thesis", n_lines=6, n_points=9)
     spt = prt.search_space()
@@ -92,7 +89,6 @@ def _plans():
     yield "storm-gc", solve(prs, storm, solver="gc", space=sps), sps
     yield "storm-bfoa-4", solve(prs, storm, solver="bfoa", seed=4, params=FAST, space=sps), sps
     yield "storm-dp", solve(prs, storm, solver="dp", space=sps), sps
-    yield "storm-dp-bucket", solve(prs, storm, solver="dp", bucket_h=0.5, space=sps), sps
     yield "storm-astar", solve(prs, storm, solver="astar", space=sps), sps
 
 

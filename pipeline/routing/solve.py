@@ -143,14 +143,12 @@ def product_options(solver: str):
     return solver_spec(solver).make_options(RoutingOptions(solver=solver).solver_overrides())
 
 
-def _options(spec, options, params: BfoaParams | None, bucket_h: float | None):
-    """The solver's options: `options` as given, else the shorthands (`params` are BfoaParams, `bucket_h` a
-    DpOptions field) when they are of this solver's kind, else the product's (product_options)."""
+def _options(spec, options, params: BfoaParams | None):
+    """The solver's options: `options` as given, else the shorthand `params` (BfoaParams) when they are of this
+    solver's kind, else the product's (product_options)."""
     if options is None:
         if params is not None and isinstance(params, spec.options):
             options = params
-        elif bucket_h is not None and "bucket_h" in getattr(spec.options, "__dataclass_fields__", {}):
-            options = spec.make_options({"bucket_h": float(bucket_h)})
         else:
             options = product_options(spec.name)
     if not isinstance(options, spec.options):
@@ -289,14 +287,14 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
 
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODUCT.solver, seed: int = PRODUCT.seed,
           options=None, params: BfoaParams | None = None, space: SearchSpace | None = None,
-          bucket_h: float | None = None, limits: EngineLimits | None = PRODUCT.limits, savings: bool = True,
+          limits: EngineLimits | None = PRODUCT.limits, savings: bool = True,
           continuous: bool = PRODUCT.continuous_speed) -> Plan:
     """Route one voyage. Never raises for a voyage that simply cannot be sailed: the plan says why.
 
     Every default is the product's (`PRODUCT`, options.RoutingOptions): `solve(problem, weather, solver="dp")` gives
     the plan `jitroute route --solver dp`, route-fleet and the workers give (job.plan_voyage calls this with the
     run's options). `options` are the solver's own (solvers.SOLVERS[solver].options; default product_options);
-    `params` (BfoaParams, for bfoa) and `bucket_h` (for dp) are shorthands for them. With `limits`
+    `params` (BfoaParams, for bfoa) are a shorthand for them. With `limits`
     (engine_limits.EngineLimits; None: none) the solver's route gets the best engine plan holding each setting;
     `savings` adds the split against the constant-speed voyage (savings.py) to the plan and lets the best engine
     plan on the base route compete in never-worse. A `space` laid along another base route than the solver's
@@ -307,7 +305,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     `solve(..., options=SOLVERS[solver].options(), limits=None, savings=False)`.
     """
     spec = solver_spec(solver)
-    opts = _options(spec, options, params, bucket_h)
+    opts = _options(spec, options, params)
     _check_forecast(problem, weather)
     t0 = time.perf_counter()
     if space is None:

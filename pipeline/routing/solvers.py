@@ -28,7 +28,7 @@ def _dp(inst, base: Baseline, *, seed: int, options: dp.DpOptions) -> Found:
     """The DP, pruned by the cost of the incumbent solver's plan when it names one (seed 1, default options)."""
     upper = math.inf if options.upper_bound is None else float(options.upper_bound)
     incumbent = None
-    if options.bucket_h is None and options.incumbent is not None:
+    if options.incumbent is not None:
         spec = SOLVERS[options.incumbent]
         found = spec.search(inst, base, seed=1, options=spec.options())
         if found.nodes is not None:
