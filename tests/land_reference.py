@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.routing.land_mask import _mask_path
+from pipeline.routing.land_mask import mask_path
 
 N_COLS = 43200
 _STATE: dict = {}
@@ -31,7 +31,7 @@ def _cache_file(mask: Path) -> Path:
 def _grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(packed ocean bits (21600, 5400) uint8, big-endian bit order, memory-mapped; the cells' latitudes; longitudes)."""
     if not _STATE:
-        mask = _mask_path()
+        mask = mask_path()
         cached = _cache_file(mask)
         with np.load(mask) as z:  # an npz member is decompressed only when read: lat and lon are small
             lat, lon = z["lat"], z["lon"]

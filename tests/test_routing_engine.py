@@ -1,9 +1,12 @@
-"""The compiled core the routing searches share (pipeline/routing/engine/): its pruning rule and label stores on
-hand-made bound tables."""
+"""The compiled core the routing searches share (pipeline/routing/engine/): its pruning rule on hand-made bound tables,
+and the routing modules' imports (one way in: no module takes another's private helpers, nothing imports the old
+paths)."""
 
 from __future__ import annotations
 
+import ast
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +14,8 @@ import pytest
 from pipeline.routing.engine.bounds import FinishBounds, cost_lb_nb, fuel_to_finish_lb, is_on_time, label_priced_out
 from pipeline.routing.engine.labels import grow, prefix_min, put_min, time_span_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, OBJ_THESIS, Objective
+
+ROUTING = Path(__file__).resolve().parents[1] / "pipeline" / "routing"
 
 
 def _objective(kind: int = OBJ_JIT) -> Objective:
@@ -76,3 +81,26 @@ def test_the_label_stores_grow_keep_their_contents_and_the_prefix_minimum_looks_
     assert [time_span_nb(t, 10.0, 20.0, 4) for t in (10.0, 14.9, 15.0, 30.0)] == [0, 0, 1, 3]
     assert time_span_nb(12.0, 10.0, 0.0, 4) == 0
 
+
+def _imports(path: Path):
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            yield node.module, [a.name for a in node.names]
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                yield a.name, []
+
+
+def test_no_routing_module_takes_another_modules_private_names_or_the_old_leg_module():
+    """Each helper one way in: a name two modules need is public where it lives (the label primitives in engine/, the
+    land mask's file helpers, the clearance kernels)."""
+    bad = []
+    for path in sorted(ROUTING.rglob("*.py")):
+        for module, names in _imports(path):
+            if module == "pipeline.routing.leg_kernel" or module.endswith(".leg_kernel") or (
+                    module == "pipeline.routing" and "leg_kernel" in names):
+                bad.append(f"{path.relative_to(ROUTING)} imports the leg from {module}")
+            if module.startswith("pipeline.routing"):
+                bad += [f"{path.relative_to(ROUTING)} imports {module}.{n}" for n in names if n.startswith("_")]
+    assert not bad, bad
+    assert not (ROUTING / "leg_kernel.py").exists()

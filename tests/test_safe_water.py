@@ -106,7 +106,7 @@ def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
             "from pipeline.routing import land\n"
             "g = land.build_land_grid()\n"
             "peak_kb = int(re.search('VmHWM:\\\\s+(\\\\d+)', open('/proc/self/status').read()).group(1))\n"
-            "shipped = land._read_saved(land.PACKAGED, land._mask_key(land._mask_path()))\n"
+            "shipped = land.read_saved(land.PACKAGED, land.mask_key(land.mask_path()))\n"
             "same = shipped is not None and all((a == b).all() for a, b in zip(g, shipped))\n"
             "print(g.nbytes, 'global_land_mask.globe' in sys.modules, same, peak_kb // 1024)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()

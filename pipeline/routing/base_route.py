@@ -12,7 +12,7 @@ from dataclasses import replace
 
 from pipeline.routing.options import RoutingOptions
 from pipeline.routing.global_routes import sea_route
-from pipeline.routing.problem import RoutingProblem, _place
+from pipeline.routing.problem import RoutingProblem, place_name
 from pipeline.routing.sea_route import NoSeaRoute, SeaRoute
 from pipeline.routing.search_space import VoyageGeometryError
 from pipeline.routing.solve import solver_spec
@@ -35,8 +35,8 @@ def with_base_route(problem: RoutingProblem, options: RoutingOptions) -> Routing
     """The problem laid along `base_route_for` its ports (unchanged when that is the great circle)."""
     who = f"voyage {problem.voyage_id}: "
     try:
-        route = base_route_for(problem.dep, problem.arr, options, dep_name=who + _place("departure", problem.dep_name),
-                               arr_name=who + _place("destination", problem.arr_name))
+        route = base_route_for(problem.dep, problem.arr, options, dep_name=who + place_name("departure", problem.dep_name),
+                               arr_name=who + place_name("destination", problem.arr_name))
     except NoSeaRoute as exc:
         raise VoyageGeometryError(str(exc)) from None
     return problem if route is None else replace(problem, base_route=route)

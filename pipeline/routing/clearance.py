@@ -87,6 +87,35 @@ def leg_is_clear_nb(grid, c, lat0, lon0, lat1, lon1, lat_lo, lat_hi):
 
 
 @numba.njit(cache=True)
+def nodes_clear(grid, rule, lat, lon, out):
+    """out[i, j] &= whether node (i, j) is clear of land under `rule`."""
+    for i in range(lat.shape[0]):
+        for j in range(lat.shape[1]):
+            out[i, j] = out[i, j] and point_is_clear_nb(grid, rule, lat[i, j], lon[i, j])
+
+
+@numba.njit(cache=True)
+def line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out):
+    """Whether each leg from a usable node of line i to a usable node of line i + 1 (at most `max_shift` nodes
+    aside) is clear of land under `rule`, into out[i]."""
+    P = lat.shape[1]
+    for a in range(P):
+        if not node_ok[i, a]:
+            continue
+        for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
+            if node_ok[i + 1, b]:
+                out[i, a, b] = leg_is_clear_nb(grid, rule, lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b],
+                                               lat_lo, lat_hi)
+
+
+@numba.njit(cache=True)
+def edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
+    """`line_edges_clear` for every line."""
+    for i in range(lat.shape[0] - 1):
+        line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out)
+
+
+@numba.njit(cache=True)
 def least_clearance_nb(grid, c, lat, lon):
     """Least distance to land along the route through waypoints (lat, lon), outside the port approaches, to
     0.1 NM; BOUND_CAP_NM when it is at least that."""

@@ -29,7 +29,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.clearance import Clearance, clearance, point_is_clear_nb
+from pipeline.routing.clearance import Clearance, clearance, edges_clear, line_edges_clear, nodes_clear, point_is_clear_nb
 from pipeline.routing.land import land_grid
 from pipeline.routing.sea_route import SeaRoute
 
@@ -210,14 +210,12 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
                 lon[i, j] = geo.wrap180(lon[i, j])
             node_ok[i, j] = abs(off) <= reach[i, 1 if off > 0 else 0] + 1e-9 and lat_limits[0] <= lat[i, j] <= lat_limits[1]
     if check_land:
-        from pipeline.routing.search_space import _edges_clear, _nodes_clear
-
         free = ~gate
         free[0] = free[-1] = False  # the ports are at sea (checked by the caller)
         rows = np.nonzero(free)[0]
         if rows.size:
             sub = node_ok[rows].copy()
-            _nodes_clear(grid, rule, lat[rows], lon[rows], sub)
+            nodes_clear(grid, rule, lat[rows], lon[rows], sub)
             node_ok[rows] = sub
         # a line with no node clear of land (the route itself passes closer to land there) is left out: the legs
         # from the line before it to the line after it are checked as any other
@@ -228,7 +226,7 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
             L = lat.shape[0] - 2
     edge_ok = np.zeros((L + 1, P, P), dtype=bool)
     if check_land:
-        _edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
+        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
         _gate_edges(grid, rule, lat, lon, node_ok, gate, ms, lat_limits, edge_ok)
     else:
         for i in range(L + 1):
@@ -241,8 +239,6 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
 def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, lat_limits, edge_ok) -> None:
     """Legs touching a passage's gate: along the fairway (gate to gate) as given; into and out of it at sea within
     the approach radius of the gate (the nearer port keeps its own approach), the clearance beyond."""
-    from pipeline.routing.search_space import line_edges_clear  # search_space imports this module
-
     L2, P = lat.shape
     c = P // 2
     for i in range(L2 - 1):

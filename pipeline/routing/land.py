@@ -22,8 +22,8 @@ import numpy as np
 
 # is_sea, land_grid and the file helpers are land_mask's, here too for the routing code and the land tests
 from pipeline.routing.land_mask import (BLOCK, BOUND_CAP_NM, BOUND_UNIT_NM, CELL_NM, LAND_TILE, N_COLS, N_ROWS,
-                                        PACKAGED, SEA_TILE, TILE, LandGrid, _mask_key, _mask_path, _read_saved, is_sea,  # noqa: F401
-                                        land_grid, save_land_grid)
+                                        PACKAGED, SEA_TILE, TILE, LandGrid, is_sea, land_grid, mask_key,  # noqa: F401
+                                        mask_path, read_saved, save_land_grid)  # noqa: F401
 
 
 def _tile_rows(path: Path):
@@ -63,7 +63,7 @@ def build_land_grid(path: Path | None = None) -> LandGrid:
     """Stream the package's mask into a LandGrid (a few seconds; peak about 30 MB above the result)."""
     from scipy.ndimage import binary_dilation, distance_transform_edt
 
-    path = _mask_path() if path is None else Path(path)
+    path = mask_path() if path is None else Path(path)
     nb = TILE // BLOCK
     slot = np.full((180, 360), SEA_TILE, np.int32)
     bits, land_blocks = [], np.zeros((180 * nb, 360 * nb), bool)
@@ -196,5 +196,5 @@ def distance_to_land_nm(lat, lon, limit_nm: float = BOUND_CAP_NM) -> np.ndarray:
 
 
 if __name__ == "__main__":  # write the shipped LandGrid from the installed mask
-    save_land_grid(build_land_grid(), PACKAGED, _mask_key(_mask_path()))
+    save_land_grid(build_land_grid(), PACKAGED, mask_key(mask_path()))
     print(f"wrote {PACKAGED} ({PACKAGED.stat().st_size / 1e6:.1f} MB)")

@@ -48,16 +48,16 @@ class LandGrid(NamedTuple):
         return int(sum(a.nbytes for a in self))
 
 
-def _mask_path() -> Path:
+def mask_path() -> Path:
     spec = importlib.util.find_spec("global_land_mask")  # finds the package without importing it (its import loads 933 MB)
     if spec is None or not spec.submodule_search_locations:
         raise RuntimeError("the global-land-mask package is not installed; pip install global-land-mask")
     return Path(list(spec.submodule_search_locations)[0]) / _MASK_FILE
 
 
-def _mask_key(mask_path: Path) -> str:
+def mask_key(path: Path) -> str:
     """What a saved LandGrid was built from: the package version and the mask file's size."""
-    return f"global-land-mask {importlib.metadata.version('global-land-mask')}, {mask_path.stat().st_size} bytes"
+    return f"global-land-mask {importlib.metadata.version('global-land-mask')}, {path.stat().st_size} bytes"
 
 
 def save_land_grid(grid: LandGrid, path: Path, key: str) -> None:
@@ -68,7 +68,7 @@ def save_land_grid(grid: LandGrid, path: Path, key: str) -> None:
     tmp.replace(path)
 
 
-def _read_saved(path: Path, key: str) -> LandGrid | None:
+def read_saved(path: Path, key: str) -> LandGrid | None:
     if not path.exists():
         return None
     with np.load(path) as z:
@@ -88,12 +88,12 @@ def land_grid() -> LandGrid:
     if _GRID is None:
         with _GRID_LOCK:
             if _GRID is None:
-                mask_path = _mask_path()
-                grid = _read_saved(PACKAGED, _mask_key(mask_path))
+                mask = mask_path()
+                grid = read_saved(PACKAGED, mask_key(mask))
                 if grid is None:
                     from pipeline.routing import land  # numba: only where the shipped grid does not fit the mask
 
-                    grid = land.build_land_grid(mask_path)
+                    grid = land.build_land_grid(mask)
                 _GRID = grid
     return _GRID
 

@@ -44,7 +44,7 @@ def lon_span_deg(lon_deg) -> tuple[float, float]:
     return west, west + 360.0 - float(gaps[k])
 
 
-def _place(role: str, name: str) -> str:
+def place_name(role: str, name: str) -> str:
     """'departure Yokohama', or just 'departure' when the voyage names no port (never 'departure departure')."""
     name = (name or "").strip()
     return role if not name or name.lower() == role else f"{role} {name}"
@@ -124,8 +124,8 @@ class RoutingProblem:
                                   d_point_nm=self.d_point_nm, base=self.base, max_shift=self.max_shift,
                                   lat_limits=self.lat_limits, limit_lines=list(self.limit_lines),
                                   clearance_nm=self.land_clearance_nm, approach_nm=self.port_approach_nm,
-                                  dep_name=f"voyage {self.voyage_id}: {_place('departure', self.dep_name)}",
-                                  arr_name=f"voyage {self.voyage_id}: {_place('destination', self.arr_name)}",
+                                  dep_name=f"voyage {self.voyage_id}: {place_name('departure', self.dep_name)}",
+                                  arr_name=f"voyage {self.voyage_id}: {place_name('destination', self.arr_name)}",
                                   base_route=self.base_route)
 
     def slowest_kn(self) -> float:

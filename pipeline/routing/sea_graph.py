@@ -25,7 +25,7 @@ import numpy as np
 
 from pipeline.routing.clearance import Clearance, leg_is_clear_nb
 from pipeline.routing.land import distance_to_land_nb, land_grid
-from pipeline.routing.land_mask import _mask_key, _mask_path
+from pipeline.routing.land_mask import mask_key, mask_path
 
 GRAPH_VERSION = 1
 RES_DEG = 0.125
@@ -95,7 +95,7 @@ def build_sea_graph(clearance_nm: float) -> SeaGraph:
 
 
 def _cache_path(clearance_nm: float) -> Path:
-    key = f"{_mask_key(_mask_path())}|{clearance_nm:.6f}|{GRAPH_VERSION}|{RES_DEG}|{LAT_LIMITS_DEG}"
+    key = f"{mask_key(mask_path())}|{clearance_nm:.6f}|{GRAPH_VERSION}|{RES_DEG}|{LAT_LIMITS_DEG}"
     digest = hashlib.sha256(key.encode()).hexdigest()[:16]
     return Path(tempfile.gettempdir()) / "jitroute-sea-graph" / f"sea_graph_{digest}.npz"
 

@@ -14,12 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.clearance import (DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, Clearance, clearance, leg_is_clear_nb,
-                                        point_is_clear_nb)
+from pipeline.routing.clearance import (DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, Clearance, clearance, edges_clear,
+                                        nodes_clear)
+from pipeline.routing.corridor import lay_out_corridor
 from pipeline.routing.land import is_sea, land_grid
 from pipeline.routing.sea_route import SeaRoute
 
@@ -99,33 +99,6 @@ def _segments_cross(ax, ay, bx, by, cx, cy, dx, dy) -> bool:
     o1, o2 = orient(ax, ay, bx, by, cx, cy), orient(ax, ay, bx, by, dx, dy)
     o3, o4 = orient(cx, cy, dx, dy, ax, ay), orient(cx, cy, dx, dy, bx, by)
     return (o1 * o2 < 0) and (o3 * o4 < 0)
-
-
-@numba.njit(cache=True)
-def _nodes_clear(grid, rule, lat, lon, out):
-    for i in range(lat.shape[0]):
-        for j in range(lat.shape[1]):
-            out[i, j] = out[i, j] and point_is_clear_nb(grid, rule, lat[i, j], lon[i, j])
-
-
-@numba.njit(cache=True)
-def line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out):
-    """Whether each leg from a usable node of line i to a usable node of line i + 1 (at most `max_shift` nodes
-    aside) is clear of land under `rule`, into out[i]."""
-    P = lat.shape[1]
-    for a in range(P):
-        if not node_ok[i, a]:
-            continue
-        for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
-            if node_ok[i + 1, b]:
-                out[i, a, b] = leg_is_clear_nb(grid, rule, lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b],
-                                               lat_lo, lat_hi)
-
-
-@numba.njit(cache=True)
-def _edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
-    for i in range(lat.shape[0] - 1):
-        line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out)
 
 
 # when the default layout leaves no route at sea: (lines, nodes per line) this many times as many, in turn. More
@@ -232,8 +205,8 @@ def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines
     edge_ok = np.zeros((L + 1, P, P), dtype=bool)
     if check_land:
         grid = land_grid()
-        _nodes_clear(grid, rule, lat[1:-1], lon[1:-1], node_ok[1:-1])  # the ports were checked above: at sea
-        _edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
+        nodes_clear(grid, rule, lat[1:-1], lon[1:-1], node_ok[1:-1])  # the ports were checked above: at sea
+        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
     else:
         for i in range(L + 1):
             for a in range(P):
@@ -249,8 +222,6 @@ SEA_ROUTE_END_TOL_NM = 1.0  # a sea route must start and end this close to the v
 
 
 def _along_sea_route(route: SeaRoute, dep, arr, dep_name: str, arr_name: str, *, limit_lines, **kw) -> SearchSpace:
-    from pipeline.routing.corridor import lay_out_corridor  # the corridor builds on this module's kernels
-
     for name, (la, lo), k in ((dep_name, dep, 0), (arr_name, arr, -1)):
         off = geo.gc_distance_nm(la, lo, float(route.lat[k]), float(route.lon[k]))
         if off > SEA_ROUTE_END_TOL_NM:
