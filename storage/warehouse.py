@@ -290,14 +290,44 @@ def _check(con: duckdb.DuckDBPyConnection) -> None:
     route_history.check_sizes(con)
 
 
-def verify(con: duckdb.DuckDBPyConnection) -> None:
-    """Read every row of every table on `con` (DuckDB checks each block's checksum as it reads it); raises
-    duckdb.Error on a damaged block. A cheap pass: one hash over each table, nothing kept."""
+def verify(con: duckdb.DuckDBPyConnection, database: str | None = None) -> None:
+    """Read every row of every table of `database` (default: the current one) on `con` (DuckDB checks each block's
+    checksum as it reads it); raises duckdb.Error on a damaged block. A cheap pass: one hash over each table, nothing
+    kept."""
+    where, prefix = ("current_database()", "") if database is None else (f"'{database}'", f'"{database}".')
     tables = con.execute("SELECT schema_name, table_name FROM duckdb_tables() "
-                         "WHERE database_name = current_database() AND NOT temporary").fetchall()
+                         f"WHERE database_name = {where} AND NOT temporary").fetchall()
     if tables:  # one query for all of them: a third of the CPU of one query a table
-        con.execute(" UNION ALL ".join(f'SELECT count(*), sum(hash(t)) FROM "{schema}"."{table}" AS t'
+        con.execute(" UNION ALL ".join(f'SELECT count(*), sum(hash(t)) FROM {prefix}"{schema}"."{table}" AS t'
                                        for schema, table in tables)).fetchall()
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def _check_attached(con: duckdb.DuckDBPyConnection, path: Path) -> str | None:
+    """`check_file(path)` on an open connection: the file attached read-only, every table read (`verify`) and detached;
+    None when it passes, else why not (one line). Half the CPU of opening the file as a database of its own."""
+    quoted = str(path).replace("'", "''")
+    con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
+    try:
+        try:
+            con.execute(f"ATTACH '{quoted}' AS {_CHECKED} (READ_ONLY)")
+        except duckdb.Error as exc:
+            return _first_line(exc)
+        try:
+            verify(con, _CHECKED)
+            return None
+        except duckdb.Error as exc:
+            return _first_line(exc)
+        finally:
+            con.execute(f"DETACH {_CHECKED}")
+    finally:
+        con.execute("RESET memory_limit")
+
+
+_CHECKED = "jitroute_copy_being_checked"  # the name a copy is attached under while `_check_attached` reads it
 
 
 def check_file(path: Path) -> str | None:
@@ -367,7 +397,7 @@ def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
                 f"the snapshot {tmp} could not be written ({exc.strerror or exc}): free space (or make {snap.parent} "
                 f"writable) and re-run; warehouse {path} holds this command's writes and the snapshots are as they were"
             ) from exc
-        problem = check_file(tmp)
+        problem = _check_attached(con, tmp)
         if problem is not None:
             raise WarehouseCorruptError(
                 f"the snapshot copy of warehouse {path} fails the check ({problem}), so it was not published and the "
