@@ -90,9 +90,9 @@ class DataLayout:
     def ensure(self) -> "DataLayout":
         """Create the folders and check the warehouse: a job calls this before it writes anything, so a damaged
         warehouse stops it first (WarehouseCorruptError, naming the newest good snapshot)."""
-        from storage import route_history, warehouse
+        from storage import warehouse
 
-        warehouse.check_before_writing(self.warehouse, also=route_history.check_sizes)
+        warehouse.check_before_writing(self.warehouse)
         for p in (self.root, self.raw, self.quarantine, self.cubes, self.exports, self.locks):
             p.mkdir(parents=True, exist_ok=True)
         return self

@@ -29,7 +29,7 @@ import duckdb
 
 from schemas.table import comment_sql
 from schemas.tables.routes import ROUTE_LEG_PARTS, ROUTE_LEGS
-from storage.warehouse import WarehouseCorruptError, transaction
+from storage.warehouse_base import WarehouseCorruptError, transaction
 
 VIEW = ROUTE_LEGS.name
 PARTS = ROUTE_LEG_PARTS.name

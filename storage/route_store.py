@@ -29,6 +29,7 @@ import pyarrow.parquet as pq
 from schemas.table import Table
 from schemas.tables.routes import ROUTE_LEGS, ROUTE_RUNS, ROUTES
 from storage import route_history, warehouse
+from storage.run_owners import process_started
 
 # The Parquet columns of each table, from its definition (the partition column run_id is the folder name, not in
 # the file).
@@ -139,26 +140,9 @@ def migrate_old_parquet_layout(exports_dir: Path) -> list[str]:
     return moved
 
 
-def process_started(pid: int) -> str | None:
-    """The start time of process `pid` (clock ticks after boot, from /proc), None when it does not exist."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    return stat.rsplit(")", 1)[1].split()[19]  # field 22 (starttime); the name in (…) may hold spaces
-
-
-def process_alive(pid: int | None, started: str | None) -> bool:
-    """Process `pid` exists and is the one that started at `started` (not a later process given the same PID)."""
-    if not pid:
-        return False
-    now = process_started(int(pid))
-    return now is not None and (started is None or now == started)
-
-
 def begin_run(db_path: Path, run_id: str, *, cycle, solver: str, trigger: str, n_voyages: int,
               nominal_utc=None, cycle_age_h: float | None = None) -> set[str]:
-    """Record a run as `running`, owned by this host and process (see `reap_dead_runs`), with the cycle's age
+    """Record a run as `running`, owned by this host and process (see `run_owners.reap_dead_runs`), with the cycle's age
     (hours) at the run's nominal time. Returns the ids of the runs running now (this one included), read after the
     dead ones were reaped."""
     pid = os.getpid()
@@ -204,24 +188,6 @@ def stale_plans(db_path: Path) -> list[dict]:
 def _stale_plans(con) -> list[dict]:
     return con.execute("SELECT voyage_id, imo, 'stale' AS status, stale_reason AS reason FROM latest_routes WHERE stale "
                        "ORDER BY voyage_id").fetchdf().to_dict("records")
-
-
-def reap_dead_runs(con) -> list[str]:
-    """Mark this host's `running` runs whose process is gone as failed ("process died"); returns their ids.
-
-    Called by every writer connection (storage.warehouse.connect), so a SIGKILLed run is settled by the
-    next command that opens the warehouse. Runs of other hosts are left to their own host.
-    """
-    try:
-        rows = con.execute("SELECT run_id, pid, pid_started FROM route_runs WHERE status = 'running' AND host = ?",
-                           [socket.gethostname()]).fetchall()
-    except Exception:  # a warehouse older than the owner columns (before its migration)
-        return []
-    dead = [(rid, pid) for rid, pid, started in rows if not process_alive(pid, started)]
-    for rid, pid in dead:
-        con.execute("UPDATE route_runs SET status = 'failed', finished_at = ?, reason = ? WHERE run_id = ?",
-                    [_utcnow(), f"process died (host {socket.gethostname()}, pid {pid} no longer runs)", rid])
-    return [rid for rid, _pid in dead]
 
 
 def _running_run_ids(con) -> set[str]:

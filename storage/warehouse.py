@@ -26,18 +26,21 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
 import hashlib
 import os
 import shutil
 import struct
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import duckdb
 
+from storage import route_history, run_owners
 from storage.migration import Migration
+from storage.warehouse_base import WarehouseCorruptError, transaction
 
 
 # The oldest DuckDB release whose readers open the analysts' snapshot (its storage format number is
@@ -62,10 +65,6 @@ class WarehouseBusyError(RuntimeError):
 class WarehouseWriteError(RuntimeError):
     """The warehouse (or its snapshot) cannot be written: disk full, read-only or immutable; the message names the
     file and what to do."""
-
-
-class WarehouseCorruptError(RuntimeError):
-    """The warehouse file is damaged; the message names it and how to recover from the snapshot."""
 
 
 _CORRUPT_SIGNS = ("not a valid duckdb database", "corrupt database file", "checksum", "serialization error")
@@ -105,19 +104,26 @@ def _unwritable(path: Path, exc: Exception) -> WarehouseWriteError | None:
     return None
 
 
-def _all_migrations() -> list[Migration]:
+@functools.cache  # the schema modules' lists are constants: made once per process
+def _all_migrations() -> tuple[Migration, ...]:
     # Imported here so each schema module can be edited on its own.
     from storage import schema_docs, schema_fleet, schema_ingest, schema_planning, schema_routes
 
     schema = [*schema_ingest.MIGRATIONS, *schema_fleet.MIGRATIONS, *schema_routes.MIGRATIONS, *schema_planning.MIGRATIONS]
     schema.append(schema_routes.views_migration(after=[m.name for m in schema]))
-    return [*schema, schema_docs.comments_migration(after=[m.name for m in schema])]
+    return (*schema, schema_docs.comments_migration(after=[m.name for m in schema]))
+
+
+@functools.lru_cache(maxsize=4)
+def _migrations_digest(migrations: tuple[Migration, ...]) -> str:
+    """The name of the template of `migrations` (names and SQL), computed once per list rather than per warehouse."""
+    return hashlib.sha1("\0".join(f"{m.name}\0{m.sql}" for m in migrations).encode()).hexdigest()[:16]
 
 
 # A folder of migrated, empty warehouses that `connect` copies for a new warehouse instead of running every migration
 # on it (about 0.3 s CPU a warehouse); None (the default): each new warehouse is migrated from scratch. The tests set
 # one per session (tests/conftest.py), so the hundreds of warehouses they create pay the migrations once.
-_TEMPLATES: dict[str, Path] = {}
+_TEMPLATE_FOLDER: Path | None = None
 _TEMPLATES_LOCK = threading.Lock()
 
 
@@ -125,21 +131,18 @@ def use_templates(folder: Path | None) -> None:
     """New warehouses are copies of `folder/migrated-<digest of the migrations>.duckdb`, made there on first need by
     migrating an empty file; a different list of migrations (names or SQL) gets its own template, so a copy always
     holds exactly what migrating from scratch gives. None: migrate every new warehouse from scratch."""
+    global _TEMPLATE_FOLDER
     with _TEMPLATES_LOCK:
-        _TEMPLATES.clear()
-        if folder is not None:
-            _TEMPLATES["folder"] = Path(folder)
+        _TEMPLATE_FOLDER = None if folder is None else Path(folder)
 
 
 def _from_template(path: Path) -> None:
     """Create the new warehouse `path` as a copy of the template of the current migrations (see `use_templates`);
     nothing when no template folder is set. Never replaces a warehouse another process created meanwhile."""
-    folder = _TEMPLATES.get("folder")
+    folder = _TEMPLATE_FOLDER
     if folder is None:
         return
-    migrations = _all_migrations()
-    digest = hashlib.sha1("\0".join(f"{m.name}\0{m.sql}" for m in migrations).encode()).hexdigest()[:16]
-    template = folder / f"migrated-{digest}.duckdb"
+    template = folder / f"migrated-{_migrations_digest(tuple(_all_migrations()))}.duckdb"
     with _TEMPLATES_LOCK:
         if not template.exists():
             folder.mkdir(parents=True, exist_ok=True)
@@ -248,16 +251,10 @@ def connect(path: Path, *, write: bool = True, wait_s: float = 60.0,
     con = _open(path, read_only=not write, wait_s=wait_s)
     try:
         if write and checked:
-            con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
-            verify(con)  # before anything is written to it
-            con.execute("RESET memory_limit")
-            from storage import route_history  # here: these modules build on this one
-            from storage.route_store import reap_dead_runs
-
-            route_history.check_sizes(con)
+            _check(con)  # before anything is written to it
             migrate(con)
             route_history.keep_legs_in_parquet(con)
-            reap_dead_runs(con)
+            run_owners.reap_dead_runs(con)
         yield con
         if write and checked:  # while we still hold the file, so no other writer changes it during the copy
             con.execute("CHECKPOINT")
@@ -284,14 +281,53 @@ def snapshot_generations(path: Path) -> list[Path]:
     return [snap] + [snap.with_name(f"{Path(path).stem}.snapshot.{k}.duckdb") for k in range(1, SNAPSHOT_GENERATIONS)]
 
 
-def verify(con: duckdb.DuckDBPyConnection) -> None:
-    """Read every row of every table on `con` (DuckDB checks each block's checksum as it reads it); raises
-    duckdb.Error on a damaged block. A cheap pass: one hash over each table, nothing kept."""
+def _check(con: duckdb.DuckDBPyConnection) -> None:
+    """What a writer checks before it writes (`connect`, `check_before_writing`): every table's blocks (`verify`, with
+    a small buffer) and the size of every listed route-legs file (storage/route_history.py). Raises what it finds."""
+    con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
+    verify(con)
+    con.execute("RESET memory_limit")
+    route_history.check_sizes(con)
+
+
+def verify(con: duckdb.DuckDBPyConnection, database: str | None = None) -> None:
+    """Read every row of every table of `database` (default: the current one) on `con` (DuckDB checks each block's
+    checksum as it reads it); raises duckdb.Error on a damaged block. A cheap pass: one hash over each table, nothing
+    kept."""
+    where, prefix = ("current_database()", "") if database is None else (f"'{database}'", f'"{database}".')
     tables = con.execute("SELECT schema_name, table_name FROM duckdb_tables() "
-                         "WHERE database_name = current_database() AND NOT temporary").fetchall()
+                         f"WHERE database_name = {where} AND NOT temporary").fetchall()
     if tables:  # one query for all of them: a third of the CPU of one query a table
-        con.execute(" UNION ALL ".join(f'SELECT count(*), sum(hash(t)) FROM "{schema}"."{table}" AS t'
+        con.execute(" UNION ALL ".join(f'SELECT count(*), sum(hash(t)) FROM {prefix}"{schema}"."{table}" AS t'
                                        for schema, table in tables)).fetchall()
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def _check_attached(con: duckdb.DuckDBPyConnection, path: Path) -> str | None:
+    """`check_file(path)` on an open connection: the file attached read-only, every table read (`verify`) and detached;
+    None when it passes, else why not (one line). Half the CPU of opening the file as a database of its own."""
+    quoted = str(path).replace("'", "''")
+    con.execute(f"SET memory_limit = '{CHECK_MEMORY_LIMIT}'")
+    try:
+        try:
+            con.execute(f"ATTACH '{quoted}' AS {_CHECKED} (READ_ONLY)")
+        except duckdb.Error as exc:
+            return _first_line(exc)
+        try:
+            verify(con, _CHECKED)
+            return None
+        except duckdb.Error as exc:
+            return _first_line(exc)
+        finally:
+            con.execute(f"DETACH {_CHECKED}")
+    finally:
+        con.execute("RESET memory_limit")
+
+
+_CHECKED = "jitroute_copy_being_checked"  # the name a copy is attached under while `_check_attached` reads it
 
 
 def check_file(path: Path) -> str | None:
@@ -314,19 +350,17 @@ def newest_good_snapshot(path: Path) -> Path | None:
     return next((snap for snap in snapshot_generations(path) if snap.exists() and check_file(snap) is None), None)
 
 
-def check_before_writing(path: Path, wait_s: float = 60.0, also: Callable[[duckdb.DuckDBPyConnection], None] | None = None) -> None:
+def check_before_writing(path: Path, wait_s: float = 60.0) -> None:
     """Raise WarehouseCorruptError (naming the newest good snapshot) when the warehouse `path` exists and is
-    damaged, so a command stops before it writes anything (cube, exports or rows). A missing warehouse passes.
-    `also(con)`: a further check on the open file that raises what it finds (the data layout passes the route-legs
-    files' size check, storage/route_history.py, which builds on this module)."""
+    damaged (its blocks, or a route-legs file missing or of the wrong size: route_history.HistoryDamagedError), so a
+    command stops before it writes anything (cube, exports or rows), as a writer connection would. A missing warehouse
+    passes."""
     path = Path(path)
     if not path.exists():
         return
     con = _open(path, read_only=True, wait_s=wait_s)
     try:
-        verify(con)
-        if also is not None:
-            also(con)
+        _check(con)
     except duckdb.Error as exc:
         if _is_corrupt(exc):
             raise _corrupt(path, exc) from exc
@@ -363,7 +397,7 @@ def publish_snapshot(con: duckdb.DuckDBPyConnection, path: Path) -> Path:
                 f"the snapshot {tmp} could not be written ({exc.strerror or exc}): free space (or make {snap.parent} "
                 f"writable) and re-run; warehouse {path} holds this command's writes and the snapshots are as they were"
             ) from exc
-        problem = check_file(tmp)
+        problem = _check_attached(con, tmp)
         if problem is not None:
             raise WarehouseCorruptError(
                 f"the snapshot copy of warehouse {path} fails the check ({problem}), so it was not published and the "
@@ -411,18 +445,3 @@ def storage_version_number(path: Path) -> int:
     if magic != b"DUCK":
         raise ValueError(f"{path} is not a DuckDB file")
     return number
-
-
-@contextlib.contextmanager
-def transaction(con: duckdb.DuckDBPyConnection) -> Iterator[duckdb.DuckDBPyConnection]:
-    """BEGIN … COMMIT on `con`; when the block (or the COMMIT) fails, ROLLBACK and re-raise: all or nothing."""
-    con.execute("BEGIN TRANSACTION")
-    try:
-        yield con
-        con.execute("COMMIT")
-    except Exception:
-        try:
-            con.execute("ROLLBACK")
-        except duckdb.TransactionException:  # a failed COMMIT has ended the transaction (rolled back): say why it failed
-            pass
-        raise

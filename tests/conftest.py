@@ -68,7 +68,7 @@ def migrated_from_scratch():
     """New warehouses in this test run every migration (no template copy)."""
     from storage import warehouse
 
-    folder = warehouse._TEMPLATES.get("folder")
+    folder = warehouse._TEMPLATE_FOLDER
     warehouse.use_templates(None)
     yield
     warehouse.use_templates(folder)

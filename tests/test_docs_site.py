@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -22,6 +24,7 @@ def test_the_readme_is_the_short_layer_and_points_to_every_page_of_the_manual():
         assert (ROOT / "docs" / page).is_file() and page in linked, page
 
 
+@pytest.mark.slow  # a child process builds the whole manual
 def test_mkdocs_builds_the_manual_strictly_into_pages_that_load_nothing_from_elsewhere(tmp_path):
     site = tmp_path / "site"
     r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(ROOT / "mkdocs.yml"),

@@ -12,7 +12,7 @@ from pipeline.performance import features, mlp, sanity
 from pipeline.performance.model import PerformanceModel, reference_model
 from pipeline.performance.refit import Gate, _Candidate, _choose, describe_gate, gate_with
 from pipeline.performance.validate import validate_noon
-from tests.test_performance import GAS_NIRVANA_VESSEL, gas_nirvana, history  # noqa: F401 (a fixture)
+from tests.test_performance import GAS_NIRVANA_VESSEL, gas_nirvana, history, history_made  # noqa: F401 (fixtures)
 
 ENV = sanity.Envelope(rpm=(60.0, 100.0), draft_m=(8.0, 12.0), wind_kn=40.0, hs_m=5.0, trim_m=0.5)
 THESIS_OK_SPEED = np.array([0.0, 0.0, 0.14, 0.0, -0.03, 0.0, -0.3])  # draft, trim, rpm, wind dir, wind, wave dir, waves

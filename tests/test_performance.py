@@ -2,6 +2,7 @@
 
 import io
 import json
+import shutil
 from pathlib import Path
 
 import duckdb
@@ -265,17 +266,27 @@ def _models(db):
                            "ORDER BY imo, version").fetchall()
 
 
-@pytest.fixture()
-def history(tmp_path):
-    """A warehouse with two vessels' first 250 days of a year of reports, and the other 115 days by vessel."""
+@pytest.fixture(scope="module")
+def history_made(tmp_path_factory):
+    """The folder of `history`'s warehouse, generated, validated and imported once per module; its later reports."""
     fl = generate_fleet("2020-12-01T00", n_vessels=2, days=365, seed=21)
-    db = tmp_path / "w.duckdb"
+    folder = tmp_path_factory.mktemp("history")
+    db = folder / "w.duckdb"
     fleet_store.import_vessels(db, fl.vessels)
     good, _ = validate_noon(_as_text(fl.noon), set(fl.vessels.imo))
     good = good.sort_values(["imo", "ts_utc"])
     day = good.groupby("imo").cumcount()
     fleet_store.import_noon(db, good[day < 250], good.head(0))
-    return db, good[day >= 250], [int(i) for i in fl.vessels.imo]
+    return folder, good[day >= 250], [int(i) for i in fl.vessels.imo]
+
+
+@pytest.fixture()
+def history(history_made, tmp_path):
+    """A warehouse with two vessels' first 250 days of a year of reports (each test its own copy of the folder
+    `history_made` made, snapshot included, with new file times), and the other 115 days by vessel."""
+    folder, later, imos = history_made
+    shutil.copytree(folder, tmp_path / "history", copy_function=shutil.copyfile)
+    return tmp_path / "history" / "w.duckdb", later.copy(), list(imos)
 
 
 def test_versions_nothing_new_new_batch_worse_form_and_switching_back(history):

@@ -38,6 +38,7 @@ def _plan(plan) -> tuple:
     return tuple((s.k, s.sequence) for s in plan.schedules), tuple(sorted(plan.unassigned))
 
 
+@pytest.mark.slow  # two child processes keep both cores busy while the search runs
 def test_a_busy_host_gets_the_identical_plan_for_the_same_effort(medium):
     quiet = milp.solve(medium, effort=EFFORT)
     children = _busy_cores(2)

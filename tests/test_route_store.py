@@ -161,3 +161,23 @@ def test_run_savings_are_fuel_weighted_over_the_honest_baseline_and_make_the_hea
     assert headline.startswith("Savings 6.0 % against sailing the base route at the one constant speed")
     assert "speed profile 2.4 %, route 3.6 %" in headline and "limits cost 1.75 t" in headline
     assert "17.5" not in headline  # the discrete-rpm figure is no headline
+
+
+def test_the_next_writer_fails_this_hosts_runs_whose_process_is_gone_and_leaves_other_hosts_runs(tmp_path):
+    """A run killed without a word stays `running` until the next writer connection (warehouse.connect) sees its
+    process gone (the PID's start time differs: the PID now names another process) and marks it failed."""
+    from storage import warehouse
+
+    db = tmp_path / "w.duckdb"
+    assert route_store.begin_run(db, "alive", cycle=None, solver="gc", trigger="manual", n_voyages=1) == {"alive"}
+    route_store.begin_run(db, "killed", cycle=None, solver="gc", trigger="manual", n_voyages=1)
+    route_store.begin_run(db, "elsewhere", cycle=None, solver="gc", trigger="manual", n_voyages=1)
+    with warehouse.connect(db, checked=False) as con:
+        con.execute("UPDATE route_runs SET pid_started = 'not-this-start' WHERE run_id = 'killed'")
+        con.execute("UPDATE route_runs SET host = 'another-host', pid_started = 'x' WHERE run_id = 'elsewhere'")
+    assert route_store.begin_run(db, "next", cycle=None, solver="gc", trigger="manual", n_voyages=1) == {
+        "alive", "elsewhere", "next"}
+    with warehouse.connect(db, write=False) as con:
+        status = dict(con.execute("SELECT run_id, status || ' ' || coalesce(reason, '') FROM route_runs").fetchall())
+    assert status["killed"].startswith("failed process died (host ") and "no longer runs" in status["killed"]
+    assert status["alive"] == status["elsewhere"] == status["next"] == "running "

@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from routing_cases import field, moving_storm, problem, solve, wavy
+from tests.exact_cases import DEP, enumerate_nb, instance, weather, window_problem
+from tests.routing_cases import problem, solve
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
 from pipeline.routing.dp import DpOptions, grid_step_h
@@ -24,19 +25,6 @@ from pipeline.routing.fastest_plan import fastest_plan
 from pipeline.routing.objectives import objective, route_cost_nb
 from pipeline.routing.solve import solver_instance
 from pipeline.routing.solvers import SOLVERS
-from test_routing_grid_exact import _enumerate_nb, _weather as grid_weather, _window_problem
-
-DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 100 rpm ≈ 40 h in calm water
-
-
-def _weather(kind: str, seed: int):
-    if kind == "static":
-        return field(wavy(seed))
-    if kind == "storm":  # drifting west across the route while the ship sails east: time matters
-        return field(moving_storm(seed, 31.5, 206.0, drift_kn=(-12.0, 2.0), hs_peak=7.0), step_h=3, hours=200)
-    return field(lambda LA, LO: dict(uo=1.2 * np.sin(np.radians(40 * (LA - 30))), vo=0.8 * np.cos(np.radians(30 * LO)),
-                                     swh=2.0 + np.cos(np.radians(20 * LO)), mwd_deg=np.full(LA.shape, 250.0)))
-
 
 def _every_plan(inst):
     """(hours, fuel) of every route × setting per leg that can be sailed."""
@@ -53,21 +41,10 @@ def _every_plan(inst):
                 yield ct[-1] - o.t_dep_h, cf[-1]
 
 
-def _instance(kind, calm_h, rpms, n, obj="jit", n_lines=3):
-    pr = problem(DEP, ARR, calm_h, rpm_options=rpms, objective=obj, n_lines=n_lines, n_points=5, max_shift=2,
-                 d_point_nm=25.0)
-    space = pr.search_space()
-    inst, base_nodes = solver_instance(pr, space, _weather(kind, n))
-    base = find_baseline(inst, base_nodes)
-    if base.ok:
-        inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)  # as solve() sets it
-    return inst, base
-
-
 @pytest.mark.parametrize("kind, rpms, n", [("static", (70, 85, 100), 0), ("storm", (75, 100), 1),
                                            ("current", (60, 80, 100), 2), ("storm", (70, 85, 100), 3)])
 def test_the_fastest_plan_arrives_first(kind, rpms, n):
-    inst, _ = _instance(kind, 30.0, rpms, n)
+    inst, _ = instance(kind, 30.0, rpms, n)
     nodes, rpm_idx, hours, n_legs = fastest_plan(inst)
     first = min(h for h, _ in _every_plan(inst))
     assert nodes is not None and n_legs > 0
@@ -96,7 +73,7 @@ def test_a_late_voyage_gets_the_enumerated_optimum_with_the_fastest_plan_as_incu
     """An RTA 25 % under the calm full-speed passage: every plan is late. Without a BFOA incumbent the DP's only
     on-hand plan is the (late) baseline; it sails the fastest plan, prunes on lateness, and still returns the
     enumerated optimum (exact labels) or a plan within the gap."""
-    inst, base = _instance(kind, 30.0, rpms, n, obj=obj)
+    inst, base = instance(kind, 30.0, rpms, n, obj=obj)
     best = min(route_cost_nb(inst.objective, h, f) for h, f in _every_plan(inst))
     assert best > 1000.0  # late under both objectives
     exact = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
@@ -111,7 +88,7 @@ def test_late_pricing_sails_fewer_legs_than_fuel_alone_on_a_longer_graph():
     pr = problem(DEP, (34.0, -146.0), 40.0, rpm_options=(70, 80, 90, 100), n_lines=8, n_points=9, max_shift=2,
                  d_point_nm=20.0)
     space = pr.search_space()
-    inst, base_nodes = solver_instance(pr, space, _weather("storm", 4))
+    inst, base_nodes = solver_instance(pr, space, weather("storm", 4))
     base = find_baseline(inst, base_nodes)
     found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
     plan_hours = evaluate(inst, found.nodes, found.rpm_idx)[1]
@@ -129,7 +106,7 @@ def test_the_grid_step_grows_with_the_rta_and_the_reason_says_so():
     """slots_per_rta: the step is the RTA's hours over that many slots in whole hours when that is longer than
     slot_h. On storm-window (no wait-free plan: the ship must wait for the storm to move off) with a 75 h RTA and
     25 slots, the grid is 3 h: the plan is the enumerated optimum of the 3 h grid and its reason says so."""
-    pr, fld = _window_problem(), grid_weather("storm-window", 0)
+    pr, fld = window_problem(), weather("storm-window", 0)
     inst, _ = solver_instance(pr, pr.search_space(), fld)
     assert grid_step_h(inst, DpOptions(slot_h=1.0)) == 1.0
     assert grid_step_h(inst, DpOptions(slot_h=1.0, slots_per_rta=240)) == 1.0  # 75 h: the 1 h grid
@@ -140,7 +117,7 @@ def test_the_grid_step_grows_with_the_rta_and_the_reason_says_so():
     plan = solve(pr, fld, solver="dp", options=opts)
     assert plan.status == "ok" and plan.legs[0]["wait_h"] >= 3.0 - 1e-9
     assert "waits on a 3 h grid" in plan.reason
-    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 3.0), 12.0, 0.3)
+    best = enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 3.0), 12.0, 0.3)
     assert plan.cost == pytest.approx(best, rel=1e-9)
     on_1h = solve(pr, fld, solver="dp", options=DpOptions(slot_h=1.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None))
     assert on_1h.status == "ok" and "grid" not in (on_1h.reason or "")  # the step asked for: nothing to say

@@ -12,76 +12,27 @@ RTAs (least late); both objectives; two to five settings."""
 
 from __future__ import annotations
 
-import functools
 import itertools
 import math
 
-import numba
 import numpy as np
 import pytest
 from lxml import etree
 
-from tests.routing_cases import field, moving_storm, problem, wavy
+from tests.exact_cases import ARR, DEP, LIMITED, enumerate_nb, instance, weather, window_problem
+from tests.routing_cases import problem
 from pipeline.routing.engine import leg as lk
-from pipeline.routing.baseline import baseline as find_baseline, evaluate
+from pipeline.routing.baseline import evaluate
 from pipeline.export.rtz import route_to_rtz, validate_rtz
 from pipeline.routing.dp import DpOptions
 from pipeline.routing.dp_grid import line_times
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.fastest_plan import fastest_plan
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
-from pipeline.routing.savings import solver_instance
 from pipeline.routing.solvers import SOLVERS
 
-DEP, ARR = (30.0, -160.0), (33.0, -150.0)  # ≈ 560 NM: 70 rpm ≈ 57 h, 100 rpm ≈ 40 h in calm water
+CALM_H = {"loose": 75.0, "tight": 48.0, "impossible": 30.0}  # the RTAs after departure: 100 rpm needs ≈ 40 h in calm water
 GAP = 0.02
-
-
-@numba.njit(cache=True)
-def _enumerate_nb(g, v, w, o, times, max_wait_h, wait_tph):
-    """Least cost over every plan of the grid space (inf: none), depth first: leave line i at a time of
-    times[i] from the first at or after arriving up to max_wait_h later."""
-    L2, P = g.lat.shape
-    R = v.rpm_options.shape[0]
-    c = P // 2
-    K = times.shape[1]
-    n_choice = K * P * R
-    choice = np.full(L2, -1, np.int64)
-    t = np.zeros(L2)
-    f = np.zeros(L2)
-    node = np.zeros(L2, np.int64)
-    t[0], node[0] = o.t_dep_h, c
-    out = np.empty(lk.N_LEG_OUT)
-    best = np.inf
-    i = 0
-    while i >= 0:
-        choice[i] += 1
-        if choice[i] >= n_choice:
-            i -= 1
-            continue
-        q, b, r = choice[i] // (P * R), (choice[i] // R) % P, choice[i] % R
-        if (i == L2 - 2 and b != c) or not g.edge_ok[i, node[i], b]:
-            continue
-        k0 = 0
-        while k0 < K and times[i, k0] < t[i] - 1e-9:
-            k0 += 1
-        if k0 + q >= K:
-            continue
-        td = times[i, k0 + q]
-        if td > times[i, k0] + max_wait_h + 1e-9 or td - o.t_dep_h > o.max_hours:
-            continue
-        fw = f[i] + wait_tph * (td - t[i])
-        lk.sail_leg_nb(g.lat[i, node[i]], g.lon[i, node[i]], g.lat[i + 1, b], g.lon[i + 1, b], td, v.rpm_options[r],
-                       v, w, out)
-        if out[lk.CODE] != lk.OK or td + out[lk.H] - o.t_dep_h > o.max_hours:
-            continue
-        if i == L2 - 2:
-            best = min(best, route_cost_nb(o, td + out[lk.H] - o.t_dep_h, fw + out[lk.FUEL]))
-            continue
-        t[i + 1], f[i + 1], node[i + 1] = td + out[lk.H], fw + out[lk.FUEL], b
-        i += 1
-        choice[i] = -1
-    return best
 
 
 def _sail_with_waits(inst, nodes, rpm_idx, wait_h, wait_tph) -> float:
@@ -101,25 +52,6 @@ def _sail_with_waits(inst, nodes, rpm_idx, wait_h, wait_tph) -> float:
     return float(route_cost_nb(o, t - o.t_dep_h, fuel))
 
 
-@functools.cache  # made once per module: a field is only read (the solvers and kernels never write it)
-def _weather(kind: str, seed: int):
-    if kind == "static":
-        return field(wavy(seed))
-    if kind == "storm":  # drifting west across the route while the ship sails east
-        return field(moving_storm(seed, 31.5, 206.0, drift_kn=(-12.0, 2.0), hs_peak=7.0), step_h=3, hours=200)
-    if kind == "storm-limit":  # a smaller storm along the north of the corridor, against a 4.5 m limit
-        return field(moving_storm(seed, 32.8, 209.0, drift_kn=(-12.0, 0.0), radius_nm=60.0, hs_peak=6.0), step_h=3,
-                     hours=200)
-    if kind == "storm-window":  # on the departure at first, then moving north-east off the route: closed, then open
-        return field(moving_storm(seed, 30.0, 200.5, drift_kn=(4.0, 8.0), radius_nm=90.0, hs_peak=5.0), step_h=1,
-                     hours=200)
-    if kind == "current":
-        return field(lambda LA, LO: dict(uo=1.2 * np.sin(np.radians(40 * (LA - 30))), vo=0.8 * np.cos(np.radians(30 * LO)),
-                                         swh=2.0 + np.cos(np.radians(20 * LO)), mwd_deg=np.full(LA.shape, 250.0)))
-    raise ValueError(kind)
-
-
-LIMITED = ("storm-limit", "storm-window")
 CASES = []
 for n, (kind, rta, obj, waits) in enumerate(itertools.product(("static", "storm", "current", "storm-limit", "storm-window"),
                                                               ("loose", "tight", "impossible"), ("jit", "thesis"),
@@ -133,19 +65,6 @@ FAST_CASES = {("static", "loose", "jit", "round"), ("storm", "tight", "thesis", 
               ("storm-window", "impossible", "thesis", "round")}
 CASE_PARAMS = [pytest.param(*c, id=f"{c[0]}-{c[1]}-{c[2]}-{c[3]}-{len(c[4])}rpm",
                             marks=() if c[:4] in FAST_CASES else pytest.mark.slow) for c in CASES]
-
-
-def _instance(kind, rta, obj, rpms, n, n_lines):
-    calm_h = {"loose": 75.0, "tight": 48.0, "impossible": 30.0}[rta]  # 100 rpm needs ≈ 40 h in calm water
-    pr = problem(DEP, ARR, calm_h, rpm_options=rpms, objective=obj, n_lines=n_lines, n_points=5, max_shift=2,
-                 d_point_nm=25.0, max_hs_m=4.5 if kind in LIMITED else None,
-                 max_wind_kn=45.0 if kind == "storm-window" else None)
-    space = pr.search_space()
-    inst, base_nodes = solver_instance(pr, space, _weather(kind, n))
-    base = find_baseline(inst, base_nodes)
-    if base.ok:
-        inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)  # as solve() sets it
-    return inst, base
 
 
 def _known(inst, base) -> list:
@@ -164,10 +83,10 @@ def _known(inst, base) -> list:
 def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)  # "wait": up to 3 slots more at a node
     n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
-    inst, base = _instance(kind, rta, obj, rpms, n, n_lines)
+    inst, base = instance(kind, CALM_H[rta], rpms, n, obj=obj, n_lines=n_lines)
     wait_tph = 0.3
     times = line_times(inst, _known(inst, base), slot_h)  # the grid + the baseline's (and the fastest plan's)
-    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, times, max_wait_h, wait_tph)
+    best = enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, times, max_wait_h, wait_tph)
     dp = SOLVERS["dp"]
     exact = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
                                                             incumbent=None))
@@ -193,14 +112,14 @@ def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optim
     label DP's wait-free plan (which lies in it), and it finds the waiting plans no wait-free plan can match."""
     slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)
     n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
-    inst, base = _instance(kind, rta, obj, rpms, n, n_lines)
+    inst, base = instance(kind, CALM_H[rta], rpms, n, obj=obj, n_lines=n_lines)
     wait_tph = 0.3
     dp = SOLVERS["dp"]
     label = dp.search(inst, base, seed=1, options=DpOptions(incumbent=None))
     plans = _known(inst, base)
     if label.nodes is not None:
         plans.append((label.nodes, label.rpm_idx))
-    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, plans, slot_h),
+    best = enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, plans, slot_h),
                          max_wait_h, wait_tph)
     got = dp.search(inst, base, seed=1, options=DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph,
                                                           wait_free_first=True, incumbent=None))
@@ -217,22 +136,17 @@ def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optim
 def test_the_window_cases_open_and_close():
     """storm-window closes the route's first legs at the start and opens them later: leaving at once is refused
     by the limit, leaving 4 h later is not. No wait-free plan exists; the grid DP's plan waits at the departure."""
-    fld = _weather("storm-window", 0)
+    fld = weather("storm-window", 0)
     ves = lk.vessel(problem(DEP, ARR, 75.0).model, max_hs_m=4.5, max_wind_kn=45.0)
     leg = (30.0, -160.0, 30.7, -157.5)
     assert lk.sail_leg(*leg, 6.0, 85.0, ves, fld)[lk.CODE] in (lk.WAVE_LIMIT, lk.WIND_LIMIT)  # 06 UTC: departure
     assert lk.sail_leg(*leg, 10.0, 85.0, ves, fld)[lk.CODE] == lk.OK
     for n, rta in itertools.product(range(3), ("loose", "tight")):
-        inst, base = _instance("storm-window", rta, "jit", (70, 85, 100), n, 2)
+        inst, base = instance("storm-window", CALM_H[rta], (70, 85, 100), n, n_lines=2)
         found = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(slot_h=2.0, max_wait_h=12.0, incumbent=None))
         wait_free = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
         assert wait_free.nodes is None  # every wait-free plan meets the storm at the departure
         assert found.nodes is not None and found.wait_h[0] >= 2.0  # the grid DP's plan waits for it to move on
-
-
-def _window_problem(n_lines=2):
-    return problem(DEP, ARR, 75.0, n_lines=n_lines, n_points=5, max_shift=2, d_point_nm=25.0, max_hs_m=4.5,
-                   max_wind_kn=45.0)
 
 
 @pytest.mark.parametrize("limits", [None, EngineLimits(min_hold_h=0.0, change_cost_t=0.05),
@@ -246,7 +160,7 @@ def test_route_carries_the_grid_dps_waits(limits):
     from routing_cases import solve
     from schemas.tables.routes import ROUTE_LEGS
 
-    pr, fld = _window_problem(), _weather("storm-window", 0)
+    pr, fld = window_problem(), weather("storm-window", 0)
     opts = DpOptions(slot_h=2.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None)
     plan = solve(pr, fld, solver="dp", options=opts, limits=limits, savings=True)
     assert plan.status == "ok", plan.reason
@@ -260,9 +174,9 @@ def test_route_carries_the_grid_dps_waits(limits):
     assert plan.hours == pytest.approx(sum(g["hours"] + g["wait_h"] for g in plan.legs))
     assert plan.fuel_t == pytest.approx(sum(g["fuel_t"] + g["wait_fuel_t"] for g in plan.legs))
     assert abs(float((t - np.datetime64(pr.depart_utc, "s")) / np.timedelta64(1, "s")) / 3600 - plan.hours) < 1e-3
-    inst, base = _instance("storm-window", "loose", "jit", (70, 85, 100), 0, 2)
+    inst, base = instance("storm-window", CALM_H["loose"], (70, 85, 100), 0, n_lines=2)
     assert not base.ok  # so the grid is the 2 h grid alone
-    best = _enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 2.0), 12.0, 0.3)
+    best = enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 2.0), 12.0, 0.3)
     changes = (limits.change_cost_t * plan.n_engine_changes) if limits is not None else 0.0
     assert plan.cost == pytest.approx(best + changes, rel=1e-9)
     if limits is not None:
@@ -293,9 +207,9 @@ def test_a_waiting_plan_that_breaks_the_holds(kind, calm_h, rpms, slot_h, max_wa
                  max_hs_m=4.5 if kind in LIMITED else None, max_wind_kn=45.0 if kind == "storm-window" else None)
     opts = DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=0.3, incumbent=None)
     limits = EngineLimits(min_hold_h=12.0)
-    free = solve(pr, _weather(kind, 0), solver="dp", options=opts)
+    free = solve(pr, weather(kind, 0), solver="dp", options=opts)
     assert free.status == "ok" and free.wait_h > 0 and min(h for _, h in settings_held_h(free.legs)) < 12.0
-    held = solve(pr, _weather(kind, 0), solver="dp", options=opts, limits=limits)
+    held = solve(pr, weather(kind, 0), solver="dp", options=opts, limits=limits)
     assert held.status == "ok", held.reason
     if kind == "storm":
         assert held.wait_h == 0.0 and held.limits == limits
@@ -313,7 +227,7 @@ def test_position_on_a_waiting_plan_is_its_wait_node():
     from routing_cases import solve
 
     opts = DpOptions(slot_h=2.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None)
-    plan = solve(_window_problem(), _weather("storm-window", 0), solver="dp", options=opts)
+    plan = solve(window_problem(), weather("storm-window", 0), solver="dp", options=opts)
     first = plan.legs[0]
     during = np.datetime64(first["etd_utc"], "s") - np.timedelta64(60, "s")
     assert position_on_plan(plan.legs, during) == (first["lat0"], first["lon0"])
@@ -323,7 +237,7 @@ def test_position_on_a_waiting_plan_is_its_wait_node():
                                                       (1.0, 0.0, -0.5)])
 def test_a_grid_that_is_no_grid_is_refused(slot_h, max_wait_h, wait_tph):
     """A negative waiting rate is refused too: the fuel-to-finish bounds assume waiting burns nothing less than 0."""
-    inst, base = _instance("static", "loose", "jit", (70, 85, 100), 0, 2)
+    inst, base = instance("static", CALM_H["loose"], (70, 85, 100), 0, n_lines=2)
     opts = DpOptions(slot_h=slot_h, max_wait_h=max_wait_h, wait_tph=wait_tph, incumbent=None)
     with pytest.raises(ValueError, match="slot_h must be > 0 h and max_wait_h, wait_tph ≥ 0"):
         SOLVERS["dp"].search(inst, base, seed=1, options=opts)

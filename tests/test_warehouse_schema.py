@@ -134,7 +134,7 @@ def test_a_new_warehouse_copied_from_the_template_is_the_one_migrated_from_scrat
     """The tests' new warehouses are copies of one migrated once (warehouse.use_templates, tests/conftest.py): the copy
     holds what every migration run on an empty file gives, in the snapshot's storage format, and a list of migrations
     that differs gets its own template rather than a copy of another's."""
-    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    monkeypatch.setattr(warehouse, "_TEMPLATE_FOLDER", None)
     warehouse.use_templates(tmp_path / "templates")
     with warehouse.connect(tmp_path / "copied.duckdb"):
         pass
@@ -161,7 +161,7 @@ def test_a_new_warehouse_copied_from_the_template_is_the_one_migrated_from_scrat
 
 
 def test_an_existing_warehouse_is_never_replaced_by_the_template(tmp_path, monkeypatch):
-    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    monkeypatch.setattr(warehouse, "_TEMPLATE_FOLDER", None)
     warehouse.use_templates(tmp_path / "templates")
     db = tmp_path / "w.duckdb"
     with warehouse.connect(db) as con:
@@ -178,7 +178,7 @@ def test_threads_creating_the_same_new_warehouse_leave_one_whole_copy(tmp_path, 
     thread's copy is written over while another thread links it."""
     from concurrent.futures import ThreadPoolExecutor
 
-    monkeypatch.setattr(warehouse, "_TEMPLATES", {})
+    monkeypatch.setattr(warehouse, "_TEMPLATE_FOLDER", None)
     warehouse.use_templates(tmp_path / "templates")
     db = tmp_path / "w.duckdb"
     with ThreadPoolExecutor(4) as pool:

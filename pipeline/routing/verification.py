@@ -5,7 +5,7 @@ is known far better: each cycle's shortest leads (its analysis and first step, `
 estimate of the weather valid then. `verification_weather` makes one field of several cycles: at every valid time
 the cycle valid then with the shortest lead (the newest one), so the voyage's past lies in analysed weather and its
 rest in the newest forecast; past the newest cycle's last step its neutral weather applies, as in planning
-(leg_kernel). `verify` sails the plan as the master executes it (its waypoints, the rpm of each leg and its waits,
+(engine/leg.py). `verify` sails the plan as the master executes it (its waypoints, the rpm of each leg and its waits,
 leaving at its departure) and its baseline (the base route at the constant rpm that arrived at the RTA in the
 forecast) through that field with the same leg kernel (ensemble.sail_plan) and gives their realised fuel and
 arrival, and the realised saving.
