@@ -29,8 +29,11 @@ strategies   each sailed on the TRUTH with the product's leg kernel (leg_kernel.
              once/replan calibrated   the same with the arrival margin of the product's forecast-error model
                       (pipeline/routing/calibration.py): aim bias + k·σ_eta(hours ahead) before the RTA (k =
                       `--margin-sigmas` 1.65, at most `--margin-max-share` 0.15 of the hours ahead; re-planned at sea
-                      each cycle, so it shrinks as the voyage nears its end), claiming the saving the model expects
-                      the plan to realise (its P50: the claim × the calibrated skill). The model is fitted first on
+                      each cycle, so it shrinks as the voyage nears its end), the model's calm or stormy part for
+                      the route's severity where the fit split it (mean Hs along the plan made for the RTA,
+                      calibration.route_hs_mean_m), claiming the saving the model expects the plan to realise (its
+                      P50: skill × the gain, less the margin's cost) against the constant speed arriving at the RTA
+                      (robust.margin_charged, as job.robust_plan). The model is fitted first on
                       TRAINING voyages of their own seed (`--train-seed`, default --seed + 1000: another truth, other
                       storms, other forecasts and voyages; `--train-voyages` 12, 8 with --quick): each re-planned every
                       cycle, every plan made (at departure and at sea) re-sailed as made on that truth with the
@@ -417,10 +420,17 @@ def plan_at(v: Voyage, ship: Ship, field: wf.WeatherField, members, rules: Rules
         plan = solve(prob, field)
         margin = 0.0
         if plan.legs and rules.margin_sigmas > 0 and rules.model is not None:
-            margin = calibration.arrival_margin_h(rules.model, v.rta_h - ship.t_h, rules.margin_sigmas,
+            # as job.robust_plan: the model's part for the route's severity, the claim against the RTA's baseline
+            model = rules.model.given(calibration.route_hs_mean_m(plan.legs))
+            margin = calibration.arrival_margin_h(model, v.rta_h - ship.t_h, rules.margin_sigmas,
                                                   rules.margin_max_share)
             if margin > 0.05:
-                plan = solve(problem(v, (ship.lat, ship.lon), ship.t_h, v.rta_h - margin), field)
+                aimed = solve(problem(v, (ship.lat, ship.lon), ship.t_h, v.rta_h - margin), field)
+                if robust.aim_reached(aimed, utc(v.rta_h)):
+                    plan = robust.margin_charged(aimed, plan)
+                    plan.status = "ok"
+                else:
+                    margin = 0.0
         elif plan.legs and rules.margin_sigmas > 0:
             margin = robust.arrival_margin_h(plan, members, VESSEL, rules.margin_sigmas)
             if margin > 0.05:
@@ -442,7 +452,8 @@ def claimed(plan, rules: Rules = Rules()) -> float:
         return c
     planned_h = float((np.datetime64(plan.legs[-1]["eta_utc"], "s") - np.datetime64(plan.depart_utc, "s"))
                       / np.timedelta64(1, "s")) / 3600.0
-    return calibration.expected_saving_pct(rules.model, c, planned_h)[1]
+    model = rules.model.given(calibration.route_hs_mean_m(plan.legs))
+    return calibration.expected_saving_pct(model, c, planned_h, plan.savings.margin_cost_pct if plan.savings else 0.0)[1]
 
 
 def sail_once(v: Voyage, fc: Forecasts, rules: Rules = Rules(), field=None) -> Outcome:
@@ -500,7 +511,8 @@ def verification_row(plan, truth_weather: ver.VerificationWeather) -> dict | Non
         return None
     return {"coverage": r.coverage, "hours_total": r.hours_total, "claimed_eta_utc": plan.legs[-1]["eta_utc"],
             "realised_eta_utc": r.plan_eta_utc, "claimed_fuel_t": plan.fuel_t, "realised_fuel_t": r.plan_fuel_t,
-            "claimed_savings_pct": claim, "realised_savings_pct": r.realised_savings_pct}
+            "claimed_savings_pct": claim, "realised_savings_pct": r.realised_savings_pct,
+            "route_hs_mean_m": calibration.route_hs_mean_m(plan.legs)}
 
 
 def calibrate(seed: int, n: int, max_lead_h: int) -> tuple[calibration.ErrorModel, list[dict]]:
@@ -534,7 +546,9 @@ def model_json(m: calibration.ErrorModel) -> dict:
     return {"n_plans": m.n_plans, "source": m.source, "eta_bias_share": round(m.eta_bias_share, 5),
             "eta_sd_h": [round(m.eta_sd_h.a, 5), round(m.eta_sd_h.b, 3)], "fuel_bias_share": round(m.fuel_bias_share, 5),
             "fuel_sd_share": [round(m.fuel_sd_share.a, 6), round(m.fuel_sd_share.b, 3)], "skill": round(m.skill, 3),
-            "saving_sd_pts": [round(m.saving_sd_pts.a, 5), round(m.saving_sd_pts.b, 3)]}
+            "saving_sd_pts": [round(m.saving_sd_pts.a, 5), round(m.saving_sd_pts.b, 3)]} | (
+        {"severity_split_m": round(m.severity_split_m, 3), "calm": model_json(m.calm), "stormy": model_json(m.stormy)}
+        if m.calm is not None and m.stormy is not None else {})
 
 
 # --------------------------------------------------------------------------------------------------------- report

@@ -7,7 +7,7 @@ degrees (wind/waves coming-from).
 import hashlib
 
 from schemas.tables.routes import (LEG_HOURS_ADDED, PLAN_VERIFICATION, ROUTE_BASELINE_TRACK_ADDED, ROUTE_ENSEMBLE_ADDED,
-                                   ROUTE_FORECAST_SPLIT_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS, ROUTES)
+                                   ROUTE_FORECAST_SPLIT_ADDED, ROUTE_MARGIN_COST_ADDED, ROUTE_LEG_PARTS, ROUTE_LEGS, ROUTES)
 from storage.migration import Migration
 
 # What a plan depends on of its voyage (vessel, ports, RTA, draft), as one digest: routing stores it with each plan
@@ -673,6 +673,9 @@ MIGRATIONS: list[Migration] = [
     Migration("routes_016_plan_verification",
               "\n".join([ROUTES.add_columns_sql(*ROUTE_BASELINE_TRACK_ADDED), PLAN_VERIFICATION.create_sql(),
                          FLEET_SAVINGS_VIEW_016])),
+    # a plan aiming before the RTA claims its saving against the baseline arriving at the RTA, and says what the
+    # margin costs
+    Migration("routes_019_margin_cost", ROUTES.add_columns_sql(*ROUTE_MARGIN_COST_ADDED)),
 ]
 
 

@@ -72,8 +72,13 @@ def write_verifications(db_path: Path, rows: list[dict]) -> int:
 
 
 def verifications(db_path: Path, run_id: str | None = None) -> pd.DataFrame:
-    """The stored rows (of run `run_id`, or all), newest run first."""
-    q = "SELECT p.* FROM plan_verification p JOIN route_runs u USING (run_id)"
+    """The stored rows (of run `run_id`, or all), newest run first, each with `route_hs_mean_m`: the forecast's
+    severity along the plan's route (the hours-weighted mean Hs its stored legs meet inside the forecast, as
+    pipeline.routing.calibration.route_hs_mean_m; empty without such legs), which the error model may be split by."""
+    q = ("SELECT p.*, (SELECT sum(l.hours * l.hs_m) FILTER (WHERE NOT coalesce(l.beyond_forecast, false)) "
+         "/ nullif(sum(l.hours) FILTER (WHERE NOT coalesce(l.beyond_forecast, false) AND l.hs_m IS NOT NULL), 0) "
+         "FROM route_legs l WHERE l.run_id = p.run_id AND l.voyage_id = p.voyage_id) AS route_hs_mean_m "
+         "FROM plan_verification p JOIN route_runs u USING (run_id)")
     params: list = []
     if run_id is not None:
         q += " WHERE p.run_id = ?"

@@ -12,6 +12,14 @@ passage, "lead"):
 - the saving: realised ≈ skill × claimed (least squares through the origin, skill within 0..1: the forecast-skill
   factor), and the spread of the rest σ_saving(h) = a · h^b, in points.
 
+The weather ahead matters as much as the hours: a passage through a forecast storm belt arrives further from its claim
+than one in the trades. Where the verified plans say so, the model is split by the forecast's severity along the
+plan's route, `route_hs_mean_m` (the hour-weighted mean significant wave height its legs meet inside the forecast it
+was made on: known at departure): below a threshold the "calm" model, at or above it the "stormy" one, each fitted as
+above on its own plans (`ErrorModel.given`). The threshold is chosen among the severities' quantiles, and the split is
+kept only when it explains the arrival errors better than the hours alone by more than its extra parameters (normal
+likelihood, AIC); a plan whose severity is unknown, or a model without a split, uses the hours-only model.
+
 Each σ(h) is fitted by its growth b on the residuals' RMS in bins of lead (a line in log–log), then a = the RMS of
 residual / h^b. With fewer than `MIN_PLANS` verified plans the stated `DEFAULT` applies,
 and then only where a lagged ensemble of two or more members shows that forecasts differ at all (`in_effect`):
@@ -26,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -48,6 +56,10 @@ class PowerLaw:
         return float(self.a * max(float(hours), MIN_HOURS) ** self.b)
 
 
+SPLIT_QUANTILES = (0.3, 0.4, 0.5, 0.6, 0.7)  # candidate severity thresholds (quantiles of the plans' severities)
+SPLIT_EXTRA_PARAMS = 4  # a split adds a threshold and a second bias, σ scale and growth: the AIC penalty
+
+
 @dataclass(frozen=True)
 class ErrorModel:
     """How far plans realise from their claims, by the hours they have ahead (their claimed passage)."""
@@ -60,12 +72,29 @@ class ErrorModel:
     saving_sd_pts: PowerLaw  # σ of realised − skill × claimed, percentage points
     n_plans: int  # verified plans it was fitted on (0: the stated default)
     source: str  # "calibrated" | "default"
+    # split by the forecast's severity along the route (route_hs_mean_m): None without a split
+    severity_split_m: float = math.nan  # mean Hs (m) at or above which `stormy` applies
+    calm: "ErrorModel | None" = None
+    stormy: "ErrorModel | None" = None
+    severity_m: float = math.nan  # the severity this model was picked for (given); NaN: not picked
+
+    def given(self, severity_m: float) -> "ErrorModel":
+        """The model for a plan whose route meets a mean Hs of `severity_m` in its forecast (route_hs_mean_m): the
+        calm or the stormy part of a split model; itself without a split or a known severity."""
+        if self.calm is None or self.stormy is None or not math.isfinite(_finite(severity_m)):
+            return self
+        part = self.stormy if severity_m >= self.severity_split_m else self.calm
+        return replace(part, severity_split_m=self.severity_split_m, severity_m=float(severity_m))
 
     def eta_bias_h(self, hours_ahead: float) -> float:
         return self.eta_bias_share * max(float(hours_ahead), 0.0)
 
     def note(self) -> str:
         """Which model, for a plan's reason."""
+        if self.source == "calibrated" and math.isfinite(self.severity_m):
+            side = "at or above" if self.severity_m >= self.severity_split_m else "below"
+            return (f"forecast error calibrated from {self.n_plans} verified plans whose route's mean Hs in the forecast "
+                    f"was {side} {self.severity_split_m:.1f} m, as this plan's {self.severity_m:.1f} m")
         if self.source == "calibrated":
             return f"forecast error calibrated from {self.n_plans} verified plans"
         return (f"forecast error from the stated default model (only {self.n_plans} verified plans, fewer than "
@@ -92,6 +121,20 @@ class VerifiedErrors:
     fuel_error_share: float  # (realised − claimed fuel) / claimed fuel
     claimed_savings_pct: float  # NaN: no baseline
     realised_savings_pct: float
+    severity_m: float = math.nan  # route_hs_mean_m of the plan as made (NaN: unknown)
+
+
+def route_hs_mean_m(legs: Iterable[dict]) -> float:
+    """The forecast's severity along a plan's route: the mean significant wave height (m) its legs meet inside the
+    forecast (legs sailed past the last valid time left out), weighted by each leg's hours; NaN with none."""
+    h = hs = 0.0
+    for g in legs:
+        if g.get("beyond_forecast") or not math.isfinite(_finite(g.get("hs_m"))) \
+                or not math.isfinite(_finite(g.get("hours"))):
+            continue
+        h += float(g["hours"])
+        hs += float(g["hours"]) * float(g["hs_m"])
+    return hs / h if h > 0 else math.nan
 
 
 def _hours(a, b) -> float:
@@ -108,7 +151,8 @@ def _finite(x) -> float:
 
 def verification_errors(rows: Iterable[dict]) -> list[VerifiedErrors]:
     """The errors of plan_verification rows (dicts with its columns) that are wholly verified (`coverage`
-    'verified'; a row without the column counts as verified) and have a claimed and a realised arrival and fuel."""
+    'verified'; a row without the column counts as verified) and have a claimed and a realised arrival and fuel; the
+    severity is the row's `route_hs_mean_m` (route_hs_mean_m of the plan's legs) when it has one."""
     out = []
     for r in rows:
         if r.get("coverage", "verified") != "verified":
@@ -124,7 +168,7 @@ def verification_errors(rows: Iterable[dict]) -> list[VerifiedErrors]:
         if not ahead > 0:
             continue
         out.append(VerifiedErrors(ahead, e, (r_fuel - c_fuel) / c_fuel, _finite(r.get("claimed_savings_pct")),
-                                  _finite(r.get("realised_savings_pct"))))
+                                  _finite(r.get("realised_savings_pct")), _finite(r.get("route_hs_mean_m"))))
     return out
 
 
@@ -149,10 +193,8 @@ def _power_law(hours: np.ndarray, resid: np.ndarray, default_b: float) -> PowerL
     return PowerLaw(a, b)
 
 
-def fit_error_model(errors: list[VerifiedErrors], min_plans: int = MIN_PLANS,
-                    default: ErrorModel = DEFAULT) -> ErrorModel:
-    """The error model of these verified plans (verification_errors); `default` (saying how many there were) with
-    fewer than `min_plans`."""
+def _fit_hours_only(errors: list[VerifiedErrors], min_plans: int, default: ErrorModel) -> ErrorModel:
+    """The error model of these verified plans by the hours ahead alone."""
     if len(errors) < min_plans:
         return ErrorModel(**{**default.__dict__, "n_plans": len(errors), "source": "default"})
     h = np.array([e.hours_ahead for e in errors])
@@ -174,6 +216,43 @@ def fit_error_model(errors: list[VerifiedErrors], min_plans: int = MIN_PLANS,
                       n_plans=len(errors), source="calibrated")
 
 
+def eta_neg_log_likelihood(model: ErrorModel, errors: list[VerifiedErrors]) -> float:
+    """−ln L of the plans' arrival errors under the model's normal (bias β·h, σ_eta(h)), the split's part per plan."""
+    nll = 0.0
+    for e in errors:
+        m = model.given(e.severity_m)
+        sd = max(m.eta_sd_h.at(e.hours_ahead), 1e-6)
+        z = (e.eta_error_h - m.eta_bias_h(e.hours_ahead)) / sd
+        nll += math.log(sd) + 0.5 * z * z + 0.5 * math.log(2.0 * math.pi)
+    return nll
+
+
+def fit_error_model(errors: list[VerifiedErrors], min_plans: int = MIN_PLANS,
+                    default: ErrorModel = DEFAULT) -> ErrorModel:
+    """The error model of these verified plans (verification_errors); `default` (saying how many there were) with
+    fewer than `min_plans`. Split by the severity along the route (route_hs_mean_m) when both sides have `min_plans`
+    plans and the split's likelihood of the arrival errors beats the hours alone by more than SPLIT_EXTRA_PARAMS
+    (AIC); the parts then fall back to the whole where they lack plans (the saving's skill)."""
+    whole = _fit_hours_only(errors, min_plans, default)
+    known = [e for e in errors if math.isfinite(e.severity_m)]
+    if whole.source != "calibrated" or len(known) < 2 * min_plans:
+        return whole
+    sev = np.array([e.severity_m for e in known])
+    best, best_nll = None, eta_neg_log_likelihood(whole, known) - SPLIT_EXTRA_PARAMS
+    for q in SPLIT_QUANTILES:
+        cut = float(np.quantile(sev, q))
+        calm = [e for e in known if e.severity_m < cut]
+        stormy = [e for e in known if e.severity_m >= cut]
+        if len(calm) < min_plans or len(stormy) < min_plans:
+            continue
+        split = replace(whole, severity_split_m=cut, calm=_fit_hours_only(calm, min_plans, whole),
+                        stormy=_fit_hours_only(stormy, min_plans, whole))
+        nll = eta_neg_log_likelihood(split, known)
+        if nll < best_nll:
+            best, best_nll = split, nll
+    return best if best is not None else whole
+
+
 def in_effect(model: ErrorModel | None, n_members: int) -> ErrorModel | None:
     """The model a plan uses: one calibrated from verified plans always; the stated default only with a lagged
     ensemble of two or more members (one forecast and no history: nothing to go by, the plan stays as made)."""
@@ -193,9 +272,14 @@ def arrival_margin_h(model: ErrorModel, hours_ahead: float, k_sigma: float, max_
     return float(min(m, max_share * hours_ahead))
 
 
-def expected_saving_pct(model: ErrorModel, claimed_pct: float, hours_ahead: float) -> tuple[float, float, float]:
-    """The saving a plan can be expected to realise: (P10, P50, P90), P50 = skill × the claim, spread σ_saving(h)."""
-    mid = model.skill * float(claimed_pct)
+def expected_saving_pct(model: ErrorModel, claimed_pct: float, hours_ahead: float,
+                        margin_cost_pct: float = 0.0) -> tuple[float, float, float]:
+    """The saving a plan can be expected to realise: (P10, P50, P90), P50 = skill × the claim, spread σ_saving(h).
+    The claim of a plan aiming before the RTA contains the margin's cost (savings.with_margin_cost): that is the fuel of
+    arriving earlier, not a forecast of the weather, so the skill discounts only the rest:
+    P50 = skill × (claim + margin cost) − margin cost."""
+    m = float(margin_cost_pct) if math.isfinite(_finite(margin_cost_pct)) else 0.0
+    mid = model.skill * (float(claimed_pct) + m) - m
     sd = model.saving_sd_pts.at(hours_ahead)
     return mid - Z90 * sd, mid, mid + Z90 * sd
 
@@ -221,17 +305,20 @@ def fuel_range_t(model: ErrorModel, fuel_t: float, hours_ahead: float) -> tuple[
 def calibrated_spread(plan, ens, model: ErrorModel):
     """The plan's spread (ensemble.Spread) from the error model instead of the members' disagreement: P(on time) of
     the plan and of its baseline, fuel and saving P10/P50/P90 around what the model expects it to realise (the saving's
-    P50 is the claim × skill: the honest claim). `ens` (the members' spread, or None) gives the member count."""
+    P50 is the claim × skill: the honest claim); a model split by severity uses its part for the plan's route
+    (route_hs_mean_m). `ens` (the members' spread, or None) gives the member count."""
     from pipeline.routing.ensemble import ON_TIME_TOL_H, Spread  # noqa: PLC0415 (compiled kernels: routing only)
 
     if not plan.legs:
         return ens
+    model = model.given(route_hs_mean_m(plan.legs))
     allowed_h = _hours(plan.depart_utc, plan.rta_utc) + ON_TIME_TOL_H
     planned_h = _hours(plan.depart_utc, plan.legs[-1]["eta_utc"])
     base = plan.baseline if plan.baseline is not None else plan
     base_h = _hours(base.depart_utc, base.legs[-1]["eta_utc"]) if base.legs else math.nan
     f10, f50, f90 = fuel_range_t(model, plan.fuel_t, planned_h)
     claimed = plan.savings.total_pct if plan.savings is not None else 0.0
-    s10, s50, s90 = expected_saving_pct(model, claimed, planned_h)
+    margin = plan.savings.margin_cost_pct if plan.savings is not None else 0.0
+    s10, s50, s90 = expected_saving_pct(model, claimed, planned_h, margin)
     return Spread(ens.n_members if ens is not None else 0, p_on_time(model, planned_h, allowed_h),
                   p_on_time(model, base_h, allowed_h), f10, f50, f90, s10, s50, s90)

@@ -101,13 +101,17 @@ def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for
     says what it aims at; kept as it was when the earlier arrival cannot be met), then replaced by its constant-speed
     baseline unless it beats it in `min_win_share` of the members. σ is that of the arrival error by the hours ahead
     (calibration.py: `job.error_model` where calibration.in_effect allows it, saying which model in the reason), else
-    that of the plan's arrival across the members. With fewer than two members and no error model calibrated from
-    verified plans, or the options at 0, the plan is returned as it is."""
+    that of the plan's arrival across the members. A plan aiming before the RTA claims its saving against the
+    constant speed arriving at the RTA (robust.margin_charged: the margin's cost in `margin_cost_pct`). With fewer
+    than two members and no error model calibrated from verified plans, or the options at 0, the plan is returned as
+    it is."""
     o = job.options
     model = calibration.in_effect(job.error_model, len(members))
     if not plan.legs or not (o.arrival_margin_sigmas > 0 or o.min_win_share > 0) or (len(members) < 2 and model is None):
         return plan, weather
     vessel = routing_problem(job).kernel_vessel()
+    if model is not None:  # split by the forecast's severity: the part for this route (the plan made for the RTA)
+        model = model.given(calibration.route_hs_mean_m(plan.legs))
     rta = np.datetime64(plan.rta_utc, "s")
     ahead_h = float((rta - np.datetime64(plan.depart_utc, "s")) / np.timedelta64(1, "s")) / 3600.0
     if model is not None:
@@ -119,23 +123,30 @@ def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for
     else:
         margin_h = robust.arrival_margin_h(plan, members, vessel, o.arrival_margin_sigmas, o.arrival_margin_max_share)
         why = f"{o.arrival_margin_sigmas:g} × the spread of its arrival across {len(members)} forecasts"
+    at_rta = None  # the plan made for the RTA, whose baseline the claim is made against when the plan aims earlier
     if margin_h >= 1.0 / 60.0:
         aim = rta - np.timedelta64(int(round(margin_h * 3600.0)), "s")
         aimed, aimed_weather = plan_voyage(replace(job, voyage={**job.voyage, "rta_utc": aim}), weather_for)
         note = f"aims {margin_h:.1f} h before the RTA ({why})"
-        if aimed.legs and aimed.status == "ok":
-            for p in (aimed, aimed.baseline):
+        if robust.aim_reached(aimed, rta):
+            if aimed.status != "ok":  # the earliest it can make: still before the RTA
+                early_h = float((rta - np.datetime64(aimed.legs[-1]["eta_utc"], "s")) / np.timedelta64(1, "s")) / 3600
+                note += f"; can arrive only {early_h:.1f} h before it"
+            for p in (aimed, aimed.baseline):  # on time means by the RTA, in the members too
                 if p is not None:
                     p.rta_utc = rta
+            aimed.status = "ok"
             aimed.reason = note if aimed.reason is None else f"{aimed.reason}; {note}"
-            plan, weather = aimed, aimed_weather
+            at_rta, plan, weather = plan, aimed, aimed_weather
         else:
             note = f"could not aim {margin_h:.1f} h before the RTA ({aimed.status}): planned for the RTA itself"
             plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
-    if o.min_win_share > 0 and len(members) >= 2:
+    if o.min_win_share > 0 and len(members) >= 2:  # against the constant speed arriving when the plan aims
         wins = robust.wins_across(plan, members, vessel)
         if not wins.preferred(o.min_win_share) and plan.baseline is not None and plan.baseline.legs:
             plan = robust.baseline_kept(plan, wins, o.min_win_share)
+    if at_rta is not None:
+        plan = robust.margin_charged(plan, at_rta)
     return plan, weather
 
 
@@ -149,6 +160,7 @@ def plan_spread(job: RouteJob, plan: Plan, members: list[wf.WeatherField]):
     model = calibration.in_effect(job.error_model, len(members))
     if model is None or not plan.legs:
         return ens
+    model = model.given(calibration.route_hs_mean_m(plan.legs))
     s = calibration.calibrated_spread(plan, ens, model)
     note = (f"expected to realise a saving of {s.savings_p50_pct:.1f} % (P10–P90 {s.savings_p10_pct:.1f} to "
             f"{s.savings_p90_pct:.1f} %; {model.note()})")

@@ -20,7 +20,8 @@ if TYPE_CHECKING:
 STATUSES = ("ok", "late", "infeasible", "failed")
 SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_baseline_hours", "profile_fuel_t",
                    "savings_total_pct", "savings_speed_profile_pct", "savings_route_pct", "fuel_beyond_forecast_t",
-                   "honest_baseline_fuel_beyond_forecast_t", "savings_forecast_pct", "savings_beyond_forecast_pct")
+                   "honest_baseline_fuel_beyond_forecast_t", "savings_forecast_pct", "savings_beyond_forecast_pct",
+                   "margin_cost_pct")
 LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes", "unlimited_fuel_t", "limits_fuel_t")
 BASELINE_TRACK_COLUMNS = ("baseline_lat_deg", "baseline_lon_deg", "baseline_leg_rpm")
 ENSEMBLE_COLUMNS = ("ensemble_members", "p_on_time", "baseline_p_on_time", "fuel_p10_t", "fuel_p50_t", "fuel_p90_t",
@@ -186,7 +187,8 @@ class Plan:
                 "savings_total_pct": s.total_pct, "savings_speed_profile_pct": s.speed_profile_pct,
                 "savings_route_pct": s.route_pct, "fuel_beyond_forecast_t": known(s.plan_fuel_beyond_t),
                 "honest_baseline_fuel_beyond_forecast_t": known(s.baseline_fuel_beyond_t),
-                "savings_forecast_pct": known(s.forecast_pct), "savings_beyond_forecast_pct": known(s.beyond_forecast_pct)}
+                "savings_forecast_pct": known(s.forecast_pct), "savings_beyond_forecast_pct": known(s.beyond_forecast_pct),
+                "margin_cost_pct": known(s.margin_cost_pct)}
 
     def _limits_row(self) -> dict:
         lim = self.limits

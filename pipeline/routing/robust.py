@@ -29,6 +29,7 @@ import numpy as np
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.ensemble import ON_TIME_TOL_H, sail_plan, spread
 from pipeline.routing.plan import Plan
+from pipeline.routing.savings import with_margin_cost
 from pipeline.routing.weather_field import WeatherField
 
 MIN_GAIN_SHARE = 1e-3  # a re-plan gaining less than this share of the current plan's fuel is noise: never taken
@@ -56,6 +57,35 @@ def arrival_margin_h(plan: Plan, members: list[WeatherField], vessel: lk.Vessel,
         return 0.0
     passage_h = _hours_between(plan.depart_utc, plan.rta_utc)
     return float(min(k_sigma * np.std(hours, ddof=1), max_share * passage_h))
+
+
+def aim_reached(aimed: Plan, rta_utc) -> bool:
+    """Whether a plan made for an aim before the RTA (an arrival margin) is the one to sail: it has legs and meets
+    that aim, or, late for it, still arrives by the RTA (the earliest the ship can make it, still earlier than a plan
+    for the RTA)."""
+    if not aimed.legs:
+        return False
+    return aimed.status == "ok" or np.datetime64(aimed.legs[-1]["eta_utc"], "s") <= np.datetime64(rta_utc, "s")
+
+
+def margin_charged(aimed: Plan, at_rta: Plan) -> Plan:
+    """The plan made to arrive before the RTA (`aimed`, by an arrival margin) as the plan for the voyage's RTA: it keeps
+    the RTA, its constant-speed baseline becomes the one arriving at the RTA itself (`at_rta.baseline`, the voyage a
+    master aiming at the RTA sails; verification re-sails that one) and its saving is claimed against that baseline,
+    so it contains what the margin costs, which is its own figure (savings.with_margin_cost, `margin_cost_pct`)."""
+    rta = np.datetime64(at_rta.rta_utc, "s")
+    aimed.rta_utc = rta
+    if aimed.savings is not None and at_rta.savings is not None:
+        aimed.savings = with_margin_cost(aimed.savings, at_rta.savings)
+        s = aimed.savings
+        note = (f"saving claimed against the constant speed arriving at the RTA: {s.total_pct:.2f} %, after the "
+                f"margin's cost of {s.margin_cost_pct:.2f} %")
+        aimed.reason = note if aimed.reason is None else f"{aimed.reason}; {note}"
+    if at_rta.baseline is not None and at_rta.baseline.legs:
+        aimed.baseline = at_rta.baseline
+    elif aimed.baseline is not None:
+        aimed.baseline.rta_utc = rta
+    return aimed
 
 
 @dataclass(frozen=True)
@@ -230,6 +260,6 @@ def current_plan_kept(new_plan: Plan, ahead: list[dict], weather: WeatherField, 
         f, f_beyond = kept.fuel_t, kept.fuel_beyond_forecast_t
         total = 100.0 * (s.baseline_fuel_t - f) / s.baseline_fuel_t
         beyond = 100.0 * (s.baseline_fuel_beyond_t - f_beyond) / s.baseline_fuel_t
-        kept.savings = replace(s, plan_fuel_t=f, route_pct=total - s.speed_profile_pct, total_pct=total,
+        kept.savings = replace(s, plan_fuel_t=f, route_pct=total - s.speed_profile_pct + s.margin_cost_pct, total_pct=total,
                                plan_fuel_beyond_t=f_beyond, forecast_pct=total - beyond, beyond_forecast_pct=beyond)
     return kept

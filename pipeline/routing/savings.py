@@ -22,6 +22,16 @@ burns after the weather's last valid time, where they sail in the neutral weathe
     total          = forecast + beyond
 
 Both voyages leave at the same time, so the forecast's last valid time cuts both at the same instant.
+
+A plan that aims before the RTA (an arrival margin, job.robust_plan) is compared with the baseline that arrives at
+the RTA itself, the voyage a master aiming at the RTA sails (`with_margin_cost`), not with the constant-speed voyage
+arriving as early as the plan: F_b is then the RTA baseline's fuel, F_b'' the early baseline's, F_p'' the best engine
+plan on the base route for the early arrival, and
+
+    speed profile  (F_b'' − F_p'') / F_b
+    route          (F_p'' − F) / F_b
+    margin cost    (F_b'' − F_b) / F_b     the fuel of arriving early at constant speed: what the margin costs
+    total          (F_b − F) / F_b         = speed profile + route − margin cost
 """
 
 from __future__ import annotations
@@ -57,6 +67,20 @@ class SavingsSplit:
     plan_fuel_beyond_t: float = math.nan  # the plan's
     forecast_pct: float = math.nan  # the part of total_pct burnt within the forecast's valid times
     beyond_forecast_pct: float = math.nan  # the part burnt past them (total_pct − forecast_pct)
+    margin_cost_pct: float = 0.0  # what aiming before the RTA costs (with_margin_cost); total = profile + route − this
+
+
+def with_margin_cost(aimed: SavingsSplit, at_rta: SavingsSplit) -> SavingsSplit:
+    """The split of a plan made to arrive before the RTA (`aimed`: against the constant-speed voyage arriving as early)
+    against the baseline that arrives at the RTA itself (`at_rta`: the split of the plan made for the RTA, in the same
+    cycle): the saving then contains the margin's cost, and that cost is its own figure (`margin_cost_pct`)."""
+    f_b, f_early, f = at_rta.baseline_fuel_t, aimed.baseline_fuel_t, aimed.plan_fuel_t
+    total = 100.0 * (f_b - f) / f_b
+    beyond = 100.0 * (at_rta.baseline_fuel_beyond_t - aimed.plan_fuel_beyond_t) / f_b
+    return SavingsSplit(at_rta.baseline_rpm, f_b, at_rta.baseline_hours, aimed.profile_fuel_t, f,
+                        100.0 * (f_early - aimed.profile_fuel_t) / f_b, 100.0 * (aimed.profile_fuel_t - f) / f_b, total,
+                        at_rta.baseline_fuel_beyond_t, aimed.plan_fuel_beyond_t, total - beyond, beyond,
+                        100.0 * (f_early - f_b) / f_b)
 
 
 def held_plan(inst: Instance, nodes: np.ndarray, limits: EngineLimits, continuous: bool = True,

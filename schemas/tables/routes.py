@@ -104,6 +104,11 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('savings_beyond_forecast_pct', 'DOUBLE', '%',
            "part of savings_total_pct burnt after the forecast's last valid time (an assumption, not a forecast), "
            'percent; savings_forecast_pct + savings_beyond_forecast_pct = savings_total_pct'),
+    Column('margin_cost_pct', 'DOUBLE', '%',
+           'what aiming before the RTA (an arrival margin) costs: the constant-speed voyage arriving as early as the plan '
+           'aims burns this much more than the one arriving at the RTA, percent of the latter\'s fuel; '
+           'savings_total_pct (against the RTA baseline) = savings_speed_profile_pct + savings_route_pct − this; '
+           '0: the plan aims at the RTA'),
     Column('ensemble_members', 'INTEGER', None,
            'forecast cycles the plan and its baseline were sailed through (the one routed on and the complete ones '
            'before it, valid at the same times); empty: not computed'),
@@ -169,6 +174,9 @@ ROUTE_FORECAST_SPLIT_ADDED = ('fuel_beyond_forecast_t', 'honest_baseline_fuel_be
 # the plan's spread across a lagged ensemble of cycles (pipeline/routing/ensemble.py)
 ROUTE_ENSEMBLE_ADDED = ('ensemble_members', 'p_on_time', 'baseline_p_on_time', 'fuel_p10_t', 'fuel_p50_t', 'fuel_p90_t',
                         'savings_p10_pct', 'savings_p50_pct', 'savings_p90_pct')
+
+# what the plan's arrival margin costs, the saving being against the baseline arriving at the RTA itself
+ROUTE_MARGIN_COST_ADDED = ('margin_cost_pct',)
 
 # the baseline's track, so plan and baseline can be sailed again in the weather that came (plan_verification)
 ROUTE_BASELINE_TRACK_ADDED = ('baseline_lat_deg', 'baseline_lon_deg', 'baseline_leg_rpm')
