@@ -17,7 +17,7 @@ voyages      ≥ 24 (`--voyages`; 8 with `--quick`), seeded: half along the stor
              30 and 46 N), half across it (south-west to north-east and back), 1,600–4,000 NM great circle, leaving at a
              cycle time between day 1 and day 10; tight RTAs (the great circle at 12 kn) and loose ones (10.5 kn)
              alternate. Vessel: reference_model(14 kn at 100 rpm, 28 t/h), rpm 70/85/100, draft 10 m.
-strategies   each sailed on the TRUTH with the product's leg kernel (leg_kernel.sail_leg, max step 1 h):
+strategies   each sailed on the TRUTH with the product's leg kernel (engine/leg.py sail_leg, max step 1 h):
              master   the great circle at one constant rpm, reset every 12 h (at each cycle) to the rpm that arrives at
                       the RTA sailing the rest of the great circle in the newest forecast (bisection);
              once     the product's `solve()` (default solver and options, as `jitroute route`) on the cycle at

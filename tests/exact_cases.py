@@ -10,7 +10,7 @@ import functools
 import numba
 import numpy as np
 
-from pipeline.routing import leg_kernel as lk
+from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.savings import solver_instance
