@@ -99,3 +99,26 @@ def test_wrts_route_file_comes_back_to_jitroutes_longitudes_with_its_own_fuel(wi
     np.testing.assert_allclose(lat, [30.5, 31.0, 31.5])
     np.testing.assert_allclose(lon, [177.0, 179.0, -176.0])
     assert fuel_t == pytest.approx(0.8 * 3 + 0.6 * 3)
+
+
+@pytest.mark.slow  # builds a suite instance and loads the DP kernels: ~5 s on a busy machine
+def test_the_dps_own_route_handed_over_as_waypoints_prices_at_the_stored_optimum(wio):
+    """The evaluator WRT's route goes through: the suite's stored optimum of a small instance, its route given as
+    waypoints (a graph of one node per line), gets the best setting per leg back at the stored cost."""
+    from pipeline.routing.engine_limits import best_engine_plan
+    from pipeline.routing.savings import solver_instance
+    from pipeline.synthetic import routing_suite as suite
+
+    spec = suite.BY_NAME["short-coastal"]
+    problem, space, weather = suite.build(spec)
+    rec = suite.read_optima(BENCH / "optima.json")[spec.name]
+    nodes = np.asarray(rec["nodes"], np.int64)
+    lines = np.arange(nodes.size)
+    lat, lon = space.lat[lines, nodes], space.lon[lines, nodes]
+    inst, _ = solver_instance(problem, space, weather)
+    _, cost, _ = best_engine_plan(wio.route_instance(inst, lat, lon), np.zeros(nodes.size, np.int64))
+    assert cost == pytest.approx(suite.plan_cost(problem, space, weather, nodes, rec["rpm_idx"]), rel=1e-9)
+    assert cost == pytest.approx(rec["cost"], rel=1e-9)
+    assert wio.legs_off_clearance(inst, lat, lon) == 0
+    # a route straight over Honshu's coast breaks jitroute's clearance where the graph never would
+    assert wio.legs_off_clearance(inst, np.array([34.8, 35.6, 33.3]), np.array([139.9, 137.5, 135.6])) >= 1
