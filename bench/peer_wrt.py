@@ -209,6 +209,9 @@ def main() -> int:
               f"cost {priced['cost']:.3f} (fuel {priced['fuel_t']:.2f} t, {priced['hours']:.1f} h), gap {gap:.2f} %; "
               f"{priced['legs_off_clearance']} legs off jitroute's land clearance; CPU {wrt['cpu_s']:.2f} s "
               f"(wall {wrt['wall_s']:.2f} s{', reused' if wrt.get('reused') else ''}); WRT's own fuel {wrt_fuel_t:.2f} t (ignored)")
+        if priced["legs_off_clearance"]:
+            print("   not like for like: jitroute's graph keeps every leg clear of land by its clearance, WRT's route "
+                  "does not (gap marked * below)")
         report.append(row)
     print(f"\n{'instance':<16} {'NM':>6} {'DP optimum':>11} {'BFOA gap % med':>15} {'BFOA CPU s':>11} "
           f"{'WRT cost':>10} {'WRT gap %':>10} {'WRT CPU s':>10}")
@@ -216,8 +219,8 @@ def main() -> int:
         g = np.median(row["bfoa"]["gaps_pct"])
         c = np.median(row["bfoa"]["cpu_s"])
         w = row["wrt"]
-        wc, wg, wcpu = ((f"{w['priced']['cost']:.3f}", f"{w['gap_pct']:.2f}", f"{w['cpu_s']:.2f}") if "priced" in w
-                        else ("failed", "-", "-"))
+        wc, wg, wcpu = ((f"{w['priced']['cost']:.3f}", f"{w['gap_pct']:.2f}" + ("*" if w["priced"]["legs_off_clearance"]
+                         else ""), f"{w['cpu_s']:.2f}") if "priced" in w else ("failed", "-", "-"))
         print(f"{row['name']:<16} {row['distance_nm']:>6,.0f} {row['dp']['cost']:>11.3f} {g:>15.2f} {c:>11.2f} "
               f"{wc:>10} {wg:>10} {wcpu:>10}")
     print(f"load at the end {os.getloadavg()[0]:.1f}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
