@@ -33,7 +33,7 @@ import xarray as xr
 
 from pipeline.routing.geodesy import KN_PER_MS
 from pipeline.routing.land import land_grid
-from pipeline.routing.search_space import line_edges_clear
+from pipeline.routing.clearance import line_edges_clear
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, WeatherField
 
 WIND_HEIGHT_M = 10.0
