@@ -80,3 +80,26 @@ def test_a_one_way_canal_is_sailed_only_its_way_and_a_gate_closes_the_way_round(
     exact = 2.0 * math.sqrt(to_end ** 2 - r ** 2) + r * arc
     assert exact == pytest.approx(75.31, abs=0.01)
     assert exact * (1.0 - 1e-3) <= west.dist_nm <= exact * 1.003
+
+
+def test_the_bench_judges_a_pair_against_the_exact_route_only_where_searoute_is_more_than_3_percent_above_it():
+    import json
+    import subprocess
+
+    def row(pair, product, ref):
+        return dict(pair=pair, product_nm=product, searoute_nm=ref, diff=product / ref - 1.0)
+
+    rows = [row("searoute detours", 1000.0, 1060.0),  # -5.7 % plain; exact 990: product +1.0 %, searoute +7.1 %
+            row("product detours too", 1050.0, 1100.0),  # exact 1000: product +5 % of it
+            row("searoute near the exact", 960.0, 1020.0),  # exact 1000: searoute +2 %, judged plainly: -5.9 %
+            row("not computed", 1000.0, 1010.0)]
+    exact = {"searoute detours": 990.0, "product detours too": 1000.0, "searoute near the exact": 1000.0}
+    root = Path(__file__).resolve().parents[1]
+    code = ("import json, sys; sys.path.insert(0, 'bench'); from sea_routes import by_the_exact_route; "
+            "print(json.dumps({x['pair']: x['rule3'] for x in by_the_exact_route(*json.loads(sys.argv[1]))}))")
+    r = subprocess.run([sys.executable, "-c", code, json.dumps([rows, exact])], cwd=root, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout.strip().splitlines()[-1]) == {
+        "searoute detours": "exact within", "product detours too": "exact off", "searoute near the exact": "off",
+        "not computed": "within"}
