@@ -76,6 +76,7 @@ class Route:
     touches_box: bool
     fairways: list[str] = field(default_factory=list)
     n_nodes: int = 0
+    fairway_runs: list[tuple[str, int, int]] = field(default_factory=list)  # (fairway, first, last waypoint) sailed
 
 
 def haversine_nm(lat0, lon0, lat1, lon1):
@@ -210,8 +211,8 @@ def _cut_corners(pts, clear):
             mid = hi if first else 0.5 * (lo + hi)
             p1 = gc_points(v[0], v[1], a[0], a[1], mid / la_)
             p2 = gc_points(v[0], v[1], b[0], b[1], mid / lb_)
-            q1 = (float(p1[0]), float(a[1] + (float(p1[1]) - a[1] + 180.0) % 360.0 - 180.0), False, ())
-            q2 = (float(p2[0]), float(b[1] + (float(p2[1]) - b[1] + 180.0) % 360.0 - 180.0), False, ())
+            q1 = (float(p1[0]), float(a[1] + (float(p1[1]) - a[1] + 180.0) % 360.0 - 180.0), False, (), None)
+            q2 = (float(p2[0]), float(b[1] + (float(p2[1]) - b[1] + 180.0) % 360.0 - 180.0), False, (), None)
             if clear(q1, q2):
                 lo, best = mid, (q1, q2)
                 if first:
@@ -355,7 +356,9 @@ def shortest_route(problem: Problem, dist_nm, box: tuple[float, float, float, fl
                 used.append(problem.fairways[q].name)
     fixed[0] = fixed[-1] = True
 
-    pts = [(float(plat[k]), float(plon[k]), bool(fixed[k]), end_discs(path[k]) if path[k] in ends else ())
+    sailed = [problem.fairways[xfw[n - n_cells]].name if fixed[k] and n >= n_cells + 2 else None
+              for k, n in enumerate(path)]
+    pts = [(float(plat[k]), float(plon[k]), bool(fixed[k]), end_discs(path[k]) if path[k] in ends else (), sailed[k])
            for k in range(len(path))]
 
     def clear(a, b) -> bool:
@@ -368,11 +371,17 @@ def shortest_route(problem: Problem, dist_nm, box: tuple[float, float, float, fl
         if gain < TIGHTEN_STOP_NM:
             break
     plat, plon = np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+    runs = []  # (fairway, first, last waypoint) of each fairway sailed
+    for k, p in enumerate(pts):
+        if p[4] is not None and k > 0 and pts[k - 1][4] == p[4] and runs and runs[-1][2] == k - 1:
+            runs[-1] = (p[4], runs[-1][1], k)
+        elif p[4] is not None:
+            runs.append((p[4], k, k))
     keep = np.arange(len(pts))
     lat, lon = plat[keep], plon[keep]
     length = float(np.sum(haversine_nm(lat[:-1], lon[:-1], lat[1:], lon[1:])))
     return Route(lat=lat, lon=lon, dist_nm=length, grid_nm=float(dist[ARR]), touches_box=touches, fairways=used,
-                 n_nodes=int(ok.sum()))
+                 n_nodes=int(ok.sum()), fairway_runs=[r for r in runs if r[2] > r[1]])
 
 
 __all__ = ["Fairway", "Problem", "Route", "arcs_cross", "haversine_nm", "shortest_route"]

@@ -68,6 +68,7 @@ def test_a_one_way_canal_is_sailed_only_its_way_and_a_gate_closes_the_way_round(
     east = ssp.shortest_route(ssp.Problem(dep=(0.0, -0.3), arr=(0.0, 0.3), clearance_nm=2.0, approach_nm=1.0,
                                           fairways=(canal,), gates=(gate,)), _wall, box, 0.02)
     assert east.fairways == ["canal"]
+    assert east.fairway_runs == [("canal", 1, 2)] and east.lat.size == 4  # port, the canal's two ends, port
     assert east.dist_nm == pytest.approx(36.0, abs=0.1)  # 6 NM to the canal, 24 through, 6 from it
     west = ssp.shortest_route(ssp.Problem(dep=(0.0, 0.3), arr=(0.0, -0.3), clearance_nm=2.0, approach_nm=1.0,
                                           fairways=(canal,), gates=(gate,)), _wall, box, 0.02)
