@@ -282,3 +282,28 @@ def test_the_bench_s_stated_rules_correct_the_reference_only_where_it_is_provabl
     assert got == {"ends": ["within", -0.0049], "ends against": ["off", -0.0437], "bound": ["gc bound", -0.04],
                    "bound, not clear": ["off", -0.04], "off the circle": ["off", -0.05],
                    "published": ["off", 0.0648]}
+
+
+@pytest.mark.parametrize("dep, arr, area", [((22.1, 114.25), (35.95, 120.45), "jiangsu_shoals"),  # Hong Kong–Qingdao
+                                            (LISBON, ROTTERDAM, "berlengas"), (ROTTERDAM, LISBON, "berlengas")])
+def test_routes_keep_out_of_the_areas_to_avoid(dep, arr, area):
+    from matplotlib.path import Path
+
+    from pipeline.routing.passages import AREAS_TO_AVOID
+
+    outline = next(a for a in AREAS_TO_AVOID if a.name == area).outline
+    r = sea_route(dep, arr)
+    check(r)
+    assert_clear_outside_fairways(r, dep, arr)
+    lat, lon = [], []
+    for k in range(r.lat.size - 1):  # every 0.5 NM along the route
+        n = int(geo.gc_distance_nm(r.lat[k], r.lon[k], r.lat[k + 1], r.lon[k + 1]) / 0.5) + 2
+        la, lo = gc_points(r.lat[k], r.lon[k], r.lat[k + 1], r.lon[k + 1], np.linspace(0.0, 1.0, n))
+        lat.append(la)
+        lon.append(lo)
+    inside = Path([(lo, la) for la, lo in outline]).contains_points(np.column_stack([np.concatenate(lon),
+                                                                                     np.concatenate(lat)]))
+    assert not inside.any()
+    # and the route passes the area close by: it is what moved it (to seaward of the shoals, outside the islands)
+    near = min(geo.gc_distance_nm(la, lo, r.lat[k], r.lon[k]) for la, lo in outline for k in range(r.lat.size))
+    assert near < 30.0

@@ -9,7 +9,8 @@ How:
    edge a great-circle leg checked at ≤ 0.1 NM. The passages' fairways are chains of extra nodes whose two ends join
    the cells and the other passages' vertices within `JOIN_NM` by clear legs (at sea only within
    FAIRWAY_END_APPROACH_NM of the end, as for a port); grid edges across a passage's gate are removed, so a strait with a gate
-   is sailed on its fairway only.
+   is sailed on its fairway only. The areas to avoid (passages.AREAS_TO_AVOID) are closed the same way: their
+   outlines' sides are gates.
 2. The ports join the graph (cells and fairway vertices within `JOIN_NM`, widening to `JOIN_MAX_NM`) by legs clear
    under the voyage's rule; a direct leg between them counts too.
 3. A* from departure to arrival (numba, an indexed binary heap; the great circle to the arrival as heuristic, so the
@@ -33,7 +34,7 @@ import numpy as np
 from pipeline.routing import geodesy as geo
 from pipeline.routing.clearance import DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, clearance, leg_is_clear_nb
 from pipeline.routing.land import distance_to_land_nm, is_sea, land_grid
-from pipeline.routing.passages import PASSAGES, Passage, check_avoid
+from pipeline.routing.passages import PASSAGES, Passage, area_gates, check_avoid
 from pipeline.routing.sea_graph import (LAT_LIMITS_DEG, MOVES, N_COLS, N_ROWS, OPPOSITE, RES_DEG, cell_lat, cell_lon,
                                         sea_graph)
 from pipeline.routing.sea_route import NoSeaRoute, PassageTransit, SeaRoute
@@ -254,7 +255,8 @@ def _escape(rule, layer: _Layer, lat: float, lon: float) -> tuple[np.ndarray, np
 def _build_layer(clearance_nm: float) -> _Layer:
     base = sea_graph(clearance_nm)
     edges = base.edges.copy()
-    gates = np.array([(a[0], a[1], b[0], b[1]) for p in PASSAGES for a, b in p.gates], np.float64).reshape(-1, 4)
+    sides = [g for p in PASSAGES for g in p.gates] + list(area_gates())
+    gates = np.array([(a[0], a[1], b[0], b[1]) for a, b in sides], np.float64).reshape(-1, 4)
     _remove_gate_edges(edges, gates, MOVES, OPPOSITE)
     xlat, xlon, vpass = [], [], []
     adj: dict[int, list[tuple[int, float, int]]] = {}

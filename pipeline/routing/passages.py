@@ -34,6 +34,9 @@ The lanes' positions are approximate, taken from the schemes' charts as adopted 
 Casquets, Off Finisterre 2004, Off Cabo de São Vicente 2005) and stated in round figures: the centre of each lane within about
 3 NM, the distance off the headland (what sets the route's length) within about 2 NM. They are not for navigation.
 The Strait of Dover's scheme is the `dover` strait's fairway and gate above.
+
+Areas to avoid (`AREAS_TO_AVOID`): water the mask holds as sea that a route keeps out of, each an outline whose sides
+are gates, with its source named: the Jiangsu shoals (the mask has no depths) and the Berlengas. Not avoidable.
 """
 
 from __future__ import annotations
@@ -233,6 +236,47 @@ PASSAGES: tuple[Passage, ...] = (
 )
 
 
+@dataclass(frozen=True)
+class AreaToAvoid:
+    """Water a route keeps out of although the land mask holds it as sea (shoals, routeing measures): its outline's
+    sides are gates (no leg crosses them), so a route passes outside. The outline may run over land to close it."""
+
+    name: str
+    outline: tuple[tuple[float, float], ...]  # (lat, lon) degrees, a closed polygon (the last vertex joins the first)
+    title: str
+    source: str
+
+    @property
+    def gates(self) -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
+        return _chain(*self.outline, self.outline[0])
+
+
+# Both outlines are approximate, drawn in round figures round what their sources describe; not for navigation.
+AREAS_TO_AVOID: tuple[AreaToAvoid, ...] = (
+    AreaToAvoid("jiangsu_shoals", (
+        (31.7, 121.7), (31.95, 122.45), (32.6, 122.55), (33.5, 122.2), (34.3, 121.2), (34.6, 120.45), (34.3, 119.9),
+        (32.0, 120.8),
+    ), title="Jiangsu shoals (the Subei radial sand ridges off the Jiangsu coast, from the Yangtze's north bank to "
+             "Haizhou Bay)",
+        source="the radial sand ridge field of the southern Yellow Sea, fanning out about 100 km from Jianggang "
+               "(32.7 N 120.9 E) with a few metres over the ridges at low water: deep-draught traffic between the "
+               "Yangtze and Qingdao keeps east of it; the outline is its rough extent (32-35 N, 120.5-122.5 E) "
+               "closed on the coast, not charted limits"),
+    AreaToAvoid("berlengas", (
+        (39.36, -9.36), (39.3, -9.48), (39.35, -9.66), (39.52, -9.68), (39.56, -9.5), (39.47, -9.16),
+    ), title="Berlengas (the Berlengas and Farilhões islands and the channel inside them off Cabo Carvoeiro)",
+        source="the routeing measures adopted by IMO off the Berlengas (a traffic separation scheme with an area to "
+               "be avoided round the islands, which keeps through traffic outside them); drawn round the islands "
+               "(Berlenga Grande 39.41 N 9.51 W, Farilhões 39.47 N 9.54 W) about 5 NM to seaward and closed on the "
+               "coast at Peniche, not from the adopted coordinates"),
+)
+
+
+def area_gates() -> tuple[tuple[tuple[float, float], tuple[float, float]], ...]:
+    """Every side of every area to avoid, as gates."""
+    return tuple(g for a in AREAS_TO_AVOID for g in a.gates)
+
+
 def check_avoid(names) -> frozenset[str]:
     """`names` as a set of passages a route may keep out of (lower case); ValueError for a name that is no passage,
     or that of a traffic separation scheme's lane (compulsory: a route sails its lane or passes outside the scheme)."""
@@ -255,4 +299,4 @@ def passage(name: str) -> Passage:
     raise KeyError(f"no passage {name!r}; known: {', '.join(p.name for p in PASSAGES)}")
 
 
-__all__ = ["PASSAGES", "Passage", "check_avoid", "passage"]
+__all__ = ["AREAS_TO_AVOID", "PASSAGES", "AreaToAvoid", "Passage", "area_gates", "check_avoid", "passage"]
