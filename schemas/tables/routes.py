@@ -104,11 +104,6 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('savings_beyond_forecast_pct', 'DOUBLE', '%',
            "part of savings_total_pct burnt after the forecast's last valid time (an assumption, not a forecast), "
            'percent; savings_forecast_pct + savings_beyond_forecast_pct = savings_total_pct'),
-    Column('margin_cost_pct', 'DOUBLE', '%',
-           'what aiming before the RTA (an arrival margin) costs: the constant-speed voyage arriving as early as the plan '
-           'aims burns this much more than the one arriving at the RTA, percent of the latter\'s fuel; '
-           'savings_total_pct (against the RTA baseline) = savings_speed_profile_pct + savings_route_pct − this; '
-           '0: the plan aims at the RTA'),
     Column('ensemble_members', 'INTEGER', None,
            'forecast cycles the plan and its baseline were sailed through (the one routed on and the complete ones '
            'before it, valid at the same times); empty: not computed'),
@@ -127,6 +122,11 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('baseline_lon_deg', 'DOUBLE[]', 'degree', "longitudes of the baseline's waypoints, degrees east"),
     Column('baseline_leg_rpm', 'DOUBLE[]', 'rpm',
            "engine speed of each leg of the baseline (one constant rpm), so it can be sailed again (plan_verification)"),
+    Column('margin_cost_pct', 'DOUBLE', '%',
+           'what aiming before the RTA (an arrival margin) costs: the constant-speed voyage arriving as early as the plan '
+           'aims burns this much more than the one arriving at the RTA, percent of the latter\'s fuel; '
+           'savings_total_pct (against the RTA baseline) = savings_speed_profile_pct + savings_route_pct − this; '
+           '0: the plan aims at the RTA'),
 ), primary_key=('run_id', 'voyage_id'))
 
 ROUTE_LEGS = Table('route_legs', 'legs of each route plan, with the weather met (speeds in knots, times UTC)', (
