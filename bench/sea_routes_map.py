@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from sea_routes import PAIRS, PORTS, key  # noqa: E402
+from sea_route_pairs import PAIRS, PORTS, key  # noqa: E402
 
 
 def draw(pair: str) -> Path:

@@ -37,6 +37,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from shortest_sea_path import Fairway, Problem, haversine_nm, shortest_route  # noqa: E402
 
+from sea_route_pairs import CLEARANCE_NM, PAIRS, PORTS, key  # noqa: E402
+
 from pipeline.routing.clearance import DEFAULT_APPROACH_NM  # noqa: E402
 from pipeline.routing.global_routes import FAIRWAY_END_APPROACH_NM, JOIN_NM  # noqa: E402
 from pipeline.routing.land import distance_to_land_nm  # noqa: E402
@@ -52,6 +54,8 @@ REFERENCE_PAIRS = (
     "Port Klang - Hong Kong", "Melbourne - Auckland", "Manila - Guam", "Singapore - Manila", "Hong Kong - Qingdao",
     "Guam - Manila", "Auckland - Honolulu", "Valparaiso - Sydney", "Rio de Janeiro - Lagos",
     "Buenos Aires - Cape Town", "Dakar - New York",
+    "Rotterdam - Gdansk (avoid kiel)", "Sydney - Port Hedland", "Port Hedland - Qingdao", "Busan - Tokyo Bay",
+    "Qingdao - Tokyo Bay", "Kaohsiung - Ningbo",
     # within ±3 %
     "Singapore - Shanghai", "Piraeus - Constanta", "Naples - Piraeus", "Davao - Hong Kong", "Lisbon - Rotterdam",
 )
@@ -124,8 +128,6 @@ def product_clearance_nm(route) -> float:
 
 def compute(keys, clearance_nm: float) -> dict[str, dict]:
     """The exact route's figures for the bench pairs named by `keys` (sea_routes.key); prints a line per pair."""
-    from sea_routes import PAIRS, PORTS, key
-
     from pipeline.routing.global_routes import sea_route
 
     try:
@@ -173,9 +175,13 @@ def record(keys, clearance_nm: float) -> dict:
 
 
 def main() -> int:
-    from sea_routes import CLEARANCE_NM
-
     keys = sys.argv[1:] or list(REFERENCE_PAIRS)
+    known = {key(a, b, avoid) for a, b, avoid in PAIRS}
+    unknown = [k for k in keys if k not in known]
+    if unknown:
+        print(f"not a pair of the bench: {', '.join(repr(k) for k in unknown)}; the pairs are named as "
+              f"bench/sea_routes.py prints them, e.g. {sorted(known)[:3]}", file=sys.stderr)
+        return 2
     record(keys, CLEARANCE_NM)
     return 0
 
