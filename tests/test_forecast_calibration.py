@@ -107,13 +107,20 @@ def test_with_one_member_and_no_history_the_plan_is_the_solvers():
         assert plan_spread(j, plan, [calm]) == plan_spread(job, plan, [calm])  # the one member's spread
 
 
-def test_a_calibrated_model_aims_k_sigma_of_the_hours_ahead_early_with_one_member():
+def _calm_voyage_with_a_calibrated_model():
+    """(calm weather, its weather_for, a calibrated model with σ_eta = 0.04 · h, the job aiming 1.65 σ early with it,
+    the solver's plan for the RTA)."""
     calm = _current(0.0)
     weather_for = lambda problem, space: calm  # noqa: E731
     model = cal.ErrorModel(0.0, cal.PowerLaw(0.04, 1.0), 0.0, cal.PowerLaw(0.01, 0.5), 0.5, cal.PowerLaw(0.3, 0.5),
                            30, "calibrated")
     job = replace(_job(arrival_margin_sigmas=1.65, arrival_margin_max_share=1.0), error_model=model)
     plan, _ = plan_voyage(job, weather_for)
+    return calm, weather_for, model, job, plan
+
+
+def test_a_calibrated_model_aims_k_sigma_of_the_hours_ahead_early_with_one_member():
+    calm, weather_for, model, job, plan = _calm_voyage_with_a_calibrated_model()
     aimed, _ = robust_plan(job, plan, calm, weather_for, [calm])
     margin = 1.65 * 0.04 * 55.0  # k × σ(55 h ahead) = 3.6 h
     assert aimed.rta_utc == plan.rta_utc
@@ -157,12 +164,7 @@ def test_route_fleet_fits_the_model_on_the_warehouses_verified_plans(tmp_path):
 
 
 def test_a_plan_aiming_early_claims_against_the_baseline_arriving_at_the_rta_and_shows_the_margins_cost():
-    calm = _current(0.0)
-    weather_for = lambda problem, space: calm  # noqa: E731
-    model = cal.ErrorModel(0.0, cal.PowerLaw(0.04, 1.0), 0.0, cal.PowerLaw(0.01, 0.5), 0.5, cal.PowerLaw(0.3, 0.5),
-                           30, "calibrated")
-    job = replace(_job(arrival_margin_sigmas=1.65, arrival_margin_max_share=1.0), error_model=model)
-    plan, _ = plan_voyage(job, weather_for)
+    calm, weather_for, model, job, plan = _calm_voyage_with_a_calibrated_model()
     margin_s = int(round(cal.arrival_margin_h(model, 55.0, 1.65, 1.0) * 3600.0))  # 3.6 h
     early_job = replace(job, voyage={**job.voyage, "rta_utc": job.voyage["rta_utc"] - np.timedelta64(margin_s, "s")})
     early, _ = plan_voyage(early_job, weather_for)  # what the margin aims at, planned by hand
