@@ -18,6 +18,10 @@ How:
 4. String-pulling: between fixed points (the ports and the fairway vertices used) a waypoint is dropped while the
    great-circle leg that replaces it stays clear (and crosses no gate), so the route is near-geodesic: its legs
    touch the coast's clearance line rather than following cell centres.
+5. Corners cut: each waypoint left (not a fairway vertex) slides towards the midpoint of its neighbours as far as
+   its legs stay clear, in rounds while they shorten the route, then the route is pulled again: a bend is no longer
+   held a cell (0.125°) off the tangent (on the bench's 26 pairs with an exact reference the product is 0.0–1.6 %
+   above the exact shortest route, 0.0–3.0 % before).
 A pair takes 0.03–0.3 s warm (up to about 0.9 s for an ocean-wide search such as Santos–Shanghai); the first call
 in a process loads the graph (or, once per machine and clearance, builds it: about 25 s).
 """
@@ -43,6 +47,10 @@ from pipeline.routing.sphere import EARTH_RADIUS_NM
 JOIN_NM = 40.0  # a port or a fairway end joins the cells within this distance...
 JOIN_MAX_NM = 160.0  # ...widening (×2) up to this when none is clear
 FAIRWAY_END_APPROACH_NM = 5.0  # a fairway's end joins the graph as a port does: at sea only within this of it
+CORNER_ROUNDS = 20  # a pulled route's corners are cut (`_cut_corners`) in at most this many rounds...
+CORNER_MIN_GAIN_NM = 0.01  # ...while a round shortens it by at least this
+CORNER_MARGIN_NM = 0.05  # a cut corner keeps the clearance plus this: a leg moved onto the clearance line is
+# checked at 0.1 NM steps, and a check sampled elsewhere along it could find it a hair nearer
 N_GRID = N_ROWS * N_COLS
 
 
@@ -544,6 +552,60 @@ def _pull(grid, rule, gates, lat, lon, fixed, keep):
         k += 1
 
 
+@numba.njit(cache=True)
+def _leg_ok(grid, rule, gates, lat0, lon0, lat1, lon1, lo, hi):
+    return leg_is_clear_nb(grid, rule, lat0, lon0, lat1, lon1, lo, hi) and not _crosses_gate(gates, lat0, lon0, lat1,
+                                                                                            lon1)
+
+
+@numba.njit(cache=True)
+def _cut_corners(grid, rule, gates, lat, lon, fixed):
+    """Shorten a pulled route in place: each waypoint that is not fixed slides along the great circle towards the
+    midpoint of its neighbours as far as both its legs stay clear and cross no gate (halving the step from the
+    whole way, then bisecting towards the blocked side). Pulling keeps only the graph's nodes (0.125°), so a bend
+    round an island or a headland sits up to a cell off the tangent; here it moves onto it. A move is kept only
+    when it shortens the two legs, so the route never lengthens; rounds repeat (at most CORNER_ROUNDS) while one gains ≥ CORNER_MIN_GAIN_NM."""
+    lo, hi = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
+    n = lat.size
+    for _round in range(CORNER_ROUNDS):
+        gain = 0.0
+        for k in range(1, n - 1):
+            if fixed[k]:
+                continue
+            la, loa, lb, lob = lat[k - 1], lon[k - 1], lat[k + 1], lon[k + 1]
+            before = geo.gc_distance_nm(la, loa, lat[k], lon[k]) + geo.gc_distance_nm(lat[k], lon[k], lb, lob)
+            m_lat, m_lon = geo.gc_interpolate(la, loa, lb, lob, 0.5)
+            ok, bad = 0.0, 1.0
+            step = 1.0
+            while step > 1.0 / 64.0:  # the largest clear slide among 1, 1/2, 1/4, ...
+                t_lat, t_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, step)
+                if _leg_ok(grid, rule, gates, la, loa, t_lat, t_lon, lo, hi) and _leg_ok(grid, rule, gates, t_lat,
+                                                                                          t_lon, lb, lob, lo, hi):
+                    ok = step
+                    break
+                bad = step
+                step *= 0.5
+            if ok == 0.0:
+                continue
+            for _ in range(4):  # towards the blocked side
+                mid = 0.5 * (ok + bad)
+                if bad <= ok:
+                    break
+                t_lat, t_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, mid)
+                if _leg_ok(grid, rule, gates, la, loa, t_lat, t_lon, lo, hi) and _leg_ok(grid, rule, gates, t_lat,
+                                                                                          t_lon, lb, lob, lo, hi):
+                    ok = mid
+                else:
+                    bad = mid
+            n_lat, n_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, ok)
+            after = geo.gc_distance_nm(la, loa, n_lat, n_lon) + geo.gc_distance_nm(n_lat, n_lon, lb, lob)
+            if after < before:
+                lat[k], lon[k] = n_lat, n_lon
+                gain += before - after
+        if gain < CORNER_MIN_GAIN_NM:
+            break
+
+
 # ---------------------------------------------------------------------------------------------- the entry point
 
 _MOVE_COST = None
@@ -643,6 +705,12 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
     keep = np.zeros(len(pts), np.bool_)
     _pull(grid, rule, layer.gates, lat, lon, fixed, keep)
     new_index = np.cumsum(keep) - 1
+    lat, lon, fixed = lat[keep], lon[keep], fixed[keep]
+    cut_rule = clearance(dep, arr, clearance_nm + CORNER_MARGIN_NM, approach_nm)
+    _cut_corners(grid, cut_rule, layer.gates, lat, lon, fixed)  # then waypoints the slides made needless are dropped
+    keep = np.zeros(lat.size, np.bool_)
+    _pull(grid, rule, layer.gates, lat, lon, fixed, keep)
+    new_index = (np.cumsum(keep) - 1)[new_index]
     lat, lon = lat[keep], lon[keep]
     transits = []
     for pid, a, b in used:
