@@ -109,6 +109,13 @@ def _crosses_gate(gates, lat0, lon0, lat1, lon1):
 
 
 @numba.njit(cache=True)
+def _leg_ok(grid, rule, gates, lat0, lon0, lat1, lon1, lo, hi):
+    """The great-circle leg crosses no gate and keeps the clearance `rule` (and latitudes lo..hi) all along."""
+    return not _crosses_gate(gates, lat0, lon0, lat1, lon1) and leg_is_clear_nb(grid, rule, lat0, lon0, lat1, lon1, lo,
+                                                                                hi)
+
+
+@numba.njit(cache=True)
 def _node_pos(xlat, xlon, n):
     if n < N_GRID:
         return cell_lat(n // N_COLS), cell_lon(n % N_COLS)
@@ -163,7 +170,7 @@ def _joins(grid, rule, edges, xlat, xlon, gates, lat, lon, radius_nm, with_extra
             d = geo.gc_distance_nm(lat, lon, la, lo_)
             if d > radius_nm:
                 continue
-            if _crosses_gate(gates, lat, lon, la, lo_) or not leg_is_clear_nb(grid, rule, lat, lon, la, lo_, lo, hi):
+            if not _leg_ok(grid, rule, gates, lat, lon, la, lo_, lo, hi):
                 continue
             out_node[n] = i * edges.shape[1] + j
             out_cost[n] = d
@@ -175,7 +182,7 @@ def _joins(grid, rule, edges, xlat, xlon, gates, lat, lon, radius_nm, with_extra
             d = geo.gc_distance_nm(lat, lon, xlat[k], xlon[k])
             if d > radius_nm:
                 continue
-            if _crosses_gate(gates, lat, lon, xlat[k], xlon[k]) or not leg_is_clear_nb(grid, rule, lat, lon, xlat[k], xlon[k], lo, hi):
+            if not _leg_ok(grid, rule, gates, lat, lon, xlat[k], xlon[k], lo, hi):
                 continue
             out_node[n] = N_GRID + k
             out_cost[n] = d
@@ -545,17 +552,17 @@ def _pull(grid, rule, gates, lat, lon, fixed, keep):
         if fixed[k] or k == n - 1:
             keep[k] = True
             a = k
-        elif not (leg_is_clear_nb(grid, rule, lat[a], lon[a], lat[k + 1], lon[k + 1], lo, hi)
-                  and not _crosses_gate(gates, lat[a], lon[a], lat[k + 1], lon[k + 1])):
+        elif not _leg_ok(grid, rule, gates, lat[a], lon[a], lat[k + 1], lon[k + 1], lo, hi):
             keep[k] = True
             a = k
         k += 1
 
 
 @numba.njit(cache=True)
-def _leg_ok(grid, rule, gates, lat0, lon0, lat1, lon1, lo, hi):
-    return leg_is_clear_nb(grid, rule, lat0, lon0, lat1, lon1, lo, hi) and not _crosses_gate(gates, lat0, lon0, lat1,
-                                                                                            lon1)
+def _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob, lo, hi):
+    """Both legs through the moved waypoint (t_lat, t_lon), from its neighbour a and on to its neighbour b, are clear."""
+    return _leg_ok(grid, rule, gates, la, loa, t_lat, t_lon, lo, hi) and _leg_ok(grid, rule, gates, t_lat, t_lon, lb, lob,
+                                                                                lo, hi)
 
 
 @numba.njit(cache=True)
@@ -564,7 +571,8 @@ def _cut_corners(grid, rule, gates, lat, lon, fixed):
     midpoint of its neighbours as far as both its legs stay clear and cross no gate (halving the step from the
     whole way, then bisecting towards the blocked side). Pulling keeps only the graph's nodes (0.125°), so a bend
     round an island or a headland sits up to a cell off the tangent; here it moves onto it. A move is kept only
-    when it shortens the two legs, so the route never lengthens; rounds repeat (at most CORNER_ROUNDS) while one gains ≥ CORNER_MIN_GAIN_NM."""
+    when it shortens the two legs, so the route never lengthens; rounds repeat (at most CORNER_ROUNDS) while one
+    gains ≥ CORNER_MIN_GAIN_NM."""
     lo, hi = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
     n = lat.size
     for _round in range(CORNER_ROUNDS):
@@ -579,8 +587,7 @@ def _cut_corners(grid, rule, gates, lat, lon, fixed):
             step = 1.0
             while step > 1.0 / 64.0:  # the largest clear slide among 1, 1/2, 1/4, ...
                 t_lat, t_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, step)
-                if _leg_ok(grid, rule, gates, la, loa, t_lat, t_lon, lo, hi) and _leg_ok(grid, rule, gates, t_lat,
-                                                                                          t_lon, lb, lob, lo, hi):
+                if _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob, lo, hi):
                     ok = step
                     break
                 bad = step
@@ -592,8 +599,7 @@ def _cut_corners(grid, rule, gates, lat, lon, fixed):
                 if bad <= ok:
                     break
                 t_lat, t_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, mid)
-                if _leg_ok(grid, rule, gates, la, loa, t_lat, t_lon, lo, hi) and _leg_ok(grid, rule, gates, t_lat,
-                                                                                          t_lon, lb, lob, lo, hi):
+                if _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob, lo, hi):
                     ok = mid
                 else:
                     bad = mid
@@ -653,8 +659,8 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
     grid = land_grid()
     lo_lat, hi_lat = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
     gc = float(geo.gc_distance_nm(*dep, *arr))
-    direct = gc if gc <= 3 * JOIN_MAX_NM and (leg_is_clear_nb(grid, rule, *dep, *arr, lo_lat, hi_lat)
-                                            and not _crosses_gate(layer.gates, *dep, *arr)) else math.inf
+    direct = (gc if gc <= 3 * JOIN_MAX_NM and _leg_ok(grid, rule, layer.gates, *dep, *arr, lo_lat, hi_lat)
+              else math.inf)
     src_node, src_cost = _join(rule, layer, *dep, with_extra=True)
     dst_node, dst_cost = _join(rule, layer, *arr, with_extra=True)
     src_paths: dict[int, list] = {}
