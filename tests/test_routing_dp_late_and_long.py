@@ -97,7 +97,7 @@ def test_late_pricing_sails_fewer_legs_than_fuel_alone_on_a_longer_graph():
     # the same search with no upper bound at all (pricing cannot prune): it must sail more and find the same cost
     from pipeline.routing.dp import _label_search, latest_departures
 
-    _, _, cost_free, legs_free, _ = _label_search(inst, 0.0, math.inf, latest_departures(inst))
+    _, _, cost_free, legs_free, _, _ = _label_search(inst, DpOptions(gap=0.0), math.inf, latest_departures(inst), base)
     assert cost_free == pytest.approx(evaluate(inst, found.nodes, found.rpm_idx)[0], rel=1e-12)
     assert found.n_evals < legs_free / 3
 
@@ -121,3 +121,35 @@ def test_the_grid_step_grows_with_the_rta_and_the_reason_says_so():
     assert plan.cost == pytest.approx(best, rel=1e-9)
     on_1h = solve(pr, fld, solver="dp", options=DpOptions(slot_h=1.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None))
     assert on_1h.status == "ok" and "grid" not in (on_1h.reason or "")  # the step asked for: nothing to say
+
+
+def test_a_label_search_past_its_legs_budget_keeps_fewer_labels_and_the_plan_says_so():
+    """max_label_legs paces the wait-free label DP by legs sailed: within the budget it is the exact search, bit for
+    bit; past it the search is given up and run again keeping at most capped_labels per node (never cheaper than the
+    exact plan in weather that holds still, where the exact one is the optimum), and the plan's reason says so."""
+    pr = problem(DEP, (34.0, -146.0), 70.0, rpm_options=(70, 80, 90, 100), n_lines=8, n_points=9, max_shift=2,
+                 d_point_nm=20.0)
+    space = pr.search_space()
+    fld = weather("static", 0)
+    inst, base_nodes = solver_instance(pr, space, fld)
+    base = find_baseline(inst, base_nodes)
+    exact = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
+    roomy = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None, max_label_legs=exact.n_evals))
+    assert roomy.note is None and roomy.n_evals == exact.n_evals
+    assert (roomy.nodes == exact.nodes).all() and (roomy.rpm_idx == exact.rpm_idx).all()
+    budget = exact.n_evals // 4
+    capped = [SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None, max_label_legs=budget,
+                                                                        capped_labels=3)) for _ in range(2)]
+    assert capped[0].note is not None and "at most 3 labels per node" in capped[0].note
+    assert f"{budget:,} legs" in capped[0].note
+    assert capped[0].n_evals == capped[1].n_evals > budget  # paced by legs: the same work on every run
+    if capped[0].nodes is not None:  # else nothing it kept beat the baseline, which the plan then is
+        cost_exact = evaluate(inst, exact.nodes, exact.rpm_idx)[0]
+        assert evaluate(inst, capped[0].nodes, capped[0].rpm_idx)[0] >= cost_exact - 1e-9
+    # through solve() with the product's two steps: the reason names the cap
+    opts = DpOptions(slot_h=1.0, max_wait_h=6.0, wait_free_first=True, gap=1e-3, incumbent=None,
+                     max_label_legs=budget, capped_labels=3)
+    plan = solve(pr, fld, solver="dp", options=opts)
+    assert plan.status == "ok" and "at most 3 labels per node" in plan.reason
+    with pytest.raises(ValueError, match="capped_labels"):
+        SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None, max_label_legs=10, capped_labels=0))

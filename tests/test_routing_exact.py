@@ -20,6 +20,7 @@ from pipeline.routing.engine import leg as lk
 from pipeline.routing.dp import (DpOptions, _fuel_budget_t, dp_exact_nb, finish_bounds, label_bounds, latest_departures,
                                  reachable_windows, trim_eps)
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
+from pipeline.routing.engine.labels import EXACT
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.problem import Instance
 from pipeline.routing.solve import solver_instance
@@ -109,9 +110,9 @@ def test_skipping_legs_whose_label_would_be_dropped_keeps_the_same_labels(kind, 
     fb = label_bounds(inst, ld, reachable_windows(inst, ld, on_time),
                       _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf)
     eps = trim_eps(inst, gap, upper, fb.lams, fb.m_lam, fb.t_min)
-    args = (inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps, 0, 0.0)
-    *skipping, legs_skipping, kept_skipping = dp_exact_nb(*args, True)
-    *every, legs_every, kept_every = dp_exact_nb(*args, False)
+    args = (inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps)
+    *skipping, legs_skipping, kept_skipping = dp_exact_nb(*args, EXACT)
+    *every, legs_every, kept_every = dp_exact_nb(*args, EXACT._replace(skip_dropped=False))
     assert np.isfinite(every[2]) and kept_every > 20
     assert kept_skipping == kept_every
     assert (skipping[0] == every[0]).all() and (skipping[1] == every[1]).all() and skipping[2] == every[2]

@@ -98,6 +98,7 @@ from pipeline.routing.dp import dp_exact_nb
 from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb,
                                             sail_span_nb, scratch, time_price_nb)
 from pipeline.routing.engine.bounds import FinishBounds
+from pipeline.routing.engine.labels import bucketed
 from pipeline.routing.engine.leg import sail_route_nb
 from pipeline.routing.objectives import OBJ_JIT
 from pipeline.routing.random_route import random_walk_nb
@@ -662,8 +663,8 @@ def polish(nodes, rpm_idx, cost: float, params: BfoaParams, g, v, w, o):
     # label that wins on T/T_req (with 16 the suite's storm-limit stalled 0.58 % above the optimum, with 64 at it)
     buckets = params.polish_buckets * (1 if o.kind == OBJ_JIT else 4)
     bounds = FinishBounds(np.zeros(1), m_lam, np.zeros((L2, P)), no_rate, no_rate, latest)
-    new_nodes, new_rpm, new_cost, n_legs, _ = dp_exact_nb(corridor, v, w, o, cost, bounds, eps, int(buckets),
-                                                          float(lam_t))
+    new_nodes, new_rpm, new_cost, n_legs, _ = dp_exact_nb(corridor, v, w, o, cost, bounds, eps,
+                                                          bucketed(buckets, lam_t))
     if np.isfinite(new_cost) and new_cost < cost:
         return new_nodes, new_rpm, float(new_cost), int(n_legs)
     return nodes, rpm_idx, cost, int(n_legs)

@@ -24,6 +24,13 @@ every earlier kept one's at its node, with ε = gap·LB / (lines − 1) and LB a
 optimum's cost (`cost_lower_bound`); the plan returned then costs at most (1 + gap) × the optimum (proof in
 `trim_eps`). This is what makes the 5,000 NM instance tractable: most labels at a node differ by grams.
 
+Work paced by legs sailed (`DpOptions.max_label_legs`, the product's 3,000,000): the number of labels grows with the
+voyage's length twice over (more lines, and ε shrinks as 1 / lines), so a 10,000 NM voyage would sail about 93 million
+legs. Past the budget the search is given up and run again keeping at most `capped_labels` per node
+(`engine.labels.LabelMode`: time spans, a span's label chosen at the base route's price of time), which is
+approximate and said in the plan's reason; the grid DP that follows (dp_grid.py) certifies the plan over its space
+either way.
+
 Bounds (certified: they never drop a label of an optimal plan):
   incumbent   any known plan's cost is an upper bound U on the optimum: the baseline's, and by default a
               BFOA plan's (`DpOptions.incumbent`); the answer does not depend on it, only the time taken.
@@ -70,7 +77,7 @@ from pipeline.performance.features import FORM_PHYSICAL, FORM_THESIS, stw_kn_nb,
 from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
 from pipeline.routing.engine.bounds import FinishBounds, fuel_to_finish_lb, is_on_time, label_priced_out
-from pipeline.routing.engine.labels import grow, prefix_min, put_min, time_span_nb
+from pipeline.routing.engine.labels import EXACT, bucketed, grow, prefix_min, put_min, time_span_nb
 from pipeline.routing.engine.leg import (CODE, FIX_FUEL, FIX_H, FIX_LAT0, FIX_LAT1, FIX_LON0, FIX_LON1, FIX_TOL_DEG, FUEL,
                                         H, N_LEG_OUT, OK, sail_leg_nb)
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
@@ -80,7 +87,7 @@ PRUNE_BINS = 16384  # time bins of dp_exact_nb's look-up of the candidates made 
 
 
 @numba.njit(cache=True)
-def dp_exact_nb(g, v, w, o, upper, fb, eps, buckets=0, lam_t=0.0, skip_dropped=True):
+def dp_exact_nb(g, v, w, o, upper, fb, eps, mode):
     """(nodes, rpm indexes, cost, legs sailed, labels kept) of an optimal plan; see the module docstring.
 
     `upper` bounds the optimum from above (inf: none); `fb` is a FinishBounds (`label_bounds`): the fuel bound
@@ -90,11 +97,14 @@ def dp_exact_nb(g, v, w, o, upper, fb, eps, buckets=0, lam_t=0.0, skip_dropped=T
     earlier one is within eps of dominating it: the plan returned then costs at most (lines − 1)·eps more than
     the optimum (see `trim_eps`; the incumbent bound is widened by as much, so that plan is not cut).
 
-    With `buckets` > 0 (approximate, for local searches: bfoa's polish) a node keeps at most that many labels:
-    the line's candidate times are cut into `buckets` equal spans and a span keeps its label of least
-    f − e·t + lam_t·t, lam_t (t/h) the price of time.
+    `mode` (engine.labels.LabelMode) says which labels are kept: every one not dominated (`EXACT`), or with
+    `mode.buckets` > 0 (approximate: bfoa's polish, the engine plans of a fixed route, the wait-free search of a
+    voyage too long for every label) at most that many per node: the line's candidate times are cut into `buckets`
+    equal spans and a span keeps its label of least f − e·t + lam_t·t, lam_t (t/h) the price of time. With
+    `mode.max_legs` > 0 the search stops once it has sailed more legs than that and returns no plan (cost inf; the
+    legs sailed tell the caller why).
 
-    Without buckets (and with `skip_dropped`) a leg is not sailed either when the candidate B it would make is sure
+    Without buckets (and with `mode.skip_dropped`) a leg is not sailed either when the candidate B it would make is sure
     to be dropped: when a candidate A made before it at the same node arrives before B can (before t0 + d·τ) with
     g_A = f − e·t no more than B can have, g0 + d·(φ − e·τ) (the fuel rate is at least φ/τ, so fuel − e·hours ≥
     (φ/τ − e)·hours ≥ d·(φ − e·τ) when φ ≥ e·τ). B is then dropped by the keep rule below whether A is kept (g_B ≥
@@ -129,7 +139,10 @@ def dp_exact_nb(g, v, w, o, upper, fb, eps, buckets=0, lam_t=0.0, skip_dropped=T
     cpar, cnode, cr = np.empty(ccap, np.int64), np.empty(ccap, np.int64), np.empty(ccap, np.int64)
     out = np.empty(N_LEG_OUT)
     n_legs = 0
-    skip = skip_dropped and buckets == 0
+    buckets, lam_t, max_legs = mode.buckets, mode.lam_t, mode.max_legs
+    skip = mode.skip_dropped and buckets == 0
+    nodes = np.full(L2, c, np.int64)
+    rpm_idx = np.zeros(L2 - 1, np.int64)
     made = np.empty((P if skip else 0, PRUNE_BINS + 1))  # per node, the least g made so far per time bin
     bin_h = max(deadline - t_dep_h, 1e-6) / PRUNE_BINS
     S = 2 * max_shift + 1
@@ -146,6 +159,8 @@ def dp_exact_nb(g, v, w, o, upper, fb, eps, buckets=0, lam_t=0.0, skip_dropped=T
                 leg_nm[a, s] = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
                 leg_tau[a, s], leg_phi[a, s] = tau[i, a, s].min(), phi[i, a, s].min()
         for j in by_time:
+            if max_legs > 0 and n_legs > max_legs:
+                return nodes, rpm_idx, np.inf, n_legs, n_kept  # its work spent: no plan
             a, t0, f0 = knode[j], kt[j], kf[j]
             for a2 in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, a2]:
@@ -229,8 +244,6 @@ def dp_exact_nb(g, v, w, o, upper, fb, eps, buckets=0, lam_t=0.0, skip_dropped=T
             q = route_cost_nb(o, kt[j] - t_dep_h, kf[j])
             if q < best:
                 best, best_j = q, j
-    nodes = np.full(L2, c, np.int64)
-    rpm_idx = np.zeros(L2 - 1, np.int64)
     if best_j < 0:
         return nodes, rpm_idx, np.inf, n_legs, n_kept
     j = best_j
@@ -682,6 +695,10 @@ class DpOptions:
     wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
     wait_free_first: bool = False  # grid: first the label DP (same gap); its plan's times join the grid
     slots_per_rta: float | None = None  # grid: a step of at least the RTA's passage hours / this, in whole hours
+    max_label_legs: int | None = None  # the label DP gives up after sailing this many legs (None: never) and
+    #                                     searches again keeping at most `capped_labels` labels per node (approximate;
+    #                                     the plan's reason says so): its work paced by legs sailed, not the clock
+    capped_labels: int = 64
 
 
 def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None):
@@ -692,6 +709,8 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
     waits (Found.wait_h, Found.wait_tph), which solve() puts on the plan's legs."""
     from pipeline.routing.baseline import evaluate
 
+    if not options.capped_labels >= 1:
+        raise ValueError(f"dp option capped_labels must be at least 1 label per node, got {options.capped_labels}")
     if options.upper_bound is not None:
         upper = min(upper, float(options.upper_bound))
     if baseline.ok:
@@ -704,12 +723,10 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
         found = _grid_search(inst, baseline, options, upper, known)
         found.n_evals += n_fast
         return found
-    nodes, rpm_idx, cost, n_legs, _ = _label_search(inst, options.gap, upper, latest_departures(inst))
+    nodes, rpm_idx, cost, n_legs, _, note = _label_search(inst, options, upper, latest_departures(inst), baseline)
     if not math.isfinite(cost):  # nothing below the incumbents (where the dominance's assumption fails): the best
         nodes, rpm_idx = _cheapest(inst, known)  # plan known, never the baseline while a dearer plan... is known
-    if nodes is None:
-        return Found(None, None, n_fast + n_legs)
-    return Found(nodes, rpm_idx, n_fast + n_legs)
+    return Found(nodes, rpm_idx, n_fast + n_legs, note=note)
 
 
 def _cheapest(inst, plans) -> tuple:
@@ -748,17 +765,33 @@ def label_bounds(inst, ld: np.ndarray, windows=None, fuel_budget_t: float = math
     return FinishBounds(lams, m_lam, t_min, tau, phi, ld)
 
 
-def _label_search(inst, gap: float, upper: float, ld: np.ndarray, wide=None):
-    """(nodes, rpm_idx, cost, legs sailed, bounds) of dp_exact_nb, pruned by `upper` and trimmed to `gap`; `wide`
-    as in finish_bounds (per leg); `bounds` the FinishBounds the DP ran with."""
+def _label_search(inst, options: DpOptions, upper: float, ld: np.ndarray, baseline, wide=None):
+    """(nodes, rpm_idx, cost, legs sailed, bounds, note) of dp_exact_nb, pruned by `upper` and trimmed to
+    options.gap; `wide` as in finish_bounds (per leg); `bounds` the FinishBounds the DP ran with. With
+    options.max_label_legs, a search that sails more legs than that is given up and run again keeping at most
+    options.capped_labels labels per node (spans compared at the baseline route's price of time); `note` then says
+    so (else None)."""
     # the bounds in the weather of the times a plan can be at each node (an on-time incumbent: by the RTA, and
     # burning no more fuel than a plan the DP keeps: within the incumbent's cost and the gap)
+    gap = options.gap
     on_time = is_on_time(inst.objective, upper)
     fb = label_bounds(inst, ld, reachable_windows(inst, ld, on_time),
                       _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf, wide=wide)
     eps = trim_eps(inst, gap, upper, fb.lams, fb.m_lam, fb.t_min)
-    nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps)
-    return nodes, rpm_idx, cost, n_legs, fb
+    budget = int(options.max_label_legs or 0)
+    nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps,
+                                                  EXACT._replace(max_legs=budget))
+    if budget <= 0 or n_legs <= budget:
+        return nodes, rpm_idx, cost, n_legs, fb, None
+    from pipeline.routing.engine_limits import time_price
+
+    route = baseline.nodes if baseline.ok else np.full(inst.space.lat.shape[0], inst.space.lat.shape[1] // 2, np.int64)
+    mode = bucketed(options.capped_labels, time_price(inst, route) if inst.objective.kind == OBJ_JIT else 0.0)
+    nodes, rpm_idx, cost, n_capped, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps,
+                                                    mode)
+    note = (f"the wait-free label search kept at most {options.capped_labels} labels per node: keeping every label "
+            f"would sail over {budget:,} legs (solver option max_label_legs)")
+    return nodes, rpm_idx, cost, n_legs + n_capped, fb, note
 
 
 def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) -> Found:
@@ -771,10 +804,10 @@ def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) 
                          f"{options.max_wait_h} and {options.wait_tph}")
     plans = ([(baseline.nodes, baseline.rpm_idx)] if baseline.ok else []) + list(known)
     ld = latest_departures(inst)
-    n_first, bounds = 0, None
+    n_first, bounds, capped = 0, None, None
     if options.wait_free_first:
         wide: list = []
-        nodes, rpm_idx, cost, n_first, narrow = _label_search(inst, options.gap, upper, ld, wide)
+        nodes, rpm_idx, cost, n_first, narrow, capped = _label_search(inst, options, upper, ld, baseline, wide)
         if math.isfinite(cost):
             plans.append((nodes, rpm_idx))
         # which of its bound tables hold for the grid's plans: with its plan on time (a plan of the grid, so the
@@ -794,7 +827,8 @@ def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) 
     if nodes is None:
         return Found(None, None, n_first + n_legs)
     waits = wait_hours(inst, nodes, rpm_idx, slots, times)
-    note = f"waits on a {slot_h:g} h grid" if np.any(waits > 1.0 / 3600.0) and slot_h > options.slot_h else None
+    coarse = f"waits on a {slot_h:g} h grid" if np.any(waits > 1.0 / 3600.0) and slot_h > options.slot_h else None
+    note = "; ".join(x for x in (coarse, capped) if x) or None
     return Found(nodes, rpm_idx, n_first + n_legs, wait_h=waits, wait_tph=wait_rate_tph(inst, options.wait_tph),
                  note=note)
 

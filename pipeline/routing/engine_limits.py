@@ -36,7 +36,7 @@ import numpy as np
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.dp import dp_exact_nb, finish_bounds, label_bounds, latest_departures, trim_eps
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
-from pipeline.routing.engine.labels import grow, time_span_nb
+from pipeline.routing.engine.labels import bucketed, grow, time_span_nb
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
@@ -416,8 +416,8 @@ def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: f
     fb = label_bounds(sub, latest_departures(sub))
     eps = trim_eps(sub, gap, upper, fb.lams, fb.m_lam, fb.t_min) if gap > 0.0 and math.isfinite(upper) else 0.0
     lam_t = time_price(inst, nodes) if buckets > 0 else 0.0
-    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, fb, eps, int(buckets),
-                                              float(lam_t))
+    _, rpm_idx, cost, n_legs, _ = dp_exact_nb(sub.graph, sub.vessel, sub.wx, sub.objective, upper, fb, eps,
+                                              bucketed(buckets, lam_t))
     return rpm_idx, float(cost), int(n_legs)
 
 

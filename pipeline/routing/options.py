@@ -18,9 +18,11 @@ SOLVER_NAMES = ("bfoa", "dp", "astar", "gc", "rhumb")
 # within 0.1 % of the optimum instead of keeping every label, and its optimum is over plans that may wait (heave to)
 # at a node under weather that changes in time: the label DP's wait-free plan first, then the grid DP over the
 # departure times of a 1 h grid (coarser on voyages over 240 h: RTA / 240 in whole hours) and of that plan, waiting
-# up to 6 h beyond the next grid time (dp_grid.py)
+# up to 6 h beyond the next grid time (dp_grid.py). The label DP's work is paced by legs sailed: past 3,000,000 legs
+# (about 11 s of CPU; a 5,000 NM storm voyage needs 10 million to keep every label) it searches again keeping at most
+# 128 labels per node, and the plan's reason says so
 DEFAULT_SOLVER_OPTIONS = {"dp": {"gap": 1e-3, "slot_h": 1.0, "max_wait_h": 6.0, "wait_free_first": True,
-                                 "slots_per_rta": 240}}
+                                 "slots_per_rta": 240, "max_label_legs": 3_000_000, "capped_labels": 128}}
 
 
 @dataclass(frozen=True)

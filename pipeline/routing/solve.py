@@ -352,6 +352,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
             if cost < plan.cost:
                 plan = _plan(at, solver, found.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
                              n_evals=plan.n_evals, clearance_nm=plan.min_land_clearance_nm)
+        if not waits and plan.legs and found.note:  # e.g. how the search was narrowed (dp's capped label search)
+            plan.reason = found.note if plan.reason is None else f"{plan.reason}; {found.note}"
         plan = _never_worse(inst, plan, baseline, base, limits, profile, t0, continuous)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:

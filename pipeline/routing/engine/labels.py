@@ -3,8 +3,32 @@ time bins, and time spans for the searches that keep a bounded number of labels 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
+
+
+class LabelMode(NamedTuple):
+    """How a label search keeps its labels (dp.dp_exact_nb): every label that is not dominated (`EXACT`), or at most
+    `buckets` per node (the line's candidate times cut into that many equal spans, a span keeping its label of least
+    f − e·t + lam_t·t, lam_t in t/h: approximate, for local searches and for voyages too long for every label). With
+    `skip_dropped` (exact mode only) a leg is not sailed when a label made already is sure to drop the one it would
+    make. With `max_legs` > 0 the search gives up (no plan, cost inf) once it has sailed more legs than that: its
+    work is paced by legs sailed, never by the clock."""
+
+    buckets: int = 0
+    lam_t: float = 0.0
+    skip_dropped: bool = True
+    max_legs: int = 0
+
+
+EXACT = LabelMode()
+
+
+def bucketed(buckets: int, lam_t: float) -> LabelMode:
+    """At most `buckets` labels per node, a time span's label chosen at the time price lam_t (t/h); `EXACT` for 0."""
+    return LabelMode(int(buckets), float(lam_t), True, 0)
 
 
 @numba.njit(cache=True)
