@@ -41,6 +41,7 @@ def _canal_legs(plan, route):
 
 
 @pytest.mark.parametrize("solver", ["bfoa", "dp", "astar", "gc"])
+@pytest.mark.slow
 def test_a_suez_voyage_spends_the_canal_s_transit_and_waiting_hours(suez, solver):
     route, weather, pr = suez
     plan = solve(pr, weather, solver=solver, seed=1, options=FAST if solver == "bfoa" else None)

@@ -23,6 +23,7 @@ def plain_cli(monkeypatch):
     monkeypatch.setenv("COLUMNS", "400")
 
 
+@pytest.mark.slow
 def test_control_characters_in_vessel_and_port_names_are_refused_at_import_with_nothing_lost(tmp_path):
     folder = tmp_path / "fleet"
     write_fleet(generate_fleet("2020-12-01T00", n_vessels=4, days=30, seed=3), folder)

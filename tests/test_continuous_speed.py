@@ -34,6 +34,7 @@ def _sail(inst, nodes, rpm):
     return code, ct, cf
 
 
+@pytest.mark.slow
 def test_refined_speeds_come_within_a_grid_enumeration_of_the_same_two_runs():
     """A ≈ 40 h voyage into a moving storm at one constant rpm: refining cuts it in two runs of ≈ 20 h; every pair
     of rpm for those two runs (0.25 rpm apart, each held ≥ 12 h, arriving by the RTA; changes free) is sailed, and the refined
@@ -68,6 +69,7 @@ def test_refined_speeds_come_within_a_grid_enumeration_of_the_same_two_runs():
 
 
 @pytest.mark.parametrize("case", ["storm", "wavy", "thesis"])
+@pytest.mark.slow
 def test_refining_never_costs_more_is_never_late_and_holds_each_setting(case):
     if case == "thesis":
         pr = problem((35.0, -140.0), (28.0, -132.0), 52, rpm_options=(80, 100), objective="thesis", n_lines=6,

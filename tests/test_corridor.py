@@ -70,6 +70,7 @@ def land_on_legs(waypoints, step_nm=0.1):
     return bad
 
 
+@pytest.mark.slow
 def test_the_great_circle_layout_has_no_route_round_florida_and_the_corridor_has():
     dep, arr = FLORIDA[0], FLORIDA[-1]
     assert not reachable(build_search_space(dep, arr))  # the issue: the band across the great circle is cut by land
@@ -122,6 +123,7 @@ def test_a_sea_route_must_run_from_port_to_port():
 
 
 @pytest.mark.parametrize("solver", ["bfoa", "dp"])
+@pytest.mark.slow
 def test_solve_routes_round_florida_clear_of_land_on_time_and_never_worse_than_constant_speed(solver):
     route = sea_route(FLORIDA)
     weather = field(wavy(5), lat=(20.0, 35.0), lon=(270.0, 290.0))
@@ -177,6 +179,7 @@ def distance_along(lat, lon, points, s):
     return at
 
 
+@pytest.mark.slow
 def test_a_corridor_across_the_antimeridian():
     route = sea_route(PACIFIC)
     weather = field(wavy(3), lat=(25.0, 55.0), lon=(150.0, 215.0))

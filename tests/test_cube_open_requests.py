@@ -137,6 +137,7 @@ def test_a_cube_with_one_chunk_per_cycle_still_opens_and_its_next_write_bounds_t
     assert bounded[12] == bounded[3], f"GETs of one open after the next write: {bounded}"
 
 
+@pytest.mark.slow
 def test_a_rechunking_cut_short_hides_the_cycles_and_the_next_write_finishes_it(tmp_path, monkeypatch):
     store = tmp_path / "weather.zarr"
     cycles = [FIRST + np.timedelta64(6 * k, "h") for k in range(3)]

@@ -59,6 +59,7 @@ def window(store, box_lat, box_lon, t_from="2020-12-01T13", t_to="2020-12-02T05"
 @pytest.mark.parametrize("box_lat, box_lon", [((10, 30), (140, 160)),  # open ocean
                                                ((20, 50), (170, 200)),  # across 180°
                                                ((-10, 10), (350, 375))])  # across 0°, the grid's seam
+@pytest.mark.slow
 def test_a_window_samples_like_the_whole_cycle_inside_its_box(read_only_store, box_lat, box_lon):
     whole = wf.from_cycle(cube.load_cycle(read_only_store, CYCLE), CYCLE)
     part = window(read_only_store, box_lat, box_lon)
@@ -97,6 +98,7 @@ def test_lon_span_is_the_shortest_arc():
     assert lon_span_deg([-5.0, 5.0]) == (355.0, 365.0)
 
 
+@pytest.mark.slow
 def test_a_plain_reader_sees_only_published_cycles_without_a_warning(store):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -215,6 +217,7 @@ def _chunk_files_bytes(store: Path, rows: slice, cols: slice, variables=wf.CUBE_
                for k in range(cols.start // clon, (cols.stop - 1) // clon + 1))
 
 
+@pytest.mark.slow
 def test_a_second_voyage_in_the_same_window_fetches_no_chunk_again(store):
     cache = cube_window.CHUNK_CACHE
     cache.clear()
@@ -244,6 +247,7 @@ def test_the_cache_keeps_to_its_byte_bound():
     assert cache.stats()["fetched_bytes"] == 600 and cache.stats()["distinct_bytes"] == 500
 
 
+@pytest.mark.slow
 def test_opening_the_newest_cycle_reads_no_chunk_of_the_cycle_coordinate(store):
     cube.write_cycle(store, cycle_ds(CYCLE2), complete=True)
     for f in (store / "cycle" / "c").rglob("*"):  # were any read, opening would fail
@@ -257,6 +261,7 @@ def test_opening_the_newest_cycle_reads_no_chunk_of_the_cycle_coordinate(store):
     assert w.cycle == CYCLE2 and w.data["u10"].size > 0
 
 
+@pytest.mark.slow
 def test_retention_retires_old_cycles_and_frees_their_chunks(store):
     day2 = CYCLE + np.timedelta64(1, "D")
     for c in (CYCLE2, day2):
@@ -273,6 +278,7 @@ def test_retention_retires_old_cycles_and_frees_their_chunks(store):
     assert window(store, (10, 30), (140, 160)).values.size > 0 and cube.retire_cycles(store, keep_days=2) == []
 
 
+@pytest.mark.slow
 def test_cube_retire_takes_its_retention_from_the_option_or_the_setting(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 

@@ -138,6 +138,7 @@ def test_oscar_with_unexpected_dims_is_a_decode_error(tmp_path):
         decode_oscar(p)
 
 
+@pytest.mark.slow
 def test_grib_files_decoded_in_threads_equal_a_serial_decode(tmp_path, jma_fixtures):
     """The ingest decodes GRIB2 files in worker threads: eccodes (built thread-safe, multi-field support on)
     must give every thread exactly what a serial decode gives, including JMA's multi-field messages."""

@@ -193,6 +193,7 @@ def test_an_oscar_file_in_a_360_day_calendar_is_refused_naming_the_calendar(tmp_
         decode_oscar(path)
 
 
+@pytest.mark.slow
 def test_a_redirect_to_a_file_url_is_refused_naming_the_scheme(tmp_path):
     from pipeline.sources.fetch import FetchOptions, fetch
     from tests.http_mirror import serve

@@ -41,6 +41,7 @@ def test_the_early_rate_counts_the_later_arrival():
 
 
 @pytest.mark.parametrize("limits", [EngineLimits(12.0, 0.05), EngineLimits(20.0, 0.0)])
+@pytest.mark.slow
 def test_same_plan_as_the_dp_that_sails_every_change_in_steady_weather(limits, monkeypatch):
     pr = problem((30.0, -160.0), (33.0, -146.0), 100.0, n_lines=10, n_points=5)
     hours = pr.search_space().base_distance_nm / (0.14 * 82.0)  # the calm-water passage at 82 rpm

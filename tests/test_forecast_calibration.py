@@ -119,6 +119,7 @@ def _calm_voyage_with_a_calibrated_model():
     return calm, weather_for, model, job, plan
 
 
+@pytest.mark.slow
 def test_a_calibrated_model_aims_k_sigma_of_the_hours_ahead_early_with_one_member():
     calm, weather_for, model, job, plan = _calm_voyage_with_a_calibrated_model()
     aimed, _ = robust_plan(job, plan, calm, weather_for, [calm])
@@ -163,6 +164,7 @@ def test_route_fleet_fits_the_model_on_the_warehouses_verified_plans(tmp_path):
     assert m.eta_sd_h.at(100.0) == pytest.approx(same.eta_sd_h.at(100.0), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_a_plan_aiming_early_claims_against_the_baseline_arriving_at_the_rta_and_shows_the_margins_cost():
     calm, weather_for, model, job, plan = _calm_voyage_with_a_calibrated_model()
     margin_s = int(round(cal.arrival_margin_h(model, 55.0, 1.65, 1.0) * 3600.0))  # 3.6 h

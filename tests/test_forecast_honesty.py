@@ -104,6 +104,7 @@ def _voyage_fields(storm_lat0, storm_lon0):
                   lat=(10.0, 50.0), lon=(170.0, 240.0), res=0.5)
 
 
+@pytest.mark.slow
 def test_a_storm_in_the_last_step_where_the_ship_is_only_later_changes_no_plan():
     """The ship reaches the storm's area (about 120 h out) long after the last step (60 h). With the last step frozen
     the planner would route round the storm; now the plan is the plan on a field whose storm lies elsewhere (the

@@ -63,6 +63,7 @@ def test_a_network_is_flat_outside_its_training_range():
         assert mlp.forward_nb(p, *beyond[0], out) == pytest.approx(mlp.forward(p, edge)[0, out], rel=1e-12)
 
 
+@pytest.mark.slow
 def test_the_network_is_monotone_by_construction_and_an_unconstrained_one_fails_the_gate():
     """Trained on rows of a truth that is monotone, with the heaviest weather rare: the unconstrained network learns
     a speed gain somewhere in its envelope; the monotone one (the default) cannot."""
@@ -250,6 +251,7 @@ def test_model_predict_from_the_command_line(tmp_path, monkeypatch):
     assert res.exit_code == 0 and "outside the conditions the model was fitted on: rpm 130 > 122" in res.output
 
 
+@pytest.mark.slow
 def test_corrected_reports_replace_stored_ones_and_clear_the_flag(history):
     from storage import fleet_store
     from tests.test_performance import _models, _store_refit
@@ -279,6 +281,7 @@ def test_corrected_reports_replace_stored_ones_and_clear_the_flag(history):
         assert con.execute("SELECT flag FROM model_quality WHERE imo = ? AND target = 'speed'", [imos[1]]).fetchone() == (None,)
 
 
+@pytest.mark.slow
 def test_excluding_a_period_takes_it_out_of_the_refit_and_clears_the_flag(history):
     from storage import fleet_store
     from tests.test_performance import _store_refit
@@ -320,6 +323,7 @@ def test_noon_exclude_from_the_command_line(tmp_path, monkeypatch):
         assert con.execute("SELECT count(*) FROM noon_reports").fetchone() == (18,)
 
 
+@pytest.mark.slow
 def test_noon_exclude_refuses_day_month_dates_and_a_re_import_of_the_file_does_not_undo_it(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
@@ -382,6 +386,7 @@ def test_routing_uses_the_fouling_at_the_voyage_date():
     assert m.fouled_at(np.datetime64("2020-05-01")).months_dd == 6.0  # never younger than its newest report
 
 
+@pytest.mark.slow
 def test_hull_performance_per_month_with_trend_and_flag(tmp_path):
     """A year of reports of ships whose hull fouls at 0.012 kn a month (6 to 18 months since dry dock): the
     speed loss against the clean-hull model grows month by month (0.07–0.1 % a month in truth; the fitted

@@ -36,6 +36,7 @@ def test_a_check_of_a_data_root_without_a_cube_still_says_so(runner, tmp_path):
     assert res.exit_code == 0 and "no weather cube at" in res.output, res.output
 
 
+@pytest.mark.slow
 def test_cube_retire_keeps_everything_for_an_infinite_retention_and_refuses_nan(runner, tmp_path):
     store = tmp_path / "data" / "cubes" / "weather.zarr"
     for c in (CYCLE, CYCLE2):
@@ -63,6 +64,7 @@ def test_weather_map_refuses_a_file_name_that_is_not_what_it_writes(runner, tmp_
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_model_predict_json_is_strict_json_when_the_model_overflows(runner, tmp_path):
     from tests.test_model_sanity import _gas_nirvana_warehouse
 
@@ -97,6 +99,7 @@ def fleet_root(tmp_path_factory):
                                         ("\x1b[2Jcleared", "control characters or a line break"),
                                         ("=HYPERLINK(\"http://x\")", "starts with =, +, - or @ (a spreadsheet"),
                                         ("@SUM(A1)", "starts with =, +, - or @ (a spreadsheet")])
+@pytest.mark.slow
 def test_position_notes_and_exclusion_reasons_that_forge_lines_or_run_as_formulas_are_refused(runner, fleet_root,
                                                                                               note, says):
     import duckdb

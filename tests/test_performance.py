@@ -111,6 +111,7 @@ def gas_nirvana() -> pd.DataFrame:
     return df.assign(imo=9140607, hours=1.0, months_since_drydock=0.0)
 
 
+@pytest.mark.slow
 def test_thesis_form_reproduces_the_published_gas_nirvana_fit():
     """Ordinary least squares, no intercept, on [draft, trim, rpm, wind direction, wind speed]: the thesis's
     speed coefficients, R² and RMSE. Trim is 2 on every row: it is kept (the only constant term); the wave
@@ -149,6 +150,7 @@ def test_file_without_required_columns_is_refused():
         validate_noon(pd.DataFrame({"imo": ["1"], "ts_utc": ["2020-01-01"]}), source="reports.csv")
 
 
+@pytest.mark.slow
 def test_import_is_idempotent_and_conflicts_are_rejected(fleet, tmp_path):
     db = tmp_path / "w.duckdb"
     fleet_store.import_vessels(db, fleet.vessels)
@@ -193,6 +195,7 @@ def test_refit_read_matches_the_ordered_table_read(fleet, tmp_path):
             assert active == fleet_store.active_models(db) and imo in active
             assert versions == fleet_store.next_versions(db) == {imo: 2}
 
+@pytest.mark.slow
 def test_refit_read_of_a_table_larger_than_a_row_group_matches_the_ordered_table_read(fleet, fleet_checked, tmp_path):
     """Past one DuckDB row group (122,880 rows) the refit read still gives every row once, in vessel and time order:
     a year of four vessels repeated 90 times, 400 days apart (131,400 rows), imported newest first."""
@@ -289,6 +292,7 @@ def history(history_made, tmp_path):
     return tmp_path / "history" / "w.duckdb", later.copy(), list(imos)
 
 
+@pytest.mark.slow
 def test_versions_nothing_new_new_batch_worse_form_and_switching_back(history):
     db, later, imos = history
     first = _store_refit(db)
@@ -782,6 +786,7 @@ def test_voyage_performance_sets_plan_beside_actual(tmp_path):
     assert v2.n_reports == 5 and v2.actual_fuel_t == 100.0 and pd.isna(v2.planned_fuel_t) and pd.isna(v2.fuel_error_pct)
 
 
+@pytest.mark.slow
 def test_bunker_import_is_as_strict_as_noon_import_and_keeps_every_refused_row(tmp_path, monkeypatch):
     """The attacks on the old import: a date-only first row no longer decides the format of the others; day/month
     dates are refused, not guessed; inf, a date in 2031, IMO 9140607.9 and 17,000 t for a 3,500 dwt ship are refused;
@@ -877,6 +882,7 @@ def test_plan_against_actual_ends_a_late_voyage_at_its_arrival_not_at_rta_plus_3
     assert v.arrival_error_h == pytest.approx(4 * 24 + 6) and v.late_h == pytest.approx(96.0)
 
 
+@pytest.mark.slow
 def test_plan_against_actual_compares_a_replan_from_its_start_and_a_ship_at_sea_has_no_arrival(tmp_path):
     """A voyage re-planned at sea at 12-08 06:00 (plan: 50 t to go) is compared from there: the 12-08 noon report
     counts for its 6 h after the start (5 of 20 t), the later ones whole. While the ship is at sea its last report is
@@ -920,6 +926,7 @@ def test_plan_against_actual_compares_a_replan_from_its_start_and_a_ship_at_sea_
     assert v.arrival_error_h == pytest.approx(6.0) and v.late_h == pytest.approx(0.0)
 
 
+@pytest.mark.slow
 def test_a_noon_file_imported_in_chunks_stores_what_a_whole_file_import_stores(fleet, tmp_path, monkeypatch):
     """Read, validated and stored 500 rows at a time (in one transaction): the same rows, rejected rows and reasons as
     one chunk, including a (vessel, time) repeated in another chunk of the file (a duplicate, not a second report)."""

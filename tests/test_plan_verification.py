@@ -126,6 +126,7 @@ def _verified(run_id, vid, coverage, hours_analysed, fuel_t, base_t, late_h=0.0)
                                        cycles_used="2020-12-01T00, 2020-12-01T12", verified_at=datetime(2020, 12, 3))
 
 
+@pytest.mark.slow
 def test_fleet_savings_adds_up_the_realised_saving_and_the_spread_like_with_like(tmp_path):
     import duckdb
 

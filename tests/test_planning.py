@@ -31,6 +31,7 @@ def _with_ends(vessels, rng):
     return out
 
 
+@pytest.mark.slow
 def test_the_milp_plan_costs_what_brute_force_finds_on_many_small_random_instances():
     rng = np.random.default_rng(5)
     n_assigned = 0
@@ -49,6 +50,7 @@ def test_the_milp_plan_costs_what_brute_force_finds_on_many_small_random_instanc
     assert n_assigned > 150  # the instances are not trivially "leave everything"
 
 
+@pytest.mark.slow
 def test_column_generation_proves_a_bound_no_higher_than_the_optimum_when_enumeration_is_capped():
     for seed in range(12):
         vessels, contracts, dist = random_instance(3, 7, seed=seed, horizon_days=20, n_ports=5)
@@ -92,6 +94,7 @@ def test_column_generation_reaches_an_lp_bound_never_above_the_optimum_and_price
     assert tight > 30  # small instances mostly have LP = optimum
 
 
+@pytest.mark.slow
 def test_the_exact_finish_reaches_the_optimum_where_the_lp_bound_is_below_it():
     """Column generation forced (max_labels=3), then the MILP over every column within the gap: proven optimal and
     equal to the reference — brute force on small instances, HiGHS on the MILP over every enumerated column on

@@ -98,6 +98,7 @@ def _plans(root) -> int:
                                                  ("--effort", "0", "--effort 0: give a number above 0"),
                                                  ("--effort", "1e9", "--effort 1e+09: give a number above 0 and at most 300"),
                                                  ("--as-of", "9999-01-01T00:00Z", "timestamp out of range")])
+@pytest.mark.slow
 def test_plan_fleet_refuses_its_own_absurd_numbers_before_storing_anything(fleet_root, monkeypatch, option, value, says):
     from typer.testing import CliRunner
 

@@ -65,6 +65,7 @@ def test_distances_are_refused_with_the_layer_s_reason():
     assert math.isnan(land.dist_nm) and "on land" in land.reason and land.canal_h == 0.0
 
 
+@pytest.mark.slow
 def test_a_fleet_avoiding_suez_plans_with_the_cape_distance(tmp_path, monkeypatch):
     """The fleet's avoided passages (JITROUTE_AVOID_PASSAGES, the setting its voyages are routed with) hold for the
     planner's distances too: Singapore–Rotterdam goes round the Cape, and the stored table keeps the Suez route."""

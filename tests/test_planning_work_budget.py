@@ -56,6 +56,7 @@ def test_a_busy_host_gets_the_identical_plan_for_the_same_effort(medium):
     assert busy.stopped_by == quiet.stopped_by and busy.work_units == quiet.work_units
 
 
+@pytest.mark.slow
 def test_the_search_stops_once_its_effort_is_spent(medium):
     for effort in (EFFORT / 4, EFFORT):
         plan = milp.solve(medium, effort=effort)

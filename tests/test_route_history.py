@@ -34,6 +34,7 @@ def _read(path, sql):
         con.close()
 
 
+@pytest.mark.slow
 def test_the_legs_are_one_file_per_run_beside_the_warehouse_and_not_in_the_duckdb_file(tmp_path):
     db = tmp_path / "w.duckdb"
     _write_run(db, "r1")
@@ -54,6 +55,7 @@ def test_the_legs_are_one_file_per_run_beside_the_warehouse_and_not_in_the_duckd
     assert "route_legs" not in {r[0] for r in _read(db, "SELECT table_name FROM duckdb_tables()")}
 
 
+@pytest.mark.slow
 def test_a_file_of_a_run_that_never_committed_is_not_shown_and_is_replaced_by_its_run(tmp_path):
     db = tmp_path / "w.duckdb"
     _write_run(db, "r1")
@@ -88,6 +90,7 @@ def test_a_committed_runs_file_is_never_replaced_and_repeated_legs_are_refused(t
     assert _read(db, "SELECT count(*) FROM routes WHERE run_id = 'r2'")[0][0] == 0
 
 
+@pytest.mark.slow
 def test_an_older_snapshot_shows_the_legs_of_its_own_runs_only(tmp_path):
     db = tmp_path / "w.duckdb"
     _write_run(db, "r1")
@@ -103,6 +106,7 @@ def test_an_older_snapshot_shows_the_legs_of_its_own_runs_only(tmp_path):
 
 
 @pytest.mark.parametrize("damage", ["deleted", "truncated"])
+@pytest.mark.slow
 def test_a_missing_or_truncated_legs_file_stops_every_writer_naming_it(tmp_path, damage):
     db = tmp_path / "warehouse.duckdb"  # the data layout's name: its check runs below
     _write_run(db, "r1")

@@ -74,6 +74,7 @@ def _two_runs(tmp_path):
 
 
 @pytest.mark.parametrize("table, n_rows, time_col", [("routes", 3, "eta_utc"), ("route_legs", 5, "etd_utc")])
+@pytest.mark.slow
 def test_each_parquet_folder_reads_as_one_table_in_pyarrow_polars_and_duckdb(tmp_path, table, n_rows, time_col):
     folder = route_store.parquet_dir(_two_runs(tmp_path), table)
     assert sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*")  if p.is_file()) == [
@@ -107,6 +108,7 @@ def test_a_column_name_has_one_type_in_both_parquet_tables(tmp_path):
     assert str(legs_r1["etd_utc"][0]) == "2020-12-01 06:00:00+00:00"
 
 
+@pytest.mark.slow
 def test_runs_in_the_old_parquet_layout_move_to_the_per_table_folders_on_the_next_write(tmp_path):
     exports = tmp_path / "exports"
     old = exports / "routes" / "run_id=r0"

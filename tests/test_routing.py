@@ -287,6 +287,7 @@ def test_weather_sampling_interpolates_time_space_and_direction():
     np.testing.assert_array_equal(flipped.cells, f.cells)
 
 
+@pytest.mark.slow
 def test_compiled_leg_equals_the_pure_python_twin():
     fld = field(wavy(3))
     rng = np.random.default_rng(11)
@@ -565,6 +566,7 @@ def test_astar_arrives_by_the_rta_on_the_least_fuel_it_can():
     assert fastest[1] < pr.t_req_h - pr.window_h and time_only.fuel_t < 0.8 * fastest[2]
 
 
+@pytest.mark.slow
 def test_dp_equals_exhaustive_search_on_a_tiny_graph():
     for wseed, obj, rpms in ((7, "jit", (70, 85, 100)), (8, "thesis", (75, 100))):
         fld = field(wavy(wseed))

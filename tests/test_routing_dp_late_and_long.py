@@ -43,6 +43,7 @@ def _every_plan(inst):
 
 @pytest.mark.parametrize("kind, rpms, n", [("static", (70, 85, 100), 0), ("storm", (75, 100), 1),
                                            ("current", (60, 80, 100), 2), ("storm", (70, 85, 100), 3)])
+@pytest.mark.slow
 def test_the_fastest_plan_arrives_first(kind, rpms, n):
     inst, _ = instance(kind, 30.0, rpms, n)
     nodes, rpm_idx, hours, n_legs = fastest_plan(inst)
@@ -69,6 +70,7 @@ def test_the_cost_bound_is_never_above_a_plan_that_burns_and_takes_at_least_as_m
 @pytest.mark.parametrize("kind, obj, rpms, n", [("static", "jit", (70, 85, 100), 0), ("storm", "jit", (75, 100), 1),
                                                 ("current", "thesis", (60, 80, 100), 2),
                                                 ("storm", "thesis", (70, 85, 100), 3)])
+@pytest.mark.slow
 def test_a_late_voyage_gets_the_enumerated_optimum_with_the_fastest_plan_as_incumbent(kind, obj, rpms, n):
     """An RTA 25 % under the calm full-speed passage: every plan is late. Without a BFOA incumbent the DP's only
     on-hand plan is the (late) baseline; it sails the fastest plan, prunes on lateness, and still returns the
@@ -102,6 +104,7 @@ def test_late_pricing_sails_fewer_legs_than_fuel_alone_on_a_longer_graph():
     assert found.n_evals < legs_free / 3
 
 
+@pytest.mark.slow
 def test_the_grid_step_grows_with_the_rta_and_the_reason_says_so():
     """slots_per_rta: the step is the RTA's hours over that many slots in whole hours when that is longer than
     slot_h. On storm-window (no wait-free plan: the ship must wait for the storm to move off) with a 75 h RTA and

@@ -69,6 +69,7 @@ def _enumerate(inst) -> float:
 
 
 @pytest.mark.parametrize("kind, rta, obj, rpms, n", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}-{len(c[3])}rpm" for c in CASES])
+@pytest.mark.slow
 def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
     fld = _weather(kind, n)
     n_lines = 2 if len(rpms) == 5 else 3
@@ -94,6 +95,7 @@ def test_dp_equals_exhaustive_enumeration(kind, rta, obj, rpms, n):
 
 @pytest.mark.parametrize("kind, obj, gap, n", [("storm", "jit", 0.0, 1), ("storm", "jit", 0.001, 2),
                                                 ("storm-limit", "thesis", 0.001, 4), ("current", "jit", 0.01, 5)])
+@pytest.mark.slow
 def test_skipping_legs_whose_label_would_be_dropped_keeps_the_same_labels(kind, obj, gap, n):
     """dp_exact_nb does not sail a leg whose candidate a candidate made before it is sure to drop: the labels kept and
     the plan are bit for bit those of sailing every leg, with fewer legs sailed."""
@@ -152,6 +154,7 @@ def test_fuel_to_finish_bound_by_hand():
 
 
 @pytest.mark.parametrize("kind, n", [("storm", 1), ("storm-limit", 4), ("current", 2), ("static", 3)])
+@pytest.mark.slow
 def test_fuel_to_finish_bound_holds_for_every_completion(kind, n):
     """The DP's pruning bound is below the fuel of every way to finish from every node of line 1, for the hours
     that way takes (the bound may be loose, never above)."""

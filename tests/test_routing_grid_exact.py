@@ -80,6 +80,7 @@ def _known(inst, base) -> list:
 
 
 @pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASE_PARAMS)
+@pytest.mark.slow
 def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
     slot_h, max_wait_h = (1.0, 0.0) if waits == "round" else (2.0, 6.0)  # "wait": up to 3 slots more at a node
     n_lines = 3 if waits == "round" and len(rpms) < 5 else 2
@@ -106,6 +107,7 @@ def test_grid_dp_equals_exhaustive_enumeration(kind, rta, obj, waits, rpms, n):
 
 
 @pytest.mark.parametrize("kind, rta, obj, waits, rpms, n", CASE_PARAMS)
+@pytest.mark.slow
 def test_the_default_dp_equals_enumeration_over_the_grid_and_the_wait_free_optimum(kind, rta, obj, waits, rpms, n):
     """What `--solver dp` runs by default: the label DP first, then the grid DP over the grid and the departure
     times of the baseline and of the label DP's plan. Equal to enumeration of that space, never dearer than the
@@ -151,6 +153,7 @@ def test_the_window_cases_open_and_close():
 
 @pytest.mark.parametrize("limits", [None, EngineLimits(min_hold_h=0.0, change_cost_t=0.05),
                                     EngineLimits(min_hold_h=200.0, change_cost_t=0.05)], ids=["free", "cost", "hold"])
+@pytest.mark.slow
 def test_route_carries_the_grid_dps_waits(limits):
     """Through solve() (what `jitroute route --solver dp --solver-option slot_h=2` runs), storm-window: no wait-free
     plan exists, the grid DP's plan waits at the departure for the storm to move on. The plan's legs carry the wait

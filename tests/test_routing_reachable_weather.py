@@ -93,6 +93,7 @@ def _random_cells(rng, nan_share, steady):
 
 @pytest.mark.parametrize("seed, nan_share, steady", [(s, n, st) for s in range(4) for n in (0.0, 0.08)
                                                       for st in (True, False)])
+@pytest.mark.slow
 def test_box_ranges_hold_for_every_sample(seed, nan_share, steady):
     """Wind and Hs within their ranges, the relative directions' direction weights and the current along course
     within what the ranges allow, at 3,000 samples anywhere in the box and its time span, any course in range."""
@@ -158,6 +159,7 @@ def _storm(kind: str, seed: int):
 
 @pytest.mark.parametrize("kind, rta_h, n", [("storm", 48.0, 1), ("storm", 75.0, 2), ("storm-limit", 48.0, 4),
                                             ("storm", 52.0, 5), ("storm-limit", 60.0, 6)])
+@pytest.mark.slow
 def test_windowed_bounds_hold_for_every_plan_within_the_windows(kind, rta_h, n):
     """For every plan of the graph (enumerated) that keeps within the windows (on time, when the windows are the
     on-time ones): each leg takes at least d·τ hours and d·φ fuel of its node and setting, and from every line on the
@@ -195,6 +197,7 @@ def test_windowed_bounds_hold_for_every_plan_within_the_windows(kind, rta_h, n):
 
 @pytest.mark.parametrize("kind, rta_h, n, budget_share", [("storm", 48.0, 1, 1.02), ("storm", 60.0, 2, 1.1),
                                                           ("storm-limit", 60.0, 6, 1.05)])
+@pytest.mark.slow
 def test_fuel_windowed_leg_bounds_hold_for_every_plan_within_the_budget(kind, rta_h, n, budget_share):
     """With a fuel budget the windows narrow to the times a plan within it can be at each node; every on-time plan
     burning at most the budget still sails each leg in at least its leg's τ and φ (per leg, as dp_exact_nb takes

@@ -9,6 +9,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from storage.run_lock import job_lock
 
 WAITER = ("import sys, time\n"
@@ -25,6 +27,7 @@ def _waiter(tmp_path, job: str, poll_s: float) -> subprocess.Popen:
     return p
 
 
+@pytest.mark.slow
 def test_waiters_get_the_lock_in_the_order_they_came(tmp_path):
     with job_lock(tmp_path / "locks", "nightly"):
         operator = _waiter(tmp_path, "backfill (operator)", 0.5)  # polls slowly

@@ -146,6 +146,7 @@ def test_strait_closes_when_the_clearance_is_more_than_half_its_width():
 
 
 @pytest.mark.parametrize("island", [MARCUS, NAURU])
+@pytest.mark.slow
 def test_route_past_a_small_island_keeps_the_clearance(island):
     dep, arr = (island[0] + 0.01, island[1] - 1.5), (island[0] - 0.01, island[1] + 1.5)
     straight = [slerp(*dep, *arr, k / 400) for k in range(401)]
@@ -174,6 +175,7 @@ def test_a_port_close_to_land_is_reached_along_its_approach():
     assert solve(no_approach, CALM, solver="dp").status == "infeasible"
 
 
+@pytest.mark.slow
 def test_demo_voyage_off_luzon_keeps_two_miles_from_the_coast():
     dep_name, arr_name = ROUTES[11]  # the demo fleet's twelfth voyage, V20012
     assert (dep_name, arr_name) == ("Manila", "Kaohsiung")

@@ -102,6 +102,7 @@ def test_best_engine_plan_on_a_route_equals_enumeration(weather, rpm_rta):
     assert best - 1e-9 <= coarse <= best * (1 + PLAN_GAP)
 
 
+@pytest.mark.slow
 def test_limited_plan_holds_every_setting_and_costs_fuel():
     pr = _voyage(80.0, n_lines=6, n_points=7)
     limits = EngineLimits(min_hold_h=12.0, change_cost_t=0.05)

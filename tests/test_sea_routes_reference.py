@@ -61,6 +61,7 @@ def _wall(lat, lon, limit_nm):
     return np.maximum(0.0, 60.0 * np.hypot(lon, np.maximum(0.0, np.abs(lat) - 0.5)) - 0.5)
 
 
+@pytest.mark.slow
 def test_a_one_way_canal_is_sailed_only_its_way_and_a_gate_closes_the_way_round():
     canal = ssp.Fairway("canal", ((0.0, -0.2), (0.0, 0.2)), one_way=True)  # through the wall, eastbound only
     gate = ((0.55, 0.0), (1.5, 0.0))  # closes the way round the wall's northern end

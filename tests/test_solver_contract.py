@@ -44,6 +44,7 @@ def _constant_speed(pr, weather, base: str = "gc") -> tuple[float, float, float]
 
 @pytest.mark.parametrize("case", sorted(CASES))
 @pytest.mark.parametrize("solver", SOLVER_NAMES)
+@pytest.mark.slow
 def test_every_solver_is_never_worse_than_constant_speed(solver, case):
     weather, rpm_rta = CASES[case]
     pr = problem(DEP, ARR, _rta_h(rpm_rta), n_lines=6, n_points=7)

@@ -1,6 +1,7 @@
 """RISH/OSCAR listing and the fetcher, over a real HTTP server on 127.0.0.1."""
 
 import numpy as np
+import pytest
 
 from pipeline.sources import oscar, rish
 from pipeline.sources.fetch import FetchOptions, fetch, sha256_of
@@ -48,6 +49,7 @@ def test_oscar_window_takes_latest_before_and_prefers_final():
     assert [f.name for f in chosen] == ["oscar_vel10285.nc", "oscar_currents_final_20201205.nc", "oscar_vel10290.nc"]
 
 
+@pytest.mark.slow
 def test_fetch_retries_5xx_then_succeeds_with_checksum(tmp_path):
     (tmp_path / "srv").mkdir()
     (tmp_path / "srv" / "a.bin").write_bytes(b"x" * 5000)
@@ -59,6 +61,7 @@ def test_fetch_retries_5xx_then_succeeds_with_checksum(tmp_path):
     assert again.status == "skipped"
 
 
+@pytest.mark.slow
 def test_fetch_404_is_missing_at_once_and_truncation_never_lands(tmp_path):
     (tmp_path / "srv").mkdir()
     (tmp_path / "srv" / "t.bin").write_bytes(b"y" * 100_000)
@@ -70,6 +73,7 @@ def test_fetch_404_is_missing_at_once_and_truncation_never_lands(tmp_path):
     assert not (tmp_path / "out" / "t.bin").exists() and not list((tmp_path / "out").glob("*.part"))
 
 
+@pytest.mark.slow
 def test_redirect_to_another_host_is_refused(tmp_path):
     (tmp_path / "srv").mkdir()
     with serve(tmp_path / "srv", {"r.bin": "redirect:http://localhost:9/r.bin"}) as (url, _):

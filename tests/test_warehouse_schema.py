@@ -80,6 +80,7 @@ def test_an_existing_warehouse_upgrades_keeping_its_rows(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("created_by", ["warehouse", "duckdb 2 default format"])
+@pytest.mark.slow
 def test_the_snapshot_is_written_in_the_declared_storage_version_and_opens_read_only(tmp_path, created_by):
     db = tmp_path / "w.duckdb"
     if created_by != "warehouse":  # a warehouse made before it was created in the snapshot's format
@@ -130,6 +131,7 @@ def _schema(db) -> dict:
         }
 
 
+@pytest.mark.slow
 def test_a_new_warehouse_copied_from_the_template_is_the_one_migrated_from_scratch(tmp_path, monkeypatch):
     """The tests' new warehouses are copies of one migrated once (warehouse.use_templates, tests/conftest.py): the copy
     holds what every migration run on an empty file gives, in the snapshot's storage format, and a list of migrations
@@ -160,6 +162,7 @@ def test_a_new_warehouse_copied_from_the_template_is_the_one_migrated_from_scrat
     assert not list(tmp_path.rglob("*.tmp*"))
 
 
+@pytest.mark.slow
 def test_an_existing_warehouse_is_never_replaced_by_the_template(tmp_path, monkeypatch):
     monkeypatch.setattr(warehouse, "_TEMPLATE_FOLDER", None)
     warehouse.use_templates(tmp_path / "templates")
