@@ -44,6 +44,8 @@ _SAVINGS = {
                             "the honest baseline's fuel (fuel-weighted); the figure to quote",
     "savings_beyond_forecast_pct": "fuel saved after the forecast's last valid time (neutral weather there: an "
                                    "assumption, not a forecast), percent; with savings_forecast_pct it makes the total",
+    "margin_cost_pct": "what the plans' arrival margins cost (aiming before the RTA), percent of the honest baseline's "
+                       "fuel, fuel-weighted; savings_total_pct already counts it (0 for plans aiming at the RTA)",
     "limits_fuel_t": "fuel the engine-change limits cost, tonnes (plan minus the best plan on its route without them)",
     "unlimited_fuel_t": "fuel burnt in tonnes by the best engine plans on the same routes without engine-change limits",
     "discrete_baseline_fuel_t": "fuel burnt in tonnes on the discrete-rpm baseline (arrives early: overstates savings)",

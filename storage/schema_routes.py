@@ -170,6 +170,17 @@ FLEET_SAVINGS_VIEW_016 = (FLEET_SAVINGS_VIEW_013
                                    "        LEFT JOIN plan_verification v USING (run_id, voyage_id)"))
 assert FLEET_SAVINGS_VIEW_016.count("plan_verification") == 1 and "n_verified_whole" in FLEET_SAVINGS_VIEW_016
 
+# fleet_savings with what the runs' arrival margins cost (routes.margin_cost_pct, fuel-weighted by the honest
+# baseline's fuel over the compared voyages, as savings_total_pct, which already counts it; 0 for a plan aiming at
+# the RTA and for rows stored before the column)
+_COMPARED = "r.savings_total_pct IS NOT NULL"
+FLEET_SAVINGS_VIEW_020 = FLEET_SAVINGS_VIEW_016.replace(
+    "               sum(r.limits_fuel_t) AS limits_fuel_t,",
+    f"               sum(coalesce(r.margin_cost_pct, 0) * r.honest_baseline_fuel_t) FILTER (WHERE {_COMPARED})\n"
+    f"                   / nullif(sum(r.honest_baseline_fuel_t) FILTER (WHERE {_COMPARED}), 0) AS margin_cost_pct,\n"
+    "               sum(r.limits_fuel_t) AS limits_fuel_t,", 1)
+assert FLEET_SAVINGS_VIEW_020.count("AS margin_cost_pct") == 1
+
 
 ARRIVAL_NM = 10.0  # a noon report this close to the destination is the arrival (plan against actual)
 
@@ -676,6 +687,8 @@ MIGRATIONS: list[Migration] = [
     # a plan aiming before the RTA claims its saving against the baseline arriving at the RTA, and says what the
     # margin costs
     Migration("routes_019_margin_cost", ROUTES.add_columns_sql(*ROUTE_MARGIN_COST_ADDED)),
+    # fleet_savings says what the run's arrival margins cost
+    Migration("routes_020_fleet_margin_cost", FLEET_SAVINGS_VIEW_020),
 ]
 
 

@@ -105,10 +105,11 @@ def test_cycles_on_different_grids_are_refused_naming_them():
 
 # --- the warehouse: plan_verification and the realised columns of fleet_savings -------------------------------------
 
-def _route(run_id, vid, fuel_t, base_t, p10, p90, p_on_time):
+def _route(run_id, vid, fuel_t, base_t, p10, p90, p_on_time, margin_cost_pct=None):
     from schemas.tables.routes import ROUTES
 
     return ROUTES.empty_row(run_id=run_id, voyage_id=vid, imo=9000001, status="ok", fuel_t=fuel_t,
+                            margin_cost_pct=margin_cost_pct,
                             honest_baseline_fuel_t=base_t, savings_total_pct=100 * (1 - fuel_t / base_t),
                             profile_fuel_t=base_t, n_legs=2, savings_p10_pct=p10, savings_p50_pct=(p10 + p90) / 2,
                             savings_p90_pct=p90, p_on_time=p_on_time, ensemble_members=4,
@@ -134,8 +135,8 @@ def test_fleet_savings_adds_up_the_realised_saving_and_the_spread_like_with_like
 
     db, run = tmp_path / "warehouse.duckdb", "R1"
     route_store.begin_run(db, run, cycle=np.datetime64("2020-12-01T00"), solver="bfoa", trigger="manual", n_voyages=4)
-    routes = [_route(run, "A", 90.0, 100.0, 2.0, 12.0, 1.0), _route(run, "B", 190.0, 200.0, -1.0, 9.0, 0.5),
-              _route(run, "C", 45.0, 50.0, 0.0, 20.0, 0.75), _route(run, "D", 10.0, 10.0, 0.0, 0.0, 1.0)]
+    routes = [_route(run, "A", 90.0, 100.0, 2.0, 12.0, 1.0, 1.5), _route(run, "B", 190.0, 200.0, -1.0, 9.0, 0.5),
+              _route(run, "C", 45.0, 50.0, 0.0, 20.0, 0.75, 0.4), _route(run, "D", 10.0, 10.0, 0.0, 0.0, 1.0, 0.0)]
     route_store.write_run_results(db, tmp_path / "exports", run, routes, [])
     rows = [_verified(run, "A", "verified", 40.0, 95.0, 101.0),  # realised: 95 vs 101
             _verified(run, "B", "partly verified", 20.0, 205.0, 203.0, late_h=2.0),  # realised: worse than the baseline
@@ -155,6 +156,8 @@ def test_fleet_savings_adds_up_the_realised_saving_and_the_spread_like_with_like
     assert f.savings_p10_pct == pytest.approx((2 * 100 - 1 * 200 + 0 * 50 + 0 * 10) / 360)
     assert f.savings_p90_pct == pytest.approx((12 * 100 + 9 * 200 + 20 * 50 + 0 * 10) / 360)
     assert f.p_on_time == pytest.approx((1 + 0.5 + 0.75 + 1) / 4) and f.n_ensemble == 4
+    # what the arrival margins cost, weighted the same way (B stored without the column: no margin)
+    assert f.margin_cost_pct == pytest.approx((1.5 * 100 + 0.4 * 50) / 360)
     summary = route_store.run_summary(db, run)
     assert summary["n_verified"] == 3 and summary["realised_savings_pct"] == pytest.approx(f.realised_savings_pct)
 

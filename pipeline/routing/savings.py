@@ -77,10 +77,13 @@ def with_margin_cost(aimed: SavingsSplit, at_rta: SavingsSplit) -> SavingsSplit:
     f_b, f_early, f = at_rta.baseline_fuel_t, aimed.baseline_fuel_t, aimed.plan_fuel_t
     total = 100.0 * (f_b - f) / f_b
     beyond = 100.0 * (at_rta.baseline_fuel_beyond_t - aimed.plan_fuel_beyond_t) / f_b
-    return SavingsSplit(at_rta.baseline_rpm, f_b, at_rta.baseline_hours, aimed.profile_fuel_t, f,
-                        100.0 * (f_early - aimed.profile_fuel_t) / f_b, 100.0 * (aimed.profile_fuel_t - f) / f_b, total,
-                        at_rta.baseline_fuel_beyond_t, aimed.plan_fuel_beyond_t, total - beyond, beyond,
-                        100.0 * (f_early - f_b) / f_b)
+    return SavingsSplit(baseline_rpm=at_rta.baseline_rpm, baseline_fuel_t=f_b, baseline_hours=at_rta.baseline_hours,
+                        profile_fuel_t=aimed.profile_fuel_t, plan_fuel_t=f,
+                        speed_profile_pct=100.0 * (f_early - aimed.profile_fuel_t) / f_b,
+                        route_pct=100.0 * (aimed.profile_fuel_t - f) / f_b, total_pct=total,
+                        baseline_fuel_beyond_t=at_rta.baseline_fuel_beyond_t,
+                        plan_fuel_beyond_t=aimed.plan_fuel_beyond_t, forecast_pct=total - beyond,
+                        beyond_forecast_pct=beyond, margin_cost_pct=100.0 * (f_early - f_b) / f_b)
 
 
 def held_plan(inst: Instance, nodes: np.ndarray, limits: EngineLimits, continuous: bool = True,
