@@ -111,7 +111,9 @@ def register(app: typer.Typer) -> None:
                                           "on longer voyages, and at the wait-free DP's "
                                           "times, waits up to 6 h more: slot_h=1 max_wait_h=6); gap=0 keeps every "
                                           "label; slot_h=none is the wait-free DP alone (exact in weather that holds "
-                                          "still)."),
+                                          "still); past max_label_legs=3000000 legs sailed the wait-free DP keeps at "
+                                          "most capped_labels=128 labels per node and the plan says so "
+                                          "(max_label_legs=none: no limit)."),
         seed: int = typer.Option(RoutingOptions.seed, help="Random seed of the BFOA (same seed, same plan)."),
         objective: str = typer.Option(RoutingOptions.objective, help="jit (least fuel arriving by the RTA) | thesis."),
         cycle: Optional[str] = typer.Option(None, help="Cube cycle to use (default: newest complete)."),
