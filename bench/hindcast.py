@@ -54,6 +54,7 @@ numba single-threaded. Prints the table and the targets; writes bench/out/hindca
 
     .venv/bin/python bench/hindcast.py [--quick] [--voyages 24] [--seed 41] [--max-lead 264] [--robust]
         [--train-seed 1041] [--train-voyages 12] [--margin-sigmas 1.65] [--margin-max-share 0.15]
+        [--margin-horizon-h H]
 """
 
 from __future__ import annotations
@@ -406,6 +407,7 @@ class Rules:
     # the claim is the saving it expects the plan to realise (the product's calibration.py); None: the lagged spread
     model: calibration.ErrorModel | None = None
     margin_max_share: float = 0.05
+    margin_horizon_h: float | None = None  # the margin covers the error of at most this many hours ahead (None: all)
 
     @property
     def any(self) -> bool:
@@ -423,7 +425,7 @@ def plan_at(v: Voyage, ship: Ship, field: wf.WeatherField, members, rules: Rules
             # as job.robust_plan: the model's part for the route's severity, the claim against the RTA's baseline
             model = rules.model.given(calibration.route_hs_mean_m(plan.legs))
             margin = calibration.arrival_margin_h(model, v.rta_h - ship.t_h, rules.margin_sigmas,
-                                                  rules.margin_max_share)
+                                                  rules.margin_max_share, rules.margin_horizon_h)
             if margin > 0.05:
                 aimed = solve(problem(v, (ship.lat, ship.lon), ship.t_h, v.rta_h - margin), field)
                 if robust.aim_reached(aimed, utc(v.rta_h)):
@@ -624,7 +626,8 @@ def write(a, n: int, runs: dict, per_voyage: list, t_start: float) -> dict:
     out.write_text(json.dumps({"conditions": {"voyages": n, "sailed": len(per_voyage), "seed": a.seed,
                                               "max_lead_h": a.max_lead, "cycle_h": CYCLE_H,
                                               "margin_sigmas": a.margin_sigmas,
-                                              "margin_max_share": a.margin_max_share, "train_seed": a.train_seed,
+                                              "margin_max_share": a.margin_max_share,
+                                              "margin_horizon_h": a.margin_horizon_h, "train_seed": a.train_seed,
                                               "train_voyages": a.train_voyages, "error_model": a.model,
                                               "cpu_s": round(time.process_time() - t_start, 1)},
                                "summary": rows, "targets": targets(rows), "table": table(list(rows.values())),
@@ -646,6 +649,9 @@ def main(argv=None) -> int:
                     help="k of the calibrated margin: k × σ of the arrival error by the hours ahead (0: no calibration)")
     ap.add_argument("--margin-max-share", type=float, default=0.15,
                     help="the calibrated margin is at most this share of the hours ahead")
+    ap.add_argument("--margin-horizon-h", type=float, default=None,
+                    help="the calibrated margin covers the arrival error of at most this many hours ahead (the hours "
+                         "after a re-planned voyage's last re-plan; default: the whole passage)")
     ap.add_argument("--only", default=None,
                     help="comma-separated strategies to run (e.g. 'replan calibrated'); default: all")
     ap.add_argument("--out", default=str(ROOT / "bench" / "out" / "hindcast.json"))
@@ -668,7 +674,8 @@ def main(argv=None) -> int:
     strategies = {"once": lambda v: sail_once(v, fc), "replan": lambda v: sail_replan(v, fc),
                   "perfect": lambda v: sail_once(v, fc, field=fc.truth)}
     if a.margin_sigmas > 0:
-        cal = Rules(margin_sigmas=a.margin_sigmas, model=model, margin_max_share=a.margin_max_share)
+        cal = Rules(margin_sigmas=a.margin_sigmas, model=model, margin_max_share=a.margin_max_share,
+                    margin_horizon_h=a.margin_horizon_h)
         strategies["once calibrated"] = functools.partial(sail_once, fc=fc, rules=cal)
         strategies["replan calibrated"] = functools.partial(sail_replan, fc=fc, rules=cal)
     if a.robust:

@@ -263,13 +263,22 @@ def in_effect(model: ErrorModel | None, n_members: int) -> ErrorModel | None:
     return model if n_members >= 2 else None
 
 
-def arrival_margin_h(model: ErrorModel, hours_ahead: float, k_sigma: float, max_share: float = 0.05) -> float:
+def arrival_margin_h(model: ErrorModel, hours_ahead: float, k_sigma: float, max_share: float = 0.05,
+                     horizon_h: float | None = None) -> float:
     """Hours to aim before the RTA with `hours_ahead` to go: the mean lateness (bias, when late) plus k_sigma × σ_eta
-    there, at most `max_share` of those hours; 0 with k_sigma ≤ 0."""
+    there, at most `max_share` of those hours; 0 with k_sigma ≤ 0. With `horizon_h`, the error of at most that many
+    hours ahead: a voyage re-planned at sea on every new cycle corrects the error of the hours before its last re-plan,
+    and only the last ones' is left at the arrival (`margin_error_h`)."""
     if k_sigma <= 0 or not hours_ahead > 0:
         return 0.0
-    m = max(model.eta_bias_h(hours_ahead), 0.0) + k_sigma * model.eta_sd_h.at(hours_ahead)
+    h = margin_error_h(hours_ahead, horizon_h)
+    m = max(model.eta_bias_h(h), 0.0) + k_sigma * model.eta_sd_h.at(h)
     return float(min(m, max_share * hours_ahead))
+
+
+def margin_error_h(hours_ahead: float, horizon_h: float | None) -> float:
+    """The hours ahead whose arrival error a margin covers: all of them, or at most `horizon_h` (None: all)."""
+    return float(hours_ahead) if horizon_h is None else float(min(hours_ahead, max(float(horizon_h), 0.0)))
 
 
 def expected_saving_pct(model: ErrorModel, claimed_pct: float, hours_ahead: float,

@@ -56,6 +56,10 @@ class RoutingOptions:
     # passage; 0: aim at the RTA) ...
     arrival_margin_sigmas: float = 0.0
     arrival_margin_max_share: float = 0.05
+    # ... with a calibrated error model, sized by the arrival error of at most this many hours ahead (None: the whole
+    # passage): a fleet re-planned at sea on every cycle corrects the rest, and only the error after its last re-plan
+    # is left at the arrival (about the cycle interval) ...
+    arrival_margin_horizon_h: float | None = None
     # ... keep the constant-speed baseline unless the plan beats it in at least this share of the members (0: off) ...
     min_win_share: float = 0.0
     # ... and at sea keep the current plan unless the new one gains more than this many standard deviations of its
