@@ -78,6 +78,7 @@ from pipeline.routing import geodesy as geo
 from pipeline.routing.contract import Found
 from pipeline.routing.engine.bounds import FinishBounds, fuel_to_finish_lb, is_on_time, label_priced_out
 from pipeline.routing.engine.labels import EXACT, bucketed, grow, prefix_min, put_min, time_span_nb
+from pipeline.routing.engine_timing import time_price
 from pipeline.routing.engine.leg import (CODE, FIX_FUEL, FIX_H, FIX_LAT0, FIX_LAT1, FIX_LON0, FIX_LON1, FIX_TOL_DEG, FUEL,
                                         H, N_LEG_OUT, OK, sail_leg_nb)
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
@@ -783,8 +784,6 @@ def _label_search(inst, options: DpOptions, upper: float, ld: np.ndarray, baseli
                                                   EXACT._replace(max_legs=budget))
     if budget <= 0 or n_legs <= budget:
         return nodes, rpm_idx, cost, n_legs, fb, None
-    from pipeline.routing.engine_limits import time_price
-
     route = baseline.nodes if baseline.ok else np.full(inst.space.lat.shape[0], inst.space.lat.shape[1] // 2, np.int64)
     mode = bucketed(options.capped_labels, time_price(inst, route) if inst.objective.kind == OBJ_JIT else 0.0)
     nodes, rpm_idx, cost, n_capped, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps,

@@ -38,6 +38,7 @@ from pipeline.routing.dp import dp_exact_nb, finish_bounds, label_bounds, latest
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.engine.labels import bucketed, grow, time_span_nb
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine_timing import time_price
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 
@@ -372,32 +373,6 @@ def _route_finish_tables(inst, nodes: np.ndarray):
     """dp.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
     lams, m_lam, t_min, _, _ = finish_bounds(_route_instance(inst, nodes))
     return lams, np.ascontiguousarray(m_lam[:, :, 0]), np.ascontiguousarray(t_min[:, 0])
-
-
-def time_price(inst, nodes: np.ndarray) -> float:
-    """The fuel (t) the route pays per hour gained around its RTA: the slope between the two settings held
-    throughout whose arrivals bracket the RTA (0 when none do). The price at which the bucketed DPs compare
-    labels of one time span."""
-    o = inst.objective
-    deadline = o.t_dep_h + o.t_req_h
-    hours, fuel = [], []
-    for r in range(len(inst.rpm_options)):
-        ok, t, f = _sail_held(inst, nodes, r)
-        hours.append(t if ok else np.inf)
-        fuel.append(f)
-    for r in range(len(hours) - 1):
-        if hours[r] > deadline >= hours[r + 1]:
-            return max(0.0, (fuel[r + 1] - fuel[r]) / (hours[r] - hours[r + 1]))
-    return 0.0
-
-
-def _sail_held(inst, nodes: np.ndarray, r: int):
-    """The route at setting r throughout: (sailed ok, arrival time h, fuel t)."""
-    L2 = len(nodes)
-    ct, cf = np.empty(L2), np.empty(L2)
-    code, _ = lk.sail_route_nb(nodes, np.full(L2 - 1, r, np.int64), 0, inst.graph, inst.vessel, inst.wx,
-                               inst.objective, ct, cf)
-    return code == OK, float(ct[-1]), float(cf[-1])
 
 
 def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: float = 0.0,

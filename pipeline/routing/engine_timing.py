@@ -250,3 +250,29 @@ def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng):
     q = cost_from_nb(nodes, rpm_idx, 0, g, v, w, o, ct, cf)
     s.cnt[0] += 1
     return retime_nb(nodes, rpm_idx, 0, q, np.inf, g, v, w, o, s, rng)
+
+
+def time_price(inst, nodes: np.ndarray) -> float:
+    """The fuel (t) the route pays per hour gained around its RTA: the slope between the two settings held
+    throughout whose arrivals bracket the RTA (0 when none do). The price at which the bucketed DPs compare
+    labels of one time span."""
+    o = inst.objective
+    deadline = o.t_dep_h + o.t_req_h
+    hours, fuel = [], []
+    for r in range(len(inst.rpm_options)):
+        ok, t, f = _sail_held(inst, nodes, r)
+        hours.append(t if ok else np.inf)
+        fuel.append(f)
+    for r in range(len(hours) - 1):
+        if hours[r] > deadline >= hours[r + 1]:
+            return max(0.0, (fuel[r + 1] - fuel[r]) / (hours[r] - hours[r + 1]))
+    return 0.0
+
+
+def _sail_held(inst, nodes: np.ndarray, r: int):
+    """The route at setting r throughout: (sailed ok, arrival time h, fuel t)."""
+    L2 = len(nodes)
+    ct, cf = np.empty(L2), np.empty(L2)
+    code, _ = sail_route_nb(nodes, np.full(L2 - 1, r, np.int64), 0, inst.graph, inst.vessel, inst.wx, inst.objective,
+                            ct, cf)
+    return code == OK, float(ct[-1]), float(cf[-1])
