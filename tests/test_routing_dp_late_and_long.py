@@ -24,6 +24,7 @@ from pipeline.routing.dp_grid import line_times
 from pipeline.routing.fastest_plan import fastest_plan
 from pipeline.routing.objectives import objective, route_cost_nb
 from pipeline.routing.solve import solver_instance
+from pipeline.routing.contract import UnknownSolverError
 from pipeline.routing.solvers import SOLVERS
 
 def _every_plan(inst):
@@ -155,4 +156,9 @@ def test_a_label_search_past_its_legs_budget_keeps_fewer_labels_and_the_plan_say
     plan = solve(pr, fld, solver="dp", options=opts)
     assert plan.status == "ok" and "at most 3 labels per node" in plan.reason
     with pytest.raises(ValueError, match="capped_labels"):
-        SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None, max_label_legs=10, capped_labels=0))
+        DpOptions(max_label_legs=10, capped_labels=0)
+    for bad in ({"capped_labels": "0"}, {"max_label_legs": "lots"}, {"max_label_legs": "-5"}):  # as --solver-option
+        with pytest.raises(UnknownSolverError, match=next(iter(bad))):
+            SOLVERS["dp"].make_options(bad)
+    assert SOLVERS["dp"].make_options({"max_label_legs": "2e6"}).max_label_legs == 2_000_000
+    assert SOLVERS["dp"].make_options({"max_label_legs": "none"}).max_label_legs is None

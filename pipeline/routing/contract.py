@@ -75,7 +75,10 @@ class Solver:
                 raise UnknownSolverError(f"solver {self.name!r} has no option {key!r} (its options: {known})")
             current = getattr(opts, key)
             values[key] = _convert(self.name, key, value, current)
-        return dataclasses.replace(opts, **values)
+        try:
+            return dataclasses.replace(opts, **values)
+        except ValueError as exc:  # the options' own checks (e.g. DpOptions.__post_init__)
+            raise UnknownSolverError(f"solver {self.name!r}: {exc}") from None
 
 
 def _convert(solver: str, key: str, value, current):

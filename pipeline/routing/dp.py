@@ -701,6 +701,16 @@ class DpOptions:
     #                                     the plan's reason says so): its work paced by legs sailed, not the clock
     capped_labels: int = 64
 
+    def __post_init__(self):
+        legs, cap = self.max_label_legs, self.capped_labels
+        if legs is not None:
+            if isinstance(legs, bool) or not isinstance(legs, (int, float)) or not legs >= 0:
+                raise ValueError(f"dp option max_label_legs must be a number of legs ≥ 0 or none, got {legs!r}")
+            object.__setattr__(self, "max_label_legs", int(legs))
+        if isinstance(cap, bool) or not isinstance(cap, (int, float)) or not cap >= 1 or int(cap) != cap:
+            raise ValueError(f"dp option capped_labels must be a whole number of labels per node ≥ 1, got {cap!r}")
+        object.__setattr__(self, "capped_labels", int(cap))
+
 
 def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math.inf, incumbent=None):
     """The solver contract (contract.py); `seed` is not used, `upper` is a known plan's cost to prune with and
@@ -710,8 +720,6 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
     waits (Found.wait_h, Found.wait_tph), which solve() puts on the plan's legs."""
     from pipeline.routing.baseline import evaluate
 
-    if not options.capped_labels >= 1:
-        raise ValueError(f"dp option capped_labels must be at least 1 label per node, got {options.capped_labels}")
     if options.upper_bound is not None:
         upper = min(upper, float(options.upper_bound))
     if baseline.ok:
