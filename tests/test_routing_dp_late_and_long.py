@@ -157,7 +157,7 @@ def test_a_label_search_past_its_legs_budget_keeps_fewer_labels_and_the_plan_say
     assert plan.status == "ok" and "at most 3 labels per node" in plan.reason
     with pytest.raises(ValueError, match="capped_labels"):
         DpOptions(max_label_legs=10, capped_labels=0)
-    for bad in ({"capped_labels": "0"}, {"max_label_legs": "lots"}, {"max_label_legs": "-5"}):  # as --solver-option
+    for bad in ({"capped_labels": "0"}, {"max_label_legs": "lots"}, {"max_label_legs": "-5"}, {"max_label_legs": "0"}):
         with pytest.raises(UnknownSolverError, match=next(iter(bad))):
             SOLVERS["dp"].make_options(bad)
     assert SOLVERS["dp"].make_options({"max_label_legs": "2e6"}).max_label_legs == 2_000_000

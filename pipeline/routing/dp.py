@@ -704,8 +704,8 @@ class DpOptions:
     def __post_init__(self):
         legs, cap = self.max_label_legs, self.capped_labels
         if legs is not None:
-            if isinstance(legs, bool) or not isinstance(legs, (int, float)) or not legs >= 0:
-                raise ValueError(f"dp option max_label_legs must be a number of legs ≥ 0 or none, got {legs!r}")
+            if isinstance(legs, bool) or not isinstance(legs, (int, float)) or not legs >= 1:
+                raise ValueError(f"dp option max_label_legs must be a number of legs ≥ 1 or none, got {legs!r}")
             object.__setattr__(self, "max_label_legs", int(legs))
         if isinstance(cap, bool) or not isinstance(cap, (int, float)) or not cap >= 1 or int(cap) != cap:
             raise ValueError(f"dp option capped_labels must be a whole number of labels per node ≥ 1, got {cap!r}")
@@ -787,7 +787,7 @@ def _label_search(inst, options: DpOptions, upper: float, ld: np.ndarray, baseli
     fb = label_bounds(inst, ld, reachable_windows(inst, ld, on_time),
                       _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf, wide=wide)
     eps = trim_eps(inst, gap, upper, fb.lams, fb.m_lam, fb.t_min)
-    budget = int(options.max_label_legs or 0)
+    budget = options.max_label_legs or 0  # 0: no limit (LabelMode.max_legs)
     nodes, rpm_idx, cost, n_legs, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps,
                                                   EXACT._replace(max_legs=budget))
     if budget <= 0 or n_legs <= budget:
