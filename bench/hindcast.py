@@ -424,8 +424,9 @@ def plan_at(v: Voyage, ship: Ship, field: wf.WeatherField, members, rules: Rules
         if plan.legs and rules.margin_sigmas > 0 and rules.model is not None:
             # as job.robust_plan: the model's part for the route's severity, the claim against the RTA's baseline
             model = rules.model.given(calibration.route_hs_mean_m(plan.legs))
+            reserve = robust.speed_reserve_h(plan, field, VESSEL) if rules.margin_horizon_h is not None else 0.0
             margin = calibration.arrival_margin_h(model, v.rta_h - ship.t_h, rules.margin_sigmas,
-                                                  rules.margin_max_share, rules.margin_horizon_h)
+                                                  rules.margin_max_share, rules.margin_horizon_h, reserve)
             if margin > 0.05:
                 aimed = solve(problem(v, (ship.lat, ship.lon), ship.t_h, v.rta_h - margin), field)
                 if robust.aim_reached(aimed, utc(v.rta_h)):

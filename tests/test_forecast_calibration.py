@@ -81,6 +81,12 @@ def test_the_margin_shrinks_as_the_voyage_nears_its_end_and_is_capped():
     assert cal.arrival_margin_h(m, 12.0, 1.65, max_share=1.0, horizon_h=24.0) == pytest.approx(0.01 * 12 + 1.65 * 0.1 * 12)
     assert cal.arrival_margin_h(m, 200.0, 1.65, max_share=0.01, horizon_h=24.0) == pytest.approx(2.0)
     assert cal.margin_error_h(200.0, None) == 200.0 and cal.margin_error_h(200.0, 24.0) == 24.0
+    # ... and what of the whole passage's error (35 h here) the ship's speed reserve cannot make up, when more
+    whole, last = 0.01 * 200 + 1.65 * 0.1 * 200, 0.01 * 24 + 1.65 * 0.1 * 24
+    assert cal.arrival_margin_h(m, 200.0, 1.65, 1.0, horizon_h=24.0, reserve_h=10.0) == pytest.approx(whole - 10.0)
+    assert cal.arrival_margin_h(m, 200.0, 1.65, 1.0, horizon_h=24.0, reserve_h=40.0) == pytest.approx(last)
+    assert cal.arrival_margin_h(m, 200.0, 1.65, 1.0, horizon_h=24.0, reserve_h=0.0) == pytest.approx(whole)
+    assert cal.arrival_margin_h(m, 200.0, 1.65, 1.0, reserve_h=40.0) == pytest.approx(whole)  # no horizon: all of it
 
 
 def test_the_default_model_needs_two_members_a_calibrated_one_none():
@@ -134,8 +140,9 @@ def test_a_calibrated_model_aims_k_sigma_of_the_hours_ahead_early_with_one_membe
         "from 30 verified plans)" in aimed.reason
     assert aimed.hours <= plan.hours - margin + 0.6 and aimed.fuel_t > plan.fuel_t
     last = replace(job, options=replace(job.options, arrival_margin_horizon_h=12.0))  # the error after a last re-plan
-    assert "aims 0.8 h before the RTA (1.65 × σ 0.5 h of the arrival error 12 h ahead" in robust_plan(
-        last, plan, calm, weather_for, [calm])[0].reason
+    last_reason = robust_plan(last, plan, calm, weather_for, [calm])[0].reason
+    assert "aims 0.8 h before the RTA (1.65 × σ 0.5 h of the arrival error 12 h ahead" in last_reason
+    assert "its speed reserve of" in last_reason  # in calm water at full speed it could gain hours: not needed here
     late = replace(job, error_model=replace(model, eta_bias_share=0.02))  # + 1.1 h of mean lateness 55 h ahead
     assert "aims 4.7 h before the RTA (its mean lateness 1.1 h + 1.65 × σ 2.2 h" in robust_plan(
         late, plan, calm, weather_for, [calm])[0].reason

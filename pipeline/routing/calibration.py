@@ -264,15 +264,21 @@ def in_effect(model: ErrorModel | None, n_members: int) -> ErrorModel | None:
 
 
 def arrival_margin_h(model: ErrorModel, hours_ahead: float, k_sigma: float, max_share: float = 0.05,
-                     horizon_h: float | None = None) -> float:
+                     horizon_h: float | None = None, reserve_h: float = math.inf) -> float:
     """Hours to aim before the RTA with `hours_ahead` to go: the mean lateness (bias, when late) plus k_sigma × σ_eta
-    there, at most `max_share` of those hours; 0 with k_sigma ≤ 0. With `horizon_h`, the error of at most that many
-    hours ahead: a voyage re-planned at sea on every new cycle corrects the error of the hours before its last re-plan,
-    and only the last ones' is left at the arrival (`margin_error_h`)."""
+    there, at most `max_share` of those hours; 0 with k_sigma ≤ 0. With `horizon_h`, only the error no later re-plan
+    corrects: a voyage re-planned at sea on every new cycle makes up the error of the hours before its last re-plan
+    by changing speed, as far as its speed reserve `reserve_h` (hours it could still gain at its top setting,
+    robust.speed_reserve_h) allows; so the margin is the larger of the error of the last `horizon_h` hours and what of
+    the whole passage's error the reserve cannot make up."""
     if k_sigma <= 0 or not hours_ahead > 0:
         return 0.0
-    h = margin_error_h(hours_ahead, horizon_h)
-    m = max(model.eta_bias_h(h), 0.0) + k_sigma * model.eta_sd_h.at(h)
+
+    def error(h: float) -> float:
+        return max(model.eta_bias_h(h), 0.0) + k_sigma * model.eta_sd_h.at(h)
+
+    whole = error(hours_ahead)
+    m = whole if horizon_h is None else max(error(margin_error_h(hours_ahead, horizon_h)), whole - max(reserve_h, 0.0))
     return float(min(m, max_share * hours_ahead))
 
 

@@ -115,13 +115,17 @@ def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for
     rta = np.datetime64(plan.rta_utc, "s")
     ahead_h = float((rta - np.datetime64(plan.depart_utc, "s")) / np.timedelta64(1, "s")) / 3600.0
     if model is not None:
+        reserve_h = robust.speed_reserve_h(plan, weather, vessel) if o.arrival_margin_horizon_h is not None else 0.0
         margin_h = calibration.arrival_margin_h(model, ahead_h, o.arrival_margin_sigmas, o.arrival_margin_max_share,
-                                                o.arrival_margin_horizon_h)
+                                                o.arrival_margin_horizon_h, reserve_h)
         error_h = calibration.margin_error_h(ahead_h, o.arrival_margin_horizon_h)
         bias_h = max(model.eta_bias_h(error_h), 0.0)
         why = ((f"its mean lateness {bias_h:.1f} h + " if bias_h >= 0.05 else "")
                + f"{o.arrival_margin_sigmas:g} × σ {model.eta_sd_h.at(error_h):.1f} h of the arrival error "
                f"{error_h:.0f} h ahead; {model.note()}")
+        if o.arrival_margin_horizon_h is not None:
+            why = (f"{why}; or what of the whole passage's error its speed reserve of {reserve_h:.1f} h cannot make "
+                   "up, whichever is more")
     else:
         margin_h = robust.arrival_margin_h(plan, members, vessel, o.arrival_margin_sigmas, o.arrival_margin_max_share)
         why = f"{o.arrival_margin_sigmas:g} × the spread of its arrival across {len(members)} forecasts"

@@ -59,6 +59,18 @@ def arrival_margin_h(plan: Plan, members: list[WeatherField], vessel: lk.Vessel,
     return float(min(k_sigma * np.std(hours, ddof=1), max_share * passage_h))
 
 
+def speed_reserve_h(plan: Plan, weather: WeatherField, vessel: lk.Vessel) -> float:
+    """Hours the plan's route could still be sailed faster: its passage less the same legs sailed without waits at the
+    vessel's top setting in `weather` (0 when that cannot be sailed): what a later re-plan can make up by speeding up."""
+    if not plan.legs:
+        return 0.0
+    top = float(np.max(vessel.rpm_options))
+    fast = [{**leg, "rpm": top, "wait_h": 0.0, "wait_fuel_t": 0.0} for leg in plan.legs]
+    hours, _ = sail_plan(fast, plan.depart_utc, weather, vessel)
+    passage_h = _hours_between(plan.depart_utc, plan.legs[-1]["eta_utc"])
+    return float(max(passage_h - hours, 0.0)) if np.isfinite(hours) else 0.0
+
+
 def aim_reached(aimed: Plan, rta_utc) -> bool:
     """Whether a plan made for an aim before the RTA (an arrival margin) is the one to sail: it has legs and meets
     that aim, or, late for it, still arrives by the RTA (the earliest the ship can make it, still earlier than a plan
