@@ -792,7 +792,7 @@ def _label_search(inst, options: DpOptions, upper: float, ld: np.ndarray, baseli
                                                   EXACT._replace(max_legs=budget))
     if budget <= 0 or n_legs <= budget:
         return nodes, rpm_idx, cost, n_legs, fb, None
-    route = baseline.nodes if baseline.ok else np.full(inst.space.lat.shape[0], inst.space.lat.shape[1] // 2, np.int64)
+    route = baseline.nodes if baseline.ok else inst.space.base_route()
     mode = bucketed(options.capped_labels, time_price(inst, route) if inst.objective.kind == OBJ_JIT else 0.0)
     nodes, rpm_idx, cost, n_capped, _ = dp_exact_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps,
                                                     mode)

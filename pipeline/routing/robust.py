@@ -67,8 +67,7 @@ def speed_reserve_h(plan: Plan, weather: WeatherField, vessel: lk.Vessel) -> flo
     top = float(np.max(vessel.rpm_options))
     fast = [{**leg, "rpm": top, "wait_h": 0.0, "wait_fuel_t": 0.0} for leg in plan.legs]
     hours, _ = sail_plan(fast, plan.depart_utc, weather, vessel)
-    passage_h = _hours_between(plan.depart_utc, plan.legs[-1]["eta_utc"])
-    return float(max(passage_h - hours, 0.0)) if np.isfinite(hours) else 0.0
+    return float(max(plan.hours - hours, 0.0)) if np.isfinite(hours) else 0.0
 
 
 def aim_reached(aimed: Plan, rta_utc) -> bool:
