@@ -103,7 +103,7 @@ def test_distance_to_a_small_island_equals_the_raw_mask(island):
 @pytest.mark.slow  # a child process
 def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
     code = ("import re, sys\n"
-            "from pipeline.routing import land\n"
+            "from pipeline.routing import land_mask as land\n"
             "g = land.build_land_grid()\n"
             "peak_kb = int(re.search('VmHWM:\\\\s+(\\\\d+)', open('/proc/self/status').read()).group(1))\n"
             "shipped = land.read_saved(land.PACKAGED, land.mask_key(land.mask_path()))\n"
@@ -114,14 +114,14 @@ def test_building_the_land_structure_is_small_and_never_loads_the_full_mask():
     assert nbytes < 20e6 and not loaded
     assert peak_mb < 300, f"building the land structure peaked at {peak_mb} MB"
     assert same_as_shipped, ("the shipped land_grid_v1.npz differs from a build from the installed mask: "
-                             "run `python -m pipeline.routing.land` and commit it")
+                             "run `python -m pipeline.routing.land_mask` and commit it")
 
 
 @pytest.mark.slow  # child processes
 def test_processes_load_the_shipped_land_structure_without_building_it():
     code = ("import re, sys\n"
-            "from pipeline.routing import land\n"
-            "land.build_land_grid = None  # a build would fail\n"
+            "from pipeline.routing import land, land_mask\n"
+            "land_mask.build_land_grid = None  # a build would fail\n"
             "g = land.land_grid()\n"
             "peak_kb = int(re.search('VmHWM:\\\\s+(\\\\d+)', open('/proc/self/status').read()).group(1))\n"
             "print(bool(land.is_sea(24.286, 153.979)), bool(land.is_sea(25.0, 150.0)), peak_kb // 1024)\n")
