@@ -23,7 +23,7 @@ from flows.settings import load_settings
 from pipeline.performance.model import model_from_stored
 from pipeline.routing import verification as vf
 from pipeline.routing.problem import RoutingInputError, WeatherWindow
-from pipeline.routing.solve import solver_spec
+from pipeline.routing.solvers import solver_spec
 from pipeline.sources.cycles import label as cycle_label
 from storage import cube_window, fleet_store, verification_store
 from storage.cube_location import CubeError

@@ -15,7 +15,7 @@ from pipeline.routing.global_routes import sea_route
 from pipeline.routing.problem import RoutingProblem, place_name
 from pipeline.routing.sea_route import NoSeaRoute, SeaRoute
 from pipeline.routing.search_space import VoyageGeometryError
-from pipeline.routing.solve import solver_spec
+from pipeline.routing.solvers import solver_spec
 
 
 def base_route_for(dep: tuple[float, float], arr: tuple[float, float], options: RoutingOptions, *,

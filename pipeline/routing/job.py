@@ -20,7 +20,8 @@ from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan
 from pipeline.routing.problem import RoutingInputError, RoutingProblem
 from pipeline.routing.search_space import SearchSpace
-from pipeline.routing.solve import solve, solver_spec
+from pipeline.routing.solve import solve
+from pipeline.routing.solvers import solver_spec
 from pipeline.routing.voyage import problem_from_voyage
 
 
@@ -157,7 +158,7 @@ def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for
 
 
 def plan_spread(job: RouteJob, plan: Plan, members: list[wf.WeatherField]):
-    """The plan's spread (ensemble.Spread): across the members, or, where the job's error model is in effect
+    """The plan's spread (plan.Spread): across the members, or, where the job's error model is in effect
     (calibration.in_effect), from that model around what it expects the plan to realise (calibration.calibrated_spread;
     the plan's reason then says which model and the expected saving). None without either."""
     from pipeline.routing.ensemble import spread  # noqa: PLC0415

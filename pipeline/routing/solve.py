@@ -28,6 +28,7 @@ from dataclasses import replace
 import numpy as np
 
 from pipeline.routing.engine import leg as lk
+from pipeline.routing.base_route import with_base_route
 from pipeline.routing.baseline import Baseline, baseline as find_baseline, constant_rpm_route, evaluate, shortest_route
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.canal_time import passages_note
@@ -42,10 +43,9 @@ from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
 from pipeline.routing.savings import held_plan, profile_plan, solver_instance, split_of
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
-from pipeline.routing.solvers import SOLVERS as REGISTRY
+from pipeline.routing.solvers import solver_spec
 from pipeline.routing.weather_field import WeatherField
 
-SOLVERS = tuple(REGISTRY)
 # the product's defaults (options.RoutingOptions and options.DEFAULT_SOLVER_OPTIONS): what `jitroute route`,
 # route-fleet and the dask workers plan with (job.plan_voyage), and what solve() plans with when not told otherwise
 PRODUCT = RoutingOptions()
@@ -244,13 +244,6 @@ def _waiting_plan_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits
     return held
 
 
-def solver_spec(solver: str):
-    """The registered solver of that name; RoutingInputError listing the known ones otherwise."""
-    if solver not in REGISTRY:
-        raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
-    return REGISTRY[solver]
-
-
 def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, limits: EngineLimits | None, profile,
                  t0: float, continuous: bool = True) -> Plan:
     """The solver's plan, or the constant-speed voyage `baseline` (or `profile`, (rpm per leg, cost) of the best
@@ -310,8 +303,6 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     t0 = time.perf_counter()
     if space is None:
         if problem.base_route is None and spec.base == "gc":  # the base route every entry point decides alike
-            from pipeline.routing.base_route import with_base_route  # it imports this module
-
             try:
                 problem = with_base_route(problem, replace(PRODUCT, solver=solver,
                                                            land_clearance_nm=problem.land_clearance_nm,
@@ -363,5 +354,5 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     return plan
 
 
-__all__ = ["solve", "product_options", "PRODUCT", "SOLVERS", "RoutingProblem", "RoutingInputError", "VoyageGeometryError", "BfoaParams", "DpOptions",
+__all__ = ["solve", "product_options", "PRODUCT", "solver_spec", "RoutingProblem", "RoutingInputError", "VoyageGeometryError", "BfoaParams", "DpOptions",
            "Plan", "shortest_route", "constant_rpm_route", "EngineLimits"]

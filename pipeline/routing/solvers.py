@@ -12,6 +12,7 @@ from pipeline.routing.baseline import Baseline, evaluate
 from pipeline.routing.bfoa import BfoaParams, run_bfoa
 from pipeline.routing.contract import Found, NoOptions, Solver
 from pipeline.routing.options import SOLVER_NAMES
+from pipeline.routing.problem import RoutingInputError
 
 
 def _bfoa(inst, base: Baseline, *, seed: int, options: BfoaParams) -> Found:
@@ -53,3 +54,10 @@ SOLVERS: dict[str, Solver] = {
 
 if tuple(SOLVERS) != SOLVER_NAMES:  # options.SOLVER_NAMES lets a run refuse a name before loading the solvers
     raise ImportError(f"solver registry {tuple(SOLVERS)} differs from options.SOLVER_NAMES {SOLVER_NAMES}")
+
+
+def solver_spec(solver: str) -> Solver:
+    """The registered solver of that name; RoutingInputError listing the known ones otherwise."""
+    if solver not in SOLVERS:
+        raise RoutingInputError(f"unknown solver {solver!r}; use one of {', '.join(SOLVERS)}")
+    return SOLVERS[solver]
