@@ -318,11 +318,12 @@ def fuel_range_t(model: ErrorModel, fuel_t: float, hours_ahead: float) -> tuple[
 
 
 def calibrated_spread(plan, ens, model: ErrorModel):
-    """The plan's spread (ensemble.Spread) from the error model instead of the members' disagreement: P(on time) of
+    """The plan's spread (plan.Spread) from the error model instead of the members' disagreement: P(on time) of
     the plan and of its baseline, fuel and saving P10/P50/P90 around what the model expects it to realise (the saving's
     P50 is the claim × skill: the honest claim); a model split by severity uses its part for the plan's route
     (route_hs_mean_m). `ens` (the members' spread, or None) gives the member count."""
-    from pipeline.routing.ensemble import ON_TIME_TOL_H, Spread  # noqa: PLC0415 (compiled kernels: routing only)
+    from pipeline.routing.ensemble import ON_TIME_TOL_H  # noqa: PLC0415 (compiled kernels: routing only)
+    from pipeline.routing.plan import Spread  # noqa: PLC0415
 
     if not plan.legs:
         return ens

@@ -11,28 +11,14 @@ saving's P10/P50/P90. Past a member's last step its neutral weather applies (eng
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.routing.engine import leg as lk
-from pipeline.routing.plan import Plan
+from pipeline.routing.plan import Plan, Spread
 from pipeline.routing.weather_field import WeatherField
 
 ON_TIME_TOL_H = 0.5  # an arrival this late still counts as on time (the hindcast's rule in issue 41)
-
-
-@dataclass(frozen=True)
-class Spread:
-    n_members: int  # members that could sail both the plan and its baseline
-    p_on_time: float  # share of those members in which the plan arrives by the RTA (+ ON_TIME_TOL_H)
-    baseline_p_on_time: float
-    fuel_p10_t: float
-    fuel_p50_t: float
-    fuel_p90_t: float
-    savings_p10_pct: float  # the saving against the baseline sailed in the same member, percent
-    savings_p50_pct: float
-    savings_p90_pct: float
 
 
 def sail_plan(legs: list[dict], depart_utc, field: WeatherField, vessel: lk.Vessel) -> tuple[float, float]:

@@ -14,8 +14,6 @@ from pipeline.routing.engine import leg as lk
 
 if TYPE_CHECKING:
     from pipeline.routing.engine_limits import EngineLimits
-    from pipeline.routing.ensemble import Spread
-    from pipeline.routing.savings import SavingsSplit
 
 STATUSES = ("ok", "late", "infeasible", "failed")
 SAVINGS_COLUMNS = ("honest_baseline_rpm", "honest_baseline_fuel_t", "honest_baseline_hours", "profile_fuel_t",
@@ -26,6 +24,36 @@ LIMITS_COLUMNS = ("min_engine_hold_h", "engine_change_cost_t", "n_engine_changes
 BASELINE_TRACK_COLUMNS = ("baseline_lat_deg", "baseline_lon_deg", "baseline_leg_rpm")
 ENSEMBLE_COLUMNS = ("ensemble_members", "p_on_time", "baseline_p_on_time", "fuel_p10_t", "fuel_p50_t", "fuel_p90_t",
                     "savings_p10_pct", "savings_p50_pct", "savings_p90_pct")
+
+
+@dataclass(frozen=True)
+class Spread:
+    n_members: int  # members that could sail both the plan and its baseline
+    p_on_time: float  # share of those members in which the plan arrives by the RTA (+ ON_TIME_TOL_H)
+    baseline_p_on_time: float
+    fuel_p10_t: float
+    fuel_p50_t: float
+    fuel_p90_t: float
+    savings_p10_pct: float  # the saving against the baseline sailed in the same member, percent
+    savings_p50_pct: float
+    savings_p90_pct: float
+
+
+@dataclass(frozen=True)
+class SavingsSplit:
+    baseline_rpm: float  # the constant rpm of the honest baseline
+    baseline_fuel_t: float
+    baseline_hours: float
+    profile_fuel_t: float  # the best engine plan on the base route
+    plan_fuel_t: float
+    speed_profile_pct: float
+    route_pct: float
+    total_pct: float
+    baseline_fuel_beyond_t: float = math.nan  # the baseline's fuel burnt past the forecast's last valid time
+    plan_fuel_beyond_t: float = math.nan  # the plan's
+    forecast_pct: float = math.nan  # the part of total_pct burnt within the forecast's valid times
+    beyond_forecast_pct: float = math.nan  # the part burnt past them (total_pct − forecast_pct)
+    margin_cost_pct: float = 0.0  # what aiming before the RTA costs (with_margin_cost); total = profile + route − this
 
 
 def _utc(t) -> datetime | None:

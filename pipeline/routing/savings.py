@@ -37,8 +37,6 @@ plan on the base route for the early arrival, and
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -47,27 +45,8 @@ from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_r
 from pipeline.routing.continuous_speed import Refined, as_settings, refine_rpm
 from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, EngineLimits, LimitedPlan, best_engine_plan,
                                             limited_plan)
+from pipeline.routing.plan import Plan, SavingsSplit
 from pipeline.routing.problem import Instance
-
-if TYPE_CHECKING:
-    from pipeline.routing.plan import Plan
-
-
-@dataclass(frozen=True)
-class SavingsSplit:
-    baseline_rpm: float  # the constant rpm of the honest baseline
-    baseline_fuel_t: float
-    baseline_hours: float
-    profile_fuel_t: float  # the best engine plan on the base route
-    plan_fuel_t: float
-    speed_profile_pct: float
-    route_pct: float
-    total_pct: float
-    baseline_fuel_beyond_t: float = math.nan  # the baseline's fuel burnt past the forecast's last valid time
-    plan_fuel_beyond_t: float = math.nan  # the plan's
-    forecast_pct: float = math.nan  # the part of total_pct burnt within the forecast's valid times
-    beyond_forecast_pct: float = math.nan  # the part burnt past them (total_pct − forecast_pct)
-    margin_cost_pct: float = 0.0  # what aiming before the RTA costs (with_margin_cost); total = profile + route − this
 
 
 def with_margin_cost(aimed: SavingsSplit, at_rta: SavingsSplit) -> SavingsSplit:
