@@ -80,7 +80,7 @@ def test_the_dp_s_bounds_count_the_canal_s_hours_and_stay_below_a_plan(suez):
     """The exact DP prunes with the least hours and fuel to finish: across a canal those are its fixed hours and
     fuel (not the open sea's), and still no more than a plan that sails the canal needs."""
     from pipeline.routing.canal_time import canal_lines
-    from pipeline.routing.dp import finish_bounds
+    from pipeline.routing.bound_tables import finish_bounds
     from pipeline.routing.problem import Instance
 
     route, weather, pr = suez

@@ -98,7 +98,8 @@ def test_late_pricing_sails_fewer_legs_than_fuel_alone_on_a_longer_graph():
     assert plan_hours > inst.objective.t_req_h  # late
     assert plan_hours == pytest.approx(fastest_plan(inst)[2], abs=0.05)  # the least late, to a few minutes
     # the same search with no upper bound at all (pricing cannot prune): it must sail more and find the same cost
-    from pipeline.routing.dp import _label_search, latest_departures
+    from pipeline.routing.bound_tables import latest_departures
+    from pipeline.routing.dp import _label_search
 
     _, _, cost_free, legs_free, _, _ = _label_search(inst, DpOptions(gap=0.0), math.inf, latest_departures(inst), base)
     assert cost_free == pytest.approx(evaluate(inst, found.nodes, found.rpm_idx)[0], rel=1e-12)

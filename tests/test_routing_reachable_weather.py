@@ -14,7 +14,7 @@ import pytest
 
 from routing_cases import field, moving_storm, problem
 from pipeline.performance.features import direction_weight
-from pipeline.routing import dp
+from pipeline.routing import bound_tables as bt
 from pipeline.routing import geodesy as geo
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
@@ -171,10 +171,10 @@ def test_windowed_bounds_hold_for_every_plan_within_the_windows(kind, rta_h, n):
     o, sp = inst.objective, inst.space
     plans = list(_plans(inst))
     assert len(plans) > 1000
-    ld = dp.latest_departures(inst)
-    any_time = dp.finish_bounds(inst)
+    ld = bt.latest_departures(inst)
+    any_time = bt.finish_bounds(inst)
     for on_time in (True, False):
-        lams, m_lam, t_min, tau, phi = dp.finish_bounds(inst, dp.reachable_windows(inst, ld, on_time))
+        lams, m_lam, t_min, tau, phi = bt.finish_bounds(inst, bt.reachable_windows(inst, ld, on_time))
         n_checked = 0
         for nodes, rpm, ct, cf in plans:
             if on_time and ct[-1] > o.t_dep_h + o.t_req_h:
@@ -189,10 +189,10 @@ def test_windowed_bounds_hold_for_every_plan_within_the_windows(kind, rta_h, n):
         assert n_checked > (10 if on_time else 1000)
         best = min(cf[-1] for _, _, ct, cf in plans if not on_time or ct[-1] <= o.t_dep_h + o.t_req_h)
         upper = best if on_time else math.inf  # an on-time incumbent, or none
-        lb = dp.cost_lower_bound(inst, upper, lams, m_lam, t_min)
+        lb = bt.cost_lower_bound(inst, upper, lams, m_lam, t_min)
         assert lb <= best + 1e-9  # jit: the cost of an on-time plan is at least its fuel
-        assert lb >= dp.cost_lower_bound(inst, upper, *any_time[:3]) - 1e-9
-    assert lb > dp.cost_lower_bound(inst, upper, *any_time[:3]) + 1e-3  # the weather met tightens it
+        assert lb >= bt.cost_lower_bound(inst, upper, *any_time[:3]) - 1e-9
+    assert lb > bt.cost_lower_bound(inst, upper, *any_time[:3]) + 1e-3  # the weather met tightens it
 
 
 @pytest.mark.parametrize("kind, rta_h, n, budget_share", [("storm", 48.0, 1, 1.02), ("storm", 60.0, 2, 1.1),
@@ -208,8 +208,8 @@ def test_fuel_windowed_leg_bounds_hold_for_every_plan_within_the_budget(kind, rt
     o, sp = inst.objective, inst.space
     on_time = [p for p in _plans(inst) if p[2][-1] <= o.t_dep_h + o.t_req_h]
     budget = budget_share * min(cf[-1] for _, _, _, cf in on_time)
-    windows = dp.reachable_windows(inst, dp.latest_departures(inst), True)
-    lams, m_lam, t_min, tau, phi = dp.finish_bounds(inst, windows, budget, per_leg=True)
+    windows = bt.reachable_windows(inst, bt.latest_departures(inst), True)
+    lams, m_lam, t_min, tau, phi = bt.finish_bounds(inst, windows, budget, per_leg=True)
     assert tau.shape == phi.shape == sp.lat.shape + (5, 3)
     n_checked = 0
     for nodes, rpm, ct, cf in on_time:
@@ -223,7 +223,7 @@ def test_fuel_windowed_leg_bounds_hold_for_every_plan_within_the_budget(kind, rt
             assert cf[-1] - cf[i] >= fuel_to_finish_lb(m_lam[:, i, a], lams, t_min[i, a], ct[-1] - ct[i]) - 1e-9
         n_checked += 1
     assert n_checked >= 1
-    narrowed = dp.fuel_windows(inst, windows, budget, *_tables(inst, windows))
+    narrowed = bt.fuel_windows(inst, windows, budget, *_tables(inst, windows))
     assert (narrowed[0] >= windows[0]).all() and (narrowed[1] <= windows[1]).all()
     if rta_h >= 60.0:  # windows of a loose RTA are wide: a tight budget narrows some
         assert (narrowed[1] - narrowed[0] < windows[1] - windows[0] - 1.0).any()
@@ -231,7 +231,7 @@ def test_fuel_windowed_leg_bounds_hold_for_every_plan_within_the_budget(kind, rt
 
 def _tables(inst, windows):
     """(lams, m_lam, t_min, tau_e, phi_e) of the windows alone, as fuel_windows takes them."""
-    lams, m_lam, t_min, tau_e, phi_e = dp.finish_bounds(inst, windows, per_leg=True)
+    lams, m_lam, t_min, tau_e, phi_e = bt.finish_bounds(inst, windows, per_leg=True)
     return lams, m_lam, t_min, tau_e, phi_e
 
 
@@ -245,9 +245,9 @@ def test_corner_bounds_of_the_thesis_form_hold_just_above_a_calm():
     fuel = np.array([0.0, 0.0, 0.02, -0.0005, 0.002, 0.0, 0.05])
     v = lk.Vessel(FORM_THESIS, 10.0, 0.0, 0.0, np.inf, np.inf, 1.0, speed, fuel, np.array([100.0]))
     rng = np.zeros((1, 9))
-    rng[0, dp.WIND_HI], rng[0, dp.WIND_REL_HI], rng[0, dp.WAVE_REL_HI] = 20.0, 180.0, 180.0
+    rng[0, bt.WIND_HI], rng[0, bt.WIND_REL_HI], rng[0, bt.WAVE_REL_HI] = 20.0, 180.0, 180.0
     tau, phi = np.empty((1, 1)), np.empty((1, 1))
-    dp._corner_bounds(v, rng, tau, phi)
+    bt._corner_bounds(v, rng, tau, phi)
     for wind_kn in (0.0, 1e-3, 0.5, 5.0, 20.0):
         for rel in (0.0, 90.0, 180.0):
             stw = stw_kn_nb(FORM_THESIS, speed, 100.0, 10.0, 0.0, wind_kn, rel, 0.0, 0.0, 0.0)

@@ -28,12 +28,12 @@ Bounds (certified; they never drop a label of an optimal plan, as in dp.py):
               upper / (1 + gap). The plan returned (the DP's or the incumbent) is then within (1 + gap) of the
               optimum.
   deadline    with an on-time incumbent, a label must be able to leave its node by the node's latest departure
-              that still makes the RTA (dp.latest_departures; waiting only delays).
-  fuel        dp.finish_bounds: fuel so far + the least fuel to finish in the hours left (the hours left start at
+              that still makes the RTA (bound_tables.latest_departures; waiting only delays).
+  fuel        bound_tables.finish_bounds: fuel so far + the least fuel to finish in the hours left (the hours left start at
               the departure slot; waiting burns ≥ 0), priced leg by leg in the weather of the times a plan can be
               at each node (from the earliest arrival to the latest departure: waiting keeps a plan inside them).
               After the label DP found a plan on time, its own tables: its windows narrowed to the times a plan
-              within the incumbent's cost can be at a node (dp.fuel_windows), which hold for a plan that waits too
+              within the incumbent's cost can be at a node (bound_tables.fuel_windows), which hold for a plan that waits too
               (while it waits, the fuel it needed to get there and the fuel it needs to finish only grow).
   lateness    with no plan on time, the lateness of the earliest arrival a label can still make (engine.bounds.cost_lb_nb).
 
@@ -50,9 +50,10 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.dp import label_bounds, reachable_windows
+from pipeline.routing.bound_tables import label_bounds, reachable_windows
 from pipeline.routing.engine.bounds import is_on_time, label_priced_out
 from pipeline.routing.engine.labels import grow
+from pipeline.routing.engine.relax import Relax, leg_priced_out, sail_label_leg
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb, sail_route_nb
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
@@ -128,14 +129,14 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, fb, times, max_wait_h, wait_tph):
     """(nodes, rpm indexes, departure slots, cost, legs sailed, labels kept) of the best plan of the grid space
     costing less than `upper` (cost inf when there is none); labels whose lower bound is above `prune_at`
     (≤ upper; upper / (1 + gap) for a certified gap) are dropped. `fb`: the FinishBounds, as dp.dp_exact_nb's."""
-    lat, lon, edge_ok, rpm_options, max_shift = g.lat, g.lon, g.edge_ok, v.rpm_options, g.max_shift
-    tau, phi, ld = fb.tau, fb.phi, fb.ld
+    lat, lon, edge_ok, max_shift, ld = g.lat, g.lon, g.edge_ok, g.max_shift, fb.ld
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape
-    R = rpm_options.shape[0]
+    R = v.rpm_options.shape[0]
     c = P // 2
     on_time = upper < (LATE_STEP_T if o.kind == OBJ_JIT else 9999.9)
     tol = 1e-9 * max(1.0, abs(prune_at))
+    x = Relax(g, v, w, o, fb, prune_at, tol, on_time)
     # kept labels of every line: node, departure slot, fuel at departure, parent label, setting of the leg to it
     cap = 1024
     kk, kf = np.empty(cap, np.int64), np.empty(cap)
@@ -167,18 +168,11 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, fb, times, max_wait_h, wait_tph):
                 d_nm = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2]) * (1.0 - 1e-9)
                 s = a2 - a + max_shift
                 for r in range(R):
-                    t1 = t0 + d_nm * tau[i, a, s, r]  # the leg at its least hours and fuel first
-                    if on_time and t1 > ld[i + 1, a2]:
+                    if leg_priced_out(x, i, a, a2, s, r, d_nm, t0, f0):
                         continue
-                    if label_priced_out(o, fb, i + 1, a2, t1, f0 + d_nm * phi[i, a, s, r], prune_at, tol,
-                                        on_time):
-                        continue
-                    sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, a2], lon[i + 1, a2], t0, rpm_options[r], v, w, out)
+                    t1 = sail_label_leg(x, i, a, a2, r, t0, out)
                     n_legs += 1
-                    if out[CODE] != OK:
-                        continue
-                    t1 = t0 + out[H]
-                    if t1 - t_dep_h > max_hours:
+                    if t1 == np.inf:
                         continue
                     f1 = f0 + out[FUEL]
                     if last:
@@ -312,7 +306,7 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
     its optimum; `plans` are known wait-free plans (nodes, rpm_idx): their departure times join the grid
     (`line_times`, returned as `times`; a plan's slots index its rows), so each is a plan of the space as it is,
     and each, its settings one step faster and every setting held throughout are sailed with the rounding waits
-    as the incumbent; `ld` = dp.latest_departures(inst). The fuel-to-finish bound is dp.finish_bounds in the
+    as the incumbent; `ld` = bound_tables.latest_departures(inst). The fuel-to-finish bound is bound_tables.finish_bounds in the
     weather of the times a plan can be at each node (reachable_windows), per leg: waits keep a plan within them;
     `bounds`, when given, is a FinishBounds that holds for every plan the grid must keep (dp._grid_search: the label
     DP's, narrowed to the times a plan within its incumbent's cost can be at each node, when its plan is on time)."""

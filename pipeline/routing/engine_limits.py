@@ -20,7 +20,7 @@ throughout is always kept (it alone may end with less than the hold).
 
 Bounds (as in dp.py; they never drop a label of an optimal plan): when the route can arrive by the RTA at its
 fastest setting, labels that can no longer make it are dropped; under `jit`, a label whose fuel and change
-costs so far plus the least fuel to finish in the time left (dp.finish_bounds, on the route alone) exceed a
+costs so far plus the least fuel to finish in the time left (bound_tables.finish_bounds, on the route alone) exceed a
 known plan's cost is dropped. The known plan: the best of one setting throughout and one change between two
 settings at any line, among those obeying the limits.
 """
@@ -34,7 +34,8 @@ import numba
 import numpy as np
 
 from pipeline.routing.engine import leg as lk
-from pipeline.routing.dp import dp_exact_nb, finish_bounds, label_bounds, latest_departures, trim_eps
+from pipeline.routing.bound_tables import finish_bounds, label_bounds, latest_departures, trim_eps
+from pipeline.routing.dp import dp_exact_nb
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.engine.labels import bucketed, grow, time_span_nb
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
@@ -370,7 +371,7 @@ def _route_instance(inst, nodes: np.ndarray):
 
 
 def _route_finish_tables(inst, nodes: np.ndarray):
-    """dp.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
+    """bound_tables.finish_bounds on the route alone: (lams, m_route (K, lines), t_min (lines))."""
     lams, m_lam, t_min, _, _ = finish_bounds(_route_instance(inst, nodes))
     return lams, np.ascontiguousarray(m_lam[:, :, 0]), np.ascontiguousarray(t_min[:, 0])
 

@@ -1,10 +1,10 @@
 """The weather a ship can meet on each leg over the times it can sail it: the ranges the exact DP's fuel-to-finish
-bound is priced in (dp.finish_bounds with `windows`), much tighter than the strongest weather near a node at any time.
+bound is priced in (bound_tables.finish_bounds with `windows`), much tighter than the strongest weather near a node at any time.
 
 A ship is at node (i, a) no earlier than its earliest arrival there (`earliest_arrival_nb`: legs are first-in-first-
 out and the fastest setting is at least as fast in every condition, so sailing the fastest from the earliest time
 reaches each node first) and, when the plan must make the RTA, no later than the latest departure from there
-(dp.latest_departures). A leg (i, a) → (i + 1, b) is therefore sailed between the first's earliest arrival and the
+(bound_tables.latest_departures). A leg (i, a) → (i + 1, b) is therefore sailed between the first's earliest arrival and the
 second's latest departure; over the valid times a sample then reads and the grid cells the leg reads (`_edge_box`),
 the weather met lies in ranges that hold for every sample the leg kernel takes (`_box_ranges`):
 
@@ -22,7 +22,7 @@ the weather met lies in ranges that hold for every sample the leg kernel takes (
   course          along a great-circle chord the course turns monotonically (its rate is sin(course)·tan(lat)),
                   so it lies between the chord's first and last courses while it does not cross the equator.
 
-The relative directions (from − course) then lie in intervals, and dp._corner_bounds evaluates the model at the
+The relative directions (from − course) then lie in intervals, and bound_tables._corner_bounds evaluates the model at the
 corners of speed × folded relative direction, where both model forms take their extremes.
 """
 

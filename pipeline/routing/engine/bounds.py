@@ -1,7 +1,7 @@
 """The bounds the label searches prune with (compiled): the finish bounds as one structure, the least fuel to
 finish in the hours left, the least cost of every plan a label can still become, and the one pruning rule built
 from them that every label search applies. Certified: they never drop a label of an optimal plan (the proofs are
-in dp.py's docstring, where the tables are built: `dp.finish_bounds`)."""
+in dp.py's docstring; the tables are built by `bound_tables.finish_bounds`)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT
 
 class FinishBounds(NamedTuple):
     """The bound tables of a label search over a graph of L+2 lines × P nodes, R engine settings, legs (i, a) →
-    (i + 1, a + s − max_shift), hours after the objective's t_ref. Built by `dp.label_bounds` (or by hand for a
+    (i + 1, a + s − max_shift), hours after the objective's t_ref. Built by `bound_tables.label_bounds` (or by hand for a
     search that bounds otherwise: bfoa's polish)."""
 
     lams: np.ndarray  # (K,) prices of time (t of fuel per hour)
