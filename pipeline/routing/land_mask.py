@@ -111,15 +111,18 @@ def build_land_grid(path: Path | None = None) -> LandGrid:
     path = mask_path() if path is None else Path(path)
     nb = TILE // BLOCK
     slot = np.full((180, 360), SEA_TILE, np.int32)
-    bits, land_blocks = [], np.zeros((180 * nb, 360 * nb), bool)
+    mixed_tiles: list[np.ndarray] = []  # per tile row, its mixed tiles' packed cells
+    n_mixed = 0
+    land_blocks = np.zeros((180 * nb, 360 * nb), bool)
     for r, rows in enumerate(_tile_rows(path)):
         tile_sea, land_blocks[r * nb:(r + 1) * nb] = _classify_tile_row(rows)
         slot[r, tile_sea == 0] = LAND_TILE
         mixed = np.flatnonzero((tile_sea > 0) & (tile_sea < TILE * TILE))
         if len(mixed):
-            slot[r, mixed] = np.arange(len(mixed), dtype=np.int32) + sum(len(b) for b in bits)
-            bits.append(np.packbits(rows.reshape(TILE, 360, TILE)[:, mixed, :], axis=-1).transpose(1, 0, 2))
-    bits = np.concatenate(bits) if bits else np.zeros((0, TILE, TILE // 8), np.uint8)
+            slot[r, mixed] = np.arange(len(mixed), dtype=np.int32) + n_mixed
+            n_mixed += len(mixed)
+            mixed_tiles.append(np.packbits(rows.reshape(TILE, 360, TILE)[:, mixed, :], axis=-1).transpose(1, 0, 2))
+    bits = np.concatenate(mixed_tiles) if mixed_tiles else np.zeros((0, TILE, TILE // 8), np.uint8)
     far_nm = np.array([min(BOUND_CAP_NM, 60.0 * _cos_poleward(r)) for r in range(180)])
     # tiles that need a bound per block: those with land in them or in one of their 8 neighbours
     not_sea = slot != SEA_TILE
