@@ -660,17 +660,18 @@ def test_honest_baseline_and_savings_split_in_calm_water():
 
 def _bfoa_start(pr, fld, params, seed=1):
     """The initial swarm of the BFOA on a voyage: (swarm, instance, knobs)."""
-    from pipeline.routing import bfoa, engine_timing
+    from pipeline.routing import engine_timing
+    from pipeline.routing.engine import swarm
     from pipeline.routing.baseline import baseline
 
     inst = Instance.build(pr, pr.search_space(), fld)
     base = baseline(inst)
     L2, P = inst.graph.lat.shape
     k = params.knobs(L2 - 2, P, inst.graph.max_shift)
-    sw, s, wk = bfoa.swarm(k.n_bacteria, L2), engine_timing.scratch(L2), bfoa.work(L2)
+    sw, s, wk = swarm.swarm(k.n_bacteria, L2), engine_timing.scratch(L2), swarm.work(L2)
     no_branches = np.empty((0, L2), np.int64)
-    bfoa.init_swarm_nb(sw, base.nodes, base.rpm_idx, no_branches, inst.graph, inst.vessel, inst.wx, inst.objective, s,
-                       k, wk, np.random.default_rng(seed))
+    swarm.init_swarm_nb(sw, base.nodes, base.rpm_idx, no_branches, inst.graph, inst.vessel, inst.wx, inst.objective, s,
+                        k, wk, np.random.default_rng(seed))
     return sw, inst, k
 
 
@@ -705,7 +706,7 @@ def test_offset_route_goes_out_along_and_back():
 
 
 def test_bfoa_block_shift_moves_a_whole_plateau():
-    from pipeline.routing.bfoa import _block
+    from pipeline.routing.engine.swarm import _block
 
     nodes = np.array([5, 6, 7, 8, 8, 8, 8, 8, 8, 7, 6, 5], np.int64)  # out, a plateau on lines 3..8, back
     L = len(nodes) - 2

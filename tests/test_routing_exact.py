@@ -18,7 +18,8 @@ import pytest
 from routing_cases import MODEL, field, moving_storm, problem, solve, wavy
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.bound_tables import finish_bounds, label_bounds, latest_departures, reachable_windows, trim_eps
-from pipeline.routing.dp import DpOptions, _fuel_budget_t, dp_exact_nb
+from pipeline.routing.dp import DpOptions, _fuel_budget_t
+from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.engine.labels import EXACT
 from pipeline.routing.objectives import route_cost_nb

@@ -35,9 +35,9 @@ import numpy as np
 
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.bound_tables import finish_bounds, label_bounds, latest_departures, trim_eps
-from pipeline.routing.dp import dp_exact_nb
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.engine.labels import bucketed, grow, time_span_nb
+from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 from pipeline.routing.engine_timing import time_price
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
@@ -380,7 +380,7 @@ def best_engine_plan(inst, nodes: np.ndarray, upper: float | None = None, gap: f
                      buckets: int = 0) -> tuple[np.ndarray, float, int]:
     """(rpm index per leg, cost, legs sailed) of the best engine plan without limits on the fixed route `nodes`:
     on time at the least fuel when the RTA can be met, else the least late. The exact DP on the route alone
-    (dp.dp_exact_nb with its bounds), pruned by `upper` (default: the best plan of one setting throughout or one
+    (engine.label_search.dp_exact_nb with its bounds), pruned by `upper` (default: the best plan of one setting throughout or one
     change, `incumbent_cost_nb` without a hold); with gap > 0 its labels are ε-trimmed so the plan is within that
     share of the best; with `buckets` > 0 at most that many labels per line (approximate, see limited_plan_nb).
     Cost inf when no plan beats `upper` (or none can be sailed)."""

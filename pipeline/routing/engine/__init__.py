@@ -1,6 +1,8 @@
 """The compiled core every routing search shares: sailing a leg in the weather it meets (`leg`), the label
-primitives of the label searches (`labels`: growing label stores, the prefix-minimum look-up, the time spans) and
-the bounds they prune with (`bounds`: the finish bounds as one `FinishBounds`, the least cost of what a label can
-still become). A search (dp, dp_grid, bfoa, engine_limits, ...) is built over these; what is compiled and shared
-between searches belongs here, what one search alone needs stays with it.
+primitives of the label searches (`labels`: growing label stores, the prefix-minimum look-up, the time spans), the
+bounds they prune with (`bounds`: the finish bounds as one `FinishBounds`, the least cost of what a label can still
+become), the one relaxation step they take (`relax`), and the searches themselves: the label DP (`label_search`),
+the grid DP with waits (`grid_search`) and the BFOA's swarm (`swarm`). The solvers (dp.py, dp_grid.py, bfoa.py,
+engine_limits.py, ...) are plain-Python strategies over these: they build the bounds, choose the search and its
+mode, and read its answer.
 """

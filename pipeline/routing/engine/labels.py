@@ -10,7 +10,7 @@ import numpy as np
 
 
 class LabelMode(NamedTuple):
-    """How a label search keeps its labels (dp.dp_exact_nb): every label that is not dominated (`EXACT`), or at most
+    """How a label search keeps its labels (label_search.dp_exact_nb): every label that is not dominated (`EXACT`), or at most
     `buckets` per node (the line's candidate times cut into that many equal spans, a span keeping its label of least
     f − e·t + lam_t·t, lam_t in t/h: approximate, for local searches and for voyages too long for every label). With
     `skip_dropped` (exact mode only) a leg is not sailed when a label made already is sure to drop the one it would
