@@ -74,6 +74,28 @@ class Work(NamedTuple):
     on_engine: np.ndarray  # (1,) bool: the tumble acts on engine settings
 
 
+class SwarmRun(NamedTuple):
+    """What the swarm's kernels read: the graph, vessel, weather and objective (engine.leg's), the sailing scratch
+    (engine_timing.scratch), the knobs and the work arrays of a move."""
+
+    g: object
+    v: object
+    w: object
+    o: object
+    s: object
+    k: Knobs
+    wk: Work
+
+
+class Screening(NamedTuple):
+    """How a swim judges a move before sailing it whole: `on`, its changed legs first, time priced at `lam` (t/h,
+    what the engine re-set would pay); `plan`, the engine re-set for the move's estimated arrival first."""
+
+    lam: float
+    on: bool
+    plan: bool
+
+
 def swarm(n_bacteria: int, n_lines_total: int) -> Swarm:
     ns, n = n_bacteria, n_lines_total
     return Swarm(np.empty((ns, n), np.int64), np.empty((ns, n - 1), np.int64), np.empty((ns, n)), np.empty((ns, n)),
@@ -88,9 +110,10 @@ def work(n_lines_total: int) -> Work:
 
 
 @numba.njit(cache=True)
-def _new_bacterium(nodes, rpm_idx, g, v, w, o, s, k, rng):
+def _new_bacterium(nodes, rpm_idx, run, rng):
     """A random bacterium: a safe random walk with engine settings aimed at the RTA. A route that cannot be
     sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
+    g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
     q = np.inf
     for attempt in range(4):
         if not random_walk_nb(nodes, g.edge_ok, g.max_shift, k.r_max, k.k_max, k.backup, k.sigma * 2.0 ** attempt,
@@ -103,17 +126,18 @@ def _new_bacterium(nodes, rpm_idx, g, v, w, o, s, k, rng):
 
 
 @numba.njit(cache=True)
-def _offset_bacterium(j, nodes, rpm_idx, g, v, w, o, s, k, rng):
+def _offset_bacterium(j, nodes, rpm_idx, run, rng):
     """Offset route j of k.n_offset (offsets spread evenly from one side of the graph to the other): out one node
     a line, along the offset, back in time; engine settings aimed at the RTA. A random bacterium when it cannot
     be walked or sailed. (placed?, cost)"""
+    g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
     c = g.lat.shape[1] // 2
     offset = int(np.round(-c + 2.0 * c * j / max(k.n_offset - 1, 1)))
     if random_walk_nb(nodes, g.edge_ok, g.max_shift, k.r_max, k.k_max, k.backup, 0.0, 0.0, 1.0, offset, rng):
         q = aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng)
         if q < np.inf:
             return True, q
-    return _new_bacterium(nodes, rpm_idx, g, v, w, o, s, k, rng)
+    return _new_bacterium(nodes, rpm_idx, run, rng)
 
 
 @numba.njit(cache=True)
@@ -184,10 +208,11 @@ def _block(L, nodes, vec, rng):
 
 
 @numba.njit(cache=True)
-def _tumble(L, n_legs, p_engine, p_bend, p_block, nodes, rpm_idx, vec, on_engine, rng):
-    """Fill vec (length L+2 for nodes or L+1 for legs) with a direction; return the first changed index (engine? in
-    on_engine). With probability p_bend the vector is placed at a bend (a line where the route, or a leg where the
-    engine plan, changes): there a move shifts the bend instead of adding two."""
+def _tumble(kn, L, n_legs, nodes, rpm_idx, wk, rng):
+    """Fill wk.vec (length L+2 for nodes or L+1 for legs) with a direction; return the first changed index (engine? in
+    wk.on_engine). With probability kn.p_bend the vector is placed at a bend (a line where the route, or a leg where
+    the engine plan, changes): there a move shifts the bend instead of adding two."""
+    p_engine, p_bend, p_block, vec, on_engine = kn.p_engine, kn.p_bend, kn.p_block, wk.vec, wk.on_engine
     for j in range(vec.shape[0]):
         vec[j] = 0
     engine = rng.random() < p_engine
@@ -242,12 +267,13 @@ def _adopt(sw, i, cand, cand_r, ct, cf, q):
 
 
 @numba.njit(cache=True)
-def init_swarm_nb(sw, base_nodes, base_rpm, branches, g, v, w, o, s, k, wk, rng):
+def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
     """Initial bacteria: bacterium 0 (and any whose walk fails) starts on the baseline route, with its constant rpm
     or engine settings aimed at the RTA, whichever is cheaper; bacteria 1..n_offset on the offset routes; the last
     ones on the routes in `branches` (one per row, engine settings aimed at the RTA); the rest random. Returns the
     best one's index."""
-    cand, cand_r = wk.cand, wk.cand_r
+    g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
+    cand, cand_r = run.wk.cand, run.wk.cand_r
     q = np.inf
     n_branch = min(branches.shape[0], k.n_bacteria - 1 - k.n_offset)
     for i in range(k.n_bacteria):
@@ -257,9 +283,9 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, g, v, w, o, s, k, wk, rng)
             q = aim_engine_nb(cand, cand_r, g, v, w, o, s, rng)
             placed = q < np.inf
         elif 0 < i <= k.n_offset:
-            placed, q = _offset_bacterium(i - 1, cand, cand_r, g, v, w, o, s, k, rng)
+            placed, q = _offset_bacterium(i - 1, cand, cand_r, run, rng)
         elif i > 0:
-            placed, q = _new_bacterium(cand, cand_r, g, v, w, o, s, k, rng)
+            placed, q = _new_bacterium(cand, cand_r, run, rng)
         if not placed:
             sw.pos[i, :] = base_nodes
             sw.rpm[i, :] = base_rpm
@@ -283,9 +309,12 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, g, v, w, o, s, k, wk, rng)
 
 
 @numba.njit(cache=True)
-def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
+def swim_nb(sw, i, first, engine, d, screen, run, rng):
     """Swim bacterium i along the tumbled direction (wk.vec, or wk.vec_r for engine moves) in steps of `d`, while
-    the judged cost keeps falling (at most `swim_max` steps). Returns True when at least one step was taken."""
+    the judged cost keeps falling (at most `swim_max` steps), each move judged as `screen` (Screening) says. Returns
+    True when at least one step was taken."""
+    g, v, w, o, s, k, wk = run.g, run.v, run.w, run.o, run.s, run.k, run.wk
+    lam, do_screen, do_plan = screen.lam, screen.on, screen.plan
     pos, rpm, cum_t, cum_f, cost = sw.pos, sw.rpm, sw.cum_t, sw.cum_f, sw.cost
     cand, cand_r, vec, vec_r = wk.cand, wk.cand_r, wk.vec, wk.vec_r
     ct, cf = s.ct, s.cf
@@ -377,13 +406,14 @@ def swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, 
 
 
 @numba.njit(cache=True)
-def chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
+def chemotaxis_nb(sw, i, screen, run, rng):
     """Bacterium i's `n_chemo` chemotactic moves: tumble, swim; the swim length adapts after `n_fail` failed route
     moves at each size (large → medium → small → large)."""
-    L2 = g.lat.shape[0]
+    k, wk = run.k, run.wk
+    L2 = run.g.lat.shape[0]
     for _m in range(k.n_chemo):
         sw.moves[i] += 1
-        first = _tumble(L2 - 2, L2 - 1, k.p_engine, k.p_bend, k.p_block, sw.pos[i], sw.rpm[i], wk.vec, wk.on_engine, rng)
+        first = _tumble(k, L2 - 2, L2 - 1, sw.pos[i], sw.rpm[i], wk, rng)
         engine = wk.on_engine[0]
         if engine:
             for j in range(L2 - 1):
@@ -394,7 +424,7 @@ def chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng):
             d = k.step_large
         else:
             d = 3 - sw.level[i]
-        improved_any = swim_nb(sw, i, first, engine, d, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng)
+        improved_any = swim_nb(sw, i, first, engine, d, screen, run, rng)
         if not engine:
             if improved_any:
                 sw.fails[i] = 0
@@ -428,43 +458,46 @@ def reproduce_nb(sw, order, k):
 
 
 @numba.njit(cache=True)
-def disperse_nb(sw, best_i, g, v, w, o, s, k, wk, rng):
+def disperse_nb(sw, best_i, run, rng):
     """Elimination and dispersal: `n_disperse` random bacteria, never the current best, start again at random."""
+    k, wk = run.k, run.wk
     for _d in range(k.n_disperse):
         j = rng.integers(0, k.n_bacteria)
         if j == best_i:
             continue
         # walk in scratch space: a failed walk must not leave bacterium j half-overwritten with stale sums
-        placed, q = _new_bacterium(wk.cand, wk.cand_r, g, v, w, o, s, k, rng)
+        placed, q = _new_bacterium(wk.cand, wk.cand_r, run, rng)
         if placed:
-            _adopt(sw, j, wk.cand, wk.cand_r, s.ct, s.cf, q)
+            _adopt(sw, j, wk.cand, wk.cand_r, run.s.ct, run.s.cf, q)
             _reborn(sw, j)
 
 
 @numba.njit(cache=True)
-def bfoa_nb(rng, k, base_nodes, base_rpm, branches, g, v, w, o, sw, s, wk, history):
-    """Run the improved BFOA drawing from the generator `rng`, some bacteria starting on the routes in `branches`;
-    the best plan ends in sw.best_pos / best_rpm / best_cost, the best cost after each cycle in `history`. Stops
-    early after `stall` cycles that lower the best cost by no more than `stall_tol` of it. Returns (routes or route
-    tails sailed, cycles run)."""
-    best_i = init_swarm_nb(sw, base_nodes, base_rpm, branches, g, v, w, o, s, k, wk, rng)
+def bfoa_nb(rng, run, base_nodes, base_rpm, branches, sw, history):
+    """Run the improved BFOA (`run`: SwarmRun) drawing from the generator `rng`, some bacteria starting on the routes
+    in `branches`; the best plan ends in sw.best_pos / best_rpm / best_cost, the best cost after each cycle in
+    `history`. Stops early after `stall` cycles that lower the best cost by no more than `stall_tol` of it. Returns
+    (routes or route tails sailed, cycles run)."""
+    k, v, o = run.k, run.v, run.o
+    best_i = init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng)
     # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
     lam = (time_price_nb(sw.rpm[best_i], sw.cum_t[best_i], sw.cum_f[best_i], v.rpm_options)
            if sw.best_cost[0] < np.inf else 0.0)
     do_screen = o.kind == OBJ_JIT and lam > 0.0
     do_plan = k.plan_engine and v.rpm_options.shape[0] > 1
+    screen = Screening(lam, do_screen, do_plan)
     ref, last_gain, n_run = sw.best_cost[0], 0, 0
     for cyc in range(k.n_cycles):
         for i in range(k.n_bacteria):
-            chemotaxis_nb(sw, i, lam, do_screen, do_plan, g, v, w, o, s, k, wk, rng)
+            chemotaxis_nb(sw, i, screen, run, rng)
         order = np.argsort(sw.cost)
         reproduce_nb(sw, order, k)
         if (cyc + 1) % k.ed_every == 0:
-            disperse_nb(sw, order[0], g, v, w, o, s, k, wk, rng)
+            disperse_nb(sw, order[0], run, rng)
         history[cyc] = sw.best_cost[0]
         n_run = cyc + 1
         if sw.best_cost[0] < ref - k.stall_tol * abs(ref) or (ref == np.inf and sw.best_cost[0] < np.inf):
             ref, last_gain = sw.best_cost[0], n_run
         elif k.stall > 0 and ref < np.inf and n_run - last_gain >= k.stall:
             break
-    return s.cnt[0], n_run
+    return run.s.cnt[0], n_run
