@@ -91,7 +91,7 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
                  savings=True, continuous=o.continuous_speed)
     for note in (problem.rpm_note, problem.model.envelope_note(plan.legs, problem.draft_m)):
         if note:
-            plan.reason = f"{plan.reason}; {note}" if plan.reason else note
+            plan.add_reason(note)
     return plan, weather
 
 
@@ -143,11 +143,11 @@ def robust_plan(job: RouteJob, plan: Plan, weather: wf.WeatherField, weather_for
                 if p is not None:
                     p.rta_utc = rta
             aimed.status = "ok"
-            aimed.reason = note if aimed.reason is None else f"{aimed.reason}; {note}"
+            aimed.add_reason(note)
             at_rta, plan, weather = plan, aimed, aimed_weather
         else:
             note = f"could not aim {margin_h:.1f} h before the RTA ({aimed.status}): planned for the RTA itself"
-            plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+            plan.add_reason(note)
     if o.min_win_share > 0 and len(members) >= 2:  # against the constant speed arriving when the plan aims
         wins = robust.wins_across(plan, members, vessel)
         if not wins.preferred(o.min_win_share) and plan.baseline is not None and plan.baseline.legs:
@@ -172,7 +172,7 @@ def plan_spread(job: RouteJob, plan: Plan, members: list[wf.WeatherField]):
     note = (f"expected to realise a saving of {s.savings_p50_pct:.1f} % (P10–P90 {s.savings_p10_pct:.1f} to "
             f"{s.savings_p90_pct:.1f} %; {model.note()})")
     if note not in (plan.reason or ""):
-        plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+        plan.add_reason(note)
     return s
 
 
@@ -191,7 +191,7 @@ def kept_or_replanned(job: RouteJob, plan: Plan, weather: wf.WeatherField, membe
     ahead = robust.retimed(ahead, plan.depart_utc, plan.rta_utc, weather, vessel)  # its route, re-timed to the RTA
     decision = robust.replan_decision(ahead, plan, members, vessel, k)
     if decision.take_new:
-        plan.reason = decision.reason if plan.reason is None else f"{plan.reason}; {decision.reason}"
+        plan.add_reason(decision.reason)
         return plan
     kept = robust.current_plan_kept(plan, ahead, weather, vessel, decision.reason) if ahead else None
     return kept if kept is not None else plan

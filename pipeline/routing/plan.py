@@ -90,6 +90,11 @@ class Plan:
     # the plan and its baseline sailed through a lagged ensemble (ensemble.py; None: not computed)
     spread: "Spread | None" = None
 
+    def add_reason(self, note: str | None) -> None:
+        """Add `note` to what the plan's reason says ("; " between notes); nothing for no note."""
+        if note:
+            self.reason = f"{self.reason}; {note}" if self.reason else note
+
     @property
     def hours(self) -> float:
         """Hours from departure to arrival: the legs sailed and the waits at their start nodes."""

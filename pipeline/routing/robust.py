@@ -91,7 +91,7 @@ def margin_charged(aimed: Plan, at_rta: Plan) -> Plan:
         s = aimed.savings
         note = (f"saving claimed against the constant speed arriving at the RTA: {s.total_pct:.2f} %, after the "
                 f"margin's cost of {s.margin_cost_pct:.2f} %")
-        aimed.reason = note if aimed.reason is None else f"{aimed.reason}; {note}"
+        aimed.add_reason(note)
     if at_rta.baseline is not None and at_rta.baseline.legs:
         aimed.baseline = at_rta.baseline
     elif aimed.baseline is not None:
@@ -145,7 +145,7 @@ def baseline_kept(plan: Plan, wins: Wins, min_share: float, members: list[Weathe
                                beyond_forecast_pct=0.0 if math.isfinite(s.beyond_forecast_pct) else s.beyond_forecast_pct)
     note = (f"the {plan.solver} plan ({plan.fuel_t:.1f} t) beat its constant-speed baseline in only {wins.n_wins} of "
             f"{wins.n_members} forecasts (fewer than {100 * min_share:.0f} %): kept the baseline")
-    kept.reason = note if base.reason is None else f"{base.reason}; {note}"
+    kept.add_reason(note)  # kept carries its baseline's reason
     if members is not None and vessel is not None:
         kept.spread = spread(kept, members, vessel)
     return kept

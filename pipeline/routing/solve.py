@@ -107,7 +107,7 @@ def _plan(inst: Instance, solver: str, nodes, rpm_idx, *, seed=None, t0=0.0, his
                              f"{inst.weather.cycle} (its first step used)")
             if notes:
                 note = "; ".join(notes)
-                plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+                plan.add_reason(note)
         else:
             plan.reason = f"leg {bad_leg}: {lk.REASONS[code]}"
     plan.runtime_s = time.perf_counter() - t0
@@ -238,9 +238,9 @@ def _waiting_plan_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits
     if not held.legs:  # no wait-free plan of the route holds its settings (a storm blocks it): the waiting plan stays
         note = (f"holds a setting only {shortest:.1f} h (less than the {limits.min_hold_h:g} h asked): no wait-free "
                 "plan of its route holds each setting")
-        plan.reason = note if plan.reason is None else f"{plan.reason}; {note}"
+        plan.add_reason(note)
         return plan
-    held.reason = note if held.reason is None else f"{held.reason}; {note}"
+    held.add_reason(note)
     return held
 
 
@@ -274,7 +274,7 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
     found = (f"the {plan.solver} plan ({plan.fuel_t:.1f} t, {plan.status}) cost more" if plan.legs
              else f"the {plan.solver} search found no plan ({plan.reason})")
     note = f"{found}: kept {what}"
-    kept.reason = note if kept.reason is None else f"{kept.reason}; {note}"
+    kept.add_reason(note)
     return kept
 
 
@@ -333,7 +333,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
                      history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not,
                      wait_h=found.wait_h if waits else None, wait_tph=found.wait_tph)
         if waits and plan.legs and found.note:  # what the solver's space is, e.g. the grid its waits are on
-            plan.reason = found.note if plan.reason is None else f"{plan.reason}; {found.note}"
+            plan.add_reason(found.note)
         if waits and plan.legs:
             plan = _waiting_plan_limits(inst, plan, found.nodes, limits, continuous)
         elif limits is not None and limits.active and plan.legs:
@@ -344,7 +344,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
                 plan = _plan(at, solver, found.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
                              n_evals=plan.n_evals, clearance_nm=plan.min_land_clearance_nm)
         if not waits and plan.legs and found.note:  # e.g. how the search was narrowed (dp's capped label search)
-            plan.reason = found.note if plan.reason is None else f"{plan.reason}; {found.note}"
+            plan.add_reason(found.note)
         plan = _never_worse(inst, plan, baseline, base, limits, profile, t0, continuous)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:
