@@ -125,7 +125,9 @@ def test_the_grid_step_grows_with_the_rta_and_the_reason_says_so():
     best = enumerate_nb(inst.graph, inst.vessel, inst.wx, inst.objective, line_times(inst, [], 3.0), 12.0, 0.3)
     assert plan.cost == pytest.approx(best, rel=1e-9)
     on_1h = solve(pr, fld, solver="dp", options=DpOptions(slot_h=1.0, max_wait_h=12.0, wait_tph=0.3, incumbent=None))
-    assert on_1h.status == "ok" and "grid" not in (on_1h.reason or "")  # the step asked for: nothing to say
+    # the step asked for: the reason names the space certified, and no coarser grid
+    assert on_1h.status == "ok" and "leaving each node on a 1 h grid" in on_1h.reason
+    assert "waits on a" not in on_1h.reason
 
 
 def test_a_label_search_past_its_legs_budget_keeps_fewer_labels_and_the_plan_says_so():
@@ -140,7 +142,8 @@ def test_a_label_search_past_its_legs_budget_keeps_fewer_labels_and_the_plan_say
     base = find_baseline(inst, base_nodes)
     exact = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None))
     roomy = SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None, max_label_legs=exact.n_evals))
-    assert roomy.note is None and roomy.n_evals == exact.n_evals
+    assert "labels per node" not in roomy.note and roomy.n_evals == exact.n_evals
+    assert roomy.note.startswith("dp: certified as the best wait-free plan")  # gap 0: the space it is exact over
     assert (roomy.nodes == exact.nodes).all() and (roomy.rpm_idx == exact.rpm_idx).all()
     budget = exact.n_evals // 4
     capped = [SOLVERS["dp"].search(inst, base, seed=1, options=DpOptions(incumbent=None, max_label_legs=budget,

@@ -138,10 +138,13 @@ def search(inst, baseline, *, seed: int, options: DpOptions, upper: float = math
         found = _grid_search(inst, baseline, options, upper, known)
         found.n_evals += n_fast
         return found
-    nodes, rpm_idx, cost, n_legs, _, note = _label_search(inst, options, upper, latest_departures(inst), baseline)
+    nodes, rpm_idx, cost, n_legs, _, capped = _label_search(inst, options, upper, latest_departures(inst), baseline)
     if not math.isfinite(cost):  # nothing below the incumbents (where the dominance's assumption fails): the best
         nodes, rpm_idx = _cheapest(inst, known)  # plan known, never the baseline while a dearer plan... is known
-    return Found(nodes, rpm_idx, n_fast + n_legs, note=note)
+    space = (f"dp: {_within(options.gap)} the best wait-free plan of the graph, in weather that holds still, before "
+             "engine limits and continuous speed"
+             if capped is None else None)  # capped: the search was approximate, and the note says how
+    return Found(nodes, rpm_idx, n_fast + n_legs, note="; ".join(x for x in (space, capped) if x))
 
 
 def _cheapest(inst, plans) -> tuple:
@@ -232,9 +235,16 @@ def _grid_search(inst, baseline, options: DpOptions, upper: float, known: list) 
         return Found(None, None, n_first + n_legs)
     waits = wait_hours(inst, nodes, rpm_idx, slots, times)
     coarse = f"waits on a {slot_h:g} h grid" if np.any(waits > 1.0 / 3600.0) and slot_h > options.slot_h else None
-    note = "; ".join(x for x in (coarse, capped) if x) or None
+    space = (f"dp: {_within(options.gap)} the best plan of the graph leaving each node on a {slot_h:g} h grid or at the "
+             f"wait-free plans' times (waits up to {options.max_wait_h:g} h), before engine limits and continuous speed")
+    note = "; ".join(x for x in (space, coarse, capped) if x)
     return Found(nodes, rpm_idx, n_first + n_legs, wait_h=waits, wait_tph=wait_rate_tph(inst, options.wait_tph),
                  note=note)
+
+
+def _within(gap: float) -> str:
+    """How close the plan is certified to be to the best of its space (`DpOptions.gap`)."""
+    return f"certified within {100.0 * gap:g} % of" if gap > 0.0 else "certified as"
 
 
 def grid_step_h(inst, options: DpOptions) -> float:
