@@ -60,9 +60,10 @@ anyway). Without windows (the engine-limits DP, the grid DP) the range is the no
 near it at any valid time, every direction, the strongest current. For the 5,000 NM bench voyages the windowed bound
 is 0.87 (east) and 0.95 (west) of the optimum, against 0.80 and 0.75 for the node's range.
 
-The compiled primitives these searches share (sailing a leg, the label stores, the bound structure `FinishBounds`
-and the pruning rule `label_priced_out`) are in pipeline/routing/engine/; the tables are built here
-(`label_bounds`).
+The search itself is compiled in pipeline/routing/engine/ (`label_search.dp_exact_nb`, with what the searches share:
+sailing a leg, the label stores, the bound structure `FinishBounds`, the pruning rule `label_priced_out` and the one
+relaxation step of `relax.py`); the tables are built by pipeline/routing/bound_tables.py (`label_bounds`). This
+module is the strategy: the bounds, the incumbents, the legs budget, and the grid DP after it.
 """
 
 from __future__ import annotations
