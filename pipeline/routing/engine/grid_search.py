@@ -13,7 +13,7 @@ import numpy as np
 
 from pipeline.routing import geodesy as geo
 from pipeline.routing.engine.bounds import label_priced_out
-from pipeline.routing.engine.labels import grow
+from pipeline.routing.engine.labels import grow_store
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, NO_EDGE, OK, TOO_LONG, sail_leg_nb
 from pipeline.routing.engine.relax import Relax, leg_priced_out, sail_label_leg
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
@@ -126,8 +126,7 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, fb, times, max_wait_h, wait_tph):
                         if label_priced_out(o, fb, i + 1, a2, td, fw, prune_at, tol, on_time):
                             break  # a later slot burns no less and has fewer hours left
                         if n_c >= ck.shape[0]:
-                            ck, cf = grow(ck, n_c + 1), grow(cf, n_c + 1)
-                            cpar, cnode, cr = grow(cpar, n_c + 1), grow(cnode, n_c + 1), grow(cr, n_c + 1)
+                            ck, cf, cpar, cnode, cr = grow_store(n_c + 1, ck, cf, cpar, cnode, cr)
                         ck[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = k, fw, j, a2, r
                         n_c += 1
         if last or n_c == 0:
@@ -146,8 +145,7 @@ def dp_grid_nb(g, v, w, o, upper, prune_at, fb, times, max_wait_h, wait_tph):
             if q < 0:
                 continue
             if n_kept >= kk.shape[0]:
-                kk, kf = grow(kk, n_kept + 1), grow(kf, n_kept + 1)
-                kpar, knode, kr = grow(kpar, n_kept + 1), grow(knode, n_kept + 1), grow(kr, n_kept + 1)
+                kk, kf, kpar, knode, kr = grow_store(n_kept + 1, kk, kf, kpar, knode, kr)
             kk[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = ck[q], cf[q], cpar[q], cnode[q], cr[q]
             n_kept += 1
         line_hi = n_kept

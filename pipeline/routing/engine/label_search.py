@@ -11,7 +11,7 @@ import numpy as np
 
 from pipeline.routing import geodesy as geo
 from pipeline.routing.engine.bounds import label_priced_out
-from pipeline.routing.engine.labels import grow, prefix_min, put_min, time_span_nb
+from pipeline.routing.engine.labels import grow_store, prefix_min, put_min, time_span_nb
 from pipeline.routing.engine.leg import FUEL, N_LEG_OUT
 from pipeline.routing.engine.relax import Relax, leg_priced_out, sail_label_leg
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
@@ -124,8 +124,7 @@ def dp_exact_nb(g, v, w, o, upper, fb, eps, mode):
                     if label_priced_out(o, fb, i + 1, a2, t1, f1, upper, tol, on_time):
                         continue
                     if n_c >= ct.shape[0]:
-                        ct, cf = grow(ct, n_c + 1), grow(cf, n_c + 1)
-                        cpar, cnode, cr = grow(cpar, n_c + 1), grow(cnode, n_c + 1), grow(cr, n_c + 1)
+                        ct, cf, cpar, cnode, cr = grow_store(n_c + 1, ct, cf, cpar, cnode, cr)
                     ct[n_c], cf[n_c], cpar[n_c], cnode[n_c], cr[n_c] = t1, f1, j, a2, r
                     n_c += 1
                     q = int((t1 - t_dep_h) / bin_h)
@@ -160,8 +159,7 @@ def dp_exact_nb(g, v, w, o, upper, fb, eps, mode):
                         continue
                     last_b, last_val = b, val
                 if n_kept >= kt.shape[0]:
-                    kt, kf = grow(kt, n_kept + 1), grow(kf, n_kept + 1)
-                    kpar, knode, kr = grow(kpar, n_kept + 1), grow(knode, n_kept + 1), grow(kr, n_kept + 1)
+                    kt, kf, kpar, knode, kr = grow_store(n_kept + 1, kt, kf, kpar, knode, kr)
                 kt[n_kept], kf[n_kept], kpar[n_kept], knode[n_kept], kr[n_kept] = ct[k], cf[k], cpar[k], cnode[k], cr[k]
                 n_kept += 1
         line_hi = n_kept

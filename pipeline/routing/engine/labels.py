@@ -41,6 +41,13 @@ def grow(a, n):
     return b
 
 
+@numba.njit(cache=True, inline="always")
+def grow_store(n, a, b, c, d, e):
+    """The five parallel arrays of a DP's label store (time or slot, fuel, parent, node, setting), each with room for
+    at least n labels (`grow`)."""
+    return grow(a, n), grow(b, n), grow(c, n), grow(d, n), grow(e, n)
+
+
 @numba.njit(cache=True)
 def prefix_min(tree, row, n):
     """The least value put at positions 1..n of the prefix-minimum (Fenwick) tree tree[row]."""
