@@ -308,6 +308,21 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
     return best_i
 
 
+@numba.njit(cache=True, inline="always")
+def _shift(cand, vec, lo, hi, d, top, last):
+    """A swim step: cand[j] += vec[j]·d for j in lo..hi − 1 where vec[j] ≠ 0 (nodes or engine settings). Returns
+    (False, last) when a shifted value would leave 0..top − 1 (the step is not taken), else (True, the last index
+    shifted, or `last` when none)."""
+    for j in range(lo, hi):
+        if vec[j] != 0:
+            x = cand[j] + vec[j] * d
+            if x < 0 or x >= top:
+                return False, last
+            cand[j] = x
+            last = j
+    return True, last
+
+
 @numba.njit(cache=True)
 def swim_nb(sw, i, first, engine, d, screen, run, rng):
     """Swim bacterium i along the tumbled direction (wk.vec, or wk.vec_r for engine moves) in steps of `d`, while
@@ -326,27 +341,11 @@ def swim_nb(sw, i, first, engine, d, screen, run, rng):
     for _s in range(k.swim_max):
         cand[:] = pos[i]
         cand_r[:] = rpm[i]
-        valid = True
-        last = first
         if engine:
-            for j in range(L2 - 1):
-                if vec_r[j] != 0:
-                    x = cand_r[j] + vec_r[j] * d
-                    if x < 0 or x >= n_rpm:
-                        valid = False
-                        break
-                    cand_r[j] = x
-                    last = j
+            valid, last = _shift(cand_r, vec_r, 0, L2 - 1, d, n_rpm, first)
             start = first
         else:
-            for j in range(1, L2 - 1):
-                if vec[j] != 0:
-                    x = cand[j] + vec[j] * d
-                    if x < 0 or x >= P:
-                        valid = False
-                        break
-                    cand[j] = x
-                    last = j
+            valid, last = _shift(cand, vec, 1, L2 - 1, d, P, first)
             start = first - 1
         if not valid:
             break
