@@ -64,7 +64,7 @@ def test_same_plan_as_the_dp_that_sails_every_change_in_steady_weather(limits, m
 
 
 def test_a_route_planned_under_the_limits_once_is_not_planned_again():
-    from pipeline.routing.savings import held_plan, profile_plan
+    from pipeline.routing.route_speeds import best_speeds
     from pipeline.routing.solve import solver_instance
 
     pr = problem((30.0, -160.0), (33.0, -146.0), 110.0, n_lines=8, n_points=5)
@@ -72,19 +72,20 @@ def test_a_route_planned_under_the_limits_once_is_not_planned_again():
     inst, base = solver_instance(pr, space, field(wavy(7)))
     limits = EngineLimits(12.0, 0.05)
     known: dict = {}
-    rpm, cost = profile_plan(inst, base, limits, True, known)
-    (held, refined), = known.values()
-    got = held_plan(inst, base, limits, True, known)
-    assert got[0] is held and got[1] is refined  # the same objects: not planned again
-    again, again_refined = held_plan(inst, base, limits, True)  # planned afresh: the same answer
-    assert again.rpm_idx.tolist() == held.rpm_idx.tolist() and again.cost == held.cost
-    assert (again_refined is None) == (refined is None)
-    best = refined if refined is not None and refined.cost < held.cost else None
-    assert cost == (best.cost if best else held.cost)
-    assert rpm.tolist() == (best.rpm if best else inst.rpm_options[held.rpm_idx]).tolist()
+    first = best_speeds(inst, base, limits, True, known=known)
+    assert list(known.values()) == [first]
+    assert best_speeds(inst, base, limits, True, known=known) is first  # the same object: not planned again
+    again = best_speeds(inst, base, limits, True)  # planned afresh: the same answer
+    assert again.held.rpm_idx.tolist() == first.held.rpm_idx.tolist() and again.held.cost == first.held.cost
+    assert again.cost == first.cost and again.rpm.tolist() == first.rpm.tolist()
+    # the settings plan is the held DP's; the refinement is kept only when cheaper
+    assert first.settings_cost == first.held.cost and first.cost <= first.held.cost
+    assert first.refined == (first.cost < first.held.cost)
+    if not first.refined:
+        assert first.rpm.tolist() == inst.rpm_options[first.held.rpm_idx].tolist()
     # another route, or the same one without continuous speed, is another entry
     other = base.copy()
     other[1:-1] = np.clip(other[1:-1] + 1, 0, space.lat.shape[1] - 1)
-    held_plan(inst, other, limits, True, known)
-    held_plan(inst, base, limits, False, known)
+    best_speeds(inst, other, limits, True, known=known)
+    best_speeds(inst, base, limits, False, known=known)
     assert len(known) == 3

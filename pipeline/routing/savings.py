@@ -42,11 +42,11 @@ import numpy as np
 
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import constant_rpm_for_rta, evaluate, shortest_route, with_setting
-from pipeline.routing.continuous_speed import Refined, as_settings, refine_rpm
-from pipeline.routing.engine_limits import (PLAN_BUCKETS, PLAN_GAP, EngineLimits, LimitedPlan, best_engine_plan,
-                                            limited_plan)
+from pipeline.routing.continuous_speed import as_settings
+from pipeline.routing.engine_limits import EngineLimits
 from pipeline.routing.plan import Plan, SavingsSplit
 from pipeline.routing.problem import Instance
+from pipeline.routing.route_speeds import RouteSpeeds, best_speeds
 
 
 def with_margin_cost(aimed: SavingsSplit, at_rta: SavingsSplit) -> SavingsSplit:
@@ -63,45 +63,6 @@ def with_margin_cost(aimed: SavingsSplit, at_rta: SavingsSplit) -> SavingsSplit:
                         baseline_fuel_beyond_t=at_rta.baseline_fuel_beyond_t,
                         plan_fuel_beyond_t=aimed.plan_fuel_beyond_t, forecast_pct=total - beyond,
                         beyond_forecast_pct=beyond, margin_cost_pct=100.0 * (f_early - f_b) / f_b)
-
-
-def held_plan(inst: Instance, nodes: np.ndarray, limits: EngineLimits, continuous: bool = True,
-              known: dict | None = None) -> tuple[LimitedPlan, Refined | None]:
-    """(the best engine plan on the route `nodes` under the active `limits`, within 0.1 % of the best over the
-    settings and never dearer than a setting held throughout (engine_limits.limited_plan); with `continuous` its
-    speeds refined under the limits (continuous_speed.refine_rpm; None: nothing cheaper found, or no plan)).
-    `known` (a dict, one per instance) keeps each route's answer: the base route's profile and a solver's plan on the
-    same route are then planned once."""
-    key = (np.ascontiguousarray(nodes, np.int64).tobytes(), limits, bool(continuous))
-    if known is not None and key in known:
-        return known[key]
-    held = limited_plan(inst, nodes, limits, gap=PLAN_GAP, buckets=PLAN_BUCKETS)
-    refined = None
-    if continuous and math.isfinite(held.cost):
-        refined = refine_rpm(inst, nodes, inst.rpm_options[held.rpm_idx], min_hold_h=limits.min_hold_h,
-                             change_cost_t=limits.change_cost_t, barred_rpm=inst.problem.barred_rpm)
-    if known is not None:
-        known[key] = (held, refined)
-    return held, refined
-
-
-def profile_plan(inst: Instance, base_nodes: np.ndarray, limits: EngineLimits | None = None,
-                 continuous: bool = True, known: dict | None = None) -> tuple[np.ndarray, float]:
-    """(rpm per leg, cost) of the best engine plan on the base route, under `limits` when they are active
-    (`held_plan`, which keeps it in `known`), its speeds refined continuously with `continuous`
-    (continuous_speed.refine_rpm); cost includes the change costs; inf: none can be sailed."""
-    if limits is not None and limits.active:
-        held, refined = held_plan(inst, base_nodes, limits, continuous, known)
-        if refined is not None and refined.cost < held.cost:
-            return refined.rpm, float(refined.cost)
-        return inst.rpm_options[held.rpm_idx], float(held.cost)
-    rpm_idx, cost, _ = best_engine_plan(inst, base_nodes)
-    rpm = inst.rpm_options[rpm_idx]
-    if continuous and math.isfinite(cost):
-        refined = refine_rpm(inst, base_nodes, rpm, barred_rpm=inst.problem.barred_rpm)
-        if refined is not None and refined.cost < cost:
-            rpm, cost = refined.rpm, refined.cost
-    return rpm, float(cost)
 
 
 def fuel_of(inst: Instance, nodes: np.ndarray, rpm_per_leg: np.ndarray) -> float:
@@ -128,22 +89,22 @@ def fuel_beyond_forecast_t(inst: Instance, nodes: np.ndarray, rpm_per_leg: np.nd
 
 
 def split_of(inst: Instance, base_nodes: np.ndarray, plan_fuel_t: float, limits: EngineLimits | None = None,
-             profile: tuple[np.ndarray, float] | None = None, plan_fuel_beyond_t: float = math.nan
+             profile: RouteSpeeds | None = None, plan_fuel_beyond_t: float = math.nan
              ) -> SavingsSplit | None:
     """The split for a plan burning `plan_fuel_t`, `plan_fuel_beyond_t` of it past the forecast's last valid time
     (NaN: unknown, no forecast/beyond split), in the instance whose base route is `base_nodes` (None: no baseline
     can be sailed). With engine-change limits the speed-profile plan obeys them too (engine_limits); `profile`,
-    when known, is that plan (`profile_plan`)."""
+    when known, is that plan (route_speeds.best_speeds on the base route)."""
     if base_nodes is None or not math.isfinite(plan_fuel_t):
         return None
     base = constant_rpm_for_rta(inst, base_nodes)
     if base is None:
         return None
     rpm, hours, f_b = base
-    profile_rpm, cost = profile if profile is not None else profile_plan(inst, base_nodes, limits)
-    if not math.isfinite(cost):
+    profile = profile if profile is not None else best_speeds(inst, base_nodes, limits)
+    if not math.isfinite(profile.cost):
         return None
-    f_p = fuel_of(inst, base_nodes, profile_rpm)
+    f_p = fuel_of(inst, base_nodes, profile.rpm)
     f = plan_fuel_t
     total = 100.0 * (f_b - f) / f_b
     f_b_beyond = fuel_beyond_forecast_t(inst, base_nodes, np.full(len(base_nodes) - 1, rpm))

@@ -34,14 +34,14 @@ from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.canal_time import passages_note
 from pipeline.routing.clearance import least_clearance_outside_nm, widest_corridor_nm
 from pipeline.routing.dp import DpOptions
-from pipeline.routing.continuous_speed import as_settings, refine_rpm
-from pipeline.routing.engine_limits import (PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, best_engine_plan,
-                                            settings_held_h)
+from pipeline.routing.continuous_speed import as_settings
+from pipeline.routing.engine_limits import PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, settings_held_h
 from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
-from pipeline.routing.savings import held_plan, profile_plan, solver_instance, split_of
+from pipeline.routing.route_speeds import Start, best_speeds
+from pipeline.routing.savings import solver_instance, split_of
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
 from pipeline.routing.solvers import solver_spec
 from pipeline.routing.weather_field import WeatherField
@@ -156,56 +156,35 @@ def _options(spec, options, params: BfoaParams | None):
     return options
 
 
-def _unlimited_fuel_t(inst: Instance, nodes, known: list[tuple[float, float, np.ndarray]], continuous: bool) -> float:
-    """Fuel of the best engine plan on the route without limits: the route's bucketed DP over the settings, pruned
-    by the cheapest `known` plan of that route ((cost without change costs, fuel, rpm per leg); it is the answer
-    when nothing beats it), and with `continuous` speed that plan's speeds refined (continuous_speed.refine_rpm,
-    no hold, no change cost)."""
-    cost, fuel_t, rpm = min(known, key=lambda k: k[0])
-    idx, dp_cost, _ = best_engine_plan(inst, nodes, cost * (1.0 + 1e-9) + 1e-12, gap=PLAN_GAP, buckets=REFERENCE_BUCKETS)
-    if np.isfinite(dp_cost) and dp_cost < cost:
-        cost, fuel_t, rpm = dp_cost, float(evaluate(inst, nodes, idx)[2]), inst.rpm_options[idx]
-    if continuous:
-        refined = refine_rpm(inst, nodes, rpm)
-        if refined is not None and refined.cost < cost:
-            fuel_t = refined.fuel_t
-    return fuel_t
-
-
-def _refined(inst: Instance, nodes, rpm_idx, cost: float, limits: EngineLimits | None):
-    """(instance, rpm index per leg, cost) of the plan with its speeds refined continuously under the limits
-    (continuous_speed.refine_rpm; the same when that finds nothing cheaper than `cost`)."""
-    hold, change = (limits.min_hold_h, limits.change_cost_t) if limits is not None and limits.active else (0.0, 0.0)
-    refined = refine_rpm(inst, nodes, inst.rpm_options[rpm_idx], min_hold_h=hold, change_cost_t=change,
-                         barred_rpm=inst.problem.barred_rpm)
-    if refined is None or not refined.cost < cost:
-        return inst, rpm_idx, cost
-    inst2, idx = as_settings(inst, refined.rpm)
-    return inst2, idx, refined.cost
+def _unlimited_fuel_t(inst: Instance, nodes, known: list[Start], continuous: bool) -> float:
+    """Fuel of the best engine plan on the route without limits: the route's bucketed DP over the settings, pruned by
+    the cheapest `known` plan of that route (its cost without change costs; it is the answer when nothing beats it),
+    with `continuous` its speeds refined (route_speeds.best_speeds, no hold, no change cost)."""
+    start = min(known, key=lambda k: k.cost)
+    return best_speeds(inst, nodes, None, continuous, start=start, gap=PLAN_GAP, buckets=REFERENCE_BUCKETS).fuel_t
 
 
 def _with_limits(inst: Instance, plan: Plan, nodes, limits: EngineLimits, continuous: bool = True,
                  known: dict | None = None) -> Plan:
-    """The plan re-planned on its own route so each engine setting is held (savings.held_plan: within 0.1 % of the
+    """The plan re-planned on its own route so each engine setting is held (route_speeds.best_speeds: within 0.1 % of the
     best such plan over the settings and never dearer than a setting held throughout; `known` as there), its speeds
     then refined continuously (`continuous`). For what the limits cost, `unlimited_fuel_t` is the best engine plan on
     the route without limits, so the limits never seem to save fuel and are not blamed for what the solver left on
     its route."""
-    held, refined = held_plan(inst, nodes, limits, continuous, known)
-    if not np.isfinite(held.cost):
+    best = best_speeds(inst, nodes, limits, continuous, known=known)
+    held = best.held
+    if held is None or not np.isfinite(held.cost):
         return plan  # no plan of the route holds its settings (a leg cannot be sailed at some setting)
-    at, rpm_idx, cost = inst, held.rpm_idx, held.cost
-    if refined is not None and refined.cost < cost:
-        (at, rpm_idx), cost = as_settings(inst, refined.rpm), refined.cost
+    (at, rpm_idx), cost = best.as_plan_settings(inst), best.cost
     limited = _plan(at, plan.solver, nodes, rpm_idx, seed=plan.seed, history=plan.history,
                     n_evals=plan.n_evals + held.legs_sailed, clearance_nm=plan.min_land_clearance_nm)
     limited.cost = cost
     limited.limits = limits
     rpm_of = lambda p: np.array([leg["rpm"] for leg in p.legs])  # noqa: E731
-    known = [(held.cost - limits.change_cost_t * held.n_changes, held.fuel_t, inst.rpm_options[held.rpm_idx]),
-             (cost - limits.change_cost_t * limited.n_engine_changes, limited.fuel_t, rpm_of(limited))]
+    known = [Start(inst.rpm_options[held.rpm_idx], held.cost - limits.change_cost_t * held.n_changes, held.fuel_t),
+             Start(rpm_of(limited), cost - limits.change_cost_t * limited.n_engine_changes, limited.fuel_t)]
     if plan.legs:
-        known.append((plan.cost, plan.fuel_t, rpm_of(plan)))
+        known.append(Start(rpm_of(plan), plan.cost, plan.fuel_t))
     limited.unlimited_fuel_t = _unlimited_fuel_t(inst, nodes, known, continuous)
     if limited.status == "late" and plan.status == "ok":
         limited.reason = (f"RTA cannot be met holding each engine setting {limits.min_hold_h:g} h: arrives "
@@ -253,8 +232,8 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
         return plan
     const_rpm = baseline.legs[0]["rpm"]
     candidates = [(f"the base route at constant {const_rpm:.1f} rpm", inst.rpm_options[base.rpm_idx], baseline.cost)]
-    if profile is not None and np.isfinite(profile[1]):
-        candidates.append(("the best engine plan on the base route", profile[0], profile[1]))
+    if profile is not None and np.isfinite(profile.cost):
+        candidates.append(("the best engine plan on the base route", profile.rpm, profile.cost))
     what, rpm, cost = min(candidates, key=lambda c: c[2])
     if plan.legs and plan.cost <= cost * (1.0 + 1e-9) + 1e-12:
         return plan
@@ -268,8 +247,8 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
         n_changes = kept.n_engine_changes
         kept.limits = limits
         kept.unlimited_fuel_t = _unlimited_fuel_t(
-            inst, base.nodes, [(kept.cost, kept.fuel_t, rpm),
-                               (cost - limits.change_cost_t * n_changes, kept.fuel_t, rpm)], continuous)
+            inst, base.nodes, [Start(rpm, kept.cost, kept.fuel_t),
+                               Start(rpm, cost - limits.change_cost_t * n_changes, kept.fuel_t)], continuous)
         kept.cost = cost if n_changes else kept.cost
     found = (f"the {plan.solver} plan ({plan.fuel_t:.1f} t, {plan.status}) cost more" if plan.legs
              else f"the {plan.solver} search found no plan ({plan.reason})")
@@ -319,8 +298,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         inst.f_target = max(float(evaluate(inst, base.nodes, base.rpm_idx)[2]), 1e-6)
     why_not = _infeasible_reason(base, space)  # what a plan that cannot be sailed says
     baseline = _plan(inst, space.base, base.nodes, base.rpm_idx, t0=t0, reason_if_infeasible=why_not)
-    known: dict = {}  # the routes planned under the limits (savings.held_plan): the base route's once
-    profile = profile_plan(inst, base.nodes, limits, continuous, known) if savings and base.ok else None
+    known: dict = {}  # the routes planned under the limits (route_speeds.best_speeds): the base route's once
+    profile = best_speeds(inst, base.nodes, limits, continuous, known=known) if savings and base.ok else None
     if spec.is_baseline:  # the constant-speed voyage itself: the plan just made, compared with nothing
         plan = baseline
         plan.solver = solver
@@ -339,8 +318,10 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         elif limits is not None and limits.active and plan.legs:
             plan = _with_limits(inst, plan, found.nodes, limits, continuous, known)
         elif continuous and plan.legs:
-            at, rpm_idx, cost = _refined(inst, found.nodes, found.rpm_idx, plan.cost, None)
-            if cost < plan.cost:
+            own = Start(inst.rpm_options[found.rpm_idx], plan.cost, plan.fuel_t)
+            best = best_speeds(inst, found.nodes, None, continuous, start=own, search=False)
+            if best.cost < plan.cost:
+                at, rpm_idx = best.as_plan_settings(inst)
                 plan = _plan(at, solver, found.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
                              n_evals=plan.n_evals, clearance_nm=plan.min_land_clearance_nm)
         if not waits and plan.legs and found.note:  # e.g. how the search was narrowed (dp's capped label search)
