@@ -45,7 +45,11 @@ measures     fleet fuel saving vs the master: Σ(F_master − F) / Σ F_master; 
              scaled by (passage hours / RTA hours)² (fuel ∝ speed² over a fixed distance), so arriving late saves
              nothing and early costs nothing; voyages worse than the master by > 1 % (corrected); on time: arrival
              ≤ RTA + 0.5 h; |claimed − realised|: the plan at departure's claimed saving (savings_total_pct, vs its
-             constant-speed baseline on the forecast) against the realised saving vs the master, in points.
+             constant-speed baseline on the forecast) against the realised saving vs the master, in points; for the
+             calibrated strategies also each plan they made (at departure and at sea) against its own baseline, both
+             re-sailed as made on the truth, as `jitroute verify` fills plan_verification (out of sample: the model
+             is fitted on the training seed); and, per re-planned voyage, `late_from_h`: the hours after departure
+             when a plan first said the RTA cannot be met (status late) in the newest forecast.
 targets      (issue 41) replan realises ≥ half of what perfect realises (corrected, aggregate); no replan voyage
              > 1 % worse than the master; on time ≥ 95 %; mean |claimed − realised| ≤ 1 point.
 
@@ -384,6 +388,7 @@ class Outcome:
     n_plans: int = 0
     n_kept: int = 0  # re-plans not taken (rule c) or baselines kept (rule b)
     margin_h: float = 0.0
+    late_from_h: float = math.nan  # hours after departure when a plan first said the RTA cannot be met (NaN: never)
 
 
 def outcome(ship: Ship, v: Voyage, **kw) -> Outcome:
@@ -459,25 +464,27 @@ def claimed(plan, rules: Rules = Rules()) -> float:
     return calibration.expected_saving_pct(model, c, planned_h, plan.savings.margin_cost_pct if plan.savings else 0.0)[1]
 
 
-def sail_once(v: Voyage, fc: Forecasts, rules: Rules = Rules(), field=None) -> Outcome:
+def sail_once(v: Voyage, fc: Forecasts, rules: Rules = Rules(), field=None, made: list | None = None) -> Outcome:
     ship = Ship(*v.dep, v.depart_h)
     field = field if field is not None else fc.cycle(fc.newest_at(ship.t_h))
     plan, margin, kept = plan_at(v, ship, field, fc.members(ship.t_h) if rules.any else [], rules)
+    if made is not None and plan is not None:
+        made.append((plan, claimed(plan, rules)))
     legs = plan.legs if plan is not None else gc_legs(v.dep, v.arr, master_rpm(ship, v, field))
     sail_until(ship, legs, fc.truth)
     return outcome(ship, v, claimed_pct=claimed(plan, rules), n_plans=1, n_kept=int(kept), margin_h=margin)
 
 
 def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules(), made: list | None = None) -> Outcome:
-    """The voyage re-planned every cycle; each plan made is appended to `made` (when given) as (plan, the ship's
-    position and time when it was made)."""
+    """The voyage re-planned every cycle; each plan made is appended to `made` (when given) as (plan, its claim)."""
     ship = Ship(*v.dep, v.depart_h)
     field = fc.cycle(fc.newest_at(ship.t_h))
     plan, margin, kept = plan_at(v, ship, field, fc.members(ship.t_h) if rules.any else [], rules)
     if made is not None and plan is not None:
-        made.append(plan)
+        made.append((plan, claimed(plan, rules)))
     legs = plan.legs if plan is not None else gc_legs(v.dep, v.arr, master_rpm(ship, v, field))
     first_claim, n_plans, n_kept, margins = claimed(plan, rules), 1, int(kept), [margin]
+    late_from = 0.0 if plan is not None and plan.status == "late" else math.nan
     while legs:
         legs = sail_until(ship, legs, fc.truth, ship.t_h + CYCLE_H)
         if not legs or v.rta_h - ship.t_h < CYCLE_H or gc_distance_nm(ship.lat, ship.lon, *v.arr) < 60.0:
@@ -487,7 +494,9 @@ def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules(), made: list | N
         if new is None:
             continue
         if made is not None:
-            made.append(new)
+            made.append((new, claimed(new, rules)))
+        if new.status == "late" and math.isnan(late_from):
+            late_from = ship.t_h - v.depart_h
         n_plans += 1
         n_kept += int(kept)
         if rules.replan_gain_sigmas > 0:
@@ -500,7 +509,8 @@ def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules(), made: list | N
                 continue
         legs = new.legs
         margins.append(margin)
-    return outcome(ship, v, claimed_pct=first_claim, n_plans=n_plans, n_kept=n_kept, margin_h=float(np.mean(margins)))
+    return outcome(ship, v, claimed_pct=first_claim, n_plans=n_plans, n_kept=n_kept, margin_h=float(np.mean(margins)),
+                   late_from_h=late_from)
 
 
 # ------------------------------------------------------------------------------------------- calibration (training)
@@ -527,7 +537,7 @@ def calibrate(seed: int, n: int, max_lead_h: int) -> tuple[calibration.ErrorMode
     for v in voyages(n, seed):
         made: list = []
         sail_replan(v, fc, made=made)
-        rows += [r for r in (verification_row(p, truth) for p in made if p.legs) if r is not None]
+        rows += [r for r in (verification_row(p, truth) for p, _ in made if p.legs) if r is not None]
     return calibration.fit_error_model(calibration.verification_errors(rows)), rows
 
 
@@ -543,6 +553,23 @@ def claim_errors(m: calibration.ErrorModel, rows: list[dict]) -> dict:
     return {"train_mean_claimed_pct": round(float(np.mean([c for c, _, _ in pairs])), 3),
             "train_mean_realised_pct": round(float(np.mean([x for _, x, _ in pairs])), 3),
             "train_claim_error_pts": round(raw, 3), "train_expected_claim_error_pts": round(honest, 3)}
+
+
+def plan_claims(made: list, truth: ver.VerificationWeather) -> dict:
+    """Each plan a strategy made (at departure and at sea) re-sailed as made on the truth with its own baseline, as
+    `jitroute verify` fills plan_verification, on the voyages scored (out of sample for the calibration): mean
+    |claimed − realised| of the plans' claims (the calibrated P50 where the strategy has a model), in points."""
+    pairs = []
+    for plan, claim in made:
+        r = verification_row(plan, truth) if plan.legs else None
+        if r is not None and math.isfinite(claim) and math.isfinite(r["realised_savings_pct"]):
+            pairs.append((claim, r["realised_savings_pct"]))
+    if not pairs:
+        return {}
+    return {"plans_verified": len(pairs),
+            "plan_claim_error_pts": round(float(np.mean([abs(c - x) for c, x in pairs])), 3),
+            "plan_mean_claimed_pct": round(float(np.mean([c for c, _ in pairs])), 3),
+            "plan_mean_realised_pct": round(float(np.mean([x for _, x in pairs])), 3)}
 
 
 def model_json(m: calibration.ErrorModel) -> dict:
@@ -611,6 +638,12 @@ def targets(rows: dict) -> list[str]:
         out.append(f"{name}: mean |claimed − realised| {r['claim_error_pts']:.2f} points (target ≤ {TARGET_CLAIM_PTS:g}): "
                    + ("met" if r["claim_error_pts"] <= TARGET_CLAIM_PTS else
                       f"MISSED by {r['claim_error_pts'] - TARGET_CLAIM_PTS:.2f} points"))
+        if "plan_claim_error_pts" in r:
+            e = r["plan_claim_error_pts"]
+            out.append(f"{name}: each plan against its own baseline, both re-sailed as made ({r['plans_verified']} plans, "
+                       f"as plan_verification): mean |claimed − realised| {e:.2f} points (target ≤ "
+                       f"{TARGET_CLAIM_PTS:g}): " + ("met" if e <= TARGET_CLAIM_PTS else
+                                                    f"MISSED by {e - TARGET_CLAIM_PTS:.2f} points"))
     return out
 
 
@@ -619,9 +652,10 @@ ROBUST = {"a margin 1.65σ": Rules(margin_sigmas=1.65), "b win ≥ 75 %": Rules(
           "a+b+c": Rules(margin_sigmas=1.65, min_win_share=0.75, replan_gain_sigmas=1.0)}
 
 
-def write(a, n: int, runs: dict, per_voyage: list, t_start: float) -> dict:
-    """The summary of the voyages sailed so far, written to `a.out` (JSON); returns it by strategy."""
-    rows = {k: summarise(k, r) for k, r in runs.items()}
+def write(a, n: int, runs: dict, per_voyage: list, t_start: float, verified: dict | None = None) -> dict:
+    """The summary of the voyages sailed so far, written to `a.out` (JSON), with each strategy's `verified` plan
+    claims (plan_claims) when given; returns it by strategy."""
+    rows = {k: summarise(k, r) | (verified or {}).get(k, {}) for k, r in runs.items()}
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"conditions": {"voyages": n, "sailed": len(per_voyage), "seed": a.seed,
@@ -674,11 +708,14 @@ def main(argv=None) -> int:
     vs = voyages(n, a.seed)
     strategies = {"once": lambda v: sail_once(v, fc), "replan": lambda v: sail_replan(v, fc),
                   "perfect": lambda v: sail_once(v, fc, field=fc.truth)}
+    made: dict[str, list] = {}  # the plans each calibrated strategy made, verified on the truth (plan_claims)
     if a.margin_sigmas > 0:
         cal = Rules(margin_sigmas=a.margin_sigmas, model=model, margin_max_share=a.margin_max_share,
                     margin_horizon_h=a.margin_horizon_h)
-        strategies["once calibrated"] = functools.partial(sail_once, fc=fc, rules=cal)
-        strategies["replan calibrated"] = functools.partial(sail_replan, fc=fc, rules=cal)
+        made = {"once calibrated": [], "replan calibrated": []}
+        strategies["once calibrated"] = functools.partial(sail_once, fc=fc, rules=cal, made=made["once calibrated"])
+        strategies["replan calibrated"] = functools.partial(sail_replan, fc=fc, rules=cal,
+                                                            made=made["replan calibrated"])
     if a.robust:
         for label, rules in ROBUST.items():
             if (rules.margin_sigmas > 0) != (rules.min_win_share > 0):  # each alone (c acts only at sea)
@@ -703,13 +740,15 @@ def main(argv=None) -> int:
                          "saving_pct": round(100.0 * (m.fuel_t - o.fuel_t) / m.fuel_t, 2),
                          "saving_corrected_pct": round(100.0 * (corrected(m, v) - corrected(o, v)) / corrected(m, v), 2),
                          "claimed_pct": round(o.claimed_pct, 2) if math.isfinite(o.claimed_pct) else None,
-                         "n_plans": o.n_plans, "n_kept": o.n_kept}
+                         "n_plans": o.n_plans, "n_kept": o.n_kept, "margin_h": round(o.margin_h, 2),
+                         "late_from_h": round(o.late_from_h, 1) if math.isfinite(o.late_from_h) else None}
         per_voyage.append(row)
         print(f"{v.vid} {v.kind:<13} {v.dist_nm:6.0f} NM  master {m.fuel_t:7.1f} t (late {m.late_h:+5.1f} h)  " +
               "  ".join(f"{k} {row[k]['saving_corrected_pct']:+5.1f}%/{row[k]['late_h']:+.1f}h"
                         for k in ("once", "replan", "perfect", "replan calibrated") if k in row), flush=True)
         write(a, n, runs, per_voyage, t_start)  # after every voyage: a run stopped early keeps what it measured
-    rows = write(a, n, runs, per_voyage, t_start)
+    truth = ver.VerificationWeather(fc.truth, (), np.ones(fc.truth.times_h.size, bool))
+    rows = write(a, n, runs, per_voyage, t_start, {k: plan_claims(m, truth) for k, m in made.items() if k in runs})
     master_on_time = sum(r[1].late_h <= ON_TIME_TOL_H for r in next(iter(runs.values())))
     print()
     print(f"hindcast: {n} voyages, seed {a.seed}, leads to {a.max_lead} h, cycles every {CYCLE_H} h; master on time "
