@@ -120,9 +120,11 @@ def warm_up(problem: RoutingProblem, weather) -> float:
 
 def timed_solve(*args, **kw):
     """solve(...) with runtime_s set to the solve's CPU time (this thread's); the search alone (no engine-change
-    limits, no savings split) unless `limits` / `savings` are given."""
+    limits, no savings split, on the graph itself: no refinement) unless `limits` / `savings` / `refine_split` are
+    given."""
     kw.setdefault("limits", None)
     kw.setdefault("savings", False)
+    kw.setdefault("refine_split", 1)
     t0 = time.thread_time()
     plan = solve(*args, **kw)
     plan.runtime_s = time.thread_time() - t0

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 import routing_instances as suite  # noqa: E402
-from pipeline.routing.solve import BfoaParams, EngineLimits  # noqa: E402
+from pipeline.routing.solve import PRODUCT, BfoaParams, EngineLimits  # noqa: E402
 from routing import TARGET_GAP_PCT, TARGET_SOLVE_S, pin_one_core, timed_solve, verdict, warm_up  # noqa: E402
 from dataclasses import fields, replace  # noqa: E402
 
@@ -123,9 +123,10 @@ def main() -> int:
               f"{100 * within:.0f} % of runs ≤ {TARGET_GAP_PCT:g} %; CPU median {np.median(secs):.2f} s "
               f"(max {secs.max():.2f}) → gap {verdict(np.median(gaps) <= TARGET_GAP_PCT)}, "
               f"time {verdict(np.median(secs) <= TARGET_SOLVE_S)}")
-        # the product's plan (seed 1): continuous speed, engine-change limits, the savings split
+        # the product's plan (seed 1): refined on the finer corridors, continuous speed, engine-change limits, the
+        # savings split
         product = timed_solve(problem, weather, solver="bfoa", seed=1, params=params, space=space,
-                              limits=EngineLimits(), savings=True)
+                              limits=EngineLimits(), savings=True, refine_split=PRODUCT.refine_split)
         split = product.savings
         if split is not None:
             print(f"   product plan (BFOA seed 1, continuous speed, limits) vs constant rpm at the RTA on the base route: "

@@ -126,6 +126,10 @@ def register(app: typer.Typer) -> None:
                                                   "kiel, singapore, gibraltar, …: docs/sea-routes.md), repeatable: "
                                                   "--avoid suez rounds the Cape. Adds to the fleet's "
                                                   "JITROUTE_AVOID_PASSAGES."),
+        refine_split: Optional[int] = typer.Option(None, "--refine-split", help="After the search, search the route "
+                                                   "again on corridors this many times finer across the lines round "
+                                                   "it, while that gains (default 3, routing.refine_split; 1: the "
+                                                   "graph's plan as found)."),
         rpm: Optional[str] = typer.Option(None, help="Allowed rpm settings, comma separated (default from the vessel); the search uses them, then each run's rpm is refined anywhere between the lowest and the highest (routing.continuous_speed)."),
         png: Optional[Path] = typer.Option(None, help="Write a map of the route, baseline and weather."),
         convergence: Optional[Path] = typer.Option(None, help="Write the BFOA convergence plot."),
@@ -148,7 +152,8 @@ def register(app: typer.Typer) -> None:
 
         try:
             pairs = [_option_pair(x) for x in solver_option or ()]
-            chosen = _Options(solver=solver, solver_options=tuple(pairs), avoid_passages=tuple(avoid or ()))
+            chosen = _Options(solver=solver, solver_options=tuple(pairs), avoid_passages=tuple(avoid or ()),
+                              refine_split=_Options.refine_split if refine_split is None else refine_split)
             from pipeline.routing.solvers import SOLVERS
 
             SOLVERS[solver].make_options(chosen.solver_overrides())
@@ -218,6 +223,7 @@ def register(app: typer.Typer) -> None:
         job = RouteJob(voyage=v, vessel=vessel, model=model.to_json(), run_id="adhoc", cycle=c, exports=False,
                        options=RoutingOptions.from_settings(s.routing, solver=solver, objective=objective, seed=seed,
                                                             solver_options=tuple(pairs) or None,
+                                                            refine_split=refine_split,
                                                             avoid_passages=(*s.routing.avoid_passages, *(avoid or ()))
                                                             or None),
                        cycle_version=version, error_model=None if calm else _error_model(lay.warehouse))

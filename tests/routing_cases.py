@@ -105,10 +105,11 @@ def moving_storm(seed, lat0, lon0, drift_kn=(20.0, 5.0), radius_nm=150.0, hs_pea
 
 
 def solve(problem: RoutingProblem, weather: wf.WeatherField, *, solver: str = "bfoa", options=None, params=None,
-          limits=None, savings: bool = False, **kw):
+          limits=None, savings: bool = False, refine_split: int = 1, **kw):
     """pipeline.routing.solve.solve as the routing tests pin the solvers: the bare search (the defaults of the
-    solver's options class, no engine-change limits, no savings split) unless a test passes them. The product's
-    defaults, which solve() itself takes, are tested in test_solver_contract (API and CLI give the same plan)."""
+    solver's options class, no engine-change limits, no savings split, the graph's plan not refined on a finer graph)
+    unless a test passes them. The product's defaults, which solve() itself takes, are tested in test_solver_contract
+    (API and CLI give the same plan); the refinement in test_refine_graph."""
     from pipeline.routing.solve import solve as product_solve
     from pipeline.routing.solvers import SOLVERS
 
@@ -117,4 +118,4 @@ def solve(problem: RoutingProblem, weather: wf.WeatherField, *, solver: str = "b
     if options is None and not shorthand:
         options = spec.options()
     return product_solve(problem, weather, solver=solver, options=options, params=params,
-                         limits=limits, savings=savings, **kw)
+                         limits=limits, savings=savings, refine_split=refine_split, **kw)

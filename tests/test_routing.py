@@ -67,14 +67,20 @@ def field(fn, lat=(10.0, 50.0), lon=(180.0, 250.0), step=0.5, hours=400):
 
 
 def node_offsets(plan, space):
-    """Node index of each plan waypoint on its line, minus the centre index."""
-    offs = [0]  # the ports: every node of their lines is the port itself
+    """Where each plan waypoint lies on its line, in nodes from the centre: a whole number on one of the graph's
+    nodes, a fraction between two (a plan refined on a finer graph, refine_graph.py)."""
+    offs = [0.0]  # the ports: every node of their lines is the port itself
     for i, (la, lo) in enumerate(plan.waypoints[1:-1], start=1):
         d = haversine_nm(la, lo, space.lat[i], space.lon[i])
         j = int(np.argmin(d))
-        assert d[j] < 1e-6, f"waypoint {i} is not a node of line {i}"
-        offs.append(j - space.centre)
-    return np.array(offs + [0])
+        if d[j] < 1e-6:
+            offs.append(float(j - space.centre))
+            continue
+        k = j + 1 if j + 1 < len(d) and (j == 0 or d[j + 1] < d[j - 1]) else j - 1
+        assert d[j] + d[k] == pytest.approx(haversine_nm(space.lat[i, j], space.lon[i, j], space.lat[i, k],
+                                                         space.lon[i, k]), abs=1e-3), f"waypoint {i} is off line {i}"
+        offs.append(j + (k - j) * d[j] / (d[j] + d[k]) - space.centre)
+    return np.round(np.array(offs + [0.0]), 3)
 
 
 def vp(max_hs=None, max_wind=None, step_h=1.0):

@@ -84,7 +84,7 @@ def test_default_bfoa_finds_the_detour_it_used_to_miss():
     for seed in (2, 7, 8):
         for params, gaps in ((BfoaParams(), gaps_new), (old, gaps_old)):
             plan = solve(problem, weather, solver="bfoa", seed=seed, params=params, space=space, continuous=False,
-                         limits=None, savings=False)
+                         limits=None, savings=False, refine_split=1)
             assert plan.status == "ok"
             gaps.append(plan.cost / best - 1.0)
     assert max(gaps_new) <= 0.005, gaps_new
@@ -119,6 +119,6 @@ def test_thesis_polish_keeps_enough_labels_to_reach_the_optimum():
     best = suite.read_optima(OPTIMA)[spec.name]["cost"]
     for seed in (1, 2):
         gaps = [solve(problem, weather, solver="bfoa", seed=seed, params=params, space=space, continuous=False,
-                      limits=None, savings=False).cost / best - 1.0
+                      limits=None, savings=False, refine_split=1).cost / best - 1.0
                 for params in (BfoaParams(), BfoaParams(polish_buckets=4))]
         assert -1e-3 <= gaps[0] <= 0.005 < gaps[1], (seed, gaps)

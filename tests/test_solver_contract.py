@@ -120,7 +120,8 @@ def test_the_cli_refuses_an_unknown_solver_or_option_before_opening_anything(tmp
     env = {**os.environ, "JITROUTE_DATA": str(tmp_path / "data")}
     for args, says in ((("--solver", "dijkstra"), "unknown solver 'dijkstra'; use one of bfoa, dp, astar, gc, rhumb"),
                        (("--solver", "dp", "--solver-option", "gapp=0"), "solver 'dp' has no option 'gapp'"),
-                       (("--solver", "dp", "--solver-option", "gap"), "--solver-option must be NAME=VALUE")):
+                       (("--solver", "dp", "--solver-option", "gap"), "--solver-option must be NAME=VALUE"),
+                       (("--refine-split", "0"), "refine_split must be a whole number ≥ 1 (1: no refinement), not 0")):
         done = jitroute("route", *args, "--voyage", "V1", env=env, timeout_s=120)
         assert done.returncode == 2, done.stderr
         assert done.stderr.count(says) == 1, done.stderr  # said once, as one error line

@@ -88,7 +88,7 @@ def plan_voyage(job: RouteJob, weather_for: WeatherFor | None) -> tuple[Plan, wf
     options = solver_spec(o.solver).make_options(o.solver_overrides())
     # the same function and, unless the run's settings say otherwise, the same values as solve()'s defaults
     plan = solve(problem, weather, solver=o.solver, seed=o.seed, options=options, space=space, limits=o.limits,
-                 savings=True, continuous=o.continuous_speed)
+                 savings=True, continuous=o.continuous_speed, refine_split=o.refine_split)
     for note in (problem.rpm_note, problem.model.envelope_note(plan.legs, problem.draft_m)):
         if note:
             plan.add_reason(note)

@@ -48,6 +48,9 @@ class RoutingOptions:
     # speed between the lowest and the highest allowed rpm, refined per run of a setting after the search
     # (continuous_speed.py); False: plans use only the listed settings and the constant rpm meeting the RTA
     continuous_speed: bool = True
+    # after the search, the plan's route is searched again on a graph this many times finer across the lines, in a
+    # corridor of ±1 node round it, re-centred while that gains (refine_graph.py); 1: the graph's plan as found
+    refine_split: int = 3
     # a lagged ensemble of this many cycles (the one routed on and the complete ones before it) sails each plan and
     # its baseline (ensemble.py): P(on time), fuel and saving P10/P50/P90 stored with the plan; 0: none
     ensemble_members: int = 4
@@ -73,6 +76,8 @@ class RoutingOptions:
         if self.solver not in SOLVER_NAMES:
             raise UnknownSolverError(f"unknown solver {self.solver!r}; use one of {', '.join(SOLVER_NAMES)}")
         object.__setattr__(self, "solver_options", tuple((str(k), v) for k, v in dict(self.solver_options).items()))
+        if isinstance(self.refine_split, bool) or not isinstance(self.refine_split, int) or self.refine_split < 1:
+            raise ValueError(f"refine_split must be a whole number ≥ 1 (1: no refinement), not {self.refine_split!r}")
         from pipeline.routing.passages import check_avoid  # plain data, no compiled code
 
         object.__setattr__(self, "avoid_passages", tuple(sorted(check_avoid(self.avoid_passages))))

@@ -213,7 +213,7 @@ def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines
                 for b in range(max(0, a - ms), min(P, a + ms + 1)):
                     edge_ok[i, a, b] = node_ok[i, a] and node_ok[i + 1, b]
     for line in limit_lines or []:
-        _forbid_crossing(lat, lon, edge_ok, line)
+        forbid_crossing(lat, lon, edge_ok, line)
     return SearchSpace(lat=lat, lon=lon, node_ok=node_ok, edge_ok=edge_ok, d_point_nm=float(dp), base=base,
                        max_shift=int(ms), base_distance_nm=float(dist), clearance=rule)
 
@@ -236,13 +236,13 @@ def _along_sea_route(route: SeaRoute, dep, arr, dep_name: str, arr_name: str, *,
     except ValueError as e:
         raise VoyageGeometryError(f"{dep_name} to {arr_name}: {e}") from None
     for line in limit_lines or []:
-        _forbid_crossing(lat, lon, edge_ok, line)
+        forbid_crossing(lat, lon, edge_ok, line)
     return SearchSpace(lat=lat, lon=lon, node_ok=node_ok, edge_ok=edge_ok, d_point_nm=float(d_line.max()), base="gc",
                        max_shift=int(ms), base_distance_nm=float(total), clearance=rule, sea_route=route, gate=gate,
                        line_d_point_nm=d_line)
 
 
-def _forbid_crossing(lat, lon, edge_ok, polyline):
+def forbid_crossing(lat, lon, edge_ok, polyline):
     """Remove edges that cross a limit polyline [(lat, lon), ...] (planar test in a local unwrapped frame)."""
     ref = lon[0, lat.shape[1] // 2]
     pts = [(la, ref + geo.wrap180(lo - ref)) for la, lo in polyline]

@@ -40,6 +40,7 @@ from pipeline.routing.objectives import route_cost_nb
 from pipeline.routing.options import RoutingOptions
 from pipeline.routing.plan import Plan, legs_of_route
 from pipeline.routing.problem import Instance, RoutingInputError, RoutingProblem
+from pipeline.routing.refine_graph import refine_route
 from pipeline.routing.route_speeds import Start, best_speeds
 from pipeline.routing.savings import solver_instance, split_of
 from pipeline.routing.search_space import SearchSpace, VoyageGeometryError, reachable
@@ -260,7 +261,7 @@ def _never_worse(inst: Instance, plan: Plan, baseline: Plan, base: Baseline, lim
 def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODUCT.solver, seed: int = PRODUCT.seed,
           options=None, params: BfoaParams | None = None, space: SearchSpace | None = None,
           limits: EngineLimits | None = PRODUCT.limits, savings: bool = True,
-          continuous: bool = PRODUCT.continuous_speed) -> Plan:
+          continuous: bool = PRODUCT.continuous_speed, refine_split: int = PRODUCT.refine_split) -> Plan:
     """Route one voyage. Never raises for a voyage that simply cannot be sailed: the plan says why.
 
     Every default is the product's (`PRODUCT`, options.RoutingOptions): `solve(problem, weather, solver="dp")` gives
@@ -273,8 +274,11 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     (`rhumb`) is refused; without a `space`, the problem's lines are laid along the global sea route when its great
     circle crosses land (base_route.py), as for every voyage the CLI and the fleet runs route. With `continuous` the speeds of the solver's plan and of the best engine plan on the base
     route are refined continuously between the lowest and the highest allowed rpm (continuous_speed.py); without it
-    plans use only the settings. The bare search (the solver's options class's defaults, no limits, no savings) is
-    `solve(..., options=SOLVERS[solver].options(), limits=None, savings=False)`.
+    plans use only the settings. With `refine_split` > 1 the solver's route (unless its plan waits at nodes) is first
+    searched again on corridors that many times finer across the lines round it (refine_graph.py), and the plan is
+    the cheaper of the two; 1: the graph's plan. The bare search (the solver's options class's defaults, no limits,
+    no savings, the graph itself) is `solve(..., options=SOLVERS[solver].options(), limits=None, savings=False,
+    refine_split=1)`.
     """
     spec = solver_spec(solver)
     opts = _options(spec, options, params)
@@ -308,24 +312,35 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     else:
         found = spec.search(inst, base, seed=int(seed), options=opts)
         waits = found.waits
-        plan = _plan(inst, solver, found.nodes, found.rpm_idx, seed=seed if spec.seeded else None, t0=t0,
-                     history=found.history, n_evals=found.n_evals, reason_if_infeasible=why_not,
+        at, nodes, rpm_idx, n_evals = inst, found.nodes, found.rpm_idx, found.n_evals  # the plan's graph and route
+        refined = None
+        if refine_split > 1 and not waits and nodes is not None and rpm_idx is not None:
+            refined = refine_route(inst, nodes, rpm_idx, refine_split)
+            if refined is not None:
+                at, nodes, rpm_idx = refined.inst, refined.nodes, refined.rpm_idx
+                n_evals += refined.legs_sailed // max(len(nodes) - 1, 1)  # legs sailed, counted as whole routes
+        plan = _plan(at, solver, nodes, rpm_idx, seed=seed if spec.seeded else None, t0=t0,
+                     history=found.history, n_evals=n_evals, reason_if_infeasible=why_not,
                      wait_h=found.wait_h if waits else None, wait_tph=found.wait_tph)
         if waits and plan.legs and found.note:  # what the solver's space is, e.g. the grid its waits are on
             plan.add_reason(found.note)
         if waits and plan.legs:
-            plan = _waiting_plan_limits(inst, plan, found.nodes, limits, continuous)
+            plan = _waiting_plan_limits(inst, plan, nodes, limits, continuous)
         elif limits is not None and limits.active and plan.legs:
-            plan = _with_limits(inst, plan, found.nodes, limits, continuous, known)
+            plan = _with_limits(at, plan, nodes, limits, continuous, known)
         elif continuous and plan.legs:
-            own = Start(inst.rpm_options[found.rpm_idx], plan.cost, plan.fuel_t)
-            best = best_speeds(inst, found.nodes, None, continuous, start=own, search=False)
+            own = Start(at.rpm_options[rpm_idx], plan.cost, plan.fuel_t)
+            best = best_speeds(at, nodes, None, continuous, start=own, search=False)
             if best.cost < plan.cost:
-                at, rpm_idx = best.as_plan_settings(inst)
-                plan = _plan(at, solver, found.nodes, rpm_idx, seed=plan.seed, t0=t0, history=plan.history,
+                at2, idx2 = best.as_plan_settings(at)
+                plan = _plan(at2, solver, nodes, idx2, seed=plan.seed, t0=t0, history=plan.history,
                              n_evals=plan.n_evals, clearance_nm=plan.min_land_clearance_nm)
         if not waits and plan.legs and found.note:  # e.g. how the search was narrowed (dp's capped label search)
             plan.add_reason(found.note)
+        if refined is not None and plan.legs:
+            plan.add_reason(f"then searched again on corridors {refine_split}× finer across the lines round its route "
+                            f"({refined.rounds} rounds): {refined.gain_pct:.2f} % "
+                            "cheaper than the graph's plan over the settings")
         plan = _never_worse(inst, plan, baseline, base, limits, profile, t0, continuous)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:

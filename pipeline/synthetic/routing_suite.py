@@ -141,15 +141,16 @@ def plan_cost(problem, space, weather, nodes, rpm_idx) -> float:
 
 
 def solve_optimum(spec: SuiteInstance, problem, space, weather, gap: float = DP_GAP) -> tuple[dict, object]:
-    """(record for optima.json, the DP plan): the DP's plan to within `gap` of the optimum over the settings (the
-    search space the solvers' gaps are measured in: continuous=False, no refined speeds)."""
+    """(record for optima.json, the DP plan): the DP's plan to within `gap` of the optimum over the settings on the
+    graph itself (the search space the solvers' gaps are measured in: continuous=False, no refined speeds,
+    refine_split=1: no finer corridors)."""
     import time
 
     from pipeline.routing.dp import DpOptions
 
     t0 = time.thread_time()
     plan = solve(problem, weather, solver="dp", space=space, options=DpOptions(gap=gap), continuous=False, limits=None,
-                 savings=False)
+                 savings=False, refine_split=1)
     cpu_s = time.thread_time() - t0
     rec = {"hash": instance_hash(spec, problem, space, weather), "status": plan.status, "cost": plan.cost,
            "fuel_t": plan.fuel_t, "hours": plan.hours, "gap": gap, "dp_cpu_s": cpu_s, "legs_sailed": plan.n_evals,
