@@ -338,9 +338,10 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
         if not waits and plan.legs and found.note:  # e.g. how the search was narrowed (dp's capped label search)
             plan.add_reason(found.note)
         if refined is not None and plan.legs:
-            plan.add_reason(f"then searched again on corridors {refine_split}× finer across the lines round its route "
-                            f"({refined.rounds} rounds): {refined.gain_pct:.2f} % "
-                            "cheaper than the graph's plan over the settings")
+            n = refined.rounds
+            plan.add_reason(f"then searched again on {n} corridor{'s' if n > 1 else ''} {refine_split}× finer across the "
+                            f"lines round its route: {refined.gain_pct:.2f} % cheaper than the graph's plan over the "
+                            "settings")
         plan = _never_worse(inst, plan, baseline, base, limits, profile, t0, continuous)
     plan.baseline = None if spec.is_baseline else baseline
     if savings and plan.legs and base.ok:
