@@ -15,7 +15,7 @@ The route itself is a route of the corridor (node `width` of every line), so a s
 
 `refine_route` searches the corridor of a plan (±1 coarse node, at 1/split of the spacing) with the polish of the
 default search (bfoa.polish: the DP over the corridor, every engine setting per leg, partial plans within 4 h and 2 %
-of fuel of the plan's own), and again round the plan it finds, while that gains more than 0.01 % (at most
+of fuel of the plan's own, at most `REFINE_BUCKETS` labels per node), and again round the plan it finds, while that gains more than 0.01 % (at most
 `REFINE_ROUNDS` corridors): a route may walk sideways a node a round. The plan found is a plan of the finer graph,
 sailed with the same legs' kernel in the same weather; it is kept only when cheaper.
 """
@@ -36,6 +36,9 @@ from pipeline.routing.search_space import SearchSpace, forbid_crossing
 
 REFINE_ROUNDS = 3  # corridors searched at most, each round the plan the last one found
 REFINE_GAIN = 1e-4  # a round that gains less than this share of the cost ends the refinement
+# labels per node the corridor's DP keeps (the polish's 16 halved: on six suite instances half the CPU, 0.02–0.33
+# points of gain less; bench/README.md)
+REFINE_BUCKETS = 8
 
 
 def corridor_space(space: SearchSpace, centre: np.ndarray, width: int, split: int = 2,
@@ -117,7 +120,7 @@ def refine_route(inst: Instance, nodes: np.ndarray, rpm_idx: np.ndarray, split: 
     if split < 2:
         return None
     problem = inst.problem
-    params = BfoaParams(polish_width=split)
+    params = BfoaParams(polish_width=split, polish_buckets=REFINE_BUCKETS)
     centre = split * np.asarray(nodes, np.int64)
     rpm_idx = np.asarray(rpm_idx, np.int64)
     from_cost = cost = float(evaluate(inst, nodes, rpm_idx)[0])
