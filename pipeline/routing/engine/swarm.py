@@ -140,6 +140,16 @@ def _offset_bacterium(j, nodes, rpm_idx, run, rng):
     return _new_bacterium(nodes, rpm_idx, run, rng)
 
 
+@numba.njit(cache=True, inline="always")
+def _distance(cand, pos, k):
+    """d(S1, S2) of the route `cand` and bacterium k's: sqrt(Σ (P1(i) − P2(i))²) over the lines (ports excluded)."""
+    d2 = 0.0
+    for j in range(1, cand.shape[0] - 1):
+        e = cand[j] - pos[k, j]
+        d2 += e * e
+    return np.sqrt(d2)
+
+
 @numba.njit(cache=True)
 def _crowding(pos, i, cand, n_alive, d_max, q_exp):
     """dQ of `cand` (positions of bacterium i excluded) and the neighbour indices' count."""
@@ -147,11 +157,7 @@ def _crowding(pos, i, cand, n_alive, d_max, q_exp):
     for k in range(n_alive):
         if k == i:
             continue
-        d2 = 0.0
-        for j in range(1, cand.shape[0] - 1):
-            e = cand[j] - pos[k, j]
-            d2 += e * e
-        d = np.sqrt(d2)
+        d = _distance(cand, pos, k)
         if d < d_max:
             dq += q_exp * (1.0 - d / d_max)
     return dq
@@ -162,11 +168,7 @@ def _beats_neighbours(pos, cost, i, cand, q_cand, d_max):
     for k in range(pos.shape[0]):
         if k == i:
             continue
-        d2 = 0.0
-        for j in range(1, cand.shape[0] - 1):
-            e = cand[j] - pos[k, j]
-            d2 += e * e
-        if np.sqrt(d2) < d_max and q_cand >= cost[k]:
+        if _distance(cand, pos, k) < d_max and q_cand >= cost[k]:
             return False
     return True
 
