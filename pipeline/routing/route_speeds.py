@@ -16,8 +16,8 @@ measured against it). Each is the same two stages:
               barred ranges, holding and charging as the limits say (continuous_speed.refine_rpm); kept only when
               cheaper.
 
-`known` (a dict, one per instance) keeps each answer under active limits by route: the base route's profile and a
-solver's plan on the same route are then planned once.
+`known` (a dict, one per instance and graph: a route is its node per line) keeps each answer under active limits by
+route: the base route's profile and a solver's plan on the same route are then planned once.
 """
 
 from __future__ import annotations

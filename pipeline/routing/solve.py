@@ -326,8 +326,8 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
             plan.add_reason(found.note)
         if waits and plan.legs:
             plan = _waiting_plan_limits(inst, plan, nodes, limits, continuous)
-        elif limits is not None and limits.active and plan.legs:
-            plan = _with_limits(at, plan, nodes, limits, continuous, known)
+        elif limits is not None and limits.active and plan.legs:  # `known` holds routes of the graph, not a corridor's
+            plan = _with_limits(at, plan, nodes, limits, continuous, known if refined is None else None)
         elif continuous and plan.legs:
             own = Start(at.rpm_options[rpm_idx], plan.cost, plan.fuel_t)
             best = best_speeds(at, nodes, None, continuous, start=own, search=False)
