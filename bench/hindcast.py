@@ -234,6 +234,10 @@ class Forecasts:
         t_ref = T0 + np.timedelta64(int(cycle_h) * 3600, "s")
         return _field(leads, t_ref, [_state(cycle_h + L, known, displace) for L in leads], cycle=t_ref)
 
+    def analysed(self) -> ver.VerificationWeather:
+        """The truth as the weather that came: analysed at every valid time (what verification re-sails plans in)."""
+        return ver.VerificationWeather(self.truth, (), np.ones(self.truth.times_h.size, bool))
+
     def newest_at(self, t_h: float) -> int:
         """The newest cycle (hours after T0) issued at or before t_h."""
         return int(math.floor(t_h / CYCLE_H + 1e-9) * CYCLE_H)
@@ -480,10 +484,10 @@ def sail_replan(v: Voyage, fc: Forecasts, rules: Rules = Rules(), made: list | N
     ship = Ship(*v.dep, v.depart_h)
     field = fc.cycle(fc.newest_at(ship.t_h))
     plan, margin, kept = plan_at(v, ship, field, fc.members(ship.t_h) if rules.any else [], rules)
-    if made is not None and plan is not None:
-        made.append((plan, claimed(plan, rules)))
-    legs = plan.legs if plan is not None else gc_legs(v.dep, v.arr, master_rpm(ship, v, field))
     first_claim, n_plans, n_kept, margins = claimed(plan, rules), 1, int(kept), [margin]
+    if made is not None and plan is not None:
+        made.append((plan, first_claim))
+    legs = plan.legs if plan is not None else gc_legs(v.dep, v.arr, master_rpm(ship, v, field))
     late_from = 0.0 if plan is not None and plan.status == "late" else math.nan
     while legs:
         legs = sail_until(ship, legs, fc.truth, ship.t_h + CYCLE_H)
@@ -532,7 +536,7 @@ def calibrate(seed: int, n: int, max_lead_h: int) -> tuple[calibration.ErrorMode
     """The error model fitted on `n` training voyages of their own truth, forecasts and voyages (`seed`): each
     re-planned every cycle, every plan made (at departure and at sea) verified on the truth."""
     fc = Forecasts(seed, max_lead_h)
-    truth = ver.VerificationWeather(fc.truth, (), np.ones(fc.truth.times_h.size, bool))
+    truth = fc.analysed()
     rows = []
     for v in voyages(n, seed):
         made: list = []
@@ -747,7 +751,7 @@ def main(argv=None) -> int:
               "  ".join(f"{k} {row[k]['saving_corrected_pct']:+5.1f}%/{row[k]['late_h']:+.1f}h"
                         for k in ("once", "replan", "perfect", "replan calibrated") if k in row), flush=True)
         write(a, n, runs, per_voyage, t_start)  # after every voyage: a run stopped early keeps what it measured
-    truth = ver.VerificationWeather(fc.truth, (), np.ones(fc.truth.times_h.size, bool))
+    truth = fc.analysed()
     rows = write(a, n, runs, per_voyage, t_start, {k: plan_claims(m, truth) for k, m in made.items() if k in runs})
     master_on_time = sum(r[1].late_h <= ON_TIME_TOL_H for r in next(iter(runs.values())))
     print()
