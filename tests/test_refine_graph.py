@@ -53,6 +53,20 @@ def test_the_corridor_holds_the_route_the_coarse_nodes_and_legs_and_points_betwe
                     assert not fine_space.edge_ok[i, ka, kb]
 
 
+def test_a_drift_limit_keeps_every_leg_within_that_many_fine_steps_of_the_routes_own():
+    pr = problem((30.0, -160.0), (33.0, -146.0), 110.0, n_lines=8, n_points=9)
+    space = pr.search_space()
+    nodes = _route(space)
+    free, _ = corridor_space(space, 3 * nodes, 3, 3)
+    held, _ = corridor_space(space, 3 * nodes, 3, 3, max_drift=2)
+    k = np.arange(free.lat.shape[1])
+    drift = np.abs(k[None, :] - k[:, None])[None]
+    assert not held.edge_ok[np.broadcast_to(drift > 2, held.edge_ok.shape)].any()
+    near = np.broadcast_to(drift <= 2, held.edge_ok.shape)
+    assert (held.edge_ok[near] == free.edge_ok[near]).all()  # the rest as without the limit
+    assert free.edge_ok[np.broadcast_to(drift > 2, free.edge_ok.shape)].any()  # so the limit did remove legs
+
+
 def test_refining_never_costs_more_and_leaves_the_graph_between_its_nodes():
     pr = problem((30.0, -160.0), (35.0, -130.0), 150.0, n_lines=10, n_points=11)
     storm = field(moving_storm(3, 32.0, 210.0), step_h=3)

@@ -10,10 +10,14 @@ from one node to the next. The corridor keeps everything the coarse graph keeps:
 - a leg between two of the coarse graph's own nodes is the coarse graph's leg (usable or not as there); any other is
   usable only when both its nodes are, it shifts at most the coarse graph's widest shift (in the finer spacing, split
   times as many nodes), it keeps the clearance from land, and it crosses no limit line;
+- with `max_drift`, a leg moves at most that many fine steps sideways from the route's own leg (a leg from corridor
+  node k to k' has |k' − k| ≤ max_drift), the coarse graph's legs included;
 - the lines are the same, so a canal's fixed legs (canal_time.py) and the weather are the same.
 The route itself is a route of the corridor (node `width` of every line), so a search started from it can only gain.
 
-`refine_route` searches the corridor of a plan (±1 coarse node, at 1/split of the spacing) with the polish of the
+`refine_route` searches the corridor of a plan (±1 coarse node, at 1/split of the spacing, each leg drifting at most one
+coarse spacing from the route's: on the routing suite the same gains as any drift, for 74 % of the CPU,
+bench/README.md) with the polish of the
 default search (bfoa.polish: the DP over the corridor, every engine setting per leg, partial plans within 4 h and 2 %
 of fuel of the plan's own, at most `REFINE_BUCKETS` labels per node), and again round the plan it finds, while that gains more than 0.01 % (at most
 `REFINE_ROUNDS` corridors): a route may walk sideways a node a round. The plan found is a plan of the finer graph,
@@ -43,7 +47,7 @@ REFINE_BUCKETS = 8
 
 def corridor_space(space: SearchSpace, centre: np.ndarray, width: int, split: int = 2,
                    lat_limits: tuple[float, float] = (-75.0, 75.0),
-                   limit_lines=()) -> tuple[SearchSpace, np.ndarray]:
+                   limit_lines=(), max_drift: int | None = None) -> tuple[SearchSpace, np.ndarray]:
     """(the corridor's search space, each of its nodes' position along its line in steps of 1/`split` of the coarse
     spacing (L+2, 2·width + 1)) round the route whose node on line i is at position centre[i] in those steps (split ×
     the coarse node of a route of `space`): that route is node `width` of every line of the corridor."""
@@ -88,6 +92,9 @@ def corridor_space(space: SearchSpace, centre: np.ndarray, width: int, split: in
     ja, jb = np.clip(fine[:-1] // split, 0, P - 1), np.clip(fine[1:] // split, 0, P - 1)
     lines = np.arange(L2 - 1)[:, None, None]
     edge_ok = np.where(both, space.edge_ok[lines, ja[:, :, None], jb[:, None, :]], edge_ok)
+    if max_drift is not None:
+        k = np.arange(n)
+        edge_ok &= (np.abs(k[None, :] - k[:, None]) <= max_drift)[None]
     for line in limit_lines or []:
         forbid_crossing(lat, lon, edge_ok, line)
     d_line = space.line_d_point_nm / split if space.line_d_point_nm is not None else None
@@ -128,7 +135,8 @@ def refine_route(inst: Instance, nodes: np.ndarray, rpm_idx: np.ndarray, split: 
         return None
     best, legs, rounds = None, 0, 0
     for rounds in range(1, REFINE_ROUNDS + 1):
-        space, fine = corridor_space(inst.space, centre, split, split, problem.lat_limits, list(problem.limit_lines))
+        space, fine = corridor_space(inst.space, centre, split, split, problem.lat_limits, list(problem.limit_lines),
+                                     max_drift=split)
         sub = replace(inst, space=space, graph=space.graph)
         start = np.full(fine.shape[0], split, np.int64)  # the route itself: the same legs, the same cost
         n2, r2, c2, n_legs = polish(start, rpm_idx, cost, params, sub.graph, sub.vessel, sub.wx, sub.objective)
