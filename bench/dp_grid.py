@@ -32,7 +32,8 @@ import numpy as np  # noqa: E402
 
 import routing_instances as suite  # noqa: E402
 from pipeline.routing.baseline import baseline as find_baseline, evaluate  # noqa: E402
-from pipeline.routing.dp import DpOptions, search  # noqa: E402
+from pipeline.routing.dp import search  # noqa: E402
+from pipeline.routing.options import DpOptions  # noqa: E402
 from pipeline.routing.dp_grid import wait_rate_tph, waited_plan_cost  # noqa: E402
 from pipeline.routing.savings import solver_instance  # noqa: E402
 from pipeline.routing.solvers import SOLVERS  # noqa: E402

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import routing_instances as suite  # noqa: E402
-from pipeline.routing.dp import DpOptions  # noqa: E402
+from pipeline.routing.options import DpOptions  # noqa: E402
 from pipeline.routing.solve import EngineLimits, product_options, solve  # noqa: E402
 from routing import pin_one_core  # noqa: E402
 

@@ -36,7 +36,7 @@ import numpy as np  # noqa: E402
 
 import routing_instances as suite  # noqa: E402
 from pipeline.routing.baseline import baseline as find_baseline, evaluate  # noqa: E402
-from pipeline.routing.dp import DpOptions  # noqa: E402
+from pipeline.routing.options import DpOptions  # noqa: E402
 from pipeline.routing.refine_graph import refine_route  # noqa: E402
 from pipeline.routing.savings import solver_instance  # noqa: E402
 from routing import pin_one_core, timed_solve, warm_up  # noqa: E402

@@ -18,7 +18,8 @@ from tests.exact_cases import DEP, enumerate_nb, instance, weather, window_probl
 from tests.routing_cases import problem, solve
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import baseline as find_baseline, evaluate
-from pipeline.routing.dp import DpOptions, grid_step_h
+from pipeline.routing.dp import grid_step_h
+from pipeline.routing.options import DpOptions
 from pipeline.routing.engine.bounds import cost_lb_nb
 from pipeline.routing.dp_grid import line_times
 from pipeline.routing.fastest_plan import fastest_plan

@@ -17,8 +17,9 @@ import pytest
 
 from routing_cases import MODEL, field, moving_storm, problem, solve, wavy
 from pipeline.routing.engine import leg as lk
-from pipeline.routing.bound_tables import finish_bounds, label_bounds, latest_departures, reachable_windows, trim_eps
-from pipeline.routing.dp import DpOptions, _fuel_budget_t
+from pipeline.routing.bound_tables import (finish_bounds, fuel_budget_t, label_bounds, latest_departures,
+                                           reachable_windows, trim_eps)
+from pipeline.routing.options import DpOptions
 from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.bounds import fuel_to_finish_lb
 from pipeline.routing.engine.labels import EXACT
@@ -111,7 +112,7 @@ def test_skipping_legs_whose_label_would_be_dropped_keeps_the_same_labels(kind, 
     ld = latest_departures(inst)
     on_time = upper < math.inf
     fb = label_bounds(inst, ld, reachable_windows(inst, ld, on_time),
-                      _fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf)
+                      fuel_budget_t(inst.objective, upper, gap) if on_time else math.inf)
     eps = trim_eps(inst, gap, upper, fb.lams, fb.m_lam, fb.t_min)
     args = (inst.graph, inst.vessel, inst.wx, inst.objective, upper, fb, eps)
     *skipping, legs_skipping, kept_skipping = dp_exact_nb(*args, EXACT)

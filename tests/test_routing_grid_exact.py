@@ -24,7 +24,7 @@ from tests.routing_cases import problem
 from pipeline.routing.engine import leg as lk
 from pipeline.routing.baseline import evaluate
 from pipeline.export.rtz import route_to_rtz, validate_rtz
-from pipeline.routing.dp import DpOptions
+from pipeline.routing.options import DpOptions
 from pipeline.routing.dp_grid import line_times
 from pipeline.routing.engine_limits import EngineLimits, settings_held_h
 from pipeline.routing.fastest_plan import fastest_plan

@@ -1,88 +1,16 @@
-"""Improved Bacterial Foraging Optimisation (BFOA) over the node graph, numba-compiled.
+"""Improved Bacterial Foraging Optimisation (BFOA) over the node graph: the default search (`--solver bfoa`).
 
-A bacterium's position is one node per line (lines 1..L; the ports are fixed) plus one engine
-setting (index into the allowed rpm list) per leg. Every cycle each bacterium makes `n_chemo`
-chemotactic moves:
-  tumble   pick a direction vector V: +1 at line k; +1 at k, k+1; +1 at k..k+2; the same with −1;
-           or +1 at k1 and −1 at k2 (single-line moves most likely, two-line next, the rest least).
-           With probability `p_engine` the vector acts on the engine settings of legs instead. With
-           probability `p_bend` k is a bend (a line where the route, or a leg where the engine plan,
-           changes), else any line: on a smooth route a move at a bend shifts it instead of adding two.
-  swim     S' = S + V·D, repeated while the judged cost keeps falling (at most `swim_max` times); only
-           feasible improvements are accepted.
-  engine re-set  every move also re-sets engine settings so the ship still arrives just inside the
-           RTA: before sailing, random legs after the move are sped up (late) or slowed (early by more
-           than a step) for the move's estimated arrival (a leg of h hours at rpm r takes h·r/r' at r',
-           fuel ∝ rpm³); after sailing, the same corrects what the estimate missed (`retime_nb`).
-  screen   (jit objective) a route move first sails only the legs it changes; the rest of the route
-           is sailed only when their fuel change plus their time change priced at what the engine
-           re-set pays per hour is below `screen` × cost (+ the move's repulsion credit);
-           `screen_engine` ≥ 0 does the same for engine moves (off by default).
-  step D   adaptive per bacterium: large (`d_large` × nodes per line, at least 3) → medium (2) → small
-           (1) after `n_fail` consecutive failed moves at each size, and small → large again to escape
-           local optima.
-  repulsion  d(S1, S2) = sqrt(Σ (P1(i) − P2(i))²) over the lines; for neighbours closer than d_max,
-           dQ(S) = Σ Q_exp·(1 − d_k/d_max) with Q_exp = repulsion × |Q(S)|. A move is judged on
-           Q(S') + dQ(S') − dQ(S) (crowding is penalised, so bacteria spread and a crowded bacterium
-           may step to a slightly dearer, less crowded position), unless S' beats S and every
-           neighbour, when dQ = 0. The best plan ever met is kept apart and returned.
-After the moves: sort by cost; reproduction replaces the `n_repro` worst *mature* bacteria
-(≥ `steps_to_die` moves) with copies of the best; every `ed_every` cycles elimination/dispersal
-re-initialises `n_disperse` random bacteria, never the current best.
-Random initialisation is a safe random walk line by line that heads, one node at a time (chance
-`walk_slope` per line), for a target offset drawn ~ N(0, `walk_spread` × nodes per line) and redrawn
-`walk_turns` times per route on average, bending back to the destination in time: random routes are
-smooth detours of every size rather than zig-zags. Each node tries the preferred node, then nodes
-ever farther from it (R_max tries per node, K_max overall, backing up `backup` lines on failure); a
-route that cannot be sailed (weather limits) is drawn again with twice the spread (up to 4 draws).
-Its engine settings are aimed at the RTA: sailed at each constant setting, the two settings whose
-arrivals bracket the RTA are mixed over random legs in the share that should arrive just in time,
-then re-set as above. Bacterium 0 starts on the baseline route (with its constant rpm, or the aimed
-settings where cheaper) so the result is never worse than it.
+A bacterium is a route (one node per line; the ports fixed) and an engine setting per leg. Every cycle each makes
+chemotactic moves (tumble, swim while the cost falls, the engine re-set for the RTA, adaptive step, repulsion between
+neighbours); then reproduction, and elimination/dispersal every few cycles. The swarm starts on the baseline route, on
+offset routes across the graph, on the fastest routes round either side (branch_routes.py) and on random detours, and
+stops after `stall_cycles` cycles without gain. Its best plan is then polished by the label DP in a corridor of
+±`polish_width` nodes round it (`polish`), again while a round gains. Same seed, same plan (one numpy generator,
+PCG64, passed to every kernel that draws).
 
-Added beyond the thesis's moves (the structure above is kept):
-  offset routes  bacteria 1..`offset_routes` do not start at random but on offset routes spread evenly from one
-           side of the graph to the other (out one node a line to the offset, along it, back to the destination
-           in time; a random walk with no spread, see random_route): an optimum that hugs one side of the graph is
-           met from the start, and when the baseline breaks a weather limit (bacterium 0 infeasible) the routes
-           round the obstacle on either side give feasible starts. One that cannot be sailed starts at random.
-  branch routes  the last bacteria (after the offset ones, when there is room) start on the fastest routes at the
-           baseline's constant rpm through either side of the graph (branch_routes.py, `branch_routes`): round a
-           storm across the voyage the swarm starts on both branches, and on a detour the weather shapes rather than
-           on the offset routes' straight ones. Without them the swarm stalled +0.5 to +3.6 % above the optimum on
-           such voyages (bench/routing_suite.py: `storm-head-on`, `southern-indian`); they cost ~3·P·L legs.
-  block shift  with probability `p_block` a route tumble is +1 or −1 on a whole block of lines: the plateau (lines
-           on one node) around a random line, or 4..L/2 lines from it when that plateau is shorter than 4. It moves
-           a detour sideways as one piece, which the thesis's 1..3-line vectors can only do through dearer,
-           kinked intermediate routes.
-  stall stop  the cycles end early once `stall_cycles` cycles in a row lowered the best cost by no more than
-           `stall_tol` of it (never while no bacterium is feasible); the polish, cheap with its bucketed labels,
-           then fixes the rest in up to `polish_rounds` rounds. Easy voyages stop after a few cycles, so fleets
-           route faster.
-  polish   after the last cycle the best plan is polished by a local search of a window: the DP
-           (engine.label_search.dp_exact_nb) over the corridor of ±`polish_width` nodes around its route, every engine setting
-           per leg, keeping partial plans within `polish_window_h` hours and `polish_fuel` × cost of fuel of
-           the plan's own at each line (2 %: a detour one node wider or earlier than the plan's burns more early
-           on and gains it back later; at 0.3 % the window cut it out), with ε-trimmed labels (`polish_gap` of the cost) and at most
-           `polish_buckets` labels per node (the line's arrival times cut into that many spans, a span keeping
-           its label of least fuel plus the plan's price of time: its cost grows with the lines, not with the
-           lines times the spread of their arrival times, so a 5,000 NM voyage costs ~2.5× a 2,000 NM one,
-           bench/routing_length.py). It fixes what the
-           random tumbles leave (a setting one leg too early or late, a one-node kink) and can only lower the
-           cost; `polish_width` −1 leaves it out. The polished plan is polished again, around its new route,
-           while a round lowers the cost by more than `stall_tol` of it (at most `polish_rounds` rounds): each
-           round can move the route one more node and its engine plan with it, which walks a plan whose whole
-           detour sits a node off into the optimum's corridor.
-With these the defaults are at most 20 cycles of 10 moves (the thesis's settings here were 40 of 12): on the
-routing suite (bench/routing_suite.py) that gives a plan within 1 % of the exact optimum in more runs, for less
-work per solve.
-The kernel is split as the method is: `init_swarm_nb` (initialisation), `chemotaxis_nb` (one
-bacterium's tumbles and swims, with `swim_nb` the swim of one tumble), `reproduce_nb` and `disperse_nb`;
-`bfoa_nb` runs the cycles. They take the voyage as named structures (graph, vessel, weather, objective;
-see engine_timing), the settings as `Knobs`, the bacteria as a `Swarm` and work arrays as `Work` + `Scratch`.
-Everything random comes from one explicit generator, numpy's default_rng(seed) (PCG64), passed down to every
-kernel that draws: same seed, same plan, and the interpreted kernels (NUMBA_DISABLE_JIT=1) draw the same
-numbers as the compiled ones.
+This module is the strategy: the settings (`BfoaParams`), the run and the polish. The swarm is compiled in
+engine/swarm.py, the DP in engine/label_search.py. Every move, its probabilities and why each addition to the thesis's
+method is there: docs/search-methods.md, "The default search".
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The bound tables every label search prunes with (the searches: dp.py, dp_grid.py, engine_limits.py): the least
 hours and fuel per NM of each leg in the weather it can meet, the fuel-to-finish tables built from them, the latest
 departures that still make the RTA, the windows of times a plan can be at each node, and the `FinishBounds` they
-make together (engine/bounds.py holds the structure and the pruning rule; why each bound is certified is in dp.py's
-docstring, "Bounds").
+make together (engine/bounds.py holds the structure and the pruning rule; why each bound is certified:
+docs/search-methods.md, "The exact DP", Bounds).
 """
 
 from __future__ import annotations
@@ -448,3 +448,10 @@ def label_bounds(inst, ld: np.ndarray, windows=None, fuel_budget_t: float = math
     plans burning at most `fuel_budget_t`; `wide` as there) and the latest departures `ld` (`latest_departures`)."""
     lams, m_lam, t_min, tau, phi = finish_bounds(inst, windows, fuel_budget_t, per_leg=True, wide=wide)
     return FinishBounds(lams, m_lam, t_min, tau, phi, ld)
+
+
+def fuel_budget_t(o, upper: float, gap: float) -> float:
+    """The most fuel (t) a plan can burn that the DP, pruning with the on-time incumbent cost `upper` and trimming
+    within `gap`, must keep: its cost is at most upper + gap·upper (the DP's tolerance is gap·LB ≤ gap·optimum)."""
+    cost = upper * (1.0 + gap) + 2e-9 * max(1.0, abs(upper))
+    return cost if o.kind == OBJ_JIT else (cost - 0.85) * o.f_target / 3.0  # thesis: 0.85 + 3·F/F_target on time

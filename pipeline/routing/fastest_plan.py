@@ -15,9 +15,12 @@ rely on it: it is only an incumbent).
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
+from pipeline.routing.baseline import evaluate
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
 
 
@@ -73,3 +76,28 @@ def fastest_plan(inst):
     if not np.isfinite(hours):
         return None, None, float(hours), int(n_legs)
     return nodes, rpm_idx, float(hours), int(n_legs)
+
+
+def cheapest_known(inst, plans) -> tuple:
+    """(nodes, rpm_idx) of the cheapest of `plans` (the DP's incumbents) that can be sailed; (None, None) when none
+    can."""
+    best, pick = math.inf, (None, None)
+    for nodes, rpm_idx in plans:
+        cost = evaluate(inst, nodes, rpm_idx)[0]
+        if cost < best:
+            best, pick = cost, (nodes, rpm_idx)
+    return pick
+
+
+def fastest_incumbent(inst, upper: float, known: list) -> tuple[float, int]:
+    """(upper, legs sailed): `upper` lowered to the cost of the fastest wait-free plan (`fastest_plan`) when that is
+    cheaper, the plan appended to `known`. Worth its few legs only when no plan known is on time: then either none
+    is (and the optimum is within minutes of the fastest, which the lateness in the DP's bound then shows) or the
+    fastest is, and it is an on-time incumbent."""
+    nodes, rpm_idx, _, n_legs = fastest_plan(inst)
+    if nodes is not None:
+        cost = evaluate(inst, nodes, rpm_idx)[0]
+        if cost < upper:
+            upper = cost
+            known.append((nodes, rpm_idx))
+    return upper, n_legs

@@ -26,6 +26,36 @@ DEFAULT_SOLVER_OPTIONS = {"dp": {"gap": 1e-3, "slot_h": 1.0, "max_wait_h": 6.0, 
 
 
 @dataclass(frozen=True)
+class DpOptions:
+    """The options of `--solver dp` (pipeline/routing/dp.py; the product's values: DEFAULT_SOLVER_OPTIONS)."""
+
+    upper_bound: float | None = None  # a known plan's cost, to prune with (the baseline's is always used)
+    incumbent: str | None = "bfoa"  # also prune with this solver's plan (seed 1, default options); None: no
+    gap: float = 0.0  # > 0: the plan costs at most (1 + gap) × the optimum. Labels: ε-trimming (see `trim_eps`),
+    #                   certified under the dominance's assumption; grid (slot_h): pruning, certified outright
+    slot_h: float | None = None  # a number: the exact DP of dp_grid.py, departures from nodes on this time grid
+    #                              (h) with waits; the plan's legs then carry their waits (wait_h, wait_fuel_t)
+    max_wait_h: float = 0.0  # grid: a ship may wait this long beyond the first slot after arriving at a node
+    wait_tph: float | None = None  # grid: fuel rate while waiting (t/h); None: calm water at the lowest setting
+    wait_free_first: bool = False  # grid: first the label DP (same gap); its plan's times join the grid
+    slots_per_rta: float | None = None  # grid: a step of at least the RTA's passage hours / this, in whole hours
+    max_label_legs: int | None = None  # the label DP gives up after sailing this many legs (None: never) and
+    #                                     searches again keeping at most `capped_labels` labels per node (approximate;
+    #                                     the plan's reason says so): its work paced by legs sailed, not the clock
+    capped_labels: int = 64
+
+    def __post_init__(self):
+        legs, cap = self.max_label_legs, self.capped_labels
+        if legs is not None:
+            if isinstance(legs, bool) or not isinstance(legs, (int, float)) or not legs >= 1:
+                raise ValueError(f"dp option max_label_legs must be a number of legs ≥ 1 or none, got {legs!r}")
+            object.__setattr__(self, "max_label_legs", int(legs))
+        if isinstance(cap, bool) or not isinstance(cap, (int, float)) or not cap >= 1 or int(cap) != cap:
+            raise ValueError(f"dp option capped_labels must be a whole number of labels per node ≥ 1, got {cap!r}")
+        object.__setattr__(self, "capped_labels", int(cap))
+
+
+@dataclass(frozen=True)
 class RoutingOptions:
     """Solver settings of a run (see pipeline.routing.solve); the settings' `routing` section extends them."""
 

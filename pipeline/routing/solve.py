@@ -33,7 +33,7 @@ from pipeline.routing.baseline import Baseline, baseline as find_baseline, const
 from pipeline.routing.bfoa import BfoaParams
 from pipeline.routing.canal_time import passages_note
 from pipeline.routing.clearance import least_clearance_outside_nm, widest_corridor_nm
-from pipeline.routing.dp import DpOptions
+from pipeline.routing.options import DpOptions
 from pipeline.routing.continuous_speed import as_settings
 from pipeline.routing.engine_limits import PLAN_GAP, REFERENCE_BUCKETS, EngineLimits, settings_held_h
 from pipeline.routing.objectives import route_cost_nb

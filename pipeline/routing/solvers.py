@@ -11,7 +11,7 @@ from pipeline.routing import astar, dp
 from pipeline.routing.baseline import Baseline, evaluate
 from pipeline.routing.bfoa import BfoaParams, run_bfoa
 from pipeline.routing.contract import Found, NoOptions, Solver
-from pipeline.routing.options import SOLVER_NAMES
+from pipeline.routing.options import SOLVER_NAMES, DpOptions
 from pipeline.routing.problem import RoutingInputError
 
 
@@ -25,7 +25,7 @@ def _bfoa(inst, base: Baseline, *, seed: int, options: BfoaParams) -> Found:
     return Found(nodes if ok else None, rpm_idx if ok else None, n_evals, history)
 
 
-def _dp(inst, base: Baseline, *, seed: int, options: dp.DpOptions) -> Found:
+def _dp(inst, base: Baseline, *, seed: int, options: DpOptions) -> Found:
     """The DP, pruned by the cost of the incumbent solver's plan when it names one (seed 1, default options)."""
     upper = math.inf if options.upper_bound is None else float(options.upper_bound)
     incumbent = None
@@ -44,7 +44,7 @@ def _baseline(inst, base: Baseline, *, seed: int, options: NoOptions) -> Found:
 
 SOLVERS: dict[str, Solver] = {
     "bfoa": Solver("bfoa", _bfoa, BfoaParams, seeded=True, doc="improved bacterial foraging optimisation (bfoa.py)"),
-    "dp": Solver("dp", _dp, dp.DpOptions, doc="dynamic programming over the graph (dp.py)"),
+    "dp": Solver("dp", _dp, DpOptions, doc="dynamic programming over the graph (dp.py)"),
     "astar": Solver("astar", astar.search, astar.AstarOptions, doc="A* with the time-constraint weight sweep (astar.py)"),
     "gc": Solver("gc", _baseline, NoOptions, space_base=None, is_baseline=True,
                  doc="the shortest sea route along the great-circle graph at constant rpm"),

@@ -146,7 +146,7 @@ def solve_optimum(spec: SuiteInstance, problem, space, weather, gap: float = DP_
     refine_split=1: no finer corridors)."""
     import time
 
-    from pipeline.routing.dp import DpOptions
+    from pipeline.routing.options import DpOptions
 
     t0 = time.thread_time()
     plan = solve(problem, weather, solver="dp", space=space, options=DpOptions(gap=gap), continuous=False, limits=None,

@@ -1,7 +1,7 @@
 """The bounds the label searches prune with (compiled): the finish bounds as one structure, the least fuel to
 finish in the hours left, the least cost of every plan a label can still become, and the one pruning rule built
-from them that every label search applies. Certified: they never drop a label of an optimal plan (the proofs are
-in dp.py's docstring; the tables are built by `bound_tables.finish_bounds`)."""
+from them that every label search applies. Certified: they never drop a label of an optimal plan (the proofs:
+docs/search-methods.md, "The exact DP"; the tables are built by `bound_tables.finish_bounds`)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The label DP's search (compiled): labels at (line, node) kept by time–fuel dominance (every one not dominated, or
 at most a number per node in time spans), each leg relaxed by the one step of engine/relax.py. Why the dominance is
-exact, the bounds it prunes with and the ε-trimming: pipeline/routing/dp.py, the strategy that runs it (also the
-BFOA's polish and the engine plans of a fixed route, engine_limits.py).
+exact, the bounds it prunes with and the ε-trimming: docs/search-methods.md, "The exact DP"; the strategy that runs it
+is pipeline/routing/dp.py (also the BFOA's polish and the engine plans of a fixed route, engine_limits.py).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """The swarm of the improved BFOA (compiled): bacteria that are routes with an engine setting per leg, their
 chemotaxis (tumbles of route blocks, bends and engine settings, swims while a move pays), reproduction and
 elimination–dispersal, and the best plan met. The algorithm, its parameters and what each step is for:
-pipeline/routing/bfoa.py, the strategy that runs the swarm and then polishes its best plan.
+docs/search-methods.md, "The default search"; pipeline/routing/bfoa.py is the strategy that runs the swarm and then
+polishes its best plan.
 """
 
 from __future__ import annotations
