@@ -1,5 +1,5 @@
-"""The engine-limits DP leaves out the change runs an earlier label of the line dominates (engine_limits
-._runs_to_sail_nb): fewer legs sailed, the same plan where its dominance rule is exact (weather steady in time)."""
+"""The engine-limits DP leaves out the change runs an earlier label of the line dominates (engine.hold_search
+.runs_to_sail_nb): fewer legs sailed, the same plan where its dominance rule is exact (weather steady in time)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from pipeline.routing import engine_limits as el
+from pipeline.routing.engine import hold_search as hs
 from pipeline.routing.baseline import shortest_route
 from pipeline.routing.engine_limits import EngineLimits, limited_plan
 from pipeline.routing.problem import Instance
@@ -21,7 +22,7 @@ def test_a_change_is_sailed_only_when_no_earlier_label_reaches_its_setting_as_ch
     kf = np.array([5.0, 6.0, 7.0, 4.0])
     kn = np.array([0, 0, 1, 0], np.int64)
     kr = np.array([0, 1, 2, 0], np.int64)
-    sail = el._runs_to_sail_nb(kt, kf, kn, kr, 0, 4, 3, C, 0.0)
+    sail = hs.runs_to_sail_nb(kt, kf, kn, kr, 0, 4, 3, C, 0.0)
     # in time order: label 2 (9 h, g 7.05), label 0 (10 h, g 5), label 1 (11 h, g 6), label 3 (12 h, g 4)
     assert sail[2].tolist() == [True, True, False]  # the first of the line: both its changes
     assert sail[0].tolist() == [False, True, True]  # cheaper than label 2 after a change: both
@@ -29,15 +30,15 @@ def test_a_change_is_sailed_only_when_no_earlier_label_reaches_its_setting_as_ch
     assert sail[1].tolist() == [False, False, False]
     assert sail[3].tolist() == [False, True, True]  # the cheapest yet, though the latest
     # a later label dominates nothing: the earliest label's changes are sailed whatever follows
-    assert el._runs_to_sail_nb(kt[[2]], kf[[2]], kn[[2]], kr[[2]], 0, 1, 3, C, 0.0)[0].tolist() == [True, True, False]
+    assert hs.runs_to_sail_nb(kt[[2]], kf[[2]], kn[[2]], kr[[2]], 0, 1, 3, C, 0.0)[0].tolist() == [True, True, False]
 
 
 def test_the_early_rate_counts_the_later_arrival():
     # jit's early-arrival rate e: g = f − e·t, so a later label worth more than its extra fuel is not dominated
     kt, kf = np.array([10.0, 12.0]), np.array([5.0, 5.5])
     kn, kr = np.zeros(2, np.int64), np.array([0, 1], np.int64)
-    assert el._runs_to_sail_nb(kt, kf, kn, kr, 0, 2, 2, C, 0.0)[1].tolist() == [False, False]  # 5.55 ≥ 5
-    assert el._runs_to_sail_nb(kt, kf, kn, kr, 0, 2, 2, C, 0.5)[1].tolist() == [True, False]  # 0.05 − 6 < 0 − 5
+    assert hs.runs_to_sail_nb(kt, kf, kn, kr, 0, 2, 2, C, 0.0)[1].tolist() == [False, False]  # 5.55 ≥ 5
+    assert hs.runs_to_sail_nb(kt, kf, kn, kr, 0, 2, 2, C, 0.5)[1].tolist() == [True, False]  # 0.05 − 6 < 0 − 5
 
 
 @pytest.mark.parametrize("limits", [EngineLimits(12.0, 0.05), EngineLimits(20.0, 0.0)])
@@ -53,8 +54,8 @@ def test_same_plan_as_the_dp_that_sails_every_change_in_steady_weather(limits, m
     kept_near = limited_plan(inst, nodes, limits, gap=el.PLAN_GAP, buckets=el.PLAN_BUCKETS)
     # the DP as it was: its interpreted twin, every change run sailed
     every = lambda kt, kf, kn, kr, lo, hi, R, c, e: np.ones((hi - lo, R), np.bool_)  # noqa: E731
-    monkeypatch.setattr(el, "_runs_to_sail_nb", every)
-    monkeypatch.setattr(el, "limited_plan_nb", el.limited_plan_nb.py_func)
+    monkeypatch.setattr(hs, "runs_to_sail_nb", every)
+    monkeypatch.setattr(el, "hold_search_nb", hs.hold_search_nb.py_func)
     for mine, gap, buckets in ((kept, 0.0, 0), (kept_near, el.PLAN_GAP, el.PLAN_BUCKETS)):
         ref = limited_plan(inst, nodes, limits, gap=gap, buckets=buckets)
         assert ref.rpm_idx.tolist() == mine.rpm_idx.tolist()
