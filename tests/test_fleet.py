@@ -254,3 +254,19 @@ def test_a_routing_batch_stops_the_dask_workers_task_profiler():
         assert client.submit(route_batch, [], None, pure=False).result() == []  # an empty batch still stops it
         assert list(client.run(profiling).values()) == [[]]
         assert client.submit(stop_task_profiler, pure=False).result() is False  # already off
+
+
+def test_a_local_cluster_leaves_no_process_behind():
+    """The local cluster's worker processes start multiprocessing's resource tracker in the routing process; left
+    running, it outlived the command by a moment. Closing the cluster stops and reaps it."""
+    from multiprocessing import resource_tracker
+
+    from flows.jobs.dask_pool import dask_client
+
+    with dask_client(None, 1) as client:
+        assert client.submit(sum, [1, 2], pure=False).result() == 3
+        tracker = resource_tracker._resource_tracker._pid
+    assert tracker is not None  # the workers started it
+    assert resource_tracker._resource_tracker._pid is None
+    with pytest.raises(ChildProcessError):  # stopped and reaped: no such child any more
+        os.waitpid(tracker, os.WNOHANG)

@@ -69,6 +69,18 @@ def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
             client.close()
             if cluster is not None:
                 cluster.close()
+                _stop_resource_tracker()
+
+
+def _stop_resource_tracker() -> None:
+    """Stop multiprocessing's resource tracker, which the local cluster's worker processes started: it holds nothing
+    once they are gone, and left running it outlives the command by a moment (a process left behind in its group).
+    Started again if anything needs it later."""
+    from multiprocessing import resource_tracker
+
+    stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # CPython's own; absent elsewhere
+    if stop is not None:
+        stop()
 
 
 def worker_slots(client) -> int:
