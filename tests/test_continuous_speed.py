@@ -26,11 +26,12 @@ DEP, ARR = (30.0, -160.0), (35.0, -130.0)
 
 def _sail(inst, nodes, rpm):
     from pipeline.routing.continuous_speed import sail_from_nb
+    from pipeline.routing.engine.leg import OnRoute
 
     ct, cf = np.empty(len(nodes)), np.empty(len(nodes))
     ct[0], cf[0] = inst.objective.t_dep_h, 0.0
-    code = sail_from_nb(inst.graph.lat, inst.graph.lon, nodes, np.asarray(rpm, np.float64), inst.vessel, inst.wx, 0,
-                        ct, cf)
+    code = sail_from_nb(OnRoute(inst.graph, np.asarray(nodes, np.int64), inst.vessel, inst.wx),
+                        np.asarray(rpm, np.float64), 0, ct, cf)
     return code, ct, cf
 
 

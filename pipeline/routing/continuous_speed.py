@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb
+from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, OnRoute, sail_leg_nb
 from pipeline.routing.objectives import route_cost_nb
 
 _ITERATIONS = 12  # descent steps at most
@@ -57,13 +58,14 @@ def runs_of(rpm_per_leg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True)
-def sail_from_nb(lat, lon, nodes, rpm, v, w, i0, cum_t, cum_f):
-    """Sail the route from line i0 (cum_t[i0], cum_f[i0] given) at rpm[i] on leg i, filling cum_t/cum_f after it.
-    Returns the engine.leg code."""
+def sail_from_nb(rt, rpm, i0, cum_t, cum_f):
+    """Sail the route `rt` (engine.leg.OnRoute) from line i0 (cum_t[i0], cum_f[i0] given) at rpm[i] on leg i, filling
+    cum_t/cum_f after it. Returns the engine.leg code."""
     out = np.empty(N_LEG_OUT)
+    lat, lon, nodes = rt.g.lat, rt.g.lon, rt.nodes
     for i in range(i0, nodes.shape[0] - 1):
         a, b = nodes[i], nodes[i + 1]
-        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], cum_t[i], rpm[i], v, w, out)
+        sail_leg_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], cum_t[i], rpm[i], rt.v, rt.w, out)
         if out[CODE] != OK:
             return int(out[CODE])
         cum_t[i + 1] = cum_t[i] + out[H]
@@ -71,12 +73,21 @@ def sail_from_nb(lat, lon, nodes, rpm, v, w, i0, cum_t, cum_f):
     return OK
 
 
+class SlopeStep(NamedTuple):
+    """How `run_slopes_nb` measures a slope: `delta` rpm more on a run (less when that passes `hi`; none below `lo`)."""
+
+    delta: float
+    lo: float
+    hi: float
+
+
 @numba.njit(cache=True)
-def run_slopes_nb(lat, lon, nodes, rpm, starts, ends, delta, lo, hi, v, w, cum_t, cum_f, d_fuel, d_hours):
-    """Per run j: the change of the voyage's fuel (t) and hours per rpm when run j alone sails `delta` rpm faster
+def run_slopes_nb(rt, rpm, starts, ends, step, cum_t, cum_f, d_fuel, d_hours):
+    """Per run j: the change of the voyage's fuel (t) and hours per rpm when run j alone sails `step.delta` rpm faster
     (slower at the top of the range), the rest of the voyage sailed from the times that gives; inf when a leg then
     cannot be sailed. cum_t/cum_f: the plan as sailed (left unchanged)."""
-    L2 = nodes.shape[0]
+    delta, lo, hi = step.delta, step.lo, step.hi
+    L2 = rt.nodes.shape[0]
     t2, f2 = np.empty(L2), np.empty(L2)
     r2 = rpm.copy()
     for j in range(starts.shape[0]):
@@ -87,7 +98,7 @@ def run_slopes_nb(lat, lon, nodes, rpm, starts, ends, delta, lo, hi, v, w, cum_t
         for i in range(starts[j], ends[j]):
             r2[i] = rpm[i] + d
         t2[starts[j]], f2[starts[j]] = cum_t[starts[j]], cum_f[starts[j]]
-        code = sail_from_nb(lat, lon, nodes, r2, v, w, starts[j], t2, f2)
+        code = sail_from_nb(rt, r2, starts[j], t2, f2)
         for i in range(starts[j], ends[j]):
             r2[i] = rpm[i]
         if code != OK:
@@ -103,7 +114,7 @@ class _Route:
     def __init__(self, inst, nodes, change_cost_t: float, min_hold_h: float):
         self.inst = inst
         self.nodes = np.ascontiguousarray(nodes, np.int64)
-        self.lat, self.lon = inst.graph.lat, inst.graph.lon
+        self.rt = OnRoute(inst.graph, self.nodes, inst.vessel, inst.wx)
         self.o = inst.objective
         self.change_cost_t, self.min_hold_h = change_cost_t, min_hold_h
         self.n_sails = 0
@@ -114,8 +125,7 @@ class _Route:
         L2 = len(self.nodes)
         ct, cf = np.empty(L2), np.empty(L2)
         ct[0], cf[0] = self.o.t_dep_h, 0.0
-        code = sail_from_nb(self.lat, self.lon, self.nodes, np.ascontiguousarray(rpm, np.float64), self.inst.vessel,
-                            self.inst.wx, 0, ct, cf)
+        code = sail_from_nb(self.rt, np.ascontiguousarray(rpm, np.float64), 0, ct, cf)
         self.n_sails += 1
         hours, fuel = float(ct[-1] - self.o.t_dep_h), float(cf[-1])
         if code != OK or hours > self.o.max_hours or not _holds(rpm, ct, self.min_hold_h):
@@ -191,10 +201,10 @@ def _descend(inst, nodes, rpm_per_leg, min_hold_h: float, change_cost_t: float, 
     t_req = inst.objective.t_req_h
     cost, best = cost0, None
     d_fuel, d_hours = np.empty(len(starts)), np.empty(len(starts))
+    slope_step = SlopeStep(_DELTA_RPM, lo, hi)
     step = _FIRST_STEP_RPM
     for _it in range(iterations):
-        run_slopes_nb(route.lat, route.lon, route.nodes, rpm, starts, ends, _DELTA_RPM, lo, hi, inst.vessel, inst.wx,
-                      ct, cf, d_fuel, d_hours)
+        run_slopes_nb(route.rt, rpm, starts, ends, slope_step, ct, cf, d_fuel, d_hours)
         run_rpm = rpm[starts]
         # a run held barely its hold cannot go faster (it would be held less), nor one at the top
         pinned = _pinned(rpm, ct, starts, min_hold_h)

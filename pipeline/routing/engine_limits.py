@@ -35,8 +35,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pipeline.routing.bound_tables import finish_bounds, label_bounds, latest_departures, trim_eps
-from pipeline.routing.engine.hold_search import (Hold, OnRoute, RouteBounds, hold_search_nb, incumbent_cost_nb,
+from pipeline.routing.engine.hold_search import (Hold, RouteBounds, hold_search_nb, incumbent_cost_nb,
                                                   route_latest_departures_nb)
+from pipeline.routing.engine.leg import OnRoute
 from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.labels import bucketed
 from pipeline.routing.engine_timing import time_price

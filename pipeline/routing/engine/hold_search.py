@@ -16,16 +16,6 @@ from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_n
 from pipeline.routing.objectives import LATE_STEP_T, OBJ_JIT, route_cost_nb
 
 
-class OnRoute(NamedTuple):
-    """A fixed route as the kernels sail it: the graph (`search_space.Graph`), the route's node per line, the vessel
-    (engine.leg's `Vessel`) and the weather."""
-
-    g: object
-    nodes: np.ndarray
-    v: object
-    w: object
-
-
 class Hold(NamedTuple):
     """The engine-change limits as the kernels see them: the least hours a setting is held, and the cost (t) the
     objective adds per change."""
@@ -139,7 +129,7 @@ def _grow_runs(n, t, f, changes, setting, parent, start, more):
 
 @numba.njit(cache=True)
 def hold_search_nb(rt, o, hold, rb, mode):
-    """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route `rt` (an `OnRoute`) under
+    """(rpm index per leg, cost, fuel, changes, legs sailed) of the best plan on the route `rt` (engine.leg.OnRoute) under
     the `hold` (a `Hold`), cost inf when no plan can be sailed. `rb` (a `RouteBounds`): labels that cannot make the RTA
     are dropped when rb.prune, and under `jit` those whose fuel and change costs so far plus the least fuel to finish
     exceed rb.upper; with rb.eps > 0 (t) a label is also dropped when an earlier one comes within eps of dominating

@@ -81,6 +81,16 @@ class Vessel(NamedTuple):
     fixed_legs: np.ndarray = NO_FIXED_LEGS
 
 
+class OnRoute(NamedTuple):
+    """A fixed route as the kernels sail it: the graph (`search_space.Graph`), the route's node per line, the vessel
+    (a `Vessel`) and the weather."""
+
+    g: object
+    nodes: np.ndarray
+    v: object
+    w: object
+
+
 def _limit(x: float | None) -> float:
     return math.inf if x is None or math.isnan(x) else float(x)
 
