@@ -438,11 +438,29 @@ def _heap_pop(hf, hn, pos, size):
     return f, n, size
 
 
+class _Ends(NamedTuple):
+    """A search's two ends on the graph: the departure's joins (nodes, NM to them), the arrival's joins (nodes, NM
+    from them), the direct leg's length when it is clear (inf: none), and the arrival's position (the heuristic's
+    target)."""
+
+    src_node: np.ndarray
+    src_cost: np.ndarray
+    dst_node: np.ndarray
+    dst_cost: np.ndarray
+    direct_nm: float
+    tlat: float
+    tlon: float
+
+
 @numba.njit(cache=True)
-def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoided, src_node, src_cost, dst_node,
-           dst_cost, direct_nm, tlat, tlon, parent):
-    """Shortest path source → target; returns (length NM, last graph node before the target, or -1 for the direct
-    leg, -2 for none). `parent` (N_GRID + E) is filled (−1: from the source)."""
+def _astar(layer, move_cost, moves, avoided, ends, parent):
+    """Shortest path source → target over the `layer` (passages in `avoided` left out) between the `ends` (an `_Ends`);
+    returns (length NM, last graph node before the target, or -1 for the direct leg, -2 for none). `parent`
+    (N_GRID + E) is filled (−1: from the source)."""
+    edges, xlat, xlon, xoff, xdst, xcost, xpass = (layer.edges, layer.xlat, layer.xlon, layer.xoff, layer.xdst,
+                                                   layer.xcost, layer.xpass)
+    src_node, src_cost, dst_node, dst_cost = ends.src_node, ends.src_cost, ends.dst_node, ends.dst_cost
+    direct_nm, tlat, tlon = ends.direct_nm, ends.tlat, ends.tlon
     n_all = xoff.size - 1
     g = np.full(n_all, np.inf)
     order = np.argsort(dst_node)  # the arrival's joins, by node, for a binary search per node taken from the heap
@@ -500,8 +518,10 @@ def _astar(edges, move_cost, moves, xlat, xlon, xoff, xdst, xcost, xpass, avoide
 
 
 @numba.njit(cache=True)
-def _reach_count(edges, moves, xoff, xdst, xpass, avoided, src_node, limit):
-    """How many graph nodes the sources reach (stopping at `limit`): tells an enclosed sea from open water."""
+def _reach_count(layer, moves, avoided, src_node, limit):
+    """How many graph nodes of the `layer` the sources reach (stopping at `limit`): tells an enclosed sea from open
+    water."""
+    edges, xoff, xdst, xpass = layer.edges, layer.xoff, layer.xdst, layer.xpass
     n_all = xoff.size - 1
     seen = np.zeros(n_all, np.bool_)
     stack = np.empty(n_all, np.int64)
@@ -678,8 +698,8 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
                                  f"e.g. the pilot station, or a wider port approach")
     avoided = np.array([p.name in avoid for p in PASSAGES], np.bool_)
     parent = np.full(layer.xoff.size - 1, -1, np.int32)
-    best, last = _astar(layer.edges, _move_cost(), MOVES, layer.xlat, layer.xlon, layer.xoff, layer.xdst, layer.xcost,
-                        layer.xpass, avoided, src_node, src_cost, dst_node, dst_cost, direct, arr[0], arr[1], parent)
+    ends = _Ends(src_node, src_cost, dst_node, dst_cost, float(direct), float(arr[0]), float(arr[1]))
+    best, last = _astar(layer, _move_cost(), MOVES, avoided, ends, parent)
     if last == -2:
         raise NoSeaRoute(_why_none(layer, avoid, avoided, src_node, dst_node, dep, arr, dep_name, arr_name, rule.clearance_nm))
     nodes = []
@@ -733,15 +753,15 @@ def _why_none(layer, avoid, avoided, src_node, dst_node, dep, arr, dep_name, arr
     if avoid:
         none = np.zeros_like(avoided)
         parent = np.full(layer.xoff.size - 1, -1, np.int32)
-        _, last = _astar(layer.edges, _move_cost(), MOVES, layer.xlat, layer.xlon, layer.xoff, layer.xdst, layer.xcost,
-                         layer.xpass, none, src_node, np.zeros(src_node.size), dst_node, np.zeros(dst_node.size),
-                         math.inf, arr[0], arr[1], parent)
+        ends = _Ends(src_node, np.zeros(src_node.size), dst_node, np.zeros(dst_node.size), math.inf, float(arr[0]),
+                     float(arr[1]))
+        _, last = _astar(layer, _move_cost(), MOVES, none, ends, parent)
         if last != -2:
             return f"{base}: every route goes through the avoided passage(s) {', '.join(sorted(avoid))}"
     limit = 200_000
     none = np.zeros_like(avoided)
     for name, pos, nodes in ((dep_name, dep, src_node), (arr_name, arr, dst_node)):
-        n = _reach_count(layer.edges, MOVES, layer.xoff, layer.xdst, layer.xpass, none, nodes, limit)
+        n = _reach_count(layer, MOVES, none, nodes, limit)
         if n < limit:
             area = n * (RES_DEG * 60.0) ** 2 * math.cos(math.radians(pos[0]))
             return (f"{base}: the {name} lies in an enclosed sea or lake (about {area:,.0f} NM² of open water, "
