@@ -149,9 +149,10 @@ def _remove_gate_edges(edges, gates, moves, opposite):
 
 
 @numba.njit(cache=True)
-def _joins(grid, rule, edges, xlat, xlon, gates, lat, lon, radius_nm, with_extra, out_node, out_cost):
-    """Graph nodes within `radius_nm` of (lat, lon) joined to it by a leg clear under `rule` crossing no gate:
-    grid cells (nodes with an edge), and the extra nodes when `with_extra`. Returns how many (filled in out_*)."""
+def _joins(grid, rule, layer, lat, lon, radius_nm, with_extra, out_node, out_cost):
+    """Graph nodes of the `layer` within `radius_nm` of (lat, lon) joined to it by a leg clear under `rule` crossing no
+    gate: grid cells (nodes with an edge), and the extra nodes when `with_extra`. Returns how many (filled in out_*)."""
+    edges, xlat, xlon, gates = layer.edges, layer.xlat, layer.xlon, layer.gates
     n = 0
     dlat = radius_nm / 60.0
     coslat = max(math.cos(math.radians(min(abs(lat) + dlat, 89.0))), 1e-3)
@@ -195,8 +196,7 @@ def _join(rule, layer: _Layer, lat: float, lon: float, with_extra: bool) -> tupl
     radius = JOIN_NM
     out_node, out_cost = np.empty(4096, np.int64), np.empty(4096)
     while True:
-        n = _joins(land_grid(), rule, layer.edges, layer.xlat, layer.xlon, layer.gates, float(lat), float(lon), radius,
-                   with_extra, out_node, out_cost)
+        n = _joins(land_grid(), rule, layer, float(lat), float(lon), radius, with_extra, out_node, out_cost)
         if n or radius >= JOIN_MAX_NM:
             return out_node[:n].copy(), out_cost[:n].copy()
         radius *= 2.0
