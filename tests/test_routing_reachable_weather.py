@@ -103,7 +103,7 @@ def test_box_ranges_hold_for_every_sample(seed, nan_share, steady):
     crs_lo = rng.uniform(0.0, 360.0)
     crs_hi = crs_lo + rng.uniform(0.0, 15.0)
     box = np.empty(9)
-    _box_ranges(cells, 0, 4, 0, 5, 5, False, 0, 5, crs_lo, crs_hi, box)
+    _box_ranges(cells, w.grid, (0, 4, 0, 5), 0, 5, crs_lo, crs_hi, box)
     wlo, whi, wdlo, wdhi, hlo, hhi, sdlo, sdhi, cur_hi = box
     wind_cos = _cos_range(wdlo + 180.0 - crs_hi, wdhi + 180.0 - crs_lo)
     wave_cos = _cos_range(sdlo - crs_hi, sdhi - crs_lo)

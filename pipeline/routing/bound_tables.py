@@ -209,13 +209,12 @@ def reachable_weather_ranges(inst, windows) -> np.ndarray:
     """(L+2, P, 2·max_shift + 1, 9) `_corner_bounds` ranges (kn, deg, m) per leg (i, a) → (i + 1, a + s − max_shift):
     the weather it can meet while the ship is within the windows (`reachable_windows`); zeros where no edge, NaN
     where no plan within the windows sails the leg."""
-    wf, sp = inst.weather, inst.space
+    sp = inst.space
     L2, P = sp.lat.shape
     t_lo, t_hi = windows
     rng = np.zeros((L2, P, 2 * sp.max_shift + 1, 9))
-    reachable_ranges_nb(wf.cells, wf.times_h, wf.grid, np.ascontiguousarray(t_lo, dtype=np.float64),
-                        np.ascontiguousarray(t_hi, dtype=np.float64),
-                        sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), *wf.neutral_beyond, rng)
+    reachable_ranges_nb(inst.wx, inst.graph, np.ascontiguousarray(t_lo, dtype=np.float64),
+                        np.ascontiguousarray(t_hi, dtype=np.float64), rng)
     rng[..., [WIND_LO, WIND_HI, CUR_HI]] *= geo.KN_PER_MS
     return rng
 

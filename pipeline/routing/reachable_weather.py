@@ -118,12 +118,14 @@ def _edge_box(lat0, lon0, lat1, lon1, grid):
 
 
 @numba.njit(cache=True)
-def _box_ranges(cells, y0, y1, c0, nc, nlon, wraps, k0, k1, crs_lo, crs_hi, out):
-    """Over rows y0:y1, columns c0 + 0..nc (mod nlon when wraps) and valid times k0..k1 of `cells`: out = (wind lo,
-    hi (m/s), wind towards-direction lo, hi (deg; 0, 360 when free), Hs lo, hi (m), wave from-direction lo, hi,
-    current along a course in crs_lo..crs_hi hi (m/s)), bounds on every sample that reads only these corners (see
+def _box_ranges(cells, grid, rows_cols, k0, k1, crs_lo, crs_hi, out):
+    """Over the `rows_cols` (y0, y1, c0, nc: rows y0:y1, columns c0 + 0..nc, mod the grid's nlon when it wraps) and
+    valid times k0..k1 of `cells`: out = (wind lo, hi (m/s), wind towards-direction lo, hi (deg; 0, 360 when free), Hs
+    lo, hi (m), wave from-direction lo, hi, current along a course in crs_lo..crs_hi hi (m/s)), bounds on every sample that reads only these corners (see
     the module docstring). Two passes: sums and extremes over the cells, then projections of the wind and wave
     vectors kept from the first on their mean directions."""
+    y0, y1, c0, nc = rows_cols
+    nlon, wraps = grid.nlon, grid.wraps
     wsx, wsy, w_hi2, w_nan = 0.0, 0.0, 0.0, False
     ssx, ssy, s_nan = 0.0, 0.0, False
     h_lo, h_hi = np.inf, 0.0
@@ -225,17 +227,17 @@ def _cos_range(lo_deg, hi_deg):
 
 
 @numba.njit(cache=True)
-def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max_shift, beyond_wind_ms, beyond_hs_m,
-                        out):
+def reachable_ranges_nb(w, g, t_lo, t_hi, out):
     """Per leg (i, a) → (i + 1, a + s − max_shift): out[i, a, s] = (wind lo, wind hi (m/s), wind relative direction
     lo, hi (folded deg 0..180), Hs lo, hi (m), wave relative direction lo, hi, current along course hi (m/s)) over
     the leg's cells (`_edge_box`) and the valid times a sample at t_lo[i, a]..t_hi[i + 1, b] (h) reads, widened to
     the neutral weather past the last valid time (beyond_wind_ms and beyond_hs_m at BEYOND_REL_DEG, no current) when the
     window reaches past it; NaN when that window is empty (no plan within the windows sails the leg); legs that are
-    not edges are left as they are."""
+    not edges are left as they are. `w`: the weather (weather_field.Weather), `g`: the graph (search_space.Graph)."""
+    cells, times_h, grid, beyond_wind_ms, beyond_hs_m = w.cells, w.times_h, w.grid, w.beyond_wind_ms, w.beyond_hs_m
+    lat, lon, edge_ok, max_shift = g.lat, g.lon, g.edge_ok, g.max_shift
     nt = times_h.shape[0]
     L2, P = lat.shape
-    nlon, wraps = grid.nlon, grid.wraps
     box = np.empty(9)
     for i in range(L2 - 1):
         for a in range(P):
@@ -243,7 +245,7 @@ def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max
                 if not edge_ok[i, a, b]:
                     continue
                 s_ = b - a + max_shift
-                y0, y1, c0, nc = _edge_box(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], grid)
+                rows_cols = _edge_box(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b], grid)
                 t0, t1 = t_lo[i, a], t_hi[i + 1, b]
                 if not t0 <= t1:  # no plan within the windows sails this leg
                     out[i, a, s_, :] = np.nan
@@ -252,7 +254,7 @@ def reachable_ranges_nb(cells, times_h, grid, t_lo, t_hi, lat, lon, edge_ok, max
                 k0 = max(np.searchsorted(times_h, t0, side="right") - 1, 0)
                 k1 = max(min(np.searchsorted(times_h, t1, side="left"), nt - 1), k0)
                 crs_lo, crs_hi = _course_range_nb(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b])
-                _box_ranges(cells, y0, y1, c0, nc, nlon, wraps, k0, k1, crs_lo, crs_hi, box)
+                _box_ranges(cells, grid, rows_cols, k0, k1, crs_lo, crs_hi, box)
                 wlo, whi, wdlo, wdhi, h_lo, h_hi, sdlo, sdhi, cur_hi = box
                 # wind comes FROM the opposite of where it blows: from = towards + 180; relative = from − course
                 c_lo, c_hi = _cos_range(wdlo + 180.0 - crs_hi, wdhi + 180.0 - crs_lo)
