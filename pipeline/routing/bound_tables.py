@@ -55,10 +55,12 @@ def _corner_bounds(v, rng, tau, phi):
             phi[n, r] = (1.0 - 1e-9) * rate / sog if sog > 0.0 else 0.0
 
 
-@numba.njit(cache=True)
-def _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams, prices):
-    """The leg (i, a) → (i + 1, b) relaxed: prices[k] = d·min_r(φ + λ_k·τ); returns its least hours d·min_r τ."""
-    s = b - a + max_shift
+@numba.njit(cache=True, inline="always")  # in the tables' inner loops
+def _leg_prices(g, i, a, b, rates, prices):
+    """The leg (i, a) → (i + 1, b) of the graph `g` relaxed at the `rates` (τ, φ per leg and setting, the prices λ):
+    prices[k] = d·min_r(φ + λ_k·τ); returns its least hours d·min_r τ."""
+    lat, lon, tau_e, phi_e, lams = g.lat, g.lon, rates[0], rates[1], rates[2]
+    s = b - a + g.max_shift
     d = geo.gc_distance_nm(lat[i, a], lon[i, a], lat[i + 1, b], lon[i + 1, b]) * (1.0 - 1e-9)
     fastest = np.inf
     for r in range(tau_e.shape[3]):
@@ -72,11 +74,12 @@ def _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams, prices):
 
 
 @numba.njit(cache=True)
-def _backward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_lam, t_min):
+def _backward_tables(g, rates, m_lam, t_min):
     """m_lam[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_min[i, a] = least Σ d·min_r τ from (i, a) to the arrival
-    through feasible edges, with τ, φ (L+2, P, 2·max_shift + 1, R) of each leg (i, a) → (i + 1, a + s − max_shift);
-    inf where the arrival cannot be reached."""
-    L2, P = lat.shape
+    through the feasible edges of the graph `g`, with the `rates` (τ, φ (L+2, P, 2·max_shift + 1, R) of each leg
+    (i, a) → (i + 1, a + s − max_shift), the prices λ); inf where the arrival cannot be reached."""
+    edge_ok, max_shift, lams = g.edge_ok, g.max_shift, rates[2]
+    L2, P = g.lat.shape
     prices = np.empty(lams.shape[0])
     m_lam[:] = np.inf
     t_min[:] = np.inf
@@ -87,8 +90,7 @@ def _backward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_lam, t_
             for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, b] or t_min[i + 1, b] == np.inf:
                     continue
-                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e,
-                                                                            lams, prices))
+                t_min[i, a] = min(t_min[i, a], t_min[i + 1, b] + _leg_prices(g, i, a, b, rates, prices))
                 for k in range(lams.shape[0]):
                     m_lam[k, i, a] = min(m_lam[k, i, a], m_lam[k, i + 1, b] + prices[k])
 
@@ -245,14 +247,14 @@ def finish_bounds(inst, windows=None, fuel_budget_t: float = math.inf, per_leg: 
     lams = np.unique(np.array([0.0] + [s * m for s in slopes if np.isfinite(s) and s > 0
                                        for m in (0.5, 0.7, 0.85, 0.95, 1.0, 1.05, 1.15, 1.3, 1.6, 2.0)]))
     m_lam, t_min = np.empty((len(lams), L2, P)), np.empty((L2, P))
-    _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+    _backward_tables(sp.graph, (tau_e, phi_e, lams), m_lam, t_min)
     if wide is not None:
         wide[:] = [lams, m_lam.copy(), t_min.copy(), tau_e, phi_e] if per_leg else [lams, m_lam.copy(), t_min.copy(),
                                                                                      tau, phi]
     if windows is not None and math.isfinite(fuel_budget_t):
         windows = fuel_windows(inst, windows, fuel_budget_t, lams, m_lam, t_min, tau_e, phi_e)
         tau_e, phi_e, tau, phi = _leg_bounds(inst, windows)
-        _backward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_lam, t_min)
+        _backward_tables(sp.graph, (tau_e, phi_e, lams), m_lam, t_min)
     if per_leg:  # inf on the legs no plan within the windows sails
         return lams, m_lam, t_min, tau_e, phi_e
     return lams, m_lam, t_min, tau, phi
@@ -326,16 +328,18 @@ def fuel_windows(inst, windows, fuel_budget_t: float, lams, m_lam, t_min, tau_e,
     o, sp = inst.objective, inst.space
     L2, P = sp.lat.shape
     m_f, t_f = np.empty_like(m_lam), np.empty_like(t_min)
-    _forward_tables(sp.lat, sp.lon, sp.edge_ok, int(sp.max_shift), tau_e, phi_e, lams, m_f, t_f)
+    _forward_tables(sp.graph, (tau_e, phi_e, lams), m_f, t_f)
     t_lo, t_hi = (np.array(x, dtype=np.float64) for x in windows)
-    _fuel_windows_nb(lams, m_f, t_f, m_lam, t_min, o.t_dep_h, o.t_dep_h + o.t_req_h, fuel_budget_t, step_h,
-                     WINDOW_SLACK_H, t_lo, t_hi)
+    _fuel_windows_nb(lams, (m_f, t_f), (m_lam, t_min), (o.t_dep_h, o.t_dep_h + o.t_req_h), fuel_budget_t, step_h,
+                     WINDOW_SLACK_H, (t_lo, t_hi))
     return t_lo, t_hi
 
 
 @numba.njit(cache=True)
-def _fuel_windows_nb(lams, m_f, t_f, m_b, t_b, t_dep, deadline, budget, step, slack, t_lo, t_hi):
-    """`fuel_windows` in place on t_lo, t_hi (L+2, P)."""
+def _fuel_windows_nb(lams, forward, backward, span, budget, step, slack, windows):
+    """`fuel_windows` in place on windows = (t_lo, t_hi) (L+2, P): the tables from the departure (m_f, t_f) and to the
+    arrival (m_b, t_b), span = (departure, deadline) (h)."""
+    (m_f, t_f), (m_b, t_b), (t_dep, deadline), (t_lo, t_hi) = forward, backward, span, windows
     L2, P = t_lo.shape
     for i in range(L2):
         for a in range(P):
@@ -356,10 +360,11 @@ def _fuel_windows_nb(lams, m_f, t_f, m_b, t_b, t_dep, deadline, budget, step, sl
 
 
 @numba.njit(cache=True)
-def _forward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_f, t_f):
+def _forward_tables(g, rates, m_f, t_f):
     """`_backward_tables` from the departure: m_f[k, i, a] = least Σ d·min_r(φ + λ_k·τ) and t_f[i, a] = least Σ d·min_r τ
     from the departure to (i, a); inf where (i, a) cannot be reached."""
-    L2, P = lat.shape
+    edge_ok, max_shift, lams = g.edge_ok, g.max_shift, rates[2]
+    L2, P = g.lat.shape
     prices = np.empty(lams.shape[0])
     m_f[:] = np.inf
     t_f[:] = np.inf
@@ -372,8 +377,7 @@ def _forward_tables(lat, lon, edge_ok, max_shift, tau_e, phi_e, lams, m_f, t_f):
             for b in range(max(0, a - max_shift), min(P, a + max_shift + 1)):
                 if not edge_ok[i, a, b]:
                     continue
-                t_f[i + 1, b] = min(t_f[i + 1, b], t_f[i, a] + _leg_prices(lat, lon, max_shift, i, a, b, tau_e, phi_e, lams,
-                                                                          prices))
+                t_f[i + 1, b] = min(t_f[i + 1, b], t_f[i, a] + _leg_prices(g, i, a, b, rates, prices))
                 for k in range(lams.shape[0]):
                     m_f[k, i + 1, b] = min(m_f[k, i + 1, b], m_f[k, i, a] + prices[k])
 
