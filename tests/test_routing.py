@@ -485,7 +485,7 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     rpm = np.empty(L2 - 1, np.int64)
     gc = space.base_route()
     for seed in range(1, 6):
-        q = engine_timing.aim_engine_nb(gc.copy(), rpm, *voyage, s, np.random.default_rng(seed))
+        q = engine_timing.aim_engine_nb(engine_timing.Voyage(*voyage), gc.copy(), rpm, s, np.random.default_rng(seed))
         t_arr = ct[-1] - inst.t_dep_h
         assert pr.t_req_h - pr.window_h <= t_arr <= pr.t_req_h + 1e-9, (seed, t_arr)
         assert {0, 1} <= set(rpm.tolist())  # a mix of the two settings that bracket the RTA
@@ -501,14 +501,16 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     s2 = engine_timing.scratch(L2)
     lk.sail_route_nb(detour, rpm, 0, *voyage, s2.ct, s2.cf)
     rpm2 = rpm.copy()
-    q2 = engine_timing.retime_nb(detour, rpm2, 0, late_cost, np.inf, *voyage, s2, np.random.default_rng(1))
+    q2 = engine_timing.retime_nb(engine_timing.Voyage(*voyage), detour, rpm2, 0, late_cost, np.inf, s2,
+                                 np.random.default_rng(1))
     assert s2.ct[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
     assert q2 < LATE_STEP_T and q2 == pytest.approx(_evaluate(inst, detour, rpm2)[0], rel=1e-12)
     assert np.all(rpm2 >= rpm) and rpm2.sum() > rpm.sum()  # legs only sped up
     # with a bar below any on-time plan the re-set gives up instead of sailing (jit objective)
     rpm3 = rpm.copy()
     lk.sail_route_nb(detour, rpm3, 0, *voyage, s2.ct, s2.cf)
-    assert engine_timing.retime_nb(detour, rpm3, 0, late_cost, 1.0, *voyage, s2, np.random.default_rng(1)) == math.inf
+    assert engine_timing.retime_nb(engine_timing.Voyage(*voyage), detour, rpm3, 0, late_cost, 1.0, s2,
+                                   np.random.default_rng(1)) == math.inf
 
 
 def test_bfoa_is_reproducible_by_seed():
@@ -696,13 +698,13 @@ def test_bfoa_offset_routes_start_feasible_where_the_baseline_is_not():
 
 
 def test_offset_route_goes_out_along_and_back():
-    from pipeline.routing.random_route import random_walk_nb
+    from pipeline.routing.random_route import Walk, random_walk_nb
 
     space = problem((30.0, -160.0), (35.0, -130.0), 144, n_lines=12, n_points=11).search_space()
     L2, c = space.lat.shape[0], space.centre
     nodes = np.empty(L2, np.int64)
     for offset in (-5, -2, 0, 3, 5):
-        assert random_walk_nb(nodes, space.edge_ok, space.max_shift, 12, 4000, 2, 0.0, 0.0, 1.0, offset,
+        assert random_walk_nb(nodes, space.edge_ok, space.max_shift, Walk(12, 4000, 2, 0.0, 0.0, 1.0), offset,
                               np.random.default_rng(offset + 9))
         o = nodes - c
         k = abs(offset)

@@ -10,8 +10,8 @@ aim_engine_nb   a new route's settings: of the constant settings, the two whose 
                 mixed over random legs in the share that should arrive just in time, then re-timed
 
 Kernels take the voyage as named structures: `g` the graph (search_space.Graph), `v` the vessel
-(engine.leg.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective),
-`s` a `Scratch` of work arrays, and `rng` the random generator (a numpy Generator; numba draws from it the
+(engine.leg.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective), the
+four together as a `Voyage` where a kernel takes them all, `s` a `Scratch` of work arrays, and `rng` the random generator (a numpy Generator; numba draws from it the
 same numbers numpy would, so the interpreted kernels reproduce the compiled ones).
 """
 
@@ -24,6 +24,15 @@ import numpy as np
 
 from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_nb, sail_route_nb
 from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
+
+
+class Voyage(NamedTuple):
+    """The voyage as the kernels sail it: graph, vessel, weather and objective."""
+
+    g: object
+    v: object
+    w: object
+    o: object
 
 
 class Scratch(NamedTuple):
@@ -55,8 +64,9 @@ def cost_from_nb(nodes, rpm_idx, start, g, v, w, o, cum_t, cum_f):
 
 
 @numba.njit(cache=True)
-def sail_span_nb(nodes, rpm_idx, start, stop, g, v, w, ct, cf, out):
+def sail_span_nb(vy, nodes, rpm_idx, start, stop, ct, cf, out):
     """Sail legs start..stop-1 only (ct/cf valid at line `start`); False as soon as one is infeasible."""
+    g, v, w = vy.g, vy.v, vy.w
     lat, lon, edge_ok, rpm_options = g.lat, g.lon, g.edge_ok, v.rpm_options
     for i in range(start, stop):
         a, b = nodes[i], nodes[i + 1]
@@ -142,11 +152,12 @@ def slow_down_nb(rpm_idx, lo, slack_h, ct, rpm_options, stop_when_spent, rng):
 
 
 @numba.njit(cache=True)
-def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, o, rng):
-    """Engine settings re-set before a move is sailed: from the estimated arrival T_est (hours) and fuel F_est of
-    the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
-    the legs' hours and fuel in ct_ref/cf_ref (the legs are unchanged by the move). Returns the first leg
+def plan_flips_nb(rpm_idx, lo, est, bar, ref, rpm_options, o, rng):
+    """Engine settings re-set before a move is sailed: from the estimated arrival and fuel est = (T_est hours, F_est)
+    of the moved route, raise (late) or lower (early by more than a step) the rpm of random legs ≥ lo, priced with
+    the legs' hours and fuel in ref = (ct_ref, cf_ref) (the legs are unchanged by the move). Returns the first leg
     re-set (n when none), or -1 when, under the jit objective, the estimated fuel reaches `bar`."""
+    (T_est, F_est), (ct_ref, cf_ref) = est, ref
     n = rpm_idx.shape[0]
     if lo >= n:
         return n
@@ -161,7 +172,7 @@ def plan_flips_nb(rpm_idx, lo, T_est, F_est, bar, ct_ref, cf_ref, rpm_options, o
 
 
 @numba.njit(cache=True)
-def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s, rng):
+def retime_nb(vy, nodes, rpm_idx, lo, q, bar, s, rng):
     """Engine re-adjustment after a move, so the arrival stays just inside the RTA; returns the new cost.
 
     `nodes`/`rpm_idx` were sailed whole into s.ct/s.cf with cost q. Only legs ≥ `lo` are re-set. A leg of h hours
@@ -175,6 +186,7 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s, rng):
     n = rpm_idx.shape[0]
     if q == np.inf or lo >= n:
         return q
+    g, v, w, o = vy.g, vy.v, vy.w, vy.o
     ct, cf, rpm_options, t_dep_h, t_req_h = s.ct, s.cf, v.rpm_options, o.t_dep_h, o.t_req_h
     margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
     for _round in range(2):
@@ -213,10 +225,11 @@ def retime_nb(nodes, rpm_idx, lo, q, bar, g, v, w, o, s, rng):
 
 
 @numba.njit(cache=True)
-def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng):
+def aim_engine_nb(vy, nodes, rpm_idx, s, rng):
     """Engine settings aimed at the RTA for a route: sail it at every constant setting, take the two settings
     whose arrivals bracket the RTA and put the share of legs on the faster one that should arrive just in
     time (random legs), then re-time. The sailed route is left in s.ct/s.cf. Returns the cost."""
+    g, v, w, o = vy.g, vy.v, vy.w, vy.o
     n = rpm_idx.shape[0]
     R = v.rpm_options.shape[0]
     ct, cf, t_dep_h, t_req_h = s.ct, s.cf, o.t_dep_h, o.t_req_h
@@ -249,7 +262,7 @@ def aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng):
                 rpm_idx[perm[j]] = fast
     q = cost_from_nb(nodes, rpm_idx, 0, g, v, w, o, ct, cf)
     s.cnt[0] += 1
-    return retime_nb(nodes, rpm_idx, 0, q, np.inf, g, v, w, o, s, rng)
+    return retime_nb(vy, nodes, rpm_idx, 0, q, np.inf, s, rng)
 
 
 def time_price(inst, nodes: np.ndarray) -> float:

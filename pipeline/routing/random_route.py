@@ -3,19 +3,35 @@ that drifts towards a drawn offset and bends back to the destination in time (se
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 
+class Walk(NamedTuple):
+    """How a random route walks (`random_walk_nb`): tries per node and overall, lines to back up on failure, the
+    spread of its target offsets (nodes), and the chances per line of a new target and of a step towards it."""
+
+    r_max: int
+    k_max: int
+    backup: int
+    sigma: float
+    p_new: float
+    p_step: float
+
+
 @numba.njit(cache=True)
-def random_walk_nb(nodes, edge_ok, max_shift, r_max, k_max, backup, sigma, p_new, p_step, offset, rng):
+def random_walk_nb(nodes, edge_ok, max_shift, walk, offset, rng):
     """Safe random route: a walk line by line whose step heads, one node at a time, for a target offset that
     is redrawn now and then (so random routes are smooth detours of every size, not zig-zags) and bends back
     to the destination in time. Each node: the preferred one first, then nodes ever farther from it (random
     side), R_max tries in all; on failure back up `backup` lines; give up after K_max tries overall.
     Offsets are drawn ~ N(0, sigma) nodes, the first one around `offset` instead of 0; a new target with
     probability p_new per line; a step towards it with probability p_step per line. With sigma 0, p_new 0 and
-    p_step 1 the walk is the offset route: out to `offset` one node a line, along it, and back in time."""
+    p_step 1 the walk is the offset route: out to `offset` one node a line, along it, and back in time. The settings
+    come as one `Walk`."""
+    r_max, k_max, backup, sigma, p_new, p_step = walk
     L2 = nodes.shape[0]
     P = edge_ok.shape[1]
     c = P // 2

@@ -12,9 +12,10 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from pipeline.routing.engine_timing import aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb, time_price_nb
+from pipeline.routing.engine_timing import (Voyage, aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
+                                            time_price_nb)
 from pipeline.routing.objectives import OBJ_JIT
-from pipeline.routing.random_route import random_walk_nb
+from pipeline.routing.random_route import Walk, random_walk_nb
 
 
 class Knobs(NamedTuple):
@@ -117,10 +118,10 @@ def _new_bacterium(nodes, rpm_idx, run, rng):
     g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
     q = np.inf
     for attempt in range(4):
-        if not random_walk_nb(nodes, g.edge_ok, g.max_shift, k.r_max, k.k_max, k.backup, k.sigma * 2.0 ** attempt,
-                              k.p_new, k.p_step, 0, rng):
+        if not random_walk_nb(nodes, g.edge_ok, g.max_shift,
+                              Walk(k.r_max, k.k_max, k.backup, k.sigma * 2.0 ** attempt, k.p_new, k.p_step), 0, rng):
             return False, np.inf
-        q = aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng)
+        q = aim_engine_nb(Voyage(g, v, w, o), nodes, rpm_idx, s, rng)
         if q < np.inf:
             break
     return True, q
@@ -134,8 +135,8 @@ def _offset_bacterium(j, nodes, rpm_idx, run, rng):
     g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
     c = g.lat.shape[1] // 2
     offset = int(np.round(-c + 2.0 * c * j / max(k.n_offset - 1, 1)))
-    if random_walk_nb(nodes, g.edge_ok, g.max_shift, k.r_max, k.k_max, k.backup, 0.0, 0.0, 1.0, offset, rng):
-        q = aim_engine_nb(nodes, rpm_idx, g, v, w, o, s, rng)
+    if random_walk_nb(nodes, g.edge_ok, g.max_shift, Walk(k.r_max, k.k_max, k.backup, 0.0, 0.0, 1.0), offset, rng):
+        q = aim_engine_nb(Voyage(g, v, w, o), nodes, rpm_idx, s, rng)
         if q < np.inf:
             return True, q
     return _new_bacterium(nodes, rpm_idx, run, rng)
@@ -283,7 +284,7 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
         placed = False
         if i >= k.n_bacteria - n_branch:
             cand[:] = branches[k.n_bacteria - 1 - i]
-            q = aim_engine_nb(cand, cand_r, g, v, w, o, s, rng)
+            q = aim_engine_nb(Voyage(g, v, w, o), cand, cand_r, s, rng)
             placed = q < np.inf
         elif 0 < i <= k.n_offset:
             placed, q = _offset_bacterium(i - 1, cand, cand_r, run, rng)
@@ -295,7 +296,7 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
             sw.cost[i] = cost_from_nb(sw.pos[i], sw.rpm[i], 0, g, v, w, o, sw.cum_t[i], sw.cum_f[i])
             s.cnt[0] += 1
             cand[:] = base_nodes
-            q = aim_engine_nb(cand, cand_r, g, v, w, o, s, rng)
+            q = aim_engine_nb(Voyage(g, v, w, o), cand, cand_r, s, rng)
         if placed or q < sw.cost[i]:
             _adopt(sw, i, cand, cand_r, s.ct, s.cf, q)
     sw.best_pos[:] = sw.pos[0]
@@ -332,6 +333,7 @@ def swim_nb(sw, i, first, engine, d, screen, run, rng):
     the judged cost keeps falling (at most `swim_max` steps), each move judged as `screen` (Screening) says. Returns
     True when at least one step was taken."""
     g, v, w, o, s, k, wk = run.g, run.v, run.w, run.o, run.s, run.k, run.wk
+    vy = Voyage(g, v, w, o)
     lam, do_screen, do_plan = screen.lam, screen.on, screen.plan
     pos, rpm, cum_t, cum_f, cost = sw.pos, sw.rpm, sw.cum_t, sw.cum_f, sw.cost
     cand, cand_r, vec, vec_r = wk.cand, wk.cand_r, wk.vec, wk.vec_r
@@ -365,7 +367,7 @@ def swim_nb(sw, i, first, engine, d, screen, run, rng):
         if do_screen and tol >= 0.0 and cost[i] < np.inf:
             # the changed legs only; the rest is sailed when their fuel and time look worth it
             resume = last + 1
-            if not sail_span_nb(cand, cand_r, start, resume, g, v, w, ct, cf, s.out):
+            if not sail_span_nb(vy, cand, cand_r, start, resume, ct, cf, s.out):
                 break
             est = cf[resume] - cum_f[i, resume] + lam * (ct[resume] - cum_t[i, resume])
             if est > tol * cost[i] + dq_old:
@@ -385,12 +387,12 @@ def swim_nb(sw, i, first, engine, d, screen, run, rng):
                         t_est += (cum_t[i, j + 1] - cum_t[i, j]) * (1.0 / k_r - 1.0)
                         f_est += (cum_f[i, j + 1] - cum_f[i, j]) * (k_r * k_r - 1.0)
                 lo_flip = last + 1
-            if plan_flips_nb(cand_r, lo_flip, t_est, f_est, cost[i] + dq_old, cum_t[i], cum_f[i], v.rpm_options,
+            if plan_flips_nb(cand_r, lo_flip, (t_est, f_est), cost[i] + dq_old, (cum_t[i], cum_f[i]), v.rpm_options,
                              o, rng) < 0:
                 break
         q = cost_from_nb(cand, cand_r, resume, g, v, w, o, ct, cf)
         # re-set the engine so the moved route still arrives just inside the RTA
-        q = retime_nb(cand, cand_r, start, q, cost[i] + dq_old, g, v, w, o, s, rng)
+        q = retime_nb(vy, cand, cand_r, start, q, cost[i] + dq_old, s, rng)
         if q == np.inf:
             break
         # judged on Q(S') + dQ(S') − dQ(S), or on Q alone when S' beats S and every neighbour
