@@ -81,7 +81,9 @@ def corridor_space(space: SearchSpace, centre: np.ndarray, width: int, split: in
         clear = new.copy()
         nodes_clear(grid, space.clearance, lat, lon, clear)
         node_ok = np.where(new, clear, node_ok)
-        edges_clear(grid, space.clearance, lat, lon, node_ok, n - 1, lat_limits[0], lat_limits[1], edge_ok)
+        # only the legs the drift limit keeps: the others are dropped below whatever their clearance
+        reach = n - 1 if max_drift is None else min(n - 1, int(max_drift))
+        edges_clear(grid, space.clearance, lat, lon, node_ok, reach, lat_limits[0], lat_limits[1], edge_ok)
     else:
         edge_ok[:] = node_ok[:-1, :, None] & node_ok[1:, None, :]
     shift = np.abs(fine[1:, None, :] - fine[:-1, :, None])
