@@ -9,10 +9,10 @@ retime_nb       after sailing: the same flips, judged on the sailed route, until
 aim_engine_nb   a new route's settings: of the constant settings, the two whose arrivals bracket the RTA
                 mixed over random legs in the share that should arrive just in time, then re-timed
 
-Kernels take the voyage as named structures: `g` the graph (search_space.Graph), `v` the vessel
-(engine.leg.Vessel), `w` the weather (weather_field.Weather), `o` the objective (objectives.Objective), the
-four together as a `Voyage` where a kernel takes them all, `s` a `Scratch` of work arrays, and `rng` the random generator (a numpy Generator; numba draws from it the
-same numbers numpy would, so the interpreted kernels reproduce the compiled ones).
+Kernels take the voyage as one `Voyage`: the graph `g` (search_space.Graph), the vessel `v` (engine.leg.Vessel), the
+weather `w` (weather_field.Weather) and the objective `o` (objectives.Objective); `s` is a `Scratch` of work arrays
+and `rng` the random generator (a numpy Generator; numba draws from it the same numbers numpy would, so the
+interpreted kernels reproduce the compiled ones).
 """
 
 from __future__ import annotations
@@ -55,8 +55,11 @@ def scratch(n_lines_total: int) -> Scratch:
 
 
 @numba.njit(cache=True)
-def cost_from_nb(nodes, rpm_idx, start, g, v, w, o, cum_t, cum_f):
-    code, _ = sail_route_nb(nodes, rpm_idx, start, g, v, w, o, cum_t, cum_f)
+def cost_from_nb(vy, nodes, rpm_idx, start, cum_t, cum_f):
+    """Sail the route from line `start` on (cum_t, cum_f valid there) and price it with the objective (inf: it
+    cannot be sailed)."""
+    o = vy.o
+    code, _ = sail_route_nb(nodes, rpm_idx, start, vy.g, vy.v, vy.w, o, cum_t, cum_f)
     if code != OK:
         return np.inf
     n = nodes.shape[0] - 1
@@ -186,7 +189,7 @@ def retime_nb(vy, nodes, rpm_idx, lo, q, bar, s, rng):
     n = rpm_idx.shape[0]
     if q == np.inf or lo >= n:
         return q
-    g, v, w, o = vy.g, vy.v, vy.w, vy.o
+    v, o = vy.v, vy.o
     ct, cf, rpm_options, t_dep_h, t_req_h = s.ct, s.cf, v.rpm_options, o.t_dep_h, o.t_req_h
     margin = 0.05 * t_req_h / n  # about 5 % of a leg's hours: room for the estimate's error
     for _round in range(2):
@@ -198,7 +201,7 @@ def retime_nb(vy, nodes, rpm_idx, lo, q, bar, s, rng):
             return q
         if o.kind == OBJ_JIT and cf[n] + extra_f >= bar:
             return np.inf
-        q = cost_from_nb(nodes, rpm_idx, first, g, v, w, o, ct, cf)
+        q = cost_from_nb(vy, nodes, rpm_idx, first, ct, cf)
         s.cnt[0] += 1
         if q == np.inf:
             return q
@@ -213,7 +216,7 @@ def retime_nb(vy, nodes, rpm_idx, lo, q, bar, s, rng):
             return q
         s.keep_t[:] = ct
         s.keep_f[:] = cf
-        q2 = cost_from_nb(nodes, rpm_idx, first, g, v, w, o, ct, cf)
+        q2 = cost_from_nb(vy, nodes, rpm_idx, first, ct, cf)
         s.cnt[0] += 1
         if not (q2 < q and ct[n] - t_dep_h <= t_req_h + 1e-9):
             rpm_idx[:] = s.keep_r
@@ -260,7 +263,7 @@ def aim_engine_nb(vy, nodes, rpm_idx, s, rng):
             perm = rng.permutation(n)
             for j in range(min(k, n)):
                 rpm_idx[perm[j]] = fast
-    q = cost_from_nb(nodes, rpm_idx, 0, g, v, w, o, ct, cf)
+    q = cost_from_nb(vy, nodes, rpm_idx, 0, ct, cf)
     s.cnt[0] += 1
     return retime_nb(vy, nodes, rpm_idx, 0, q, np.inf, s, rng)
 

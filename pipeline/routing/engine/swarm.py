@@ -115,13 +115,14 @@ def work(n_lines_total: int) -> Work:
 def _new_bacterium(nodes, rpm_idx, run, rng):
     """A random bacterium: a safe random walk with engine settings aimed at the RTA. A route that cannot be
     sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
-    g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
+    g, s, k = run.g, run.s, run.k
+    vy = Voyage(g, run.v, run.w, run.o)
     q = np.inf
     for attempt in range(4):
         if not random_walk_nb(nodes, g.edge_ok, g.max_shift,
                               Walk(k.r_max, k.k_max, k.backup, k.sigma * 2.0 ** attempt, k.p_new, k.p_step), 0, rng):
             return False, np.inf
-        q = aim_engine_nb(Voyage(g, v, w, o), nodes, rpm_idx, s, rng)
+        q = aim_engine_nb(vy, nodes, rpm_idx, s, rng)
         if q < np.inf:
             break
     return True, q
@@ -132,11 +133,11 @@ def _offset_bacterium(j, nodes, rpm_idx, run, rng):
     """Offset route j of k.n_offset (offsets spread evenly from one side of the graph to the other): out one node
     a line, along the offset, back in time; engine settings aimed at the RTA. A random bacterium when it cannot
     be walked or sailed. (placed?, cost)"""
-    g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
+    g, s, k = run.g, run.s, run.k
     c = g.lat.shape[1] // 2
     offset = int(np.round(-c + 2.0 * c * j / max(k.n_offset - 1, 1)))
     if random_walk_nb(nodes, g.edge_ok, g.max_shift, Walk(k.r_max, k.k_max, k.backup, 0.0, 0.0, 1.0), offset, rng):
-        q = aim_engine_nb(Voyage(g, v, w, o), nodes, rpm_idx, s, rng)
+        q = aim_engine_nb(Voyage(g, run.v, run.w, run.o), nodes, rpm_idx, s, rng)
         if q < np.inf:
             return True, q
     return _new_bacterium(nodes, rpm_idx, run, rng)
@@ -276,7 +277,8 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
     or engine settings aimed at the RTA, whichever is cheaper; bacteria 1..n_offset on the offset routes; the last
     ones on the routes in `branches` (one per row, engine settings aimed at the RTA); the rest random. Returns the
     best one's index."""
-    g, v, w, o, s, k = run.g, run.v, run.w, run.o, run.s, run.k
+    s, k = run.s, run.k
+    vy = Voyage(run.g, run.v, run.w, run.o)
     cand, cand_r = run.wk.cand, run.wk.cand_r
     q = np.inf
     n_branch = min(branches.shape[0], k.n_bacteria - 1 - k.n_offset)
@@ -284,7 +286,7 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
         placed = False
         if i >= k.n_bacteria - n_branch:
             cand[:] = branches[k.n_bacteria - 1 - i]
-            q = aim_engine_nb(Voyage(g, v, w, o), cand, cand_r, s, rng)
+            q = aim_engine_nb(vy, cand, cand_r, s, rng)
             placed = q < np.inf
         elif 0 < i <= k.n_offset:
             placed, q = _offset_bacterium(i - 1, cand, cand_r, run, rng)
@@ -293,10 +295,10 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
         if not placed:
             sw.pos[i, :] = base_nodes
             sw.rpm[i, :] = base_rpm
-            sw.cost[i] = cost_from_nb(sw.pos[i], sw.rpm[i], 0, g, v, w, o, sw.cum_t[i], sw.cum_f[i])
+            sw.cost[i] = cost_from_nb(vy, sw.pos[i], sw.rpm[i], 0, sw.cum_t[i], sw.cum_f[i])
             s.cnt[0] += 1
             cand[:] = base_nodes
-            q = aim_engine_nb(Voyage(g, v, w, o), cand, cand_r, s, rng)
+            q = aim_engine_nb(vy, cand, cand_r, s, rng)
         if placed or q < sw.cost[i]:
             _adopt(sw, i, cand, cand_r, s.ct, s.cf, q)
     sw.best_pos[:] = sw.pos[0]
@@ -390,7 +392,7 @@ def swim_nb(sw, i, first, engine, d, screen, run, rng):
             if plan_flips_nb(cand_r, lo_flip, (t_est, f_est), cost[i] + dq_old, (cum_t[i], cum_f[i]), v.rpm_options,
                              o, rng) < 0:
                 break
-        q = cost_from_nb(cand, cand_r, resume, g, v, w, o, ct, cf)
+        q = cost_from_nb(vy, cand, cand_r, resume, ct, cf)
         # re-set the engine so the moved route still arrives just inside the RTA
         q = retime_nb(vy, cand, cand_r, start, q, cost[i] + dq_old, s, rng)
         if q == np.inf:
