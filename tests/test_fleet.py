@@ -270,3 +270,20 @@ def test_a_local_cluster_leaves_no_process_behind():
     assert resource_tracker._resource_tracker._pid is None
     with pytest.raises(ChildProcessError):  # stopped and reaped: no such child any more
         os.waitpid(tracker, os.WNOHANG)
+
+
+def test_a_failure_inside_the_cluster_is_recorded_before_the_cluster_closes():
+    """A SIGTERM gives the run a few seconds to unwind; closing a local cluster can take most of them on a busy
+    machine, so the failure's record (on_error) comes first, while the workers still run."""
+    from flows.jobs.dask_pool import dask_client
+
+    seen = []
+
+    def on_error(exc):
+        seen.append((type(exc).__name__, client.status, client.submit(sum, [2, 3], pure=False).result()))
+
+    with pytest.raises(SystemExit):
+        with dask_client(None, 1, on_error=on_error) as client:
+            raise SystemExit(143)
+    assert seen == [("SystemExit", "running", 5)]
+    assert client.status == "closed"

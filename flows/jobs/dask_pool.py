@@ -43,9 +43,14 @@ def dashboard_of(client, address: str | None) -> str:
 
 
 @contextlib.contextmanager
-def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
+def dask_client(address: str | None, n_workers: int,
+                on_error: Callable[[BaseException], None] | None = None) -> Iterator[object]:
     """A client of the scheduler at `address`, or of a local cluster of `n_workers` single-threaded processes
-    (closed again on exit, workers included). The dashboard is on a free loopback port and logged."""
+    (closed again on exit, workers included). The dashboard is on a free loopback port and logged.
+
+    `on_error(exc)` runs when the body raises (a SIGTERM's SystemExit included), before the cluster is closed: closing
+    takes seconds on a busy machine, which a SIGTERM's grace period (cli/signals.py) may not outlast, so what must
+    be recorded about the failure goes first."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -65,6 +70,10 @@ def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
         try:
             LOG.info("dask: %s, dashboard %s", address or f"local cluster of {n_workers} workers", dashboard_of(client, address))
             yield client
+        except BaseException as exc:
+            if on_error is not None:
+                on_error(exc)
+            raise
         finally:
             client.close()
             if cluster is not None:
@@ -75,11 +84,13 @@ def dask_client(address: str | None, n_workers: int) -> Iterator[object]:
 def _stop_resource_tracker() -> None:
     """Stop multiprocessing's resource tracker, which the local cluster's worker processes started: it holds nothing
     once they are gone, and left running it outlives the command by a moment (a process left behind in its group).
-    Started again if anything needs it later."""
+    Started again if anything needs it later. Left alone while any worker process still runs: the tracker ends only
+    once every holder of its pipe has, and stopping it waits for that."""
+    import multiprocessing
     from multiprocessing import resource_tracker
 
     stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # CPython's own; absent elsewhere
-    if stop is not None:
+    if stop is not None and not multiprocessing.active_children():
         stop()
 
 

@@ -211,6 +211,15 @@ def fleet_jobs(s: Settings, db: Path, cycle: np.datetime64, run_id: str, voyage_
     return jobs
 
 
+def abandon_run(warehouse_path: Path, run_exports: export_store.RunExports | None, run_id: str,
+                exc: BaseException) -> None:
+    """Record the run failed with the error, then remove its staged exports: nothing of it is published. Safe to
+    repeat (route_voyages does it before its cluster's teardown, route_fleet_job again for what failed outside)."""
+    route_store.fail_run(warehouse_path, run_id, f"{type(exc).__name__}: {exc}")
+    if run_exports is not None:
+        run_exports.discard(run_id)
+
+
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None, store_to: tuple[Path, Path],
                   pictures_of: tuple[str, np.datetime64, np.datetime64] | None = None,
@@ -264,12 +273,14 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
             last_store = time.monotonic()
 
     if jobs:
-        with dask_pool.dask_client(dask_address, n_workers) as client:
+        run_id = jobs[0].run_id
+        with dask_pool.dask_client(dask_address, n_workers,
+                                   on_error=lambda exc: abandon_run(store_to[0], run_exports, run_id, exc)) as client:
             per = dask_pool.voyages_per_batch(len(jobs), dask_pool.worker_slots(client), per_batch)
             exports_to = (run_exports.url, run_exports.storage_options) if run_exports is not None else None
             pictures = []
             if exports_to is not None and pictures_of is not None:
-                run_id, cycle, nominal = pictures_of
+                _, cycle, nominal = pictures_of  # the run id is the jobs'
                 box = run_pictures.fleet_box([(j.voyage[f"{end}_lat"], j.voyage[f"{end}_lon"]) for j in jobs
                                               for end in ("dep", "arr")])
                 pictures.append(client.submit(run_pictures.stage_weather_maps, exports_to, run_id, cube_store.url,
@@ -289,7 +300,7 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
                 export_errors.extend(errors)
             if exports_to is not None and staged and not run_exports.local:  # the copies of the publish, shared out
                 names, n = sorted(staged), dask_pool.worker_slots(client)
-                copies = [client.submit(copy_staged, exports_to, jobs[0].run_id, names[k::n], pure=False)
+                copies = [client.submit(copy_staged, exports_to, run_id, names[k::n], pure=False)
                           for k in range(min(n, len(names)))]
                 copied = all([dask_pool.result_or(f, lambda exc: LOG.warning(
                     "exports: a worker's share of the copies failed (%s: %s); this process copies them",
@@ -363,8 +374,7 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
                        timeout_s=s.routing.task_timeout_s)
         summary = route_store.finish_run(layout.warehouse, layout.exports, run_id, out["export_errors"])
     except BaseException as exc:
-        run_exports.discard(run_id)
-        route_store.fail_run(layout.warehouse, run_id, f"{type(exc).__name__}: {exc}")
+        abandon_run(layout.warehouse, run_exports, run_id, exc)
         raise
     manifest = (run_exports.publish(run_id, only=set(out["staged"]), copied=out["copied"], sizes=out["staged"])
                 if exports else None)
