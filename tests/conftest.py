@@ -46,10 +46,18 @@ def pytest_ignore_collect(collection_path, config):
     return True if _slow_file(rel) else None
 
 
+# Files whose tests run for a minute or more in all (servers, schedulers, flows in flight), run first: under
+# `pytest -n auto` a worker that picks one of them up last keeps the whole suite waiting after the other is done.
+LONG_FILES_FIRST = ("test_schedule_e2e.py", "test_serve_sigterm.py", "test_served_worker.py", "test_enroute.py",
+                    "test_cluster.py", "test_routing_twin.py")
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if _slow_file(item.path.resolve().relative_to(TESTS).as_posix()):
             item.add_marker(pytest.mark.slow)
+    rank = {name: k for k, name in enumerate(LONG_FILES_FIRST)}  # a file's tests stay together (its module fixtures)
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
 
 
 @pytest.fixture(scope="session", autouse=True)

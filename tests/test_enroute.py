@@ -159,10 +159,14 @@ def test_a_nightly_whose_cycles_are_missing_refuses_the_old_cycle_and_says_which
     assert nightly_markdown  # the same function renders the summary shown by the CLI and Prefect
 
 
-def test_an_unreachable_rish_listing_records_the_cycle_incomplete_and_files_missing(tmp_path):
+def test_an_unreachable_rish_listing_records_the_cycle_incomplete_and_files_missing(tmp_path, monkeypatch):
+    import flows.jobs.ingest
     from flows.jobs.backfill import backfill_range
     from flows.jobs.ingest import ingest_cycle
     from tests.processes import free_port
+    from tests.reliability.ingest_child import fast_load_settings
+
+    monkeypatch.setattr(flows.jobs.ingest, "load_settings", fast_load_settings)  # short retries: nothing will answer
 
     root = tmp_path / "data"
     url = f"http://127.0.0.1:{free_port()}/rish/"  # nothing listens there
