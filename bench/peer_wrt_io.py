@@ -33,7 +33,7 @@ import xarray as xr
 
 from pipeline.routing.geodesy import KN_PER_MS
 from pipeline.routing.land import land_grid
-from pipeline.routing.clearance import line_edges_clear
+from pipeline.routing.clearance import lat_band, line_edges_clear
 from pipeline.routing.weather_field import SWH, U10, UO, V10, VO, WAVE_X, WAVE_Y, WeatherField
 
 WIND_HEIGHT_M = 10.0
@@ -188,8 +188,8 @@ def legs_off_clearance(inst, lat: np.ndarray, lon: np.ndarray) -> int:
     lon = np.ascontiguousarray(lon, np.float64)[:, None]
     n = lat.shape[0]
     ok = np.zeros((n - 1, 1, 1), bool)
-    lo, hi = inst.problem.lat_limits
+    band = lat_band(inst.problem.lat_limits)
     grid = land_grid()
     for i in range(n - 1):
-        line_edges_clear(grid, rule, lat, lon, np.ones((n, 1), bool), i, 0, lo, hi, ok)
+        line_edges_clear(grid, rule, lat, lon, np.ones((n, 1), bool), i, 0, band, ok)
     return int(np.sum(~ok))

@@ -94,10 +94,17 @@ def nodes_clear(grid, rule, lat, lon, out):
             out[i, j] = out[i, j] and point_is_clear_nb(grid, rule, lat[i, j], lon[i, j])
 
 
+def lat_band(lat_limits) -> tuple[float, float]:
+    """The latitude limits (lo, hi) as the edge kernels take them: two floats, whatever the caller gave (one compiled
+    signature)."""
+    return float(lat_limits[0]), float(lat_limits[1])
+
+
 @numba.njit(cache=True)
-def line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out):
+def line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, band, out):
     """Whether each leg from a usable node of line i to a usable node of line i + 1 (at most `max_shift` nodes
-    aside) is clear of land under `rule`, into out[i]."""
+    aside) is clear of land under `rule` and within the latitudes `band` = (lo, hi), into out[i]."""
+    lat_lo, lat_hi = band
     P = lat.shape[1]
     for a in range(P):
         if not node_ok[i, a]:
@@ -109,10 +116,10 @@ def line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi
 
 
 @numba.njit(cache=True)
-def edges_clear(grid, rule, lat, lon, node_ok, max_shift, lat_lo, lat_hi, out):
+def edges_clear(grid, rule, lat, lon, node_ok, max_shift, band, out):
     """`line_edges_clear` for every line."""
     for i in range(lat.shape[0] - 1):
-        line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, lat_lo, lat_hi, out)
+        line_edges_clear(grid, rule, lat, lon, node_ok, i, max_shift, band, out)
 
 
 @numba.njit(cache=True)

@@ -29,7 +29,7 @@ import numba
 import numpy as np
 
 from pipeline.routing import geodesy as geo
-from pipeline.routing.clearance import Clearance, clearance, edges_clear, line_edges_clear, nodes_clear, point_is_clear_nb
+from pipeline.routing.clearance import Clearance, clearance, edges_clear, lat_band, line_edges_clear, nodes_clear, point_is_clear_nb
 from pipeline.routing.land import land_grid
 from pipeline.routing.sea_route import SeaRoute
 
@@ -226,7 +226,7 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
             L = lat.shape[0] - 2
     edge_ok = np.zeros((L + 1, P, P), dtype=bool)
     if check_land:
-        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
+        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_band(lat_limits), edge_ok)
         _gate_edges(grid, rule, lat, lon, node_ok, gate, ms, lat_limits, edge_ok)
     else:
         for i in range(L + 1):
@@ -252,7 +252,7 @@ def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, lat_limits, 
             geo.gc_distance_nm(g_lat, g_lon, rule.arr_lat, rule.arr_lon)
         port = (rule.dep_lat, rule.dep_lon) if near_dep else (rule.arr_lat, rule.arr_lon)
         at_gate = Clearance(rule.clearance_nm, rule.approach_nm, float(g_lat), float(g_lon), float(port[0]), float(port[1]))
-        line_edges_clear(grid, at_gate, lat, lon, node_ok, i, ms, lat_limits[0], lat_limits[1], edge_ok)
+        line_edges_clear(grid, at_gate, lat, lon, node_ok, i, ms, lat_band(lat_limits), edge_ok)
 
 
 __all__ = ["lay_out_corridor", "line_positions", "route_arrays", "default_corridor_lines", "default_half_width_nm",

@@ -556,6 +556,10 @@ def _reach_count(layer, moves, avoided, src_node, limit):
     return count
 
 
+# the latitudes a pulled or cut leg may reach: the graph's limits and 1° more, for the bulge of a great circle
+PULLED_LAT_LO, PULLED_LAT_HI = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
+
+
 @numba.njit(cache=True)
 def _pull(grid, rule, gates, lat, lon, fixed, keep):
     """String-pulling: keep[k] for the waypoints that stay. The ports and the fixed points (fairway vertices) stay;
@@ -563,7 +567,6 @@ def _pull(grid, rule, gates, lat, lon, fixed, keep):
     clear leg (crossing no gate) reaches, passing over those in between. Consecutive path points are joined by clear
     legs (graph edges), so this always ends."""
     n = lat.size
-    lo, hi = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
     keep[:] = False
     a = 0
     keep[0] = True
@@ -572,15 +575,16 @@ def _pull(grid, rule, gates, lat, lon, fixed, keep):
         if fixed[k] or k == n - 1:
             keep[k] = True
             a = k
-        elif not _leg_ok(grid, rule, gates, lat[a], lon[a], lat[k + 1], lon[k + 1], lo, hi):
+        elif not _leg_ok(grid, rule, gates, lat[a], lon[a], lat[k + 1], lon[k + 1], PULLED_LAT_LO, PULLED_LAT_HI):
             keep[k] = True
             a = k
         k += 1
 
 
 @numba.njit(cache=True)
-def _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob, lo, hi):
+def _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob):
     """Both legs through the moved waypoint (t_lat, t_lon), from its neighbour a and on to its neighbour b, are clear."""
+    lo, hi = PULLED_LAT_LO, PULLED_LAT_HI
     return _leg_ok(grid, rule, gates, la, loa, t_lat, t_lon, lo, hi) and _leg_ok(grid, rule, gates, t_lat, t_lon, lb, lob,
                                                                                 lo, hi)
 
@@ -593,7 +597,6 @@ def _cut_corners(grid, rule, gates, lat, lon, fixed):
     round an island or a headland sits up to a cell off the tangent; here it moves onto it. A move is kept only
     when it shortens the two legs, so the route never lengthens; rounds repeat (at most CORNER_ROUNDS) while one
     gains ≥ CORNER_MIN_GAIN_NM."""
-    lo, hi = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
     n = lat.size
     for _round in range(CORNER_ROUNDS):
         gain = 0.0
@@ -607,7 +610,7 @@ def _cut_corners(grid, rule, gates, lat, lon, fixed):
             step = 1.0
             while step > 1.0 / 64.0:  # the largest clear slide among 1, 1/2, 1/4, ...
                 t_lat, t_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, step)
-                if _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob, lo, hi):
+                if _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob):
                     ok = step
                     break
                 bad = step
@@ -619,7 +622,7 @@ def _cut_corners(grid, rule, gates, lat, lon, fixed):
                 if bad <= ok:
                     break
                 t_lat, t_lon = geo.gc_interpolate(lat[k], lon[k], m_lat, m_lon, mid)
-                if _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob, lo, hi):
+                if _slide_ok(grid, rule, gates, la, loa, t_lat, t_lon, lb, lob):
                     ok = mid
                 else:
                     bad = mid
@@ -677,9 +680,8 @@ def sea_route(dep: tuple[float, float], arr: tuple[float, float], *, avoid=froze
     rule = clearance(dep, arr, clearance_nm, approach_nm)
     layer = _layer(rule.clearance_nm)
     grid = land_grid()
-    lo_lat, hi_lat = LAT_LIMITS_DEG[0] - 1.0, LAT_LIMITS_DEG[1] + 1.0
     gc = float(geo.gc_distance_nm(*dep, *arr))
-    direct = (gc if gc <= 3 * JOIN_MAX_NM and _leg_ok(grid, rule, layer.gates, *dep, *arr, lo_lat, hi_lat)
+    direct = (gc if gc <= 3 * JOIN_MAX_NM and _leg_ok(grid, rule, layer.gates, *dep, *arr, PULLED_LAT_LO, PULLED_LAT_HI)
               else math.inf)
     src_node, src_cost = _join(rule, layer, *dep, with_extra=True)
     dst_node, dst_cost = _join(rule, layer, *arr, with_extra=True)

@@ -33,7 +33,7 @@ import numpy as np
 from pipeline.routing import geodesy as geo
 from pipeline.routing.baseline import evaluate
 from pipeline.routing.bfoa import BfoaParams, polish
-from pipeline.routing.clearance import edges_clear, nodes_clear
+from pipeline.routing.clearance import edges_clear, lat_band, nodes_clear
 from pipeline.routing.land import land_grid
 from pipeline.routing.problem import Instance
 from pipeline.routing.search_space import SearchSpace, forbid_crossing
@@ -83,7 +83,7 @@ def corridor_space(space: SearchSpace, centre: np.ndarray, width: int, split: in
         node_ok = np.where(new, clear, node_ok)
         # only the legs the drift limit keeps: the others are dropped below whatever their clearance
         reach = n - 1 if max_drift is None else min(n - 1, int(max_drift))
-        edges_clear(grid, space.clearance, lat, lon, node_ok, reach, lat_limits[0], lat_limits[1], edge_ok)
+        edges_clear(grid, space.clearance, lat, lon, node_ok, reach, lat_band(lat_limits), edge_ok)
     else:
         edge_ok[:] = node_ok[:-1, :, None] & node_ok[1:, None, :]
     shift = np.abs(fine[1:, None, :] - fine[:-1, :, None])

@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.routing import geodesy as geo
 from pipeline.routing.clearance import (DEFAULT_APPROACH_NM, DEFAULT_CLEARANCE_NM, Clearance, clearance, edges_clear,
-                                        nodes_clear)
+                                        lat_band, nodes_clear)
 from pipeline.routing.corridor import lay_out_corridor
 from pipeline.routing.land import is_sea, land_grid
 from pipeline.routing.sea_route import SeaRoute
@@ -206,7 +206,7 @@ def lay_out_lines(dep: tuple[float, float], arr: tuple[float, float], *, n_lines
     if check_land:
         grid = land_grid()
         nodes_clear(grid, rule, lat[1:-1], lon[1:-1], node_ok[1:-1])  # the ports were checked above: at sea
-        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_limits[0], lat_limits[1], edge_ok)
+        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_band(lat_limits), edge_ok)
     else:
         for i in range(L + 1):
             for a in range(P):
