@@ -485,7 +485,7 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     rpm = np.empty(L2 - 1, np.int64)
     gc = space.base_route()
     for seed in range(1, 6):
-        q = engine_timing.aim_engine_nb(engine_timing.Voyage(*voyage), gc.copy(), rpm, s, np.random.default_rng(seed))
+        q = engine_timing.aim_engine_nb(lk.Voyage(*voyage), gc.copy(), rpm, s, np.random.default_rng(seed))
         t_arr = ct[-1] - inst.t_dep_h
         assert pr.t_req_h - pr.window_h <= t_arr <= pr.t_req_h + 1e-9, (seed, t_arr)
         assert {0, 1} <= set(rpm.tolist())  # a mix of the two settings that bracket the RTA
@@ -501,7 +501,7 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     s2 = engine_timing.scratch(L2)
     lk.sail_route_nb(detour, rpm, 0, *voyage, s2.ct, s2.cf)
     rpm2 = rpm.copy()
-    q2 = engine_timing.retime_nb(engine_timing.Voyage(*voyage), detour, rpm2, 0, late_cost, np.inf, s2,
+    q2 = engine_timing.retime_nb(lk.Voyage(*voyage), detour, rpm2, 0, late_cost, np.inf, s2,
                                  np.random.default_rng(1))
     assert s2.ct[-1] - inst.t_dep_h <= pr.t_req_h + 1e-9
     assert q2 < LATE_STEP_T and q2 == pytest.approx(_evaluate(inst, detour, rpm2)[0], rel=1e-12)
@@ -509,7 +509,7 @@ def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     # with a bar below any on-time plan the re-set gives up instead of sailing (jit objective)
     rpm3 = rpm.copy()
     lk.sail_route_nb(detour, rpm3, 0, *voyage, s2.ct, s2.cf)
-    assert engine_timing.retime_nb(engine_timing.Voyage(*voyage), detour, rpm3, 0, late_cost, 1.0, s2,
+    assert engine_timing.retime_nb(lk.Voyage(*voyage), detour, rpm3, 0, late_cost, 1.0, s2,
                                    np.random.default_rng(1)) == math.inf
 
 

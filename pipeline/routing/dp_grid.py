@@ -95,8 +95,8 @@ def grid_plan_cost(inst, nodes, rpm_idx, times, wait_tph: float, slots=None) -> 
     (how a wait-free plan becomes a plan of this space). Cost inf when it cannot be sailed so."""
     L2 = len(nodes)
     s = np.full(L2 - 1, -1, np.int64) if slots is None else np.array(slots, np.int64)
-    code, hours, fuel = grid_sail_nb(np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s, inst.graph,
-                                     inst.vessel, inst.wx, inst.objective, times, float(wait_tph))
+    code, hours, fuel = grid_sail_nb(inst.voyage, np.asarray(nodes, np.int64), np.asarray(rpm_idx, np.int64), s, times,
+                                     float(wait_tph))
     if code != OK:
         return math.inf, s
     return float(route_cost_nb(inst.objective, hours, fuel)), s
@@ -172,8 +172,8 @@ def search_grid(inst, plans, *, slot_h: float, max_wait_h: float, wait_tph: floa
         bounds = label_bounds(inst, ld, reachable_windows(inst, ld, on_time))
     upper = inc_cost * (1.0 + 1e-12) + 1e-12 if math.isfinite(inc_cost) else math.inf
     prune_at = upper / (1.0 + gap) if gap > 0.0 else upper
-    nodes, rpm_idx, slots, cost, n_legs, _ = dp_grid_nb(inst.graph, inst.vessel, inst.wx, inst.objective, upper,
-                                                        prune_at, bounds, times, float(max_wait_h), rate)
+    nodes, rpm_idx, slots, cost, n_legs, _ = dp_grid_nb(inst.voyage, upper, prune_at, bounds, times, float(max_wait_h),
+                                                        rate)
     if math.isfinite(cost) and cost < inc_cost:
         return nodes, rpm_idx, slots, float(cost), n_legs, times
     if inc is None:

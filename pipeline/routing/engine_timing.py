@@ -26,15 +26,6 @@ from pipeline.routing.engine.leg import CODE, FUEL, H, N_LEG_OUT, OK, sail_leg_n
 from pipeline.routing.objectives import OBJ_JIT, route_cost_nb
 
 
-class Voyage(NamedTuple):
-    """The voyage as the kernels sail it: graph, vessel, weather and objective."""
-
-    g: object
-    v: object
-    w: object
-    o: object
-
-
 class Scratch(NamedTuple):
     """Work arrays for one route being sailed and re-timed (L+2 lines, L+1 legs) and a counter of sails."""
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from pipeline.performance.model import PerformanceModel
 from pipeline.routing.canal_time import canal_fixed_legs
-from pipeline.routing.engine.leg import Vessel, vessel
+from pipeline.routing.engine.leg import Vessel, Voyage, vessel
 from pipeline.routing.objectives import OBJECTIVES, Objective, objective
 from pipeline.routing.sea_route import SeaRoute
 from pipeline.routing.search_space import Graph, SearchSpace, build_search_space
@@ -181,6 +181,11 @@ class Instance:
                         late_t_per_h=problem.late_t_per_h)
         return cls(problem=problem, space=space, weather=weather, graph=space.graph, vessel=ves, wx=weather.kernel,
                    objective=obj)
+
+    @property
+    def voyage(self) -> Voyage:
+        """The voyage as the kernels take it in one piece (graph, vessel, weather, objective)."""
+        return Voyage(self.graph, self.vessel, self.wx, self.objective)
 
     @property
     def rpm_options(self) -> np.ndarray:

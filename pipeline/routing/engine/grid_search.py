@@ -29,10 +29,11 @@ def first_slot(times_i, t_h):
 
 
 @numba.njit(cache=True)
-def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, times, wait_tph):
+def grid_sail_nb(vy, nodes, rpm_idx, slots, times, wait_tph):
     """(code, hours, fuel) of a plan of the grid space: leave line i's node at times[i, slots[i]] and sail its leg
     at rpm_idx[i]; code is an engine.leg code, or EARLY_SLOT when a slot is before the ship is there. slots[i] < 0:
     the first slot after arriving (no extra wait). `slots` is filled with the slots used."""
+    g, v, w, o = vy
     lat, lon = g.lat, g.lon
     out = np.empty(N_LEG_OUT)
     t, fuel = o.t_dep_h, 0.0
@@ -61,10 +62,11 @@ def grid_sail_nb(nodes, rpm_idx, slots, g, v, w, o, times, wait_tph):
 
 
 @numba.njit(cache=True)
-def dp_grid_nb(g, v, w, o, upper, prune_at, fb, times, max_wait_h, wait_tph):
+def dp_grid_nb(vy, upper, prune_at, fb, times, max_wait_h, wait_tph):
     """(nodes, rpm indexes, departure slots, cost, legs sailed, labels kept) of the best plan of the grid space
     costing less than `upper` (cost inf when there is none); labels whose lower bound is above `prune_at`
     (≤ upper; upper / (1 + gap) for a certified gap) are dropped. `fb`: the FinishBounds, as label_search.dp_exact_nb's."""
+    g, v, w, o = vy
     lat, lon, edge_ok, max_shift, ld = g.lat, g.lon, g.edge_ok, g.max_shift, fb.ld
     t_dep_h, max_hours = o.t_dep_h, o.max_hours
     L2, P = lat.shape

@@ -91,6 +91,15 @@ class OnRoute(NamedTuple):
     w: object
 
 
+class Voyage(NamedTuple):
+    """The voyage as the kernels sail it: graph, vessel, weather and objective."""
+
+    g: object
+    v: object
+    w: object
+    o: object
+
+
 def _limit(x: float | None) -> float:
     return math.inf if x is None or math.isnan(x) else float(x)
 
@@ -119,8 +128,10 @@ def _stw_and_fuel_rate(ves, rpm, wind_kn, wind_rel, hs, wave_rel):
 
 
 @numba.njit(cache=True, inline="always")
-def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
-    """The leg, with the weather met accumulated when `weather_met` (a constant of each caller)."""
+def _sail_leg(ends, t0_h, rpm, ves, wx, out, weather_met):
+    """The leg from (lat0, lon0) to (lat1, lon1) = `ends`, with the weather met accumulated when `weather_met` (a
+    constant of each caller)."""
+    lat0, lon0, lat1, lon1 = ends
     for k in range(N_LEG_OUT):
         out[k] = 0.0
     dist = geo.gc_distance_nm(lat0, lon0, lat1, lon1)
@@ -218,13 +229,13 @@ def _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, weather_met):
 def sail_leg_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
     """Sail one leg starting at t0_h (hours after the weather's t_ref) at `rpm`; results in out[0:N_LEG_OUT], the
     weather met (WIND_KN … CUR_KN, which no search reads) left 0: `sail_leg_weather_nb` fills those too."""
-    _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, False)
+    _sail_leg((lat0, lon0, lat1, lon1), t0_h, rpm, ves, wx, out, False)
 
 
 @numba.njit(cache=True)
 def sail_leg_weather_nb(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out):
     """`sail_leg_nb` with the weather met along the leg (time-weighted means) in out: what a plan's legs show."""
-    _sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves, wx, out, True)
+    _sail_leg((lat0, lon0, lat1, lon1), t0_h, rpm, ves, wx, out, True)
 
 
 @numba.njit(cache=True)

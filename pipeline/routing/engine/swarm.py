@@ -12,7 +12,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from pipeline.routing.engine_timing import (Voyage, aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
+from pipeline.routing.engine.leg import Voyage
+from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
                                             time_price_nb)
 from pipeline.routing.objectives import OBJ_JIT
 from pipeline.routing.random_route import Walk, random_walk_nb
