@@ -14,6 +14,8 @@ vessel lifts at most one column; at the LP optimum (no negative reduced cost lef
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from scipy import sparse
@@ -58,9 +60,50 @@ def solve_lp(data: PlanData, columns: list[Column], budget: WorkBudget | None = 
     return float(res.fun) + const, duals[:n], duals[n:], res.x
 
 
+class PricedShip(NamedTuple):
+    """One vessel as the pricing takes it: its service window, its ballast speed, fuel rate and speed–fuel curve (kn,
+    t/NM; empty: the rate at the cube law), the fuel price and its cost of a day out of service per hour."""
+
+    start_h: float
+    end_limit_h: float
+    speed_kn: float
+    fuel_t_per_nm: float
+    curve_kn: np.ndarray
+    curve_t_per_nm: np.ndarray
+    fuel_price: float
+    dc_h: float
+
+
+class PricedContracts(NamedTuple):
+    """The vessel's contracts (local indexes): load windows, hours from loading to ready again, the out-of-service
+    cost those hours save, the laden leg's fuel cost, and the end leg's hours and cost."""
+
+    early: np.ndarray
+    late: np.ndarray
+    dur: np.ndarray
+    credit: np.ndarray
+    laden_cost: np.ndarray
+    end_travel_h: np.ndarray
+    end_cost: np.ndarray
+
+
+class PricedArcs(NamedTuple):
+    """The ballast arcs: from the vessel's start (contract, arrival hour, NM each) and, in CSR form, from each contract
+    (`ptr`; the next contract, hours and NM each)."""
+
+    s_to: np.ndarray
+    s_arrive: np.ndarray
+    s_nm: np.ndarray
+    ptr: np.ndarray
+    to: np.ndarray
+    travel_h: np.ndarray
+    nm: np.ndarray
+
+
 @numba.njit(cache=True)
-def _ballast_fuel_t_nb(nm, ready_h, load_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm):
+def ballast_fuel_t_nb(ship, nm, ready_h, load_h):
     """PlanVessel.ballast_leg's fuel, compiled."""
+    speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm = ship.speed_kn, ship.fuel_t_per_nm, ship.curve_kn, ship.curve_t_per_nm
     if nm <= 0.0:
         return 0.0
     fastest_h = nm / speed_kn
@@ -72,12 +115,13 @@ def _ballast_fuel_t_nb(nm, ready_h, load_h, speed_kn, fuel_t_per_nm, curve_kn, c
 
 
 @numba.njit(cache=True)
-def _price_nb(prize, mu, start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h,
-              early, late, dur, credit, laden_cost, end_travel_h, end_cost, s_to, s_arrive, s_nm, ptr, to, travel_h,
-              nm):
-    """The label setting of `price` on one vessel's arrays (see _pricing_table). Labels are made and processed in
+def _price_nb(prize, mu, ship, jobs, arcs):
+    """The label setting of `price` on one vessel's arrays (see pricing_table). Labels are made and processed in
     one order (first in, first out), so a label's index is its place in the queue. Returns (least reduced cost,
     labels of negative reduced cost and their reduced costs, every label's parent and contract)."""
+    start_h, end_limit_h, fuel_price, dc_h = ship.start_h, ship.end_limit_h, ship.fuel_price, ship.dc_h
+    early, late, dur, credit, laden_cost, end_travel_h, end_cost = jobs
+    s_to, s_arrive, s_nm, ptr, to, travel_h, nm = arcs
     m = early.size
     cap = 1024
     ready_a = np.empty(cap)
@@ -120,8 +164,7 @@ def _price_nb(prize, mu, start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn
             if prize[j] < -1e17:  # blocked contract
                 continue
             ready = t + dur[j]
-            rc = rc0 + fuel_price * _ballast_fuel_t_nb(d, ready0, t, speed_kn, fuel_t_per_nm, curve_kn,
-                                                       curve_t_per_nm) + laden_cost[j] - credit[j] - prize[j]
+            rc = rc0 + fuel_price * ballast_fuel_t_nb(ship, d, ready0, t) + laden_cost[j] - credit[j] - prize[j]
             dominated = False
             for f in range(fn[j]):
                 lab = front[j, f]
@@ -174,7 +217,7 @@ def _price_nb(prize, mu, start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn
     return best, found[:n_found], found_rc[:n_found], parent_a[:n], node_a[:n]
 
 
-def _pricing_table(data: PlanData, k: int) -> tuple:
+def pricing_table(data: PlanData, k: int) -> tuple[np.ndarray, tuple[PricedShip, PricedContracts, PricedArcs]]:
     """Vessel k's arcs as arrays for _price_nb (its contracts renumbered 0..m-1 in `va.contracts` order; successors
     of each contract in CSR form), cached on the vessel's arcs. The arc's fuel depends on when the vessel is ready
     (a ballast leg slows down instead of waiting), so pricing costs it per label."""
@@ -200,12 +243,13 @@ def _pricing_table(data: PlanData, k: int) -> tuple:
         curve = np.array(v.ballast_curve, float).reshape(-1, 2)
         va.successors = (
             np.array(va.contracts, np.int64),
-            (v.start_h, v.end_h, v.ballast_speed_kn, v.ballast_fuel_t_per_nm, np.ascontiguousarray(curve[:, 0]),
-             np.ascontiguousarray(curve[:, 1]), data.fuel_price, v.daily_cost / HOURS_PER_DAY,
-             early, late, dur, v.daily_cost / HOURS_PER_DAY * dur, laden_cost, end_travel, end_cost,
-             np.array([x[0] for x in start], np.int64), np.array([x[1] for x in start], float),
-             np.array([x[2] for x in start], float), ptr, np.array([x[0] for x in flat], np.int64),
-             np.array([x[1] for x in flat], float), np.array([x[2] for x in flat], float)))
+            (PricedShip(float(v.start_h), float(v.end_h), float(v.ballast_speed_kn), float(v.ballast_fuel_t_per_nm),
+                        np.ascontiguousarray(curve[:, 0]), np.ascontiguousarray(curve[:, 1]), float(data.fuel_price),
+                        v.daily_cost / HOURS_PER_DAY),
+             PricedContracts(early, late, dur, v.daily_cost / HOURS_PER_DAY * dur, laden_cost, end_travel, end_cost),
+             PricedArcs(np.array([x[0] for x in start], np.int64), np.array([x[1] for x in start], float),
+                        np.array([x[2] for x in start], float), ptr, np.array([x[0] for x in flat], np.int64),
+                        np.array([x[1] for x in flat], float), np.array([x[2] for x in flat], float))))
     return va.successors
 
 
@@ -214,7 +258,7 @@ def price(data: PlanData, k: int, pi: np.ndarray, mu: float, max_new: int = 10, 
     """(least reduced cost of a column of vessel k — a lower bound, see the module doc —, up to `max_new` elementary
     columns of negative reduced cost, cheapest first). A contract whose dual is below -1e17 is blocked (no path
     enters it). The labels made and the columns scheduled are spent from `budget` when given."""
-    glob, table = _pricing_table(data, k)
+    glob, table = pricing_table(data, k)
     if glob.size == 0:
         return 0.0, []
     prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.planning.colgen import _ballast_fuel_t_nb, _pricing_table
+from pipeline.planning.colgen import ballast_fuel_t_nb, pricing_table
 from pipeline.planning.problem import PlanData, schedule
 from pipeline.planning.routes import Column
 from pipeline.planning.work_budget import GAP_ARC, WorkBudget, unlimited
@@ -27,15 +27,15 @@ from pipeline.planning.work_budget import GAP_ARC, WorkBudget, unlimited
 def completion_bound(table: tuple, prize: np.ndarray, mu: float) -> np.ndarray:
     """Per contract j of the vessel (its local index): a lower bound on the reduced cost a sequence adds after j
     ends (the rest of its contracts, the end leg and its days out of service from its start, less μ)."""
-    (start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h, early, late, dur,
-     credit, laden_cost, end_travel_h, end_cost, _, _, _, ptr, to, travel_h, nm) = table
+    ship, (early, late, dur, credit, laden_cost, end_travel_h, end_cost), arcs = table
+    start_h, end_limit_h, fuel_price, dc_h = ship.start_h, ship.end_limit_h, ship.fuel_price, ship.dc_h
+    ptr, to, travel_h, nm = arcs.ptr, arcs.to, arcs.travel_h, arcs.nm
     ready = early + dur  # the earliest each contract can end
     stop = end_cost + dc_h * (ready + end_travel_h - start_h) - mu
     stop = np.where(ready + end_travel_h > end_limit_h + 1e-9, np.inf, stop)
     src = np.repeat(np.arange(early.size), np.diff(ptr))
     load = np.maximum(ready[src] + travel_h, early[to])
-    arc = np.array([fuel_price * _ballast_fuel_t_nb(nm[a], ready[src[a]], load[a], speed_kn, fuel_t_per_nm,
-                                                    curve_kn, curve_t_per_nm) for a in range(src.size)])
+    arc = np.array([fuel_price * ballast_fuel_t_nb(ship, nm[a], ready[src[a]], load[a]) for a in range(src.size)])
     arc = np.where(load <= late[to] + 1e-9, arc + laden_cost[to] - credit[to] - prize[to], np.inf)
     bound = stop.copy()
     for _ in range(early.size):  # paths of at most i more contracts after i sweeps; every elementary one after m
@@ -53,20 +53,21 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
     enumeration complete). Past `max_labels` partial sequences or once `budget` is exhausted (each arc tried from a
     label, and each of the completion bound's, costs GAP_ARC) it stops: ([], False)."""
     budget = unlimited() if budget is None else budget
-    glob, table = _pricing_table(data, k)
+    glob, table = pricing_table(data, k)
     if glob.size == 0:
         return [], True
     if budget.exhausted():  # before the completion bound, which alone takes a while on a large fleet
         return [], False
-    (start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h, early, late, dur,
-     credit, laden_cost, end_travel_h, end_cost, s_to, s_arrive, s_nm, ptr, to, travel_h, nm) = table
+    ship, (early, late, dur, credit, laden_cost, end_travel_h, end_cost), arcs = table
+    start_h, end_limit_h, fuel_price, dc_h = ship.start_h, ship.end_limit_h, ship.fuel_price, ship.dc_h
+    s_to, s_arrive, s_nm, ptr, to, travel_h, nm = arcs
     prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]
     rest = completion_bound(table, prize, mu)
     budget.spend(GAP_ARC * to.size)  # its arcs' fuel, one by one (the sweeps after it are vectorised)
     gain = laden_cost - credit - prize  # what lifting each contract adds, besides its ballast leg
 
     def ballast(d, ready, load):
-        return fuel_price * _ballast_fuel_t_nb(d, ready, load, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm)
+        return fuel_price * ballast_fuel_t_nb(ship, d, ready, load)
 
     # a label: (ready time, reduced cost so far without the end, sequence); keyed by (contracts as bits, last)
     level: dict[tuple[int, int], list[tuple[float, float, tuple[int, ...]]]] = {}
