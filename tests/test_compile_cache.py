@@ -21,19 +21,19 @@ from pipeline import compile_cache
 REPO = Path(__file__).resolve().parents[1]
 
 # Two callers whose callee lives in another file: baseline._shortest_nb calls geodesy.gc_distance_nm, and the
-# fleet planner's colgen._ballast_fuel_t_nb compiles in problem.SLOWEST_BALLAST_SHARE.
+# fleet planner's colgen.ballast_fuel_t_nb compiles in problem.SLOWEST_BALLAST_SHARE.
 PROBE = """
 import json, os
 import numpy as np
 from pipeline.routing.baseline import _shortest_nb
-from pipeline.planning.colgen import _ballast_fuel_t_nb
+from pipeline.planning.colgen import ballast_fuel_t_nb
 
 lat = np.array([[0.0], [0.0], [0.0]])
 lon = np.array([[0.0], [1.0], [2.0]])
 dist = _shortest_nb(lat, lon, np.ones((2, 1, 1), np.bool_), 0, np.full((3, 1), -1, np.int64))
 # 100 NM at 10 kn, ready at 0 h, loading at 100 h: departs as late as the slowest share allows
-fuel = _ballast_fuel_t_nb(100.0, 0.0, 100.0, 10.0, 0.05, np.empty(0), np.empty(0))
-hits = sum(sum(k.stats.cache_hits.values()) for k in (_shortest_nb, _ballast_fuel_t_nb))
+fuel = ballast_fuel_t_nb(100.0, 0.0, 100.0, 10.0, 0.05, np.empty(0), np.empty(0))
+hits = sum(sum(k.stats.cache_hits.values()) for k in (_shortest_nb, ballast_fuel_t_nb))
 print(json.dumps({"dist_nm": float(dist[0]), "fuel_t": float(fuel), "hits": hits,
                   "cache": os.environ["NUMBA_CACHE_DIR"]}))
 """

@@ -28,14 +28,15 @@ def completion_bound(table: tuple, prize: np.ndarray, mu: float) -> np.ndarray:
     """Per contract j of the vessel (its local index): a lower bound on the reduced cost a sequence adds after j
     ends (the rest of its contracts, the end leg and its days out of service from its start, less μ)."""
     ship, (early, late, dur, credit, laden_cost, end_travel_h, end_cost), arcs = table
-    start_h, end_limit_h, fuel_price, dc_h = ship.start_h, ship.end_limit_h, ship.fuel_price, ship.dc_h
+    start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h = ship
     ptr, to, travel_h, nm = arcs.ptr, arcs.to, arcs.travel_h, arcs.nm
     ready = early + dur  # the earliest each contract can end
     stop = end_cost + dc_h * (ready + end_travel_h - start_h) - mu
     stop = np.where(ready + end_travel_h > end_limit_h + 1e-9, np.inf, stop)
     src = np.repeat(np.arange(early.size), np.diff(ptr))
     load = np.maximum(ready[src] + travel_h, early[to])
-    arc = np.array([fuel_price * ballast_fuel_t_nb(ship, nm[a], ready[src[a]], load[a]) for a in range(src.size)])
+    arc = np.array([fuel_price * ballast_fuel_t_nb(nm[a], ready[src[a]], load[a], speed_kn, fuel_t_per_nm, curve_kn,
+                                                   curve_t_per_nm) for a in range(src.size)])
     arc = np.where(load <= late[to] + 1e-9, arc + laden_cost[to] - credit[to] - prize[to], np.inf)
     bound = stop.copy()
     for _ in range(early.size):  # paths of at most i more contracts after i sweeps; every elementary one after m
@@ -59,7 +60,7 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
     if budget.exhausted():  # before the completion bound, which alone takes a while on a large fleet
         return [], False
     ship, (early, late, dur, credit, laden_cost, end_travel_h, end_cost), arcs = table
-    start_h, end_limit_h, fuel_price, dc_h = ship.start_h, ship.end_limit_h, ship.fuel_price, ship.dc_h
+    start_h, end_limit_h, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm, fuel_price, dc_h = ship
     s_to, s_arrive, s_nm, ptr, to, travel_h, nm = arcs
     prize = np.array([data.contracts[j].penalty for j in glob], float) + pi[glob]
     rest = completion_bound(table, prize, mu)
@@ -67,7 +68,7 @@ def vessel_columns_within(data: PlanData, k: int, pi: np.ndarray, mu: float, sla
     gain = laden_cost - credit - prize  # what lifting each contract adds, besides its ballast leg
 
     def ballast(d, ready, load):
-        return fuel_price * ballast_fuel_t_nb(ship, d, ready, load)
+        return fuel_price * ballast_fuel_t_nb(d, ready, load, speed_kn, fuel_t_per_nm, curve_kn, curve_t_per_nm)
 
     # a label: (ready time, reduced cost so far without the end, sequence); keyed by (contracts as bits, last)
     level: dict[tuple[int, int], list[tuple[float, float, tuple[int, ...]]]] = {}
