@@ -226,8 +226,9 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
             L = lat.shape[0] - 2
     edge_ok = np.zeros((L + 1, P, P), dtype=bool)
     if check_land:
-        edges_clear(grid, rule, lat, lon, node_ok, ms, lat_band(lat_limits), edge_ok)
-        _gate_edges(grid, rule, lat, lon, node_ok, gate, ms, lat_limits, edge_ok)
+        band = lat_band(lat_limits)
+        edges_clear(grid, rule, lat, lon, node_ok, ms, band, edge_ok)
+        _gate_edges(grid, rule, lat, lon, node_ok, gate, ms, band, edge_ok)
     else:
         for i in range(L + 1):
             for a in range(P):
@@ -236,7 +237,7 @@ def lay_out_corridor(route: SeaRoute, *, n_lines: int | None = None, n_points: i
     return lat, lon, node_ok, edge_ok, d_line, int(ms), gate, rule, total
 
 
-def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, lat_limits, edge_ok) -> None:
+def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, band, edge_ok) -> None:
     """Legs touching a passage's gate: along the fairway (gate to gate) as given; into and out of it at sea within
     the approach radius of the gate (the nearer port keeps its own approach), the clearance beyond."""
     L2, P = lat.shape
@@ -252,7 +253,7 @@ def _gate_edges(grid, rule: Clearance, lat, lon, node_ok, gate, ms, lat_limits, 
             geo.gc_distance_nm(g_lat, g_lon, rule.arr_lat, rule.arr_lon)
         port = (rule.dep_lat, rule.dep_lon) if near_dep else (rule.arr_lat, rule.arr_lon)
         at_gate = Clearance(rule.clearance_nm, rule.approach_nm, float(g_lat), float(g_lon), float(port[0]), float(port[1]))
-        line_edges_clear(grid, at_gate, lat, lon, node_ok, i, ms, lat_band(lat_limits), edge_ok)
+        line_edges_clear(grid, at_gate, lat, lon, node_ok, i, ms, band, edge_ok)
 
 
 __all__ = ["lay_out_corridor", "line_positions", "route_arrays", "default_corridor_lines", "default_half_width_nm",
