@@ -275,6 +275,6 @@ def sail_leg(lat0, lon0, lat1, lon1, t0_h, rpm, ves: Vessel, field) -> np.ndarra
 def sail_leg_python(lat0, lon0, lat1, lon1, t0_h, rpm, ves: Vessel, field) -> np.ndarray:
     """The same leg through the interpreted (non-compiled) code path, for verification."""
     out = np.empty(N_LEG_OUT)
-    _sail_leg.py_func(float(lat0), float(lon0), float(lat1), float(lon1), float(t0_h), float(rpm), ves, field.kernel,
+    _sail_leg.py_func((float(lat0), float(lon0), float(lat1), float(lon1)), float(t0_h), float(rpm), ves, field.kernel,
                       out, True)
     return out
