@@ -222,18 +222,19 @@ def abandon_run(warehouse_path: Path, run_exports: export_store.RunExports | Non
 
 def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: export_store.RunExports | None,
                   dask_address: str | None, n_workers: int, per_batch: int | None, store_to: tuple[Path, Path],
-                  pictures_of: tuple[str, np.datetime64, np.datetime64] | None = None,
+                  pictures_of: tuple[np.datetime64, np.datetime64] | None = None,
                   store_every_s: float = 0.0) -> dict:
     """Route every job on dask (workers read the cube at `cube_store`'s path or URL themselves and stage their
     export files under `run_exports`), storing the rows of the batches as they finish in the warehouse and the Parquet
     exports `store_to` = (warehouse, exports folder) of the jobs' run (route_store.write_batch): those finished since
     the last store, at most every `store_every_s` seconds, and the rest at the end. With `pictures_of`
-    = (run_id, cycle, the run's nominal time) and exports, workers also draw the run's weather maps over the fleet's
+    = (cycle, the run's nominal time) and exports, workers also draw the run's weather maps over the fleet's
     extent (while the voyages route) and its fleet map with the ships' positions at the nominal time (after them)
     and stage them (flows/jobs/run_pictures.py); on an object store they then copy the staged files to the run's
     folder (`copied`: all copies done). Returns the export errors, the staged files (name → bytes), the
     number of voyages stored and `copied`."""
     export_errors, staged, tracks, pending = [], {}, [], {"rows": [], "legs": []}  # staged: name → bytes
+    run_id = jobs[0].run_id if jobs else ""  # every job is of the one run
     done, stored, copied = 0, 0, False
     level = {"error": logging.ERROR, "warning": logging.WARNING, "info": logging.INFO}
 
@@ -268,19 +269,18 @@ def route_voyages(jobs: list[RouteJob], cube_store: cube.Location, run_exports: 
     def store(final: bool = False) -> None:  # the batches finished since the last store, in one transaction
         nonlocal stored, last_store
         if pending["rows"] and (final or time.monotonic() - last_store >= store_every_s):
-            stored += len(route_store.write_batch(*store_to, jobs[0].run_id, pending["rows"], pending["legs"]))
+            stored += len(route_store.write_batch(*store_to, run_id, pending["rows"], pending["legs"]))
             pending["rows"], pending["legs"] = [], []
             last_store = time.monotonic()
 
     if jobs:
-        run_id = jobs[0].run_id
         with dask_pool.dask_client(dask_address, n_workers,
                                    on_error=lambda exc: abandon_run(store_to[0], run_exports, run_id, exc)) as client:
             per = dask_pool.voyages_per_batch(len(jobs), dask_pool.worker_slots(client), per_batch)
             exports_to = (run_exports.url, run_exports.storage_options) if run_exports is not None else None
             pictures = []
             if exports_to is not None and pictures_of is not None:
-                _, cycle, nominal = pictures_of  # the run id is the jobs'
+                cycle, nominal = pictures_of
                 box = run_pictures.fleet_box([(j.voyage[f"{end}_lat"], j.voyage[f"{end}_lon"]) for j in jobs
                                               for end in ("dep", "arr")])
                 pictures.append(client.submit(run_pictures.stage_weather_maps, exports_to, run_id, cube_store.url,
@@ -370,7 +370,7 @@ def route_fleet_job(cycle: str | None = None, voyages: list[str] | None = None, 
             route_store.write_batch(layout.warehouse, layout.exports, run_id, unrouted, [])
         out = run.step(route_voyages, jobs, layout.cube_store, run_exports if exports else None,
                        s.dask_address, s.dask_workers, s.routing.voyages_per_task, (layout.warehouse, layout.exports),
-                       (run_id, c, nominal), s.routing.store_every_s, name="route-voyages",
+                       (c, nominal), s.routing.store_every_s, name="route-voyages",
                        timeout_s=s.routing.task_timeout_s)
         summary = route_store.finish_run(layout.warehouse, layout.exports, run_id, out["export_errors"])
     except BaseException as exc:
