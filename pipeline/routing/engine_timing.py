@@ -9,9 +9,9 @@ retime_nb       after sailing: the same flips, judged on the sailed route, until
 aim_engine_nb   a new route's settings: of the constant settings, the two whose arrivals bracket the RTA
                 mixed over random legs in the share that should arrive just in time, then re-timed
 
-Kernels take the voyage as one `Voyage`: the graph `g` (search_space.Graph), the vessel `v` (engine.leg.Vessel), the
-weather `w` (weather_field.Weather) and the objective `o` (objectives.Objective); `s` is a `Scratch` of work arrays
-and `rng` the random generator (a numpy Generator; numba draws from it the same numbers numpy would, so the
+Kernels take the voyage as one `engine.leg.Voyage`: the graph `g` (search_space.Graph), the vessel `v`
+(engine.leg.Vessel), the weather `w` (weather_field.Weather) and the objective `o` (objectives.Objective); `s` is a
+`Scratch` of work arrays and `rng` the random generator (a numpy Generator; numba draws from it the same numbers numpy would, so the
 interpreted kernels reproduce the compiled ones).
 """
 
