@@ -2,7 +2,8 @@
 nightly cron, and the server's scheduler (no manual trigger) starting the nightly. The mirror holds only
 2020-12-01, so the scheduled nightly (today's cycles) refuses to route on weather years old and ends Failed naming
 the cycle and its age; the same deployment run for 2020-12-01 routes the fleet, re-planning its ship at sea from
-its noon report.
+its noon report. The operator's runs (that nightly and a backfill) are started while the scheduler waits for the
+minute; the data root's job lock runs the three one after another.
 
 Then everything is stopped and no process of the test may be left behind.
 """
@@ -43,8 +44,25 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
     root, urls = scheduled_root
     with prefect_server_and_serve(tmp_path, ["--nightly-cron", "* * * * *", "--data", str(root), "--rish-url",
                                              urls["rish_url"], "--oscar-url", urls["oscar_url"]],
-                                  PREFECT_SERVER_SERVICES_SCHEDULER_LOOP_SECONDS="5", JITROUTE_DASK_WORKERS="1") as served:
+                                  PREFECT_SERVER_SERVICES_SCHEDULER_LOOP_SECONDS="5", PREFECT_RUNNER_POLL_FREQUENCY="1",
+                                  JITROUTE_DASK_WORKERS="1") as served:
         api, client_env = served.api, served.env
+
+        # An operator's runs while the scheduler waits for the minute: the nightly for the mirror's day, which routes
+        # the fleet, the ship at sea from its noon report, and a backfill with a bare number for the cycle hours (it
+        # arrives as a JSON integer). The data root's job lock queues them and the scheduled nightly one by one.
+        def deployed():
+            assert served.serve.poll() is None, served.log("serve")
+            found = httpx.post(f"{api}/deployments/filter", json={}, timeout=10).json()
+            return {d["id"]: d["name"] for d in found} if {"nightly", "backfill"} <= {d["name"] for d in found} else None
+
+        deployments = poll("serve to register its deployments", deployed, 120, 0.5)
+        since = datetime.now(timezone.utc).isoformat()  # the logs of these runs and later ones
+        watch = [str(VENV_BIN / "prefect"), "deployment", "run", "--watch", "--watch-interval", "1"]
+        night = subprocess.Popen([*watch, "nightly/nightly", "-p", "date=2020-12-01", "-p", "cycles=0"], env=client_env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        bf = subprocess.Popen([*watch, "backfill/backfill", "-p", "start=2020-12-01", "-p", "end=2020-12-01", "-p",
+                               "cycles=0"], env=client_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
         def refused_scheduled_nightly():
             assert served.serve.poll() is None, served.log("serve")
@@ -53,17 +71,14 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
             assert all(r["state_type"] == "FAILED" for r in ended), json.dumps(ended, indent=1)[:3000]
             return ended
 
-        done = poll("a scheduled nightly run to end", refused_scheduled_nightly, 300, 2)
-        deployments = {d["id"]: d["name"] for d in httpx.post(f"{api}/deployments/filter", json={}, timeout=10).json()}
+        done = poll("a scheduled nightly run to end", refused_scheduled_nightly, 300, 1)
         assert "nightly" in {deployments.get(r["deployment_id"]) for r in done}
         message = done[0]["state"]["message"]  # weather too old: cycle 2020-12-01T00 is 52000 h old at …
         assert "weather too old" in message and "2020-12-01T00" in message and "h old at" in message, message
 
-        # The same deployment for the mirror's day: routes the fleet, the ship at sea from its noon report
-        since = datetime.now(timezone.utc).isoformat()  # the logs of this run and later ones
-        night = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "run", "nightly/nightly", "-p", "date=2020-12-01",
-                                "-p", "cycles=0", "--watch"], env=client_env, capture_output=True, text=True, timeout=600)
-        assert night.returncode == 0 and "Completed" in night.stdout, (night.stdout[-2000:], night.stderr[-2000:])
+        for name, proc in (("nightly", night), ("backfill", bf)):
+            out, err = proc.communicate(timeout=600)
+            assert proc.returncode == 0 and "Completed" in out, (name, out[-2000:], err[-2000:])
 
         ls = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "ls"], env=client_env, capture_output=True,
                             text=True, timeout=120)
@@ -84,12 +99,6 @@ def test_the_scheduler_starts_the_nightly_and_nothing_is_left_running(scheduled_
         summaries = [a["data"] for a in artifacts if a["key"] == "nightly-summary"]
         assert any("fleet_map.png" in md and "2020-12-01T00" in md for md in summaries), summaries
         assert any(": Failed" in md and "**Routing refused:** weather too old" in md for md in summaries), summaries
-
-        # An operator's backfill with a bare number for the cycle hours (arrives as a JSON integer)
-        bf = subprocess.run([str(VENV_BIN / "prefect"), "deployment", "run", "backfill/backfill", "-p", "start=2020-12-01",
-                             "-p", "end=2020-12-01", "-p", "cycles=0", "--watch"], env=client_env, capture_output=True,
-                            text=True, timeout=300)
-        assert bf.returncode == 0 and "Completed" in bf.stdout, (bf.stdout[-2000:], bf.stderr[-2000:])
 
         with duckdb.connect(str(root / "warehouse.snapshot.duckdb"), read_only=True) as con:
             runs = con.execute("SELECT status, n_voyages, cycle, cycle_age_h, reason FROM route_runs "
