@@ -24,6 +24,10 @@ from pipeline.routing import geodesy as geo
 from pipeline.routing.land import BOUND_CAP_NM, distance_to_land_nb, distance_to_land_nm, land_grid
 
 MIN_STEP_NM = 0.1
+# a route's least clearance (least_clearance_nb) is sampled to MIN_STEP_NM, or to this share of the least distance
+# found when that is more: 0.1 NM near the clearance a route must keep, 1 NM at the 25 NM cap (the distance field
+# itself is known to its 0.5 NM cells)
+CLEARANCE_REL_TOL = 0.04
 DEFAULT_CLEARANCE_NM = 2.0
 DEFAULT_APPROACH_NM = 10.0
 
@@ -125,7 +129,7 @@ def edges_clear(grid, rule, lat, lon, node_ok, max_shift, band, out):
 @numba.njit(cache=True)
 def least_clearance_nb(grid, c, lat, lon):
     """Least distance to land along the route through waypoints (lat, lon), outside the port approaches, to
-    0.1 NM; BOUND_CAP_NM when it is at least that."""
+    0.1 NM or CLEARANCE_REL_TOL of it when that is more; BOUND_CAP_NM when it is at least that."""
     best = BOUND_CAP_NM
     for k in range(lat.size - 1):
         dist = geo.gc_distance_nm(lat[k], lon[k], lat[k + 1], lon[k + 1])
@@ -147,7 +151,8 @@ def least_clearance_nb(grid, c, lat, lon):
                 d = distance_to_land_nb(grid, plat, plon, best)
                 if d < best:
                     best = d
-                step = d - best  # every point within d − best of here is at least `best` from land
+                # every point within d − best + tol of here is at least `best` − tol from land
+                step = d - best + CLEARANCE_REL_TOL * best
             if f >= 1.0:
                 break
             s += max(MIN_STEP_NM, step)

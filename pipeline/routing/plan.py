@@ -80,7 +80,7 @@ class Plan:
     n_evals: int = 0
     model_version: int | None = None
     cycle: np.datetime64 | None = None
-    min_land_clearance_nm: float = math.nan  # least distance to land outside the port approaches (0.1 NM sampling)
+    min_land_clearance_nm: float = math.nan  # least distance to land outside the port approaches (to 0.1 NM or 4 %)
     # engine-change limits (engine_limits.py): the limits the legs obey (None: none), and the fuel (t) of the
     # best engine plan on the same route without them, for what the limits cost
     limits: "EngineLimits | None" = None
