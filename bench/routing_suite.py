@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 import routing_instances as suite  # noqa: E402
-from pipeline.routing.solve import PRODUCT, BfoaParams, EngineLimits  # noqa: E402
+from pipeline.routing.solve import PRODUCT, BfoaParams, EngineLimits, product_options  # noqa: E402
 from routing import TARGET_GAP_PCT, TARGET_SOLVE_S, pin_one_core, timed_solve, verdict, warm_up  # noqa: E402
 from dataclasses import fields, replace  # noqa: E402
 
@@ -57,8 +57,9 @@ def dp_reference(spec, problem, space, weather, recompute: bool) -> dict:
     return {**rec, "stored": False}
 
 
-def bfoa_params(settings: list[str]) -> BfoaParams:
-    """BfoaParams with FIELD=VALUE settings (bool, int, float or None, by the field's default) applied."""
+def bfoa_params(settings: list[str], base: BfoaParams | None = None) -> BfoaParams:
+    """`base` (default: BfoaParams()) with FIELD=VALUE settings (bool, int, float or None, by the field's default)
+    applied."""
     kinds = {f.name: type(f.default) for f in fields(BfoaParams)}
     changes = {}
     for item in settings:
@@ -72,7 +73,7 @@ def bfoa_params(settings: list[str]) -> BfoaParams:
             changes[name] = text.lower() in ("1", "true", "yes")
         else:
             changes[name] = (float if kind is type(None) else kind)(text)
-    return replace(BfoaParams(), **changes)
+    return replace(base or BfoaParams(), **changes)
 
 
 def main() -> int:
@@ -125,8 +126,8 @@ def main() -> int:
               f"time {verdict(np.median(secs) <= TARGET_SOLVE_S)}")
         # the product's plan (seed 1): refined on the finer corridors, continuous speed, engine-change limits, the
         # savings split
-        product = timed_solve(problem, weather, solver="bfoa", seed=1, params=params, space=space,
-                              limits=EngineLimits(), savings=True, refine_split=PRODUCT.refine_split)
+        product = timed_solve(problem, weather, solver="bfoa", seed=1, params=bfoa_params(a.bfoa, product_options("bfoa")),
+                              space=space, limits=EngineLimits(), savings=True, refine_split=PRODUCT.refine_split)
         split = product.savings
         if split is not None:
             print(f"   product plan (BFOA seed 1, continuous speed, limits) vs constant rpm at the RTA on the base route: "

@@ -4,6 +4,7 @@ product's (pipeline.routing.options: RoutingOptions and DEFAULT_SOLVER_OPTIONS, 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,7 +19,11 @@ def test_solve_takes_the_products_defaults():
     dp = api.product_options("dp")
     assert dp == SOLVERS["dp"].make_options(DEFAULT_SOLVER_OPTIONS["dp"])
     assert (dp.gap, dp.slot_h, dp.max_wait_h, dp.wait_free_first) == (1e-3, 1.0, 6.0, True)  # label + grid DP
-    assert api.product_options("bfoa") == SOLVERS["bfoa"].options()  # no product override for the swarm
+    # the swarm's plan is polished once when the finer corridors walk it on, as often as it gains on the graph alone
+    assert api.product_options("bfoa") == replace(SOLVERS["bfoa"].options(), polish_rounds=1)
+    assert api.product_options("bfoa", refine_split=1) == SOLVERS["bfoa"].options()
+    assert RoutingOptions(solver="bfoa", refine_split=1, solver_options={"polish_rounds": "3"}).solver_overrides() == {
+        "polish_rounds": "3"}
     defaults = api.solve.__kwdefaults__
     product = RoutingOptions()
     assert defaults["solver"] == product.solver and defaults["seed"] == product.seed

@@ -138,20 +138,21 @@ def _check_forecast(problem: RoutingProblem, weather: WeatherField) -> None:
             f"{weather.horizon_utc} of the forecast cycle {cycle}; route it with a later cycle")
 
 
-def product_options(solver: str):
+def product_options(solver: str, refine_split: int = PRODUCT.refine_split):
     """The solver's own options as the product runs them: its options class's defaults with the product's
-    (options.DEFAULT_SOLVER_OPTIONS) over them, e.g. `dp` certified within 0.1 % over plans that may wait."""
-    return solver_spec(solver).make_options(RoutingOptions(solver=solver).solver_overrides())
+    (options.DEFAULT_SOLVER_OPTIONS, and REFINED_SOLVER_OPTIONS with `refine_split` > 1) over them, e.g. `dp`
+    certified within 0.1 % over plans that may wait."""
+    return solver_spec(solver).make_options(RoutingOptions(solver=solver, refine_split=refine_split).solver_overrides())
 
 
-def _options(spec, options, params: BfoaParams | None):
+def _options(spec, options, params: BfoaParams | None, refine_split: int):
     """The solver's options: `options` as given, else the shorthand `params` (BfoaParams) when they are of this
-    solver's kind, else the product's (product_options)."""
+    solver's kind, else the product's for that refinement (product_options)."""
     if options is None:
         if params is not None and isinstance(params, spec.options):
             options = params
         else:
-            options = product_options(spec.name)
+            options = product_options(spec.name, refine_split)
     if not isinstance(options, spec.options):
         raise RoutingInputError(f"solver {spec.name!r} takes {spec.options.__name__} options, not {type(options).__name__}")
     return options
@@ -281,7 +282,7 @@ def solve(problem: RoutingProblem, weather: WeatherField, *, solver: str = PRODU
     refine_split=1)`.
     """
     spec = solver_spec(solver)
-    opts = _options(spec, options, params)
+    opts = _options(spec, options, params, refine_split)
     _check_forecast(problem, weather)
     t0 = time.perf_counter()
     if space is None:
