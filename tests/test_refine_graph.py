@@ -67,6 +67,7 @@ def test_a_drift_limit_keeps_every_leg_within_that_many_fine_steps_of_the_routes
     assert free.edge_ok[np.broadcast_to(drift > 2, free.edge_ok.shape)].any()  # so the limit did remove legs
 
 
+@pytest.mark.slow  # six whole solves in a moving storm (about 2.7 s)
 def test_refining_never_costs_more_and_leaves_the_graph_between_its_nodes():
     pr = problem((30.0, -160.0), (35.0, -130.0), 150.0, n_lines=10, n_points=11)
     storm = field(moving_storm(3, 32.0, 210.0), step_h=3)
