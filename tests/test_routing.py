@@ -678,7 +678,7 @@ def _bfoa_start(pr, fld, params, seed=1):
     k = params.knobs(L2 - 2, P, inst.graph.max_shift)
     sw, s, wk = swarm.swarm(k.n_bacteria, L2), engine_timing.scratch(L2), swarm.work(L2)
     no_branches = np.empty((0, L2), np.int64)
-    run = swarm.SwarmRun(inst.graph, inst.vessel, inst.wx, inst.objective, s, k, wk)
+    run = swarm.SwarmRun(inst.voyage, s, k, wk)
     swarm.init_swarm_nb(sw, base.nodes, base.rpm_idx, no_branches, run, np.random.default_rng(seed))
     return sw, inst, k
 

@@ -25,7 +25,7 @@ from pipeline.routing.engine.bounds import FinishBounds
 from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.labels import bucketed
 from pipeline.routing.engine.swarm import Knobs, SwarmRun, bfoa_nb, swarm, work
-from pipeline.routing.engine.leg import sail_route_nb
+from pipeline.routing.engine.leg import Voyage, sail_route_nb
 from pipeline.routing.objectives import OBJ_JIT
 
 
@@ -91,8 +91,8 @@ def run_bfoa(seed: int, params: BfoaParams, base_nodes, base_rpm, g, v, w, o):
     branches, n_legs = np.empty((0, n), np.int64), 0
     if params.branch_routes and base_rpm.shape[0] > 0 and k.n_bacteria - 1 - k.n_offset > 0:  # room for them
         branches, n_legs = branch_routes(g, v, w, o, int(base_rpm[0]))  # at the baseline's constant rpm
-    n_evals, n_run = bfoa_nb(rng, SwarmRun(g, v, w, o, s, k, wk), np.asarray(base_nodes, np.int64), base_rpm, branches,
-                             sw, history)
+    run = SwarmRun(Voyage(g, v, w, o), s, k, wk)
+    n_evals, n_run = bfoa_nb(rng, run, np.asarray(base_nodes, np.int64), base_rpm, branches, sw, history)
     n_evals += n_legs // max(n - 1, 1)  # legs sailed, counted as whole routes
     history = history[:n_run]
     nodes, rpm_idx, cost = sw.best_pos, sw.best_rpm, float(sw.best_cost[0])

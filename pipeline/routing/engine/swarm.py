@@ -78,13 +78,10 @@ class Work(NamedTuple):
 
 
 class SwarmRun(NamedTuple):
-    """What the swarm's kernels read: the graph, vessel, weather and objective (engine.leg's), the sailing scratch
-    (engine_timing.scratch), the knobs and the work arrays of a move."""
+    """What the swarm's kernels read: the voyage (engine.leg.Voyage: graph, vessel, weather, objective), the sailing
+    scratch (engine_timing.scratch), the knobs and the work arrays of a move."""
 
-    g: object
-    v: object
-    w: object
-    o: object
+    vy: Voyage
     s: object
     k: Knobs
     wk: Work
@@ -116,8 +113,8 @@ def work(n_lines_total: int) -> Work:
 def _new_bacterium(nodes, rpm_idx, run, rng):
     """A random bacterium: a safe random walk with engine settings aimed at the RTA. A route that cannot be
     sailed (weather limits on the way) is drawn again with twice the spread, up to 4 draws. (placed?, cost)"""
-    g, s, k = run.g, run.s, run.k
-    vy = Voyage(g, run.v, run.w, run.o)
+    vy, s, k = run.vy, run.s, run.k
+    g = vy.g
     q = np.inf
     for attempt in range(4):
         if not random_walk_nb(nodes, g.edge_ok, g.max_shift,
@@ -134,11 +131,11 @@ def _offset_bacterium(j, nodes, rpm_idx, run, rng):
     """Offset route j of k.n_offset (offsets spread evenly from one side of the graph to the other): out one node
     a line, along the offset, back in time; engine settings aimed at the RTA. A random bacterium when it cannot
     be walked or sailed. (placed?, cost)"""
-    g, s, k = run.g, run.s, run.k
+    g, s, k = run.vy.g, run.s, run.k
     c = g.lat.shape[1] // 2
     offset = int(np.round(-c + 2.0 * c * j / max(k.n_offset - 1, 1)))
     if random_walk_nb(nodes, g.edge_ok, g.max_shift, Walk(k.r_max, k.k_max, k.backup, 0.0, 0.0, 1.0), offset, rng):
-        q = aim_engine_nb(Voyage(g, run.v, run.w, run.o), nodes, rpm_idx, s, rng)
+        q = aim_engine_nb(run.vy, nodes, rpm_idx, s, rng)
         if q < np.inf:
             return True, q
     return _new_bacterium(nodes, rpm_idx, run, rng)
@@ -278,8 +275,7 @@ def init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng):
     or engine settings aimed at the RTA, whichever is cheaper; bacteria 1..n_offset on the offset routes; the last
     ones on the routes in `branches` (one per row, engine settings aimed at the RTA); the rest random. Returns the
     best one's index."""
-    s, k = run.s, run.k
-    vy = Voyage(run.g, run.v, run.w, run.o)
+    vy, s, k = run.vy, run.s, run.k
     cand, cand_r = run.wk.cand, run.wk.cand_r
     q = np.inf
     n_branch = min(branches.shape[0], k.n_bacteria - 1 - k.n_offset)
@@ -335,8 +331,8 @@ def swim_nb(sw, i, first, engine, d, screen, run, rng):
     """Swim bacterium i along the tumbled direction (wk.vec, or wk.vec_r for engine moves) in steps of `d`, while
     the judged cost keeps falling (at most `swim_max` steps), each move judged as `screen` (Screening) says. Returns
     True when at least one step was taken."""
-    g, v, w, o, s, k, wk = run.g, run.v, run.w, run.o, run.s, run.k, run.wk
-    vy = Voyage(g, v, w, o)
+    vy, s, k, wk = run.vy, run.s, run.k, run.wk
+    g, v, o = vy.g, vy.v, vy.o
     lam, do_screen, do_plan = screen.lam, screen.on, screen.plan
     pos, rpm, cum_t, cum_f, cost = sw.pos, sw.rpm, sw.cum_t, sw.cum_f, sw.cost
     cand, cand_r, vec, vec_r = wk.cand, wk.cand_r, wk.vec, wk.vec_r
@@ -417,7 +413,7 @@ def chemotaxis_nb(sw, i, screen, run, rng):
     """Bacterium i's `n_chemo` chemotactic moves: tumble, swim; the swim length adapts after `n_fail` failed route
     moves at each size (large → medium → small → large)."""
     k, wk = run.k, run.wk
-    L2 = run.g.lat.shape[0]
+    L2 = run.vy.g.lat.shape[0]
     for _m in range(k.n_chemo):
         sw.moves[i] += 1
         first = _tumble(k, L2 - 2, L2 - 1, sw.pos[i], sw.rpm[i], wk, rng)
@@ -485,7 +481,7 @@ def bfoa_nb(rng, run, base_nodes, base_rpm, branches, sw, history):
     in `branches`; the best plan ends in sw.best_pos / best_rpm / best_cost, the best cost after each cycle in
     `history`. Stops early after `stall` cycles that lower the best cost by no more than `stall_tol` of it. Returns
     (routes or route tails sailed, cycles run)."""
-    k, v, o = run.k, run.v, run.o
+    k, v, o = run.k, run.vy.v, run.vy.o
     best_i = init_swarm_nb(sw, base_nodes, base_rpm, branches, run, rng)
     # route moves are first judged on the legs they change, time priced at what the engine re-set would pay
     lam = (time_price_nb(sw.rpm[best_i], sw.cum_t[best_i], sw.cum_f[best_i], v.rpm_options)
