@@ -254,6 +254,20 @@ def test_underdetermined_model_is_refused():
     assert not s["changed"] and "under-determined" in s["reason"] and not any(r["active"] for r in rows)
 
 
+def test_a_ship_with_two_or_three_reports_is_refused_and_the_fleet_is_still_fitted(fleet_checked, fleet):
+    """A fit through two or three rows leaves residuals of exactly 0, which the Huber weights divided by (the
+    robust physical form): the whole fleet's refit raised ZeroDivisionError."""
+    good = fleet_checked[0]
+    new_ship, old_ship = int(fleet.vessels.imo[0]), int(fleet.vessels.imo[1])
+    for n in (2, 3):
+        few = good[good.imo == new_ship].sort_values("ts_utc").head(n)
+        reports = pd.concat([few, good[good.imo == old_ship]]).reset_index(drop=True)
+        rows, summaries = refit_fleet(reports, {}, {})
+        by_imo = {s["imo"]: s for s in summaries}
+        assert "under-determined" in by_imo[new_ship]["reason"], by_imo[new_ship]
+        assert by_imo[old_ship]["changed"] and any(r["imo"] == old_ship and r["active"] for r in rows)
+
+
 def _store_refit(db, form="best", gate=Gate()):
     """What the refit-performance flow does, without Prefect: read, refit, store."""
     reports, active, versions, fitted = fleet_store.load_for_refit(db, None, REPORT_COLUMNS)

@@ -35,8 +35,7 @@ def huber_weights(r, m, huber_k, med_guess, s_guess, buf, w):
     c = huber_k * s
     for q in range(m):
         u = abs(r[q]) / c
-        inv = 1.0 / u
-        w[q] = inv if inv < 1.0 else 1.0  # 1 where u ≤ 1, else 1/u
+        w[q] = 1.0 if u <= 1.0 else 1.0 / u  # a residual of exactly 0 (a fit through its few rows) weighs 1
     return med, s
 
 
