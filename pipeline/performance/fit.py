@@ -144,8 +144,10 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
         nonneg = nonneg | flip
         beta0 = np.ascontiguousarray(np.where(flip, -beta0, beta0))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
-    fit_kernels.fit_groups_nb(X, sign, y, np.ascontiguousarray(starts), np.ascontiguousarray(ends), intercept, nonneg, bool(robust), solves, rtol, HUBER_K,
-                              max(int(k_folds), 1), int(k_folds) >= 2, warm, beta0, coef, keep, n, stats)
+    rule = fit_kernels.FitRule(intercept, nonneg, bool(robust), int(solves), float(rtol), float(HUBER_K),
+                               max(int(k_folds), 1), int(k_folds) >= 2, bool(warm))
+    fit_kernels.fit_groups_nb(fit_kernels.FitRows(X, sign, y), np.ascontiguousarray(starts), np.ascontiguousarray(ends),
+                              rule, beta0, coef, keep, n, stats)
     if flip.any():
         coef[:, flip] *= -1.0
     out, dropped_for = FitBatch(), {}

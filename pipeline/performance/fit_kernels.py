@@ -6,49 +6,91 @@ k-fold cross-validated RMSE from the same blocks.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from pipeline.performance.huber import huber_weights
 
 
+class FitRows(NamedTuple):
+    """The rows every group is fitted on: the regressors X (rows × k), a sign ±1 per column (the fit is of
+    X·diag(sign): a coefficient held ≤ 0 is fitted as a ≥ 0 one on its negated regressor, without a copy of X) and
+    the target y."""
+
+    X: np.ndarray
+    sign: np.ndarray
+    y: np.ndarray
+
+
+class FitRule(NamedTuple):
+    """How each group is fitted: the regressors kept even when constant (`intercept`) and held ≥ 0 (`nonneg`); Huber
+    re-weighting (`robust`) of at most `max_solves` solves, settled when no coefficient moves more than `rtol` of the
+    largest, with Huber's `huber_k`; `folds` cross-validation folds (`do_cv`: whether to cross-validate); `warm`: the
+    re-weighting starts from given coefficients."""
+
+    intercept: np.ndarray
+    nonneg: np.ndarray
+    robust: bool
+    max_solves: int
+    rtol: float
+    huber_k: float
+    folds: int
+    do_cv: bool
+    warm: bool
+
+
+class FitScratch(NamedTuple):
+    """Scratch of one group's fit, sized for the largest group: the scaled regressors then the target (Z, k + 1 rows),
+    the weighted regressors (T), weights, residuals, the medians' buffer, the rows packed, the per-fold Gram blocks
+    [ZᵀWZ | ZᵀWy] and each fold's slots lo[f]:hi[f]."""
+
+    Z: np.ndarray
+    T: np.ndarray
+    w: np.ndarray
+    r: np.ndarray
+    buf: np.ndarray
+    rows: np.ndarray
+    gram: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
 @numba.njit(cache=True)
-def fit_groups_nb(X, sign, y, starts, ends, intercept, nonneg, robust, max_solves, rtol, huber_k, F, do_cv, warm, beta0, coef, keep,
-                  n_out, stats):
-    """Fit every group (group g: rows starts[g]:ends[g]; see `fit_targets`) on the regressors X·diag(sign) (sign ±1 per
-    column: a coefficient held ≤ 0 is fitted as a ≥ 0 one on its negated regressor, without a copy of X); writes coef
-    (unscaled, of X·diag(sign), 0 where dropped), keep, row counts and stats[g] = (R², RMSE, CV-RMSE) (NaN where not
-    defined). With `warm` (and `robust`), group g's first Huber weights come from the coefficients beta0[g] (e.g. a fit
-    of most of the same rows)."""
-    k = X.shape[1]
+def fit_groups_nb(data, starts, ends, rule, beta0, coef, keep, n_out, stats):
+    """Fit every group (group g: rows starts[g]:ends[g] of `data`, a FitRows; see `fit_targets`) as `rule` (a FitRule)
+    says; writes coef (unscaled, of X·diag(sign), 0 where dropped), keep, row counts and stats[g] = (R², RMSE,
+    CV-RMSE) (NaN where not defined). With `rule.warm` (and `robust`), group g's first Huber weights come from the
+    coefficients beta0[g] (e.g. a fit of most of the same rows)."""
+    k = data.X.shape[1]
     G = starts.size
+    F = rule.folds
     nmax = 0
     for g in range(G):
         nmax = max(nmax, ends[g] - starts[g])
-    Z = np.empty((k + 1, nmax))  # scaled regressors, then the target
-    T = np.empty((k, nmax))  # weighted regressors
-    w, r, buf = np.empty(nmax), np.empty(nmax), np.empty((3, nmax))
-    rows = np.empty(nmax, dtype=np.int64)
-    gram = np.empty((F, k, k + 1))  # [ZᵀWZ | ZᵀWy] per fold
-    lo, hi = np.empty(F, dtype=np.int64), np.empty(F, dtype=np.int64)
+    scr = FitScratch(np.empty((k + 1, nmax)), np.empty((k, nmax)), np.empty(nmax), np.empty(nmax), np.empty((3, nmax)),
+                     np.empty(nmax, dtype=np.int64), np.empty((F, k, k + 1)), np.empty(F, dtype=np.int64),
+                     np.empty(F, dtype=np.int64))
     for g in range(G):
-        n_out[g] = _fit_group(X, sign, y, starts[g], ends[g], intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv,
-                              warm, beta0[g], coef[g], keep[g], stats[g], Z, T, w, r, buf, rows, gram, lo, hi)
+        n_out[g] = _fit_group(data, starts[g], ends[g], rule, beta0[g], coef[g], keep[g], stats[g], scr)
 
 
 @numba.njit(cache=True)
-def _fit_group(X, sign, y, a, b, intercept, nonneg, robust, max_solves, rtol, huber_k, do_cv, warm, beta0, coef, keep, stats, Z, T, w,
-               r, buf, rows, gram, lo, hi):
-    """Fit rows a:b of X and y; returns how many were finite (see `_fit_groups_nb` for the outputs;
-    Z … hi are scratch).
+def _fit_group(data, a, b, rule, beta0, coef, keep, stats, scr):
+    """Fit rows a:b of `data` (FitRows) as `rule` (FitRule) says; returns how many were finite (see `fit_groups_nb`
+    for the outputs; `scr`: a FitScratch).
 
     The finite rows are copied, scaled to unit RMS per regressor, into scratch laid out regressor
     by row, fold by fold (row p goes to CV fold p mod F), so every fold is one contiguous range and
     the whole group stays in cache through all its solves.
     """
-    k = X.shape[1]
+    intercept, nonneg, robust, max_solves, rtol = rule.intercept, rule.nonneg, rule.robust, rule.max_solves, rule.rtol
+    huber_k, do_cv, warm = rule.huber_k, rule.do_cv, rule.warm
+    Z, T, w, r, buf, gram, lo, hi = scr.Z, scr.T, scr.w, scr.r, scr.buf, scr.gram, scr.lo, scr.hi
+    k = data.X.shape[1]
     F = lo.size
-    m = _pack(X, sign, y, a, b, F, rows, lo, hi, Z)
+    m = _pack(data, a, b, scr)
     scale = np.empty(k)
     n_keep = _scale(Z, m, intercept, keep, scale)
     if m == 0 or n_keep == 0:
@@ -121,9 +163,13 @@ def _fit_group(X, sign, y, a, b, intercept, nonneg, robust, max_solves, rtol, hu
 
 
 @numba.njit(cache=True)
-def _pack(X, sign, y, a, b, F, rows, lo, hi, Z):
-    """Copy the finite rows among a:b of X·diag(sign) and y into Z[:, :m] (regressors, then the target) fold by fold:
-    the p-th of them goes to fold p mod F, and fold f is slots lo[f]:hi[f]. Returns m."""
+def _pack(data, a, b, scr):
+    """Copy the finite rows among a:b of X·diag(sign) and y (`data`) into scr.Z[:, :m] (regressors, then the target)
+    fold by fold: the p-th of them goes to fold p mod F (F = scr.lo.size), and fold f is slots scr.lo[f]:scr.hi[f].
+    Returns m."""
+    X, sign, y = data.X, data.sign, data.y
+    rows, lo, hi, Z = scr.rows, scr.lo, scr.hi, scr.Z
+    F = lo.size
     k = X.shape[1]
     if _all_finite(X[a:b].ravel()) and _all_finite(y[a:b]):
         m = b - a
