@@ -32,6 +32,7 @@ Forms (ids are what numba kernels take):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -266,9 +267,27 @@ def fuel_tph_nb(form, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, w
     return max(f, 0.0)
 
 
+MODEL_INPUTS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd")  # in call order
+
+
+class Conditions(NamedTuple):
+    """Conditions to predict at or observations to fit, one per row: equal-length float64 arrays, the model's inputs
+    (MODEL_INPUTS) in call order."""
+
+    rpm: np.ndarray
+    draft_m: np.ndarray
+    trim_m: np.ndarray
+    wind_kn: np.ndarray
+    wind_rel_deg: np.ndarray
+    hs_m: np.ndarray
+    wave_rel_deg: np.ndarray
+    months_dd: np.ndarray
+
+
 @numba.njit(cache=True)
-def predict_nb(form, target_speed, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, out):
-    """`stw_kn_nb` (target_speed) or `fuel_tph_nb` of every row of the (equal-length) input arrays into out."""
+def predict_nb(form, target_speed, coef, cond, out):
+    """`stw_kn_nb` (target_speed) or `fuel_tph_nb` of every row of the Conditions `cond` into out."""
+    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd = cond
     for i in range(out.size):
         if target_speed:
             out[i] = stw_kn_nb(form, coef, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i],
@@ -278,13 +297,11 @@ def predict_nb(form, target_speed, coef, rpm, draft_m, trim_m, wind_kn, wind_rel
                                  months_dd[i])
 
 
-MODEL_INPUTS = ("rpm", "draft_m", "trim_m", "wind_kn", "wind_rel_deg", "hs_m", "wave_rel_deg", "months_dd")  # in call order
-
-
 @numba.njit(cache=True)
-def predict_ranges_nb(form, target_speed, coefs, starts, ends, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg,
-                      months_dd, out):
-    """`predict_nb` of group g's coefficients coefs[g] at rows starts[g]:ends[g] of the inputs, into consecutive slots of out."""
+def predict_ranges_nb(form, target_speed, coefs, starts, ends, cond, out):
+    """`predict_nb` of group g's coefficients coefs[g] at rows starts[g]:ends[g] of the Conditions `cond`, into
+    consecutive slots of out."""
+    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd = cond
     q = 0
     for g in range(starts.size):
         c = coefs[g]
@@ -299,9 +316,10 @@ def predict_ranges_nb(form, target_speed, coefs, starts, ends, rpm, draft_m, tri
 
 
 @numba.njit(cache=True)
-def predict_physical_ranges_nb(target_speed, coefs, starts, ends, rpm, draft_m, trim_m, months_dd, Xs, out):
+def predict_physical_ranges_nb(target_speed, coefs, starts, ends, cond, Xs, out):
     """`predict_ranges_nb` of the physical form, its weather loads read from the speed design matrix Xs (columns 4 and
     5 hold −Vw²·w(θw) and −Hs²·w(θs), `design_matrices`) instead of worked out again: the same values exactly."""
+    rpm, draft_m, trim_m, months_dd = cond.rpm, cond.draft_m, cond.trim_m, cond.months_dd
     q = 0
     for g in range(starts.size):
         c = coefs[g]
@@ -316,28 +334,28 @@ def predict_physical_ranges_nb(target_speed, coefs, starts, ends, rpm, draft_m, 
 
 def predict(form: int, target: str, coef, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """What routing gets (`stw_kn_nb` / `fuel_tph_nb`), for broadcastable inputs; flat float64 array."""
-    cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
-    out = np.empty(cols[0].size)
-    predict_nb(form, target == "speed", np.ascontiguousarray(coef, dtype=np.float64), *cols, out)
+    cond = conditions(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
+    out = np.empty(cond.rpm.size)
+    predict_nb(form, target == "speed", np.ascontiguousarray(coef, dtype=np.float64), cond, out)
     return out
 
 
 def design_matrix(form: int, target: str, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> np.ndarray:
     """Regressor matrix (n_obs × n_regressors) for `target` in {"speed", "fuel"}."""
     _linear(form)
-    cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
+    cond = conditions(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
     k = N_SPEED[form] if target == "speed" else N_FUEL[form]
-    X = np.empty((cols[0].size, k))
-    _fill_matrix(form, target == "speed", *cols, X)
+    X = np.empty((cond.rpm.size, k))
+    _fill_matrix(form, target == "speed", cond, X)
     return X
 
 
 def design_matrices(form: int, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> tuple[np.ndarray, np.ndarray]:
     """(speed, fuel) regressor matrices, as `design_matrix` gives them, in one pass (weather terms computed once)."""
     _linear(form)
-    cols = _columns(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
-    Xs, Xf = np.empty((cols[0].size, N_SPEED[form])), np.empty((cols[0].size, N_FUEL[form]))
-    _fill_both(form, *cols, Xs, Xf)
+    cond = conditions(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd)
+    Xs, Xf = np.empty((cond.rpm.size, N_SPEED[form])), np.empty((cond.rpm.size, N_FUEL[form]))
+    _fill_both(form, cond, Xs, Xf)
     return Xs, Xf
 
 
@@ -346,14 +364,17 @@ def _linear(form: int) -> None:
         raise ValueError("the MLP form has no design matrix: its inputs are mlp_inputs(...)")
 
 
-def _columns(*arrays) -> list[np.ndarray]:
-    cols = [np.asarray(a, dtype=np.float64) for a in arrays]
+def conditions(rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd) -> Conditions:
+    """Conditions of broadcastable inputs: each broadcast to the common shape, flat and float64."""
+    cols = [np.asarray(a, dtype=np.float64) for a in (rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg,
+                                                      months_dd)]
     n = np.broadcast_shapes(*(c.shape for c in cols))
-    return [np.broadcast_to(c, n).ravel() for c in cols]
+    return Conditions(*(np.broadcast_to(c, n).ravel() for c in cols))
 
 
 @numba.njit(cache=True)
-def _fill_matrix(form, speed, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, X):
+def _fill_matrix(form, speed, cond, X):
+    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd = cond
     for i in range(X.shape[0]):
         if speed:
             speed_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], X[i])
@@ -362,7 +383,8 @@ def _fill_matrix(form, speed, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m,
 
 
 @numba.njit(cache=True)
-def _fill_both(form, rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd, Xs, Xf):
+def _fill_both(form, cond, Xs, Xf):
+    rpm, draft_m, trim_m, wind_kn, wind_rel_deg, hs_m, wave_rel_deg, months_dd = cond
     for i in range(Xs.shape[0]):
         if form == FORM_THESIS:
             speed_row_nb(form, rpm[i], draft_m[i], trim_m[i], wind_kn[i], wind_rel_deg[i], hs_m[i], wave_rel_deg[i], months_dd[i], Xs[i])

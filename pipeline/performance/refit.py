@@ -232,14 +232,12 @@ def _predict(form: str, target: str, coefs: np.ndarray, starts: np.ndarray, ends
     from them."""
     starts, ends = np.asarray(starts, dtype=np.int64), np.asarray(ends, dtype=np.int64)
     out = np.empty(int((ends - starts).sum()))
+    cond = features.Conditions(*(np.ascontiguousarray(inp[c], dtype=np.float64) for c in features.MODEL_INPUTS))
+    coefs = np.ascontiguousarray(coefs, dtype=np.float64)
     if form == "physical" and X is not None:
-        features.predict_physical_ranges_nb(target == "speed", np.ascontiguousarray(coefs, dtype=np.float64), starts, ends,
-                                            *(np.ascontiguousarray(inp[c], dtype=np.float64)
-                                              for c in ("rpm", "draft_m", "trim_m", "months_dd")), X["speed"], out)
+        features.predict_physical_ranges_nb(target == "speed", coefs, starts, ends, cond, X["speed"], out)
         return out
-    cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in features.MODEL_INPUTS]
-    features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
-                               starts, ends, *cols, out)
+    features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", coefs, starts, ends, cond, out)
     return out
 
 

@@ -195,13 +195,13 @@ def evaluate(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, envelop
     inputs (arrays (G, grid points), features.MODEL_INPUTS order)."""
     grid = _grids(envelopes)
     G, m = len(envelopes), _U[0].size
-    cols = [np.ascontiguousarray(c, dtype=np.float64).ravel() for c in grid]
+    cond = features.Conditions(*(np.ascontiguousarray(c, dtype=np.float64).ravel() for c in grid))
     starts = np.arange(G, dtype=np.int64) * m
     out = []
     for target, coefs in (("speed", speed_coefs), ("fuel", fuel_coefs)):
         o = np.empty(G * m)
         features.predict_ranges_nb(features.FORM_IDS[form], target == "speed", np.ascontiguousarray(coefs, dtype=np.float64),
-                                   starts, starts + m, *cols, o)
+                                   starts, starts + m, cond, o)
         out.append(o.reshape(G, *GRID_SHAPE))
     return out[0], out[1], grid
 
