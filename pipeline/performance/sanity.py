@@ -120,23 +120,26 @@ def envelope_rows_until(inp: dict[str, np.ndarray], starts, splits, stops) -> tu
     starts, splits, stops = (np.asarray(a, dtype=np.int64) for a in (starts, splits, stops))
     e = np.empty((2, starts.size, 8))
     if starts.size:
-        cols = [np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m", "months_dd")]
-        _envelopes_nb(*cols, starts, splits, stops, e)
+        obs = tuple(np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m",
+                                                                             "months_dd"))
+        _envelopes_nb(obs, starts, splits, stops, e)
     return EnvelopeRows(e[0]), EnvelopeRows(e[1])
 
 
 @numba.njit(cache=True)
-def _envelopes_nb(rpm, draft, wind, hs, trim, months, starts, splits, stops, out):
+def _envelopes_nb(obs, starts, splits, stops, out):
     """out[1, g] = (least and largest rpm, least and largest draft, largest wind and waves (≥ 0), mean trim, months since
-    dry dock of the last row) of rows starts[g]:stops[g], non-finite values left out, 0 where there is none; out[0, g]
-    the same of rows starts[g]:splits[g] (starts ≤ splits ≤ stops)."""
+    dry dock of the last row) of rows starts[g]:stops[g] of `obs` = (rpm, draft, wind, hs, trim, months), non-finite
+    values left out, 0 where there is none; out[0, g] the same of rows starts[g]:splits[g] (starts ≤ splits ≤ stops)."""
+    rpm, draft, wind, hs, trim, months = obs
     for g in range(starts.size):
         a, b = starts[g], stops[g]
         r_lo, r_hi, d_lo, d_hi, w_hi, h_hi = np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0
         t_sum, t_n = 0.0, 0
         for i in range(a, b + 1):
             if i == splits[g]:
-                _envelope_row(r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum, t_n, months[i - 1] if i > a else 0.0, out[0, g])
+                _envelope_row((r_lo, r_hi, d_lo, d_hi, w_hi, h_hi), t_sum, t_n, months[i - 1] if i > a else 0.0,
+                              out[0, g])
             if i == b:
                 break
             if np.isfinite(rpm[i]):
@@ -150,11 +153,14 @@ def _envelopes_nb(rpm, draft, wind, hs, trim, months, starts, splits, stops, out
             if np.isfinite(trim[i]):
                 t_sum += trim[i]
                 t_n += 1
-        _envelope_row(r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum, t_n, months[b - 1] if b > a else 0.0, out[1, g])
+        _envelope_row((r_lo, r_hi, d_lo, d_hi, w_hi, h_hi), t_sum, t_n, months[b - 1] if b > a else 0.0, out[1, g])
 
 
 @numba.njit(cache=True, inline="always")
-def _envelope_row(r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum, t_n, m, row):
+def _envelope_row(ranges, t_sum, t_n, m, row):
+    """row = the envelope: `ranges` (rpm least and largest, draft least and largest, wind and waves largest), the mean
+    trim t_sum / t_n and the months m; 0 where not finite."""
+    r_lo, r_hi, d_lo, d_hi, w_hi, h_hi = ranges
     vals = (r_lo, r_hi, d_lo, d_hi, w_hi, h_hi, t_sum / t_n if t_n else 0.0, m)
     for k in range(8):
         row[k] = vals[k] if np.isfinite(vals[k]) else 0.0
@@ -273,7 +279,7 @@ def check_models(form: str, speed_coefs: np.ndarray, fuel_coefs: np.ndarray, env
     bad = np.zeros(G, dtype=np.bool_)
     _failing_nb(features.FORM_IDS[form], np.ascontiguousarray(speed_coefs, dtype=np.float64).reshape(G, -1),
                 np.ascontiguousarray(fuel_coefs, dtype=np.float64).reshape(G, -1), e, _AXES, _DIRECTIONS,
-                limits.speed_tol_kn, limits.fuel_allowance_share, limits.fuel_tol_share, bad)
+                (float(limits.speed_tol_kn), float(limits.fuel_allowance_share), float(limits.fuel_tol_share)), bad)
     out: list[str | None] = [None] * G
     failing = np.flatnonzero(bad)
     if failing.size:
@@ -290,9 +296,10 @@ _DIRECTIONS = np.asarray(DIRECTIONS_DEG, dtype=np.float64)
 
 
 @numba.njit(cache=True)
-def _failing_nb(form, speed_coefs, fuel_coefs, env, axes, directions, tol, allowance, fuel_tol_share, bad):
+def _failing_nb(form, speed_coefs, fuel_coefs, env, axes, directions, tols, bad):
     """bad[g]: whether model g fails a check of `check_one` on envelope g's grid (env[g]: rpm least and largest, draft
-    least and largest, wind and waves largest, trim, months since dry dock). The grid's inputs are those of `_grids`
+    least and largest, wind and waves largest, trim, months since dry dock) with the limits' tolerances `tols` =
+    (speed_tol_kn, fuel_allowance_share, fuel_tol_share). The grid's inputs are those of `_grids`
     (same arithmetic), the values those of `features.stw_kn_nb` / `fuel_tph_nb` — for the physical form from the
     weather loads of each direction, computed once per grid rather than once per point (the same values)."""
     ur, ud, uw, uh = axes
@@ -324,12 +331,13 @@ def _failing_nb(form, speed_coefs, fuel_coefs, env, axes, directions, tol, allow
                                 f = features.fuel_tph_nb(form, cf, rpm, draft, trim, wind, directions[a], hs, directions[a], months)
                             S[r, d, w, h, a], F[r, d, w, h, a] = s, f
                             finite &= np.isfinite(s) & np.isfinite(f)
-        bad[g] = not finite or _fails(S, F, rpm_hi - rpm_lo > 1e-6, tol, allowance, fuel_tol_share)
+        bad[g] = not finite or _fails(S, F, rpm_hi - rpm_lo > 1e-6, tols)
 
 
 @numba.njit(cache=True)
-def _fails(S, F, span, tol, allowance, fuel_tol_share):
-    """The checks of `check_one` on finite grids S and F (GRID_SHAPE)."""
+def _fails(S, F, span, tols):
+    """The checks of `check_one` on finite grids S and F (GRID_SHAPE), with `tols` as `_failing_nb`'s."""
+    tol, allowance, fuel_tol_share = tols
     R, D, W, H, A = S.shape
     top = 0.0
     for r in range(R):
