@@ -502,8 +502,9 @@ def _gate(c: _Candidate, g: int, n_hold: int, hold_rmse: dict, hold_mean: dict, 
                 return f"too few reports for the network: {r.n} training rows (need ≥ {gate.mlp_min_rows})"
             continue
         n_coef = len(r.names) - len(r.dropped)
-        if r.n < gate.min_rows_per_coef * max(n_coef, 1):
-            return f"under-determined: {r.n} training rows for {n_coef} {t} coefficients (need ≥ {gate.min_rows_per_coef * n_coef})"
+        need = gate.min_rows_per_coef * max(n_coef, 1)  # a ship whose rows leave no coefficient still needs some
+        if r.n < need:
+            return f"under-determined: {r.n} training rows for {n_coef} {t} coefficients (need ≥ {need})"
     if n_hold == 0:
         return "no held-out rows to validate on"
     for t in TARGETS:
