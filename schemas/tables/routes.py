@@ -79,7 +79,7 @@ ROUTES = Table('routes', 'route plans: one row per run and voyage (fuel in tonne
     Column('min_land_clearance_nm', 'DOUBLE', 'NM',
            'least distance to land along the plan outside its port approaches and outside the fairways of the '
            'passages it sails (a canal between its banks, a strait; and the approach radius at a fairway\'s ends, '
-           'as at a port), nautical miles (0.1 NM sampling; 25 means at least 25)'),
+           'as at a port), nautical miles (to 0.1 NM, or to 4 % of it when that is more; 25 means at least 25)'),
     Column('start_kind', 'VARCHAR', None,
            'where the plan starts: port (the departure) | noon report | operator position | advanced along plan '
            '(an old report moved on along the previous plan)'),
