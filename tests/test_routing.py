@@ -469,7 +469,7 @@ def test_dateline_crossing_routes_like_the_great_circle():
 def test_bfoa_engine_reset_keeps_arrival_inside_the_rta():
     """The RTA-aimed engine settings and the engine re-set after a route move (calm water: leg hours are exactly
     distance / STW, so hand formulas check them)."""
-    from pipeline.routing import engine_timing
+    from pipeline.routing.engine import timing as engine_timing
 
     dep, arr = (30.0, -160.0), (35.0, -130.0)
     dist = haversine_nm(*dep, *arr)
@@ -668,7 +668,7 @@ def test_honest_baseline_and_savings_split_in_calm_water():
 
 def _bfoa_start(pr, fld, params, seed=1):
     """The initial swarm of the BFOA on a voyage: (swarm, instance, knobs)."""
-    from pipeline.routing import engine_timing
+    from pipeline.routing.engine import timing as engine_timing
     from pipeline.routing.engine import swarm
     from pipeline.routing.baseline import baseline
 
@@ -698,7 +698,7 @@ def test_bfoa_offset_routes_start_feasible_where_the_baseline_is_not():
 
 
 def test_offset_route_goes_out_along_and_back():
-    from pipeline.routing.random_route import Walk, random_walk_nb
+    from pipeline.routing.engine.random_walk import Walk, random_walk_nb
 
     space = problem((30.0, -160.0), (35.0, -130.0), 144, n_lines=12, n_points=11).search_space()
     L2, c = space.lat.shape[0], space.centre

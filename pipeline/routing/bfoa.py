@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.routing.branch_routes import branch_routes
-from pipeline.routing.engine_timing import scratch, time_price_nb
+from pipeline.routing.engine.timing import scratch, time_price_nb
 from pipeline.routing.engine.bounds import FinishBounds
 from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.labels import bucketed

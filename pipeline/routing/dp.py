@@ -26,7 +26,7 @@ from pipeline.routing.dp_grid import search_grid, wait_hours, wait_rate_tph
 from pipeline.routing.engine.bounds import FinishBounds, is_on_time
 from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.labels import EXACT, bucketed
-from pipeline.routing.engine_timing import time_price
+from pipeline.routing.engine.timing import time_price
 from pipeline.routing.fastest_plan import cheapest_known, fastest_incumbent
 from pipeline.routing.objectives import OBJ_JIT
 from pipeline.routing.options import DpOptions

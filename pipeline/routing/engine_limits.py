@@ -40,7 +40,7 @@ from pipeline.routing.engine.hold_search import (Hold, RouteBounds, hold_search_
 from pipeline.routing.engine.leg import OnRoute
 from pipeline.routing.engine.label_search import dp_exact_nb
 from pipeline.routing.engine.labels import bucketed
-from pipeline.routing.engine_timing import time_price
+from pipeline.routing.engine.timing import time_price
 
 
 PLAN_GAP = 1e-3  # the ε-trimming (share of a known plan's cost) of the plan under the limits in solve() and savings

@@ -13,10 +13,10 @@ import numba
 import numpy as np
 
 from pipeline.routing.engine.leg import Voyage
-from pipeline.routing.engine_timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
+from pipeline.routing.engine.timing import (aim_engine_nb, cost_from_nb, plan_flips_nb, retime_nb, sail_span_nb,
                                             time_price_nb)
 from pipeline.routing.objectives import OBJ_JIT
-from pipeline.routing.random_route import Walk, random_walk_nb
+from pipeline.routing.engine.random_walk import Walk, random_walk_nb
 
 
 class Knobs(NamedTuple):
@@ -79,7 +79,7 @@ class Work(NamedTuple):
 
 class SwarmRun(NamedTuple):
     """What the swarm's kernels read: the voyage (engine.leg.Voyage: graph, vessel, weather, objective), the sailing
-    scratch (engine_timing.scratch), the knobs and the work arrays of a move."""
+    scratch (engine.timing.scratch), the knobs and the work arrays of a move."""
 
     vy: Voyage
     s: object

@@ -1,5 +1,5 @@
 """Safe random routes for the BFOA's initialisation and dispersal (numba): a random walk line by line
-that drifts towards a drawn offset and bends back to the destination in time (see bfoa.py)."""
+that drifts towards a drawn offset and bends back to the destination in time (see engine/swarm.py)."""
 
 from __future__ import annotations
 
