@@ -120,18 +120,17 @@ def envelope_rows_until(inp: dict[str, np.ndarray], starts, splits, stops) -> tu
     starts, splits, stops = (np.asarray(a, dtype=np.int64) for a in (starts, splits, stops))
     e = np.empty((2, starts.size, 8))
     if starts.size:
-        obs = tuple(np.ascontiguousarray(inp[c], dtype=np.float64) for c in ("rpm", "draft_m", "wind_kn", "hs_m", "trim_m",
-                                                                             "months_dd"))
-        _envelopes_nb(obs, starts, splits, stops, e)
+        cond = features.Conditions(*(np.ascontiguousarray(inp[c], dtype=np.float64) for c in features.MODEL_INPUTS))
+        _envelopes_nb(cond, starts, splits, stops, e)
     return EnvelopeRows(e[0]), EnvelopeRows(e[1])
 
 
 @numba.njit(cache=True)
-def _envelopes_nb(obs, starts, splits, stops, out):
+def _envelopes_nb(cond, starts, splits, stops, out):
     """out[1, g] = (least and largest rpm, least and largest draft, largest wind and waves (≥ 0), mean trim, months since
-    dry dock of the last row) of rows starts[g]:stops[g] of `obs` = (rpm, draft, wind, hs, trim, months), non-finite
-    values left out, 0 where there is none; out[0, g] the same of rows starts[g]:splits[g] (starts ≤ splits ≤ stops)."""
-    rpm, draft, wind, hs, trim, months = obs
+    dry dock of the last row) of rows starts[g]:stops[g] of the features.Conditions `cond`, non-finite values left out,
+    0 where there is none; out[0, g] the same of rows starts[g]:splits[g] (starts ≤ splits ≤ stops)."""
+    rpm, draft, wind, hs, trim, months = cond.rpm, cond.draft_m, cond.wind_kn, cond.hs_m, cond.trim_m, cond.months_dd
     for g in range(starts.size):
         a, b = starts[g], stops[g]
         r_lo, r_hi, d_lo, d_hi, w_hi, h_hi = np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0
