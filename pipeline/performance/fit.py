@@ -145,7 +145,7 @@ def fit_targets(form: str, target: str, X: np.ndarray, y: np.ndarray, bounds: np
         beta0 = np.ascontiguousarray(np.where(flip, -beta0, beta0))
     solves = (max_solves or ROBUST_ITERATIONS) if robust else 1
     rule = fit_kernels.FitRule(intercept, nonneg, bool(robust), int(solves), float(rtol), float(HUBER_K),
-                               max(int(k_folds), 1), int(k_folds) >= 2, bool(warm))
+                               max(int(k_folds), 1), bool(warm))
     fit_kernels.fit_groups_nb(fit_kernels.FitRows(X, sign, y), np.ascontiguousarray(starts), np.ascontiguousarray(ends),
                               rule, beta0, coef, keep, n, stats)
     if flip.any():

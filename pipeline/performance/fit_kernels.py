@@ -27,7 +27,7 @@ class FitRows(NamedTuple):
 class FitRule(NamedTuple):
     """How each group is fitted: the regressors kept even when constant (`intercept`) and held ≥ 0 (`nonneg`); Huber
     re-weighting (`robust`) of at most `max_solves` solves, settled when no coefficient moves more than `rtol` of the
-    largest, with Huber's `huber_k`; `folds` cross-validation folds (`do_cv`: whether to cross-validate); `warm`: the
+    largest, with Huber's `huber_k`; `folds` cross-validation folds (1: no cross-validation); `warm`: the
     re-weighting starts from given coefficients."""
 
     intercept: np.ndarray
@@ -37,7 +37,6 @@ class FitRule(NamedTuple):
     rtol: float
     huber_k: float
     folds: int
-    do_cv: bool
     warm: bool
 
 
@@ -86,7 +85,7 @@ def _fit_group(data, a, b, rule, beta0, coef, keep, stats, scr):
     the whole group stays in cache through all its solves.
     """
     intercept, nonneg, robust, max_solves, rtol = rule.intercept, rule.nonneg, rule.robust, rule.max_solves, rule.rtol
-    huber_k, do_cv, warm = rule.huber_k, rule.do_cv, rule.warm
+    huber_k, do_cv, warm = rule.huber_k, rule.folds >= 2, rule.warm
     Z, T, w, r, buf, gram, lo, hi = scr.Z, scr.T, scr.w, scr.r, scr.buf, scr.gram, scr.lo, scr.hi
     k = data.X.shape[1]
     F = lo.size
